@@ -1,0 +1,52 @@
+// The pluggable cell assignment used by ingest (and by mtbuild when it splits a simplified region).
+// A triangle goes to a cell by its centroid (BMT section 4: "the rule that uniquely assigns a
+// triangle to a region of space, e.g. the one where the barycenter of t falls").
+//
+// Ingest first writes every triangle's centroid to a temporary file; an assigner may stream over
+// it as many times as it needs (the irregular V-partition makes two passes) before it is asked for
+// cell keys. Keys need not be compact: the store sorts by key and numbers the non-empty cells.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+
+namespace mt {
+
+struct Box3 {
+  double lo[3] = {0, 0, 0};
+  double hi[3] = {0, 0, 0};
+};
+
+// A sequence of triangle centroids that can be read start to end any number of times with bounded
+// memory. Each triangle is 4 floats: centroid x,y,z and the triangle's area. One forEach() is one
+// pass: fn gets consecutive batches that cover every triangle exactly once, in triangle order.
+class CentroidSource {
+ public:
+  virtual ~CentroidSource() = default;
+  virtual uint64_t count() const = 0;
+  virtual Box3 bounds() const = 0;  // of the vertices, not only of the centroids
+  virtual void forEach(const std::function<void(const float* xyza, size_t count)>& fn) const = 0;
+};
+
+class CellAssigner {
+ public:
+  virtual ~CellAssigner() = default;
+  // Called once before any cellKey(); memoryBytes is the share of the --memory cap it may use.
+  virtual void prepare(const CentroidSource& centroids, uint64_t memoryBytes) = 0;
+  // The cell of a triangle whose centroid is c. Must be deterministic and thread-safe.
+  virtual uint64_t cellKey(const float c[3]) const = 0;
+  // One line for logs and `mtstore info`, e.g. "grid 32x20x11".
+  virtual std::string describe() const = 0;
+  // Opaque bytes the assigner wants kept in the store (e.g. the V-partition seeds), or empty.
+  virtual std::string serialize() const { return {}; }
+};
+
+// The default until a V-partition is plugged in: a uniform grid over the bounding box with cubic
+// cells sized so that a cell holds about trianglesPerCell triangles if the surface were spread
+// evenly over the occupied cells (the grid is refined once by counting occupied cells).
+std::unique_ptr<CellAssigner> makeGridAssigner(uint32_t trianglesPerCell);
+
+}  // namespace mt

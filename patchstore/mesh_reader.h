@@ -1,0 +1,80 @@
+// Streaming mesh readers: the contract between the input formats and everything that consumes a
+// scan (ingest, the V-partition seed pass, tests). A reader never holds the whole file: it pushes
+// vertices and triangles in file order, in batches, to a MeshSink, with bounded memory.
+//
+// Guarantees a sink can rely on:
+//  - every vertex is finite (NaN/Inf is an error naming the vertex index and line/byte offset);
+//  - every triangle index is < the number of vertices already delivered, or, for formats that
+//    declare their vertex count up front (PLY, OFF), < that count; out-of-range or negative
+//    indices are errors naming the face index and line/byte offset;
+//  - polygons are fan-triangulated (v0, vi, vi+1) in file order;
+//  - errors are mt::Error with a one-line message "PATH: ...";
+//  - degenerate triangles (a repeated index) are delivered, and counted in ReadStats.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "patchstore/error.h"
+
+namespace mt {
+
+enum class MeshFormat { Unknown, PlyAscii, PlyBinaryLE, PlyBinaryBE, Obj, Off, StlAscii, StlBinary };
+const char* formatName(MeshFormat f);
+
+// What the file declares before its data (counts are -1 when the format does not declare them).
+struct MeshHeader {
+  MeshFormat format = MeshFormat::Unknown;
+  int64_t declaredVertices = -1;
+  int64_t declaredFaces = -1;
+  bool hasNormals = false;  // per-vertex nx,ny,nz (PLY, OBJ vn when one normal per vertex)
+  bool hasColors = false;   // per-vertex red,green,blue[,alpha] (PLY)
+  // True when the input's coordinates need more than float32 to round-trip exactly (PLY with
+  // double or 32-bit integer coordinates). Text formats are parsed to the nearest float32.
+  bool doublePrecision = false;
+};
+
+struct InputVertex {
+  double p[3];
+  float n[3];          // 0,0,0 when the input has no normals
+  uint8_t c[4];        // 255,255,255,255 when the input has no colours
+};
+
+struct ReadStats {
+  uint64_t vertices = 0;
+  uint64_t triangles = 0;          // after triangulation
+  uint64_t polygons = 0;           // faces with more than 3 corners, before triangulation
+  uint64_t degenerateTriangles = 0;  // with a repeated vertex index
+  uint64_t bytes = 0;              // bytes of input consumed
+};
+
+class MeshSink {
+ public:
+  virtual ~MeshSink() = default;
+  // Called once, after the header is parsed and before any data.
+  virtual void begin(const MeshHeader& header) { (void)header; }
+  // Batches of vertices, in file order; global index of v[0] is `first`.
+  virtual void vertices(const InputVertex* v, size_t count, uint64_t first) = 0;
+  // Batches of triangles as global vertex indices (3 per triangle), in file order.
+  virtual void triangles(const uint32_t* indices, size_t count) = 0;
+  virtual void end(const ReadStats& stats) { (void)stats; }
+};
+
+class MeshReader {
+ public:
+  virtual ~MeshReader() = default;
+  virtual const MeshHeader& header() const = 0;
+  // Streams the whole file to the sink. Throws mt::Error on bad input.
+  virtual ReadStats read(MeshSink& sink) = 0;
+};
+
+// Picks the format by content (magic bytes, "ply"/"OFF"/"solid" headers, STL size check) and then
+// by extension; unknown formats are an error naming the file. Opens and parses the header only.
+std::unique_ptr<MeshReader> openMesh(const std::string& path);
+
+// Vertices above this index count cannot be addressed by the 32-bit indices used throughout.
+constexpr uint64_t kMaxVertices = 0xFFFFFFFEull;
+
+}  // namespace mt

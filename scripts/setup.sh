@@ -1,0 +1,45 @@
+#!/usr/bin/env bash
+# Installs every Debian package the project uses (non-interactive, idempotent, waits for the apt
+# lock), then configures and builds a Release build into build/ (executables in build/bin/).
+# Usage: scripts/setup.sh [--no-build]
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+PACKAGES=(
+  build-essential cmake ninja-build pkg-config
+  libopenmesh-dev libcgal-dev libeigen3-dev libdraco-dev libmeshoptimizer-dev
+  libglfw3-dev libglm-dev libegl-dev libgl-dev libegl-mesa0 libgl1-mesa-dri
+  libopenmpi-dev openmpi-bin libtbb-dev libzstd-dev liblz4-dev libxxhash-dev
+  libcli11-dev libgtest-dev libgmock-dev libbenchmark-dev libnanoflann-dev
+  xvfb xauth gnuplot-nox time
+)
+
+missing=()
+for p in "${PACKAGES[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+
+apt_wait() {
+  # Another apt/dpkg (unattended-upgrades, a parallel setup) may hold the lock: wait, do not fail.
+  local waited=0
+  while fuser /var/lib/dpkg/lock-frontend /var/lib/dpkg/lock /var/lib/apt/lists/lock >/dev/null 2>&1; do
+    ((waited % 10 == 0)) && echo "setup: waiting for the apt lock (${waited}s)..." >&2
+    sleep 1; waited=$((waited + 1))
+  done
+}
+
+if ((${#missing[@]})); then
+  echo "setup: installing ${#missing[@]} Debian packages: ${missing[*]}" >&2
+  SUDO=""; [[ $(id -u) -ne 0 ]] && SUDO="sudo"
+  export DEBIAN_FRONTEND=noninteractive
+  command -v fuser >/dev/null || { apt_wait; $SUDO apt-get update -qq; $SUDO apt-get install -y -qq psmisc >/dev/null; }
+  apt_wait
+  $SUDO apt-get update -qq -o DPkg::Lock::Timeout=600
+  apt_wait
+  $SUDO apt-get install -y -qq --no-install-recommends -o DPkg::Lock::Timeout=600 "${missing[@]}" >/dev/null
+fi
+
+[[ "${1:-}" == "--no-build" ]] && exit 0
+
+cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=Release >/dev/null
+cmake --build build --parallel "$(nproc)"
