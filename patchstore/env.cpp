@@ -1,0 +1,198 @@
+#include "patchstore/env.h"
+
+#include <dirent.h>
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstring>
+
+namespace mt {
+
+namespace {
+
+std::string errnoText() { return std::strerror(errno); }
+
+class PosixWritableFile : public WritableFile {
+ public:
+  PosixWritableFile(std::string path, int fd, uint64_t size) : path_(std::move(path)), fd_(fd), size_(size) {}
+  ~PosixWritableFile() override {
+    if (fd_ >= 0) ::close(fd_);
+  }
+  void append(const void* data, size_t size) override {
+    const char* p = static_cast<const char*>(data);
+    while (size > 0) {
+      ssize_t n = ::write(fd_, p, size);
+      if (n < 0) {
+        if (errno == EINTR) continue;
+        fail(path_, "write failed at byte offset " + std::to_string(size_) + ": " + errnoText());
+      }
+      p += n;
+      size -= size_t(n);
+      size_ += uint64_t(n);
+    }
+  }
+  void sync() override {
+    if (::fdatasync(fd_) != 0) fail(path_, "fsync failed: " + errnoText());
+  }
+  void close() override {
+    if (fd_ >= 0 && ::close(fd_) != 0) {
+      fd_ = -1;
+      fail(path_, "close failed: " + errnoText());
+    }
+    fd_ = -1;
+  }
+  uint64_t size() const override { return size_; }
+
+ private:
+  std::string path_;
+  int fd_;
+  uint64_t size_;
+};
+
+class PosixRandomAccessFile : public RandomAccessFile {
+ public:
+  PosixRandomAccessFile(std::string path, int fd, uint64_t size) : path_(std::move(path)), fd_(fd), size_(size) {}
+  ~PosixRandomAccessFile() override { ::close(fd_); }
+  void read(uint64_t offset, size_t size, void* out) const override {
+    char* p = static_cast<char*>(out);
+    uint64_t at = offset;
+    while (size > 0) {
+      ssize_t n = ::pread(fd_, p, size, off_t(at));
+      if (n < 0 && errno == EINTR) continue;
+      if (n < 0) fail(path_, "read failed at byte offset " + std::to_string(at) + ": " + errnoText());
+      if (n == 0) fail(path_, "unexpected end of file at byte offset " + std::to_string(at));
+      p += n;
+      at += uint64_t(n);
+      size -= size_t(n);
+    }
+  }
+  uint64_t size() const override { return size_; }
+
+ private:
+  std::string path_;
+  int fd_;
+  uint64_t size_;
+};
+
+class PosixEnv : public Env {
+ public:
+  std::unique_ptr<WritableFile> newWritableFile(const std::string& path) override {
+    int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+    if (fd < 0) fail(path, "cannot create: " + errnoText());
+    return std::make_unique<PosixWritableFile>(path, fd, 0);
+  }
+  std::unique_ptr<WritableFile> newAppendableFile(const std::string& path) override {
+    int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC, 0644);
+    if (fd < 0) fail(path, "cannot open for append: " + errnoText());
+    struct stat st;
+    if (::fstat(fd, &st) != 0) {
+      ::close(fd);
+      fail(path, "cannot stat: " + errnoText());
+    }
+    return std::make_unique<PosixWritableFile>(path, fd, uint64_t(st.st_size));
+  }
+  std::unique_ptr<RandomAccessFile> newRandomAccessFile(const std::string& path) override {
+    int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0) fail(path, "cannot open: " + errnoText());
+    struct stat st;
+    if (::fstat(fd, &st) != 0) {
+      ::close(fd);
+      fail(path, "cannot stat: " + errnoText());
+    }
+    return std::make_unique<PosixRandomAccessFile>(path, fd, uint64_t(st.st_size));
+  }
+  void renameFile(const std::string& from, const std::string& to) override {
+    if (::rename(from.c_str(), to.c_str()) != 0) fail(to, "cannot rename from " + from + ": " + errnoText());
+  }
+  void removeFile(const std::string& path) override {
+    if (::unlink(path.c_str()) != 0 && errno != ENOENT) fail(path, "cannot remove: " + errnoText());
+  }
+  void syncDir(const std::string& dir) override {
+    int fd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+    if (fd < 0) fail(dir, "cannot open directory: " + errnoText());
+    int rc = ::fsync(fd);
+    ::close(fd);
+    if (rc != 0) fail(dir, "fsync of directory failed: " + errnoText());
+  }
+  void createDir(const std::string& dir) override {
+    if (::mkdir(dir.c_str(), 0755) != 0 && errno != EEXIST) fail(dir, "cannot create directory: " + errnoText());
+  }
+  bool exists(const std::string& path) override {
+    struct stat st;
+    return ::stat(path.c_str(), &st) == 0;
+  }
+  std::vector<std::string> listDir(const std::string& dir) override {
+    std::vector<std::string> names;
+    DIR* d = ::opendir(dir.c_str());
+    if (!d) fail(dir, "cannot list directory: " + errnoText());
+    while (dirent* e = ::readdir(d)) {
+      std::string name = e->d_name;
+      if (name != "." && name != "..") names.push_back(name);
+    }
+    ::closedir(d);
+    return names;
+  }
+  uint64_t fileSize(const std::string& path) override {
+    struct stat st;
+    if (::stat(path.c_str(), &st) != 0) fail(path, "cannot stat: " + errnoText());
+    return uint64_t(st.st_size);
+  }
+};
+
+// Passes writes and syncs through to the real file, consulting the FaultInjectionEnv first.
+class FaultyWritableFile : public WritableFile {
+ public:
+  FaultyWritableFile(FaultInjectionEnv* env, std::string path, std::unique_ptr<WritableFile> base)
+      : env_(env), path_(std::move(path)), base_(std::move(base)) {}
+  void append(const void* data, size_t size) override {
+    env_->hit(FaultInjectionEnv::Op::Write, path_);
+    base_->append(data, size);
+  }
+  void sync() override {
+    env_->hit(FaultInjectionEnv::Op::Sync, path_);
+    base_->sync();
+  }
+  void close() override { base_->close(); }
+  uint64_t size() const override { return base_->size(); }
+
+ private:
+  FaultInjectionEnv* env_;
+  std::string path_;
+  std::unique_ptr<WritableFile> base_;
+};
+
+}  // namespace
+
+Env* Env::Default() {
+  static PosixEnv env;
+  return &env;
+}
+
+std::unique_ptr<WritableFile> FaultInjectionEnv::newWritableFile(const std::string& path) {
+  return std::make_unique<FaultyWritableFile>(this, path, base_->newWritableFile(path));
+}
+
+std::unique_ptr<WritableFile> FaultInjectionEnv::newAppendableFile(const std::string& path) {
+  return std::make_unique<FaultyWritableFile>(this, path, base_->newAppendableFile(path));
+}
+
+void FaultInjectionEnv::renameFile(const std::string& from, const std::string& to) {
+  hit(Op::Rename, to);
+  base_->renameFile(from, to);
+}
+
+void FaultInjectionEnv::hit(Op op, const std::string& path) {
+  int64_t& counter = op == Op::Write ? writes : op == Op::Sync ? syncs : renames;
+  ++counter;
+  if (remaining_ < 0 || op != op_) return;
+  if (--remaining_ == 0) {
+    remaining_ = -1;
+    fired_ = true;
+    const char* what = op == Op::Write ? "write" : op == Op::Sync ? "fsync" : "rename";
+    fail(path, std::string("injected ") + what + " failure");
+  }
+}
+
+}  // namespace mt

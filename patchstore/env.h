@@ -1,0 +1,85 @@
+// The file layer under the patch store (after LevelDB's Env): every write, fsync, rename and
+// remove the store does goes through here, so tests can inject failures and check that the store
+// is wholly the old one or wholly the new one afterwards.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "patchstore/error.h"
+
+namespace mt {
+
+class WritableFile {
+ public:
+  virtual ~WritableFile() = default;
+  virtual void append(const void* data, size_t size) = 0;  // throws mt::Error
+  virtual void sync() = 0;                                  // fdatasync; throws mt::Error
+  virtual void close() = 0;
+  virtual uint64_t size() const = 0;
+};
+
+class RandomAccessFile {
+ public:
+  virtual ~RandomAccessFile() = default;
+  // Reads exactly size bytes at offset or throws mt::Error naming the file and offset.
+  virtual void read(uint64_t offset, size_t size, void* out) const = 0;
+  virtual uint64_t size() const = 0;
+};
+
+class Env {
+ public:
+  virtual ~Env() = default;
+  static Env* Default();
+
+  virtual std::unique_ptr<WritableFile> newWritableFile(const std::string& path) = 0;  // truncates
+  virtual std::unique_ptr<WritableFile> newAppendableFile(const std::string& path) = 0;
+  virtual std::unique_ptr<RandomAccessFile> newRandomAccessFile(const std::string& path) = 0;
+  virtual void renameFile(const std::string& from, const std::string& to) = 0;  // atomic
+  virtual void removeFile(const std::string& path) = 0;
+  virtual void syncDir(const std::string& dir) = 0;
+  virtual void createDir(const std::string& dir) = 0;
+  virtual bool exists(const std::string& path) = 0;
+  virtual std::vector<std::string> listDir(const std::string& dir) = 0;
+  virtual uint64_t fileSize(const std::string& path) = 0;
+};
+
+// Wraps another Env and fails the N-th write, fsync or rename from now on (counting from 1),
+// by throwing mt::Error as a real failure would. Used by the crash-safety tests.
+class FaultInjectionEnv : public Env {
+ public:
+  enum class Op { Write, Sync, Rename };
+  explicit FaultInjectionEnv(Env* base) : base_(base) {}
+  void failAfter(Op op, int64_t count) { op_ = op; remaining_ = count; }
+  void disarm() { remaining_ = -1; }
+  bool fired() const { return fired_; }
+  // Counts of each operation so far (to enumerate every failure point in a test).
+  int64_t writes = 0, syncs = 0, renames = 0;
+
+  std::unique_ptr<WritableFile> newWritableFile(const std::string& path) override;
+  std::unique_ptr<WritableFile> newAppendableFile(const std::string& path) override;
+  std::unique_ptr<RandomAccessFile> newRandomAccessFile(const std::string& path) override {
+    return base_->newRandomAccessFile(path);
+  }
+  void renameFile(const std::string& from, const std::string& to) override;
+  void removeFile(const std::string& path) override { base_->removeFile(path); }
+  void syncDir(const std::string& dir) override { base_->syncDir(dir); }
+  void createDir(const std::string& dir) override { base_->createDir(dir); }
+  bool exists(const std::string& path) override { return base_->exists(path); }
+  std::vector<std::string> listDir(const std::string& dir) override { return base_->listDir(dir); }
+  uint64_t fileSize(const std::string& path) override { return base_->fileSize(path); }
+
+  // Called by the wrapped files; throws when the armed failure is due.
+  void hit(Op op, const std::string& path);
+
+ private:
+  Env* base_;
+  Op op_ = Op::Write;
+  int64_t remaining_ = -1;
+  bool fired_ = false;
+};
+
+}  // namespace mt

@@ -1,0 +1,650 @@
+// Ingest: a mesh file of any size into a new patch store, within the --memory cap.
+//
+// Every pass is sequential over scratch files or an external sort, so memory depends on the cap,
+// not on the input (BMT section 6 needs the store to exist before anything fits in RAM):
+//   1 parse      input -> vert.bin (fixed records) + face.bin (3 x u32); bounding box
+//   2 centroids  face.bin + vert.bin -> cent.bin (centroid xyz + area per face, in face order);
+//                vertex positions are loaded in chunks that fit the cap, faces that need a later
+//                chunk are carried forward, and the per-chunk results are merged by face index
+//   3 assign     the CellAssigner streams cent.bin as often as it likes, then keys every face;
+//                faces are externally sorted by (cell key, face)
+//   4 group      consecutive keys become patches 0..P-1 -> pface.bin; unique (vertex, patch)
+//                pairs are externally sorted by vertex
+//   5 join       pairs merge-joined with vert.bin -> (patch, vertex, data) sorted by patch
+//   6 patches    one geometry block per patch (local order = ascending input index); shared
+//                vertices -> (vertex, patch, local) sorted by vertex; edge use counts
+//   7 boundary   grouped by vertex -> (p, vp, q, vq) sorted by p -> one boundary block per patch
+// Determinism: every sort key is total, so the store does not depend on the cap or thread count.
+#include <tbb/parallel_for.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cinttypes>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <limits>
+#include <sstream>
+
+#include "patchstore/byte_io.h"
+#include "patchstore/external_sort.h"
+#include "patchstore/progress.h"
+#include "patchstore/store_impl.h"
+#include "patchstore/temp_file.h"
+
+namespace mt {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+// The vertex record layout in vert.bin, fixed by the input's header.
+struct VertexRecordLayout {
+  bool doublePrecision, normals, colors;
+  size_t size() const { return (doublePrecision ? 24 : 12) + (normals ? 12 : 0) + (colors ? 4 : 0); }
+  void encode(const InputVertex& v, char* out) const {
+    if (doublePrecision) {
+      std::memcpy(out, v.p, 24);
+      out += 24;
+    } else {
+      float f[3] = {float(v.p[0]), float(v.p[1]), float(v.p[2])};
+      std::memcpy(out, f, 12);
+      out += 12;
+    }
+    if (normals) {
+      std::memcpy(out, v.n, 12);
+      out += 12;
+    }
+    if (colors) std::memcpy(out, v.c, 4);
+  }
+  void position(const char* rec, double p[3]) const {
+    if (doublePrecision) {
+      std::memcpy(p, rec, 24);
+    } else {
+      float f[3];
+      std::memcpy(f, rec, 12);
+      for (int a = 0; a < 3; ++a) p[a] = f[a];
+    }
+  }
+};
+
+// Stage 1 sink: writes scratch files, tracks the bounding box.
+class ScratchSink : public MeshSink {
+ public:
+  ScratchSink(const std::string& dir, Progress& progress) : vert_(dir + "/vert.bin", 4 << 20), face_(dir + "/face.bin", 4 << 20), progress_(progress) {}
+  void begin(const MeshHeader& h) override {
+    header = h;
+    layout = {h.doublePrecision, h.hasNormals, h.hasColors};
+    record_.resize(layout.size());
+    for (int a = 0; a < 3; ++a) {
+      bounds.lo[a] = std::numeric_limits<double>::infinity();
+      bounds.hi[a] = -std::numeric_limits<double>::infinity();
+    }
+  }
+  void vertices(const InputVertex* v, size_t count, uint64_t) override {
+    for (size_t i = 0; i < count; ++i) {
+      layout.encode(v[i], record_.data());
+      vert_.write(record_.data(), record_.size());
+      for (int a = 0; a < 3; ++a) {
+        bounds.lo[a] = std::min(bounds.lo[a], v[i].p[a]);
+        bounds.hi[a] = std::max(bounds.hi[a], v[i].p[a]);
+      }
+    }
+    vertexCount += count;
+  }
+  void triangles(const uint32_t* idx, size_t count) override {
+    face_.write(idx, count * 12);
+    faceCount += count;
+    progress_.update(faceCount);
+  }
+  void close() {
+    vert_.close();
+    face_.close();
+  }
+  MeshHeader header;
+  VertexRecordLayout layout{};
+  Box3 bounds;
+  uint64_t vertexCount = 0, faceCount = 0;
+
+ private:
+  TempWriter vert_, face_;
+  Progress& progress_;
+  std::vector<char> record_;
+};
+
+struct Centroid {
+  float x, y, z, area;
+};
+
+// Centroid and area of a triangle, independent of corner order (corners summed in ascending
+// index order), so that duplicate faces always land in the same cell.
+Centroid centroidOf(const uint32_t v[3], const float* const p[3]) {
+  int order[3] = {0, 1, 2};
+  std::sort(order, order + 3, [&](int a, int b) { return v[a] < v[b]; });
+  double c[3], e1[3], e2[3];
+  for (int a = 0; a < 3; ++a) {
+    c[a] = (double(p[order[0]][a]) + double(p[order[1]][a]) + double(p[order[2]][a])) / 3.0;
+    e1[a] = double(p[order[1]][a]) - double(p[order[0]][a]);
+    e2[a] = double(p[order[2]][a]) - double(p[order[0]][a]);
+  }
+  double n[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]};
+  return {float(c[0]), float(c[1]), float(c[2]), float(0.5 * std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]))};
+}
+
+// Stage 2. Chunk c holds float positions of vertices [c*chunk, (c+1)*chunk).
+void computeCentroids(const std::string& dir, const VertexRecordLayout& layout, uint64_t vertexCount, uint64_t faceCount,
+                      uint64_t budget, bool showProgress) {
+  const uint64_t chunk = std::max<uint64_t>(1 << 16, budget / 12);
+  const uint64_t chunks = (vertexCount + chunk - 1) / chunk;
+  Progress progress(showProgress, "ingest: centroids", faceCount);
+  std::vector<float> pos;
+  struct Pending {
+    uint32_t face;
+    uint32_t v[3];
+    float p[9];
+    uint32_t resolved;  // bit mask of corners with positions
+  };
+  std::vector<std::string> completedFiles;
+  std::string input = dir + "/face.bin";
+  uint64_t done = 0;
+  for (uint64_t c = 0; c < chunks; ++c) {
+    const uint64_t lo = c * chunk, hi = std::min(vertexCount, lo + chunk);
+    pos.resize((hi - lo) * 3);
+    {
+      TempReader vr(dir + "/vert.bin", 4 << 20);
+      // Skip to the chunk: scratch readers are sequential, so read and drop earlier records.
+      std::vector<char> rec(layout.size() * 4096);
+      uint64_t skip = lo;
+      while (skip > 0) {
+        uint64_t n = std::min<uint64_t>(skip, 4096);
+        vr.read(rec.data(), n * layout.size());
+        skip -= n;
+      }
+      for (uint64_t v = lo; v < hi;) {
+        uint64_t n = std::min<uint64_t>(hi - v, 4096);
+        if (vr.read(rec.data(), n * layout.size()) != n * layout.size()) fail(dir, "vertex scratch file is short");
+        for (uint64_t i = 0; i < n; ++i) {
+          double p[3];
+          layout.position(rec.data() + i * layout.size(), p);
+          for (int a = 0; a < 3; ++a) pos[(v + i - lo) * 3 + a] = float(p[a]);
+        }
+        v += n;
+      }
+    }
+    const bool last = c + 1 == chunks;
+    std::string outPath = chunks == 1 ? dir + "/cent.bin" : dir + "/cent.part" + std::to_string(c);
+    TempWriter out(outPath, 4 << 20);
+    std::unique_ptr<TempWriter> carry;
+    std::string carryPath = dir + "/carry" + std::to_string(c);
+    if (!last) carry = std::make_unique<TempWriter>(carryPath, 4 << 20);
+    auto resolve = [&](Pending& f) {
+      for (int k = 0; k < 3; ++k)
+        if (!(f.resolved & (1u << k)) && f.v[k] >= lo && f.v[k] < hi) {
+          std::memcpy(&f.p[3 * k], &pos[(f.v[k] - lo) * 3], 12);
+          f.resolved |= 1u << k;
+        }
+      if (f.resolved != 7) {
+        if (last) fail(dir, "internal: unresolved face corner");
+        carry->put(f);
+        return;
+      }
+      const float* p[3] = {&f.p[0], &f.p[3], &f.p[6]};
+      Centroid cen = centroidOf(f.v, p);
+      if (chunks > 1) out.put(f.face);
+      out.put(cen);
+      progress.update(++done);
+    };
+    if (c == 0) {
+      TempReader fr(input, 4 << 20);
+      std::vector<uint32_t> batch;
+      uint32_t face = 0;
+      while (fr.getBatch(batch, 3 * 65536)) {
+        for (size_t i = 0; i < batch.size(); i += 3) {
+          Pending f{face++, {batch[i], batch[i + 1], batch[i + 2]}, {}, 0};
+          resolve(f);
+        }
+      }
+    } else {
+      TempReader fr(dir + "/carry" + std::to_string(c - 1), 4 << 20);
+      Pending f;
+      while (fr.get(f)) resolve(f);
+      std::remove((dir + "/carry" + std::to_string(c - 1)).c_str());
+    }
+    out.close();
+    if (carry) carry->close();
+    completedFiles.push_back(outPath);
+  }
+  if (chunks > 1) {
+    // Merge the per-chunk outputs (each ascending by face) into face order.
+    struct Tagged {
+      uint32_t face;
+      Centroid c;
+    };
+    std::vector<std::unique_ptr<TempReader>> readers;
+    std::vector<Tagged> heads(chunks);
+    std::vector<bool> live(chunks);
+    for (uint64_t c = 0; c < chunks; ++c) {
+      readers.push_back(std::make_unique<TempReader>(completedFiles[c], 1 << 20));
+      live[c] = readers[c]->get(heads[c].face) && readers[c]->get(heads[c].c);
+    }
+    TempWriter out(dir + "/cent.bin", 4 << 20);
+    for (uint64_t f = 0; f < faceCount; ++f) {
+      uint64_t c = 0;
+      while (c < chunks && !(live[c] && heads[c].face == f)) ++c;
+      if (c == chunks) fail(dir, "internal: centroid of face " + std::to_string(f) + " missing");
+      out.put(heads[c].c);
+      live[c] = readers[c]->get(heads[c].face) && readers[c]->get(heads[c].c);
+    }
+    out.close();
+    readers.clear();
+    for (auto& p : completedFiles) std::remove(p.c_str());
+  }
+  progress.finish(faceCount);
+}
+
+class CentroidFile : public CentroidSource {
+ public:
+  CentroidFile(std::string path, uint64_t count, Box3 bounds) : path_(std::move(path)), count_(count), bounds_(bounds) {}
+  uint64_t count() const override { return count_; }
+  Box3 bounds() const override { return bounds_; }
+  void forEach(const std::function<void(const float*, size_t)>& fn) const override {
+    TempReader r(path_, 4 << 20);
+    std::vector<Centroid> batch;
+    while (r.getBatch(batch, 65536)) fn(&batch[0].x, batch.size());
+  }
+
+ private:
+  std::string path_;
+  uint64_t count_;
+  Box3 bounds_;
+};
+
+struct FaceRec {
+  uint64_t key;
+  uint32_t face;
+  uint32_t v[3];
+};
+struct FaceLess {
+  bool operator()(const FaceRec& a, const FaceRec& b) const { return a.key != b.key ? a.key < b.key : a.face < b.face; }
+};
+struct U64Less {
+  bool operator()(uint64_t a, uint64_t b) const { return a < b; }
+};
+// (patch << 32 | vertex) with the vertex's data.
+template <bool Full>
+struct VertexData;
+template <>
+struct VertexData<false> {
+  uint64_t key;
+  uint32_t holders;
+  float p[3];
+};
+template <>
+struct VertexData<true> {
+  uint64_t key;
+  uint32_t holders;
+  uint32_t pad;
+  double p[3];
+  float n[3];
+  uint8_t c[4];
+};
+template <class T>
+struct KeyLess {
+  bool operator()(const T& a, const T& b) const { return a.key < b.key; }
+};
+struct LocalRec {
+  uint64_t key;  // vertex << 32 | patch
+  uint32_t local;
+  uint32_t pad;
+};
+struct EntryRec {
+  uint64_t key;  // patch << 32 | local
+  uint32_t neighbour, remote;
+};
+struct EntryLess {
+  bool operator()(const EntryRec& a, const EntryRec& b) const {
+    return a.key != b.key ? a.key < b.key : a.neighbour != b.neighbour ? a.neighbour < b.neighbour : a.remote < b.remote;
+  }
+};
+struct EdgeRec {
+  uint64_t key;  // lower vertex << 32 | higher vertex
+  uint32_t count, pad;
+};
+struct EdgeLess {
+  bool operator()(const EdgeRec& a, const EdgeRec& b) const { return a.key != b.key ? a.key < b.key : a.count < b.count; }
+};
+
+std::string encodeReport(const IngestReport& r) {
+  std::ostringstream s;
+  s << "input=" << r.input << "\nformat=" << r.format << "\ninputVertices=" << r.inputVertices
+    << "\ninputTriangles=" << r.inputTriangles << "\ninputBytes=" << r.inputBytes << "\npolygons=" << r.polygons
+    << "\ndegenerateTriangles=" << r.degenerateTriangles << "\nduplicateTriangles=" << r.duplicateTriangles
+    << "\nunreferencedVertices=" << r.unreferencedVertices << "\nnonManifoldEdges=" << r.nonManifoldEdges
+    << "\nweldedVertices=" << r.weldedVertices << "\nassigner=" << r.assigner << "\nseconds=" << r.seconds
+    << "\npeakBytes=" << r.peakBytes << "\n";
+  return s.str();
+}
+
+// The main ingest body, building the store in `dir` (already created, empty).
+template <bool Full>
+IngestReport build(const std::string& input, const std::string& dir, const std::string& scratch, CellAssigner& assigner,
+                   const IngestOptions& opt, Env* env) {
+  using Clock = std::chrono::steady_clock;
+  auto t0 = Clock::now();
+  IngestReport report;
+  report.input = input;
+  const uint64_t B = opt.memoryBytes;
+
+  // 1 parse
+  auto reader = openMesh(input);
+  Progress parseProgress(opt.progress, "ingest: parse", uint64_t(std::max<int64_t>(0, reader->header().declaredFaces)));
+  ScratchSink sink(scratch, parseProgress);
+  ReadStats stats = reader->read(sink);
+  sink.close();
+  parseProgress.finish(stats.triangles);
+  report.format = formatName(reader->header().format);
+  report.inputVertices = stats.vertices;
+  report.inputTriangles = stats.triangles;
+  report.inputBytes = stats.bytes;
+  report.polygons = stats.polygons;
+  report.degenerateTriangles = stats.degenerateTriangles;
+  if (stats.triangles == 0) fail(input, "mesh has no triangles");
+  if (stats.triangles > 0xFFFFFFF0ull) fail(input, "more than 4 billion triangles are not supported");
+  const VertexRecordLayout vlayout = sink.layout;
+  if (Full != (vlayout.doublePrecision || vlayout.normals || vlayout.colors)) fail(input, "internal: wrong record type");
+  const uint64_t nv = sink.vertexCount, nf = sink.faceCount;
+
+  // 2 centroids
+  computeCentroids(scratch, vlayout, nv, nf, B / 2, opt.progress);
+
+  // 3 assign
+  CentroidFile centroids(scratch + "/cent.bin", nf, sink.bounds);
+  assigner.prepare(centroids, B / 2);
+  report.assigner = assigner.describe();
+  ExternalSorter<FaceRec, FaceLess> byCell(scratch + "/s1", B * 3 / 10);
+  {
+    Progress progress(opt.progress, "ingest: assign", nf);
+    TempReader cr(scratch + "/cent.bin", 4 << 20), fr(scratch + "/face.bin", 4 << 20);
+    std::vector<Centroid> cent;
+    std::vector<uint32_t> faces;
+    std::vector<uint64_t> keys;
+    uint32_t face = 0;
+    while (cr.getBatch(cent, 65536)) {
+      fr.getBatch(faces, cent.size() * 3);
+      if (faces.size() != cent.size() * 3) fail(scratch, "internal: face and centroid files disagree");
+      keys.resize(cent.size());
+      tbb::parallel_for(tbb::blocked_range<size_t>(0, cent.size(), 4096), [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t i = r.begin(); i < r.end(); ++i) keys[i] = assigner.cellKey(&cent[i].x);
+      });
+      for (size_t i = 0; i < cent.size(); ++i) byCell.add({keys[i], face++, {faces[3 * i], faces[3 * i + 1], faces[3 * i + 2]}});
+      progress.update(face);
+    }
+    progress.finish(face);
+  }
+  std::remove((scratch + "/face.bin").c_str());
+
+  // 4 group into patches
+  byCell.finish();
+  std::vector<uint64_t> patchKey;
+  std::vector<uint32_t> patchTris;
+  ExternalSorter<uint64_t, U64Less> pairs(scratch + "/s2", B * 3 / 10);
+  {
+    TempWriter pface(scratch + "/pface.bin", 4 << 20);
+    FaceRec f;
+    std::vector<uint32_t> tris, verts;
+    auto flush = [&]() {
+      if (tris.empty()) return;
+      uint32_t k = uint32_t(patchKey.size() - 1);
+      pface.write(tris.data(), tris.size() * 4);
+      patchTris.push_back(uint32_t(tris.size() / 3));
+      verts = tris;
+      std::sort(verts.begin(), verts.end());
+      verts.erase(std::unique(verts.begin(), verts.end()), verts.end());
+      for (uint32_t v : verts) pairs.add(uint64_t(v) << 32 | k);
+      tris.clear();
+    };
+    while (byCell.next(f)) {
+      if (patchKey.empty() || patchKey.back() != f.key) {
+        flush();
+        patchKey.push_back(f.key);
+      }
+      tris.insert(tris.end(), f.v, f.v + 3);
+    }
+    flush();
+    pface.close();
+  }
+  const uint32_t P = uint32_t(patchKey.size());
+
+  // 5 join pairs with vertex data
+  pairs.finish();
+  ExternalSorter<VertexData<Full>, KeyLess<VertexData<Full>>> byPatch(scratch + "/s3", B * 3 / 10);
+  uint64_t distinctReferenced = 0;
+  {
+    Progress progress(opt.progress, "ingest: vertices", nv, "vert");
+    TempReader vr(scratch + "/vert.bin", 4 << 20);
+    std::vector<char> rec(vlayout.size());
+    uint64_t nextVertex = 0;
+    uint64_t pair;
+    bool have = pairs.next(pair);
+    std::vector<uint32_t> holders;
+    while (have) {
+      uint32_t v = uint32_t(pair >> 32);
+      holders.clear();
+      while (have && uint32_t(pair >> 32) == v) {
+        holders.push_back(uint32_t(pair));
+        have = pairs.next(pair);
+      }
+      ++distinctReferenced;
+      for (; nextVertex <= v; ++nextVertex)
+        if (vr.read(rec.data(), rec.size()) != rec.size()) fail(scratch, "vertex scratch file is short");
+      VertexData<Full> d{};
+      d.holders = uint32_t(holders.size());
+      if constexpr (Full) {
+        const char* r = rec.data();
+        vlayout.position(r, d.p);
+        r += vlayout.doublePrecision ? 24 : 12;
+        if (vlayout.normals) {
+          std::memcpy(d.n, r, 12);
+          r += 12;
+        }
+        if (vlayout.colors) std::memcpy(d.c, r, 4);
+      } else {
+        std::memcpy(d.p, rec.data(), 12);
+      }
+      for (uint32_t k : holders) {
+        d.key = uint64_t(k) << 32 | v;
+        byPatch.add(d);
+      }
+      progress.update(nextVertex);
+    }
+    progress.finish(nv);
+  }
+  std::remove((scratch + "/vert.bin").c_str());
+
+  // 6 patches
+  byPatch.finish();
+  auto impl = std::make_unique<PatchStore::Impl>();
+  impl->env = env;
+  impl->dir = dir;
+  impl->layout = {vlayout.doublePrecision, vlayout.normals, vlayout.colors};
+  impl->bounds = sink.bounds;
+  ExternalSorter<LocalRec, KeyLess<LocalRec>> shared(scratch + "/s4", B / 8);
+  ExternalSorter<EdgeRec, EdgeLess> edges(scratch + "/s5", B / 16);
+  {
+    Progress progress(opt.progress, "ingest: patches", nf);
+    TempReader pface(scratch + "/pface.bin", 4 << 20);
+    VertexData<Full> d;
+    bool have = byPatch.next(d);
+    std::vector<uint32_t> globalIds, holders, tris;
+    std::vector<std::array<uint32_t, 3>> sortedTris;
+    std::vector<std::pair<uint64_t, uint32_t>> edgeList;
+    uint64_t facesDone = 0;
+    for (uint32_t k = 0; k < P; ++k) {
+      Patch p;
+      p.id = k;
+      p.cell = patchKey[k];
+      globalIds.clear();
+      holders.clear();
+      while (have && uint32_t(d.key >> 32) == k) {
+        globalIds.push_back(uint32_t(d.key));
+        holders.push_back(d.holders);
+        for (int a = 0; a < 3; ++a) p.positions.push_back(d.p[a]);
+        if constexpr (Full) {
+          if (vlayout.normals) p.normals.insert(p.normals.end(), d.n, d.n + 3);
+          if (vlayout.colors) p.colors.insert(p.colors.end(), d.c, d.c + 4);
+        }
+        have = byPatch.next(d);
+      }
+      tris.resize(size_t(patchTris[k]) * 3);
+      if (pface.read(tris.data(), tris.size() * 4) != tris.size() * 4) fail(scratch, "patch face scratch file is short");
+      p.triangles.resize(tris.size());
+      for (size_t i = 0; i < tris.size(); ++i) {
+        auto it = std::lower_bound(globalIds.begin(), globalIds.end(), tris[i]);
+        if (it == globalIds.end() || *it != tris[i]) fail(scratch, "internal: patch vertex missing");
+        p.triangles[i] = uint32_t(it - globalIds.begin());
+      }
+      // Duplicate faces (same vertex set) and edge use counts.
+      sortedTris.clear();
+      edgeList.clear();
+      for (size_t t = 0; t < p.triangles.size(); t += 3) {
+        std::array<uint32_t, 3> s = {p.triangles[t], p.triangles[t + 1], p.triangles[t + 2]};
+        std::sort(s.begin(), s.end());
+        sortedTris.push_back(s);
+        if (s[0] == s[1] || s[1] == s[2]) continue;  // degenerate: no proper edges
+        for (int e = 0; e < 3; ++e) {
+          uint32_t a = p.triangles[t + e], b = p.triangles[t + (e + 1) % 3];
+          if (a > b) std::swap(a, b);
+          edgeList.push_back({uint64_t(a) << 32 | b, 1});
+        }
+      }
+      std::sort(sortedTris.begin(), sortedTris.end());
+      for (size_t i = 1; i < sortedTris.size(); ++i)
+        if (sortedTris[i] == sortedTris[i - 1]) ++report.duplicateTriangles;
+      std::sort(edgeList.begin(), edgeList.end());
+      for (size_t i = 0; i < edgeList.size();) {
+        size_t j = i;
+        while (j < edgeList.size() && edgeList[j].first == edgeList[i].first) ++j;
+        uint32_t a = uint32_t(edgeList[i].first >> 32), b = uint32_t(edgeList[i].first);
+        uint32_t count = uint32_t(j - i);
+        if (holders[a] > 1 && holders[b] > 1)
+          edges.add({uint64_t(globalIds[a]) << 32 | globalIds[b], count, 0});  // may continue in other patches
+        else if (count > 2)
+          ++report.nonManifoldEdges;
+        i = j;
+      }
+      for (uint32_t v = 0; v < globalIds.size(); ++v)
+        if (holders[v] > 1) shared.add({uint64_t(globalIds[v]) << 32 | k, v, 0});
+      PatchRecord rec;
+      rec.meta = {k, p.cell, 0, p.vertexCount(), p.triangleCount(), 0, boundsOf(p.positions)};
+      rec.geometry = impl->appendBlock(encodeGeometry(p, impl->layout));
+      impl->patches[k] = rec;
+      facesDone += p.triangleCount();
+      progress.update(facesDone);
+    }
+    progress.finish(facesDone);
+  }
+  report.unreferencedVertices = nv - distinctReferenced;
+  std::remove((scratch + "/pface.bin").c_str());
+
+  // Edges shared between patches: sum their uses.
+  edges.finish();
+  {
+    EdgeRec e;
+    bool have = edges.next(e);
+    while (have) {
+      uint64_t key = e.key;
+      uint32_t count = 0;
+      while (have && e.key == key) {
+        count += e.count;
+        have = edges.next(e);
+      }
+      if (count > 2) ++report.nonManifoldEdges;
+    }
+  }
+
+  // 7 boundary lists
+  shared.finish();
+  ExternalSorter<EntryRec, EntryLess> entries(scratch + "/s6", B / 8);
+  {
+    LocalRec r;
+    bool have = shared.next(r);
+    std::vector<std::pair<uint32_t, uint32_t>> group;  // (patch, local)
+    while (have) {
+      uint32_t v = uint32_t(r.key >> 32);
+      group.clear();
+      while (have && uint32_t(r.key >> 32) == v) {
+        group.push_back({uint32_t(r.key), r.local});
+        have = shared.next(r);
+      }
+      for (auto& a : group)
+        for (auto& b : group)
+          if (a.first != b.first) entries.add({uint64_t(a.first) << 32 | a.second, b.first, b.second});
+    }
+  }
+  entries.finish();
+  {
+    EntryRec e;
+    bool have = entries.next(e);
+    std::vector<BoundaryEntry> list;
+    for (uint32_t k = 0; k < P; ++k) {
+      list.clear();
+      while (have && uint32_t(e.key >> 32) == k) {
+        list.push_back({uint32_t(e.key), e.neighbour, e.remote});
+        have = entries.next(e);
+      }
+      PatchRecord& rec = impl->patches[k];
+      rec.boundary = impl->appendBlock(encodeBoundary(list));
+      rec.meta.boundaryEntries = uint32_t(list.size());
+    }
+  }
+
+  // Commit: segment durable, then the first manifest and CURRENT.
+  impl->nextPatchId = P;
+  for (auto& [id, rec] : impl->patches) impl->addLive(rec, +1);
+  report.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
+  report.peakBytes = peakRssBytes();
+  impl->blobs["ingest"] = encodeReport(report);
+  std::string assignerBytes = assigner.serialize();
+  if (!assignerBytes.empty()) impl->blobs["assigner"] = assignerBytes;
+  impl->activeWriter->sync();
+  impl->activeWriter->close();
+  impl->activeWriter.reset();
+  impl->writeNewManifest();
+  return report;
+}
+
+}  // namespace
+
+IngestReport PatchStore::ingest(const std::string& input, const std::string& dirIn, CellAssigner& assigner,
+                                const IngestOptions& options, Env* env) {
+  std::string dir = dirIn;
+  while (dir.size() > 1 && dir.back() == '/') dir.pop_back();
+  if (env->exists(dir) && !(fs::is_directory(dir) && fs::is_empty(dir)))
+    fail(dir, "already exists (remove it or choose another store directory)");
+  std::string building = dir + ".ingest-" + std::to_string(getpid());
+  std::error_code ec;
+  fs::remove_all(building, ec);
+  env->createDir(building);
+  std::string scratch = options.tempDir.empty() ? building + "/tmp" : options.tempDir + "/mt-ingest-" + std::to_string(getpid());
+  try {
+    env->createDir(scratch);
+    // Peek at the header to pick the record type; the reader is reopened by build().
+    const MeshHeader header = openMesh(input)->header();
+    bool full = header.doublePrecision || header.hasNormals || header.hasColors;
+    IngestReport report = full ? build<true>(input, building, scratch, assigner, options, env)
+                               : build<false>(input, building, scratch, assigner, options, env);
+    fs::remove_all(scratch, ec);
+    if (env->exists(dir)) fs::remove(dir, ec);  // the empty directory the user pointed at
+    env->renameFile(building, dir);
+    env->syncDir(fs::path(dir).parent_path().empty() ? "." : fs::path(dir).parent_path().string());
+    return report;
+  } catch (...) {
+    fs::remove_all(scratch, ec);
+    fs::remove_all(building, ec);
+    throw;
+  }
+}
+
+}  // namespace mt

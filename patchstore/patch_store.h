@@ -1,0 +1,181 @@
+// The out-of-core patch store (BMT section 6): the whole mesh kept on disk as a collection of
+// small independent patches. Each patch holds its own copy of the vertices it uses (positions,
+// and normals/colours when the input has them), its triangles in local indices, and a boundary
+// list with one entry (vp, q, vq) per vertex vp it shares: patch q holds the same vertex at its
+// local index vq. Boundary lists are symmetric: (vp, q, vq) in p <=> (vq, p, vp) in q.
+//
+// load(P) assembles patches P into one in-core mesh with unified vertex indices, flagging every
+// vertex that a patch outside P also uses as locked; writeBack() replaces the loaded patches by a
+// new partition of the (modified) mesh and rewrites the boundary lists of the outside patches that
+// point into it. The on-disk format and its crash-safety rules are in store_format.h.
+//
+// Thread safety: load(), patch(), info() may run concurrently with each other and with writeBack()
+// of disjoint patch sets; writeBack()/sync() serialize internally.
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include "patchstore/cell_assigner.h"
+#include "patchstore/env.h"
+#include "patchstore/mesh_reader.h"
+
+namespace mt {
+
+using PatchId = uint32_t;
+constexpr uint32_t kNoVertex = 0xFFFFFFFFu;
+
+// What a store's vertices carry. Fixed at ingest for the whole store.
+struct VertexLayout {
+  bool doublePrecision = false;  // positions stored as double (input needed it), else float
+  bool normals = false;
+  bool colors = false;
+};
+
+struct BoundaryEntry {
+  uint32_t local;      // vp: vertex index inside this patch
+  PatchId neighbour;   // q
+  uint32_t remote;     // vq: the same vertex's index inside q
+};
+
+// One patch, decoded.
+struct Patch {
+  PatchId id = 0;
+  uint64_t cell = 0;     // the cell key it was made for (assigner's key, or caller's in writeBack)
+  uint32_t level = 0;    // caller-defined (mtbuild: the level that wrote it); 0 at ingest
+  std::vector<double> positions;   // 3 per vertex
+  std::vector<float> normals;      // 3 per vertex, empty when the layout has none
+  std::vector<uint8_t> colors;     // 4 per vertex, empty when the layout has none
+  std::vector<uint32_t> triangles; // 3 per triangle, local indices
+  std::vector<BoundaryEntry> boundary;  // sorted by (local, neighbour)
+  uint32_t vertexCount() const { return uint32_t(positions.size() / 3); }
+  uint32_t triangleCount() const { return uint32_t(triangles.size() / 3); }
+};
+
+// Summary of one live patch, kept in RAM (from the manifest).
+struct PatchMeta {
+  PatchId id = 0;
+  uint64_t cell = 0;
+  uint32_t level = 0;
+  uint32_t vertices = 0;
+  uint32_t triangles = 0;
+  uint32_t boundaryEntries = 0;
+  Box3 bounds;
+};
+
+// Several patches loaded as one mesh (BMT section 6: "we exploit these lists to efficiently unify
+// vertex indexes and to mark the vertices that are referred by not loaded patches").
+struct LoadedMesh {
+  std::vector<PatchId> patches;    // the loaded set, ascending
+  std::vector<double> positions;   // 3 per vertex
+  std::vector<float> normals;      // 3 per vertex or empty
+  std::vector<uint8_t> colors;     // 4 per vertex or empty
+  std::vector<uint32_t> triangles; // 3 per triangle, unified indices
+  std::vector<PatchId> trianglePatch;  // the loaded patch each triangle came from
+  std::vector<uint8_t> locked;     // 1 per vertex: used by a patch outside the loaded set
+  // For each locked vertex, where outside patches hold it: (vertex, outside patch, index there).
+  struct ExternalRef { uint32_t vertex; PatchId patch; uint32_t remote; };
+  std::vector<ExternalRef> external;  // sorted by vertex
+  uint32_t vertexCount() const { return uint32_t(positions.size() / 3); }
+  uint32_t triangleCount() const { return uint32_t(triangles.size() / 3); }
+};
+
+// The new content for a loaded region. Vertices that existed in the LoadedMesh keep their
+// identity through `origin` (index into LoadedMesh's vertices, kNoVertex for new vertices).
+// Every locked vertex that is still referenced from outside must appear with its origin and its
+// exact original position: the store checks this, since it is what keeps the mesh crack-free.
+struct ReplacementMesh {
+  std::vector<double> positions;
+  std::vector<float> normals;      // empty, or 3 per vertex when the layout has normals
+  std::vector<uint8_t> colors;     // empty, or 4 per vertex when the layout has colours
+  std::vector<uint32_t> triangles;
+  std::vector<uint32_t> origin;    // 1 per vertex
+  std::vector<uint64_t> triangleCell;  // the new partition: triangles with equal key form a patch
+  uint32_t level = 0;              // recorded in every new patch
+};
+
+struct IngestOptions {
+  uint64_t memoryBytes = 256ull << 20;  // the --memory cap for the whole ingest
+  uint32_t patchTriangles = 0;          // 0: the assigner's own default
+  std::string tempDir;                  // default: STORE/tmp
+  bool progress = true;                 // progress lines on stderr
+};
+
+// Figures that ingest measured, kept in the store and printed by `mtstore info`.
+struct IngestReport {
+  std::string input;
+  std::string format;
+  uint64_t inputVertices = 0, inputTriangles = 0, inputBytes = 0;
+  uint64_t polygons = 0;              // faces with more than 3 corners (triangulated)
+  uint64_t degenerateTriangles = 0;   // a repeated vertex index
+  uint64_t duplicateTriangles = 0;    // same vertex set as an earlier triangle
+  uint64_t unreferencedVertices = 0;
+  uint64_t nonManifoldEdges = 0;      // undirected edges used by more than two triangles
+  uint64_t weldedVertices = 0;        // STL soups: exact-position duplicates merged
+  std::string assigner;
+  double seconds = 0;
+  uint64_t peakBytes = 0;             // RSS high-water mark at the end of ingest
+};
+
+struct StoreInfo {
+  uint64_t patches = 0, triangles = 0, vertices = 0, boundaryEntries = 0, bytesOnDisk = 0;
+  uint32_t minPatchTriangles = 0, maxPatchTriangles = 0;
+  double meanPatchTriangles = 0;
+  VertexLayout layout;
+  Box3 bounds;
+  IngestReport ingest;
+};
+
+struct CheckReport {
+  bool ok = true;
+  std::vector<std::string> problems;  // one line each, naming the patch (and file/offset)
+  uint64_t patchesChecked = 0, entriesChecked = 0;
+};
+
+class PatchStore {
+ public:
+  // Builds a new store at `dir` (which must not exist or be empty) from a mesh file. The store is
+  // built in a temporary directory next to `dir` and renamed into place when complete.
+  static IngestReport ingest(const std::string& input, const std::string& dir,
+                             CellAssigner& assigner, const IngestOptions& options,
+                             Env* env = Env::Default());
+  static std::unique_ptr<PatchStore> open(const std::string& dir, Env* env = Env::Default());
+  ~PatchStore();
+
+  const std::string& dir() const { return dir_; }
+  const VertexLayout& layout() const;
+  std::vector<PatchId> patchIds() const;          // live patches, ascending
+  PatchMeta meta(PatchId id) const;
+  StoreInfo info() const;
+  // Opaque bytes stored with the store (e.g. V-partition seeds), by name.
+  std::string blob(const std::string& name) const;
+  void putBlob(const std::string& name, const std::string& bytes);
+
+  Patch patch(PatchId id) const;                  // reads and verifies one patch
+  LoadedMesh load(const std::vector<PatchId>& ids) const;
+  // Replaces the loaded patches by the replacement's partition; returns the new patch ids in
+  // ascending cell-key order. Durable once sync() returns (or at once with syncNow).
+  std::vector<PatchId> writeBack(const LoadedMesh& loaded, const ReplacementMesh& replacement,
+                                 bool syncNow = false);
+  void sync();
+  // Streams every triangle (welded by vertex identity across patches) to a binary PLY.
+  void exportPly(const std::string& path, bool progress = false) const;
+  CheckReport check() const;
+
+  struct Impl;
+ private:
+  explicit PatchStore(std::unique_ptr<Impl> impl, std::string dir);
+  std::unique_ptr<Impl> impl_;
+  std::string dir_;
+};
+
+// "256M", "4G", "512MiB", "1000000" -> bytes. Throws mt::Error on garbage.
+uint64_t parseSize(const std::string& text);
+// Peak resident set size of this process so far (VmHWM), in bytes.
+uint64_t peakRssBytes();
+
+}  // namespace mt

@@ -1,0 +1,83 @@
+// The patch store's on-disk format: the one place it is written down (after LevelDB's table and
+// manifest formats). All integers are little-endian; checksums are XXH64 (seed 0).
+//
+// A store is a directory:
+//   CURRENT            one line "MANIFEST-<n>\n": the live manifest. Replaced by writing
+//                      CURRENT.tmp, fsync, rename (atomic), fsync of the directory.
+//   MANIFEST-<n>       a log of records. Record = RecordHeader + payload. The first record is a
+//                      Snapshot (the whole state); each later one is an Edit. Recovery replays
+//                      records in order and stops at the first record that is short or fails its
+//                      checksum (a torn append): everything before it is the store.
+//   SEG-<n>.dat        segment files of blocks, appended to, never modified in place:
+//                      BlockHeader + payload. A block is referenced from the manifest by a
+//                      BlockHandle (segment, offset, size, checksum), so it is verified twice.
+//   tmp/               scratch space for ingest and healing (deleted on success).
+//
+// Crash safety (the order every update follows): new blocks are appended to a segment and the
+// segment is fsynced; then one Edit record listing every change of the update is appended to the
+// manifest and fsynced: that fsync is the commit point. A crash before it leaves the old store
+// (the orphan blocks are unreferenced); after it, the new one. Segments whose blocks are all dead
+// are deleted only after the edit that killed them is durable. When the manifest log grows past
+// twice its snapshot size, a new manifest is written (Snapshot only) and CURRENT is switched to it.
+//
+// Ingest builds a whole store in DIR.ingest-<pid> and renames it to DIR when complete.
+#pragma once
+
+#include <cstdint>
+
+namespace mt::store_format {
+
+constexpr uint32_t kVersion = 1;
+
+// ---- segments ----
+constexpr uint32_t kBlockMagic = 0x4B42544D;  // "MTBK"
+struct BlockHeader {
+  uint32_t magic;     // kBlockMagic
+  uint32_t size;      // payload bytes
+  uint64_t checksum;  // XXH64 of the payload
+};
+static_assert(sizeof(BlockHeader) == 16);
+
+struct BlockHandle {
+  uint32_t segment = 0;  // SEG-<segment>.dat
+  uint32_t size = 0;     // payload bytes
+  uint64_t offset = 0;   // of the BlockHeader
+  uint64_t checksum = 0; // XXH64 of the payload
+};
+
+// Geometry block payload (one per patch):
+//   GeometryHeader
+//   positions   vertexCount * 3 * (float32 | float64 if kGeomDouble)
+//   normals     vertexCount * 3 * float32            (if kGeomNormals)
+//   colors      vertexCount * 4 * uint8              (if kGeomColors)
+//   triangles   triangleCount * 3 * uint32 local vertex indices
+constexpr uint32_t kGeomDouble = 1, kGeomNormals = 2, kGeomColors = 4;
+struct GeometryHeader {
+  uint32_t vertexCount;
+  uint32_t triangleCount;
+  uint32_t flags;
+  uint32_t reserved;
+};
+// Boundary block payload (one per patch): uint32 count, then count * {uint32 local,
+// uint32 neighbour patch id, uint32 remote index}, sorted by (local, neighbour).
+
+// ---- manifest ----
+constexpr uint32_t kManifestMagic = 0x464E4D4D;  // "MMNF", first 4 bytes of a Snapshot payload
+enum RecordType : uint32_t { kSnapshot = 1, kEdit = 2 };
+struct RecordHeader {
+  uint32_t type;      // RecordType
+  uint32_t size;      // payload bytes
+  uint64_t checksum;  // XXH64 of the payload
+};
+static_assert(sizeof(RecordHeader) == 16);
+
+// Snapshot payload: magic, version, VertexLayout flags (uint32), nextPatchId (uint32),
+//   nextSegment (uint32), bounds (6 float64), blob count + {name, bytes} (length-prefixed),
+//   patch count + PatchRecord each.
+// Edit payload: nextPatchId, nextSegment, removed count + patch ids, added/updated count +
+//   PatchRecord each, blob count + {name, bytes}.
+// PatchRecord: id u32, cell u64, level u32, vertices u32, triangles u32, boundaryEntries u32,
+//   bounds 6 x float64, geometry BlockHandle, boundary BlockHandle
+//   (BlockHandle = segment u32, size u32, offset u64, checksum u64).
+
+}  // namespace mt::store_format

@@ -1,0 +1,81 @@
+// Internal to patchstore: the state behind PatchStore, shared by the store (patch_store.cpp) and
+// ingest (ingest.cpp), which writes a new store's blocks and first snapshot directly.
+#pragma once
+
+#include <map>
+#include <memory>
+#include <mutex>
+#include <shared_mutex>
+#include <string>
+#include <vector>
+
+#include "patchstore/patch_store.h"
+#include "patchstore/store_format.h"
+
+namespace mt {
+
+struct PatchRecord {
+  PatchMeta meta;
+  store_format::BlockHandle geometry;
+  store_format::BlockHandle boundary;
+};
+
+struct PatchStore::Impl {
+  Env* env = nullptr;
+  std::string dir;
+  VertexLayout layout;
+  Box3 bounds;
+  uint32_t nextPatchId = 1;
+  uint32_t nextSegment = 1;
+  std::map<PatchId, PatchRecord> patches;
+  std::map<std::string, std::string> blobs;
+
+  // Segments: the one being appended to, and lazily opened readers for all.
+  uint32_t activeSegment = 0;
+  std::unique_ptr<WritableFile> activeWriter;
+  std::map<uint32_t, uint64_t> liveBytes;  // per segment, of blocks referenced by live patches
+  mutable std::mutex readersMutex;
+  mutable std::map<uint32_t, std::shared_ptr<RandomAccessFile>> readers;
+
+  // Manifest log.
+  uint64_t manifestNumber = 0;
+  std::unique_ptr<WritableFile> manifestWriter;
+  uint64_t snapshotBytes = 0;
+
+  // Changes not yet committed to the manifest (write-backs without syncNow).
+  std::vector<PatchId> pendingRemoved;
+  std::map<PatchId, PatchRecord> pendingUpserted;
+  std::map<std::string, std::string> pendingBlobs;
+  bool pendingDirty = false;
+
+  mutable std::shared_mutex stateMutex;  // guards the maps above against concurrent readers
+  std::mutex writeMutex;                 // serializes writeBack/sync/putBlob
+
+  // ---- file names ----
+  std::string segmentPath(uint32_t n) const;
+  std::string manifestPath(uint64_t n) const;
+
+  // ---- blocks ----
+  store_format::BlockHandle appendBlock(const std::string& payload);
+  std::string readBlock(const store_format::BlockHandle& h, const std::string& what) const;
+  void startSegment();
+
+  // ---- manifest ----
+  std::string encodeSnapshot() const;
+  void writeNewManifest();  // snapshot into MANIFEST-(n+1), then switch CURRENT
+  void commitPending();     // segment fsync, edit append, manifest fsync (the commit point)
+  void recover();           // open: CURRENT -> manifest replay
+  void dropDeadSegments();
+
+  void addLive(const PatchRecord& r, int sign);
+};
+
+// Patch payload coding, shared by ingest and write-back.
+std::string encodeGeometry(const Patch& p, const VertexLayout& layout);
+void decodeGeometry(const std::string& payload, const VertexLayout& layout, Patch& out,
+                    const std::string& source);
+std::string encodeBoundary(const std::vector<BoundaryEntry>& entries);
+std::vector<BoundaryEntry> decodeBoundary(const std::string& payload, const std::string& source);
+Box3 boundsOf(const std::vector<double>& positions);
+
+}  // namespace mt

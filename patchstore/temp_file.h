@@ -1,0 +1,129 @@
+// Sequential scratch files for the out-of-core passes: buffered record writers and readers of
+// plain-old-data records. Scratch files need no crash safety (a failed ingest deletes them), so
+// they use stdio directly rather than the store's Env.
+#pragma once
+
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+#include <string>
+#include <type_traits>
+#include <vector>
+
+#include "patchstore/error.h"
+
+namespace mt {
+
+class TempWriter {
+ public:
+  explicit TempWriter(std::string path, size_t bufferBytes = 1 << 20) : path_(std::move(path)) {
+    file_ = std::fopen(path_.c_str(), "wb");
+    if (!file_) fail(path_, std::string("cannot create scratch file: ") + std::strerror(errno));
+    buffer_.reserve(bufferBytes);
+  }
+  ~TempWriter() {
+    if (file_) std::fclose(file_);
+  }
+  TempWriter(const TempWriter&) = delete;
+  TempWriter& operator=(const TempWriter&) = delete;
+
+  void write(const void* data, size_t size) {
+    if (buffer_.size() + size > buffer_.capacity()) flush();
+    if (size > buffer_.capacity()) {
+      put(data, size);
+    } else {
+      const char* p = static_cast<const char*>(data);
+      buffer_.insert(buffer_.end(), p, p + size);
+    }
+    bytes_ += size;
+  }
+  template <class T>
+  void put(const T& record) {
+    static_assert(std::is_trivially_copyable_v<T>);
+    write(&record, sizeof(T));
+  }
+  void close() {
+    flush();
+    if (file_ && std::fclose(file_) != 0) {
+      file_ = nullptr;
+      fail(path_, std::string("cannot write scratch file: ") + std::strerror(errno));
+    }
+    file_ = nullptr;
+  }
+  uint64_t bytes() const { return bytes_; }
+  const std::string& path() const { return path_; }
+
+ private:
+  void flush() {
+    if (!buffer_.empty()) put(buffer_.data(), buffer_.size());
+    buffer_.clear();
+  }
+  void put(const void* data, size_t size) {
+    if (std::fwrite(data, 1, size, file_) != size)
+      fail(path_, std::string("cannot write scratch file (disk full?): ") + std::strerror(errno));
+  }
+  std::string path_;
+  FILE* file_ = nullptr;
+  std::vector<char> buffer_;
+  uint64_t bytes_ = 0;
+};
+
+class TempReader {
+ public:
+  explicit TempReader(std::string path, size_t bufferBytes = 1 << 20) : path_(std::move(path)) {
+    file_ = std::fopen(path_.c_str(), "rb");
+    if (!file_) fail(path_, std::string("cannot open scratch file: ") + std::strerror(errno));
+    buffer_.resize(bufferBytes);
+  }
+  ~TempReader() {
+    if (file_) std::fclose(file_);
+  }
+  TempReader(const TempReader&) = delete;
+  TempReader& operator=(const TempReader&) = delete;
+
+  // Reads up to `size` bytes; returns the count (0 at end of file).
+  size_t read(void* out, size_t size) {
+    char* p = static_cast<char*>(out);
+    size_t done = 0;
+    while (done < size) {
+      if (pos_ == end_) {
+        end_ = std::fread(buffer_.data(), 1, buffer_.size(), file_);
+        pos_ = 0;
+        if (end_ == 0) {
+          if (std::ferror(file_)) fail(path_, "cannot read scratch file");
+          break;
+        }
+      }
+      size_t n = std::min(size - done, end_ - pos_);
+      std::memcpy(p + done, buffer_.data() + pos_, n);
+      pos_ += n;
+      done += n;
+    }
+    return done;
+  }
+  template <class T>
+  bool get(T& record) {
+    static_assert(std::is_trivially_copyable_v<T>);
+    size_t n = read(&record, sizeof(T));
+    if (n == 0) return false;
+    if (n != sizeof(T)) fail(path_, "scratch file ends inside a record");
+    return true;
+  }
+  // Reads up to maxCount records into out (resized); returns false at end.
+  template <class T>
+  bool getBatch(std::vector<T>& out, size_t maxCount) {
+    out.resize(maxCount);
+    size_t n = read(out.data(), maxCount * sizeof(T));
+    if (n % sizeof(T) != 0) fail(path_, "scratch file ends inside a record");
+    out.resize(n / sizeof(T));
+    return !out.empty();
+  }
+
+ private:
+  std::string path_;
+  FILE* file_ = nullptr;
+  std::vector<char> buffer_;
+  size_t pos_ = 0, end_ = 0;
+};
+
+}  // namespace mt

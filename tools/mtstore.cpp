@@ -1,0 +1,155 @@
+// mtstore: build, inspect, export and check an out-of-core patch store.
+//   mtstore ingest IN -o STORE [--memory SIZE] [--patch-triangles N] [--partition KIND]
+//   mtstore info STORE [--json]
+//   mtstore export STORE -o OUT.ply
+//   mtstore check STORE
+#include <CLI/CLI.hpp>
+
+#include <cinttypes>
+#include <cstdio>
+#include <iostream>
+#include <sstream>
+
+#include "patchstore/patch_store.h"
+#include "tools/partition_choice.h"
+
+namespace {
+
+std::string ingestField(const std::string& report, const std::string& key) {
+  std::istringstream s(report);
+  std::string line;
+  while (std::getline(s, line))
+    if (line.rfind(key + "=", 0) == 0) return line.substr(key.size() + 1);
+  return "";
+}
+
+std::string jsonEscape(const std::string& s) {
+  std::string out;
+  for (char c : s) {
+    if (c == '"' || c == '\\') out += '\\';
+    if (static_cast<unsigned char>(c) < 0x20) continue;
+    out += c;
+  }
+  return out;
+}
+
+int runInfo(const std::string& dir, bool json) {
+  auto store = mt::PatchStore::open(dir);
+  mt::StoreInfo s = store->info();
+  std::string ingest = store->blob("ingest");
+  const char* keys[] = {"input", "format", "inputTriangles", "inputVertices", "polygons", "degenerateTriangles",
+                        "duplicateTriangles", "unreferencedVertices", "nonManifoldEdges", "assigner", "seconds"};
+  std::string metrics = mt::tools::partitionMetrics(*store, json);
+  if (json) {
+    std::printf("{\n  \"store\": \"%s\",\n  \"patches\": %" PRIu64 ",\n  \"triangles\": %" PRIu64 ",\n  \"vertices\": %" PRIu64
+                ",\n  \"triangles_per_patch\": {\"min\": %u, \"mean\": %.1f, \"max\": %u},\n  \"boundary_entries\": %" PRIu64
+                ",\n  \"bytes_on_disk\": %" PRIu64 ",\n  \"layout\": {\"double\": %s, \"normals\": %s, \"colors\": %s},\n",
+                jsonEscape(dir).c_str(), s.patches, s.triangles, s.vertices, s.minPatchTriangles, s.meanPatchTriangles,
+                s.maxPatchTriangles, s.boundaryEntries, s.bytesOnDisk, s.layout.doublePrecision ? "true" : "false",
+                s.layout.normals ? "true" : "false", s.layout.colors ? "true" : "false");
+    std::printf("  \"ingest\": {");
+    bool first = true;
+    for (const char* k : keys) {
+      std::string v = ingestField(ingest, k);
+      bool numeric = !v.empty() && v.find_first_not_of("0123456789.e+-") == std::string::npos;
+      std::printf("%s\"%s\": %s%s%s", first ? "" : ", ", k, numeric ? "" : "\"", jsonEscape(v).c_str(), numeric ? "" : "\"");
+      first = false;
+    }
+    std::printf("}%s\n", metrics.empty() ? "" : ",");
+    if (!metrics.empty()) std::printf("  \"partition\": %s\n", metrics.c_str());
+    std::printf("}\n");
+  } else {
+    std::printf("store            %s\n", dir.c_str());
+    std::printf("patches          %" PRIu64 "\n", s.patches);
+    std::printf("triangles        %" PRIu64 "\n", s.triangles);
+    std::printf("vertices         %" PRIu64 "\n", s.vertices);
+    std::printf("tris/patch       min %u  mean %.1f  max %u\n", s.minPatchTriangles, s.meanPatchTriangles, s.maxPatchTriangles);
+    std::printf("boundary entries %" PRIu64 "\n", s.boundaryEntries);
+    std::printf("bytes on disk    %" PRIu64 " (%.2f bytes/triangle)\n", s.bytesOnDisk,
+                s.triangles ? double(s.bytesOnDisk) / double(s.triangles) : 0.0);
+    std::printf("vertex layout    %s%s%s\n", s.layout.doublePrecision ? "double" : "float",
+                s.layout.normals ? " +normals" : "", s.layout.colors ? " +colours" : "");
+    if (!ingest.empty()) {
+      std::printf("ingested from    %s (%s), %s triangles, %s vertices, in %s s\n", ingestField(ingest, "input").c_str(),
+                  ingestField(ingest, "format").c_str(), ingestField(ingest, "inputTriangles").c_str(),
+                  ingestField(ingest, "inputVertices").c_str(), ingestField(ingest, "seconds").c_str());
+      std::printf("input defects    %s degenerate, %s duplicate faces, %s unreferenced vertices, %s non-manifold edges\n",
+                  ingestField(ingest, "degenerateTriangles").c_str(), ingestField(ingest, "duplicateTriangles").c_str(),
+                  ingestField(ingest, "unreferencedVertices").c_str(), ingestField(ingest, "nonManifoldEdges").c_str());
+      std::printf("cell assignment  %s\n", ingestField(ingest, "assigner").c_str());
+    }
+    if (!metrics.empty()) std::printf("%s", metrics.c_str());
+  }
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"mtstore: the out-of-core patch store (ingest a scan, inspect, export, check)"};
+  app.require_subcommand(1);
+  app.set_help_all_flag("--help-all", "Print the help of every subcommand");
+
+  std::string input, output, dir, memory = "256M", partition = mt::tools::kDefaultPartition;
+  uint32_t patchTriangles = 0;
+  bool json = false, quiet = false;
+
+  CLI::App* ingest = app.add_subcommand("ingest", "Build a patch store from a mesh file (PLY, OBJ, OFF, STL)");
+  ingest->add_option("input", input, "Input mesh file")->required();
+  ingest->add_option("-o,--output", output, "Store directory to create (must not exist)")->required();
+  ingest->add_option("--memory", memory, "Memory cap for the whole ingest, e.g. 256M, 4G (default 256M)");
+  ingest->add_option("--patch-triangles", patchTriangles,
+                     "Target triangles per patch (default: the partition's own, see docs/vpartition.md)");
+  ingest->add_option("--partition", partition, mt::tools::partitionHelp());
+  ingest->add_flag("-q,--quiet", quiet, "No progress lines on stderr");
+
+  CLI::App* info = app.add_subcommand("info", "Print a store's statistics");
+  info->add_option("store", dir, "Store directory")->required();
+  info->add_flag("--json", json, "Machine-readable output");
+
+  CLI::App* exportCmd = app.add_subcommand("export", "Write the whole surface as one binary PLY");
+  exportCmd->add_option("store", dir, "Store directory")->required();
+  exportCmd->add_option("-o,--output", output, "Output PLY file")->required();
+  exportCmd->add_flag("-q,--quiet", quiet, "No progress lines on stderr");
+
+  CLI::App* check = app.add_subcommand("check", "Verify checksums and that every boundary entry is mirrored");
+  check->add_option("store", dir, "Store directory")->required();
+
+  CLI11_PARSE(app, argc, argv);
+  try {
+    if (*ingest) {
+      mt::IngestOptions options;
+      options.memoryBytes = mt::parseSize(memory);
+      options.patchTriangles = patchTriangles;
+      options.progress = !quiet;
+      auto assigner = mt::tools::makeAssigner(partition, patchTriangles);
+      mt::IngestReport r = mt::PatchStore::ingest(input, output, *assigner, options);
+      std::fprintf(stderr, "ingested %" PRIu64 " triangles in %.2f s (%.2f M triangles/s), peak RSS %.1f MiB -> %s\n",
+                   r.inputTriangles, r.seconds, double(r.inputTriangles) / r.seconds / 1e6,
+                   double(r.peakBytes) / (1 << 20), output.c_str());
+      if (r.degenerateTriangles || r.duplicateTriangles || r.unreferencedVertices || r.nonManifoldEdges)
+        std::fprintf(stderr, "input defects: %" PRIu64 " degenerate triangles, %" PRIu64 " duplicate triangles, %" PRIu64
+                     " unreferenced vertices, %" PRIu64 " non-manifold edges\n",
+                     r.degenerateTriangles, r.duplicateTriangles, r.unreferencedVertices, r.nonManifoldEdges);
+      return 0;
+    }
+    if (*info) return runInfo(dir, json);
+    if (*exportCmd) {
+      auto store = mt::PatchStore::open(dir);
+      store->exportPly(output, !quiet);
+      return 0;
+    }
+    if (*check) {
+      auto store = mt::PatchStore::open(dir);
+      mt::CheckReport r = store->check();
+      for (const std::string& p : r.problems) std::fprintf(stderr, "%s\n", p.c_str());
+      std::printf("%s: %" PRIu64 " patches, %" PRIu64 " boundary entries checked: %s\n", dir.c_str(), r.patchesChecked,
+                  r.entriesChecked, r.ok ? "OK" : "PROBLEMS FOUND");
+      return r.ok ? 0 : 1;
+    }
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "mtstore: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}
