@@ -294,7 +294,17 @@ void PatchStore::Impl::writeNewManifest() {
 }
 
 void PatchStore::Impl::commitPending() {
+  if (!failedCommit.empty()) fail(dir, "store refuses updates after a failed commit (" + failedCommit + "); reopen it");
   if (!pendingDirty) return;
+  try {
+    commitPendingUnchecked();
+  } catch (const Error& e) {
+    failedCommit = e.what();
+    throw;
+  }
+}
+
+void PatchStore::Impl::commitPendingUnchecked() {
   if (activeWriter) activeWriter->sync();  // blocks before the record that references them
   ByteWriter w;
   w.put(nextPatchId);
@@ -384,12 +394,18 @@ void PatchStore::Impl::recover() {
   }
   if (first) fail(mpath, "no valid snapshot record");
   for (auto& [id, rec] : patches) addLive(rec, +1);
-  // A torn tail (or orphan segments from an interrupted update) is cleaned by starting a fresh
-  // manifest from the recovered state; new blocks go to a new segment.
-  writeNewManifest();
+  if (offset != size) {
+    // A torn tail from an interrupted commit: start a fresh manifest from the recovered state.
+    writeNewManifest();
+  } else {
+    manifestWriter = env->newAppendableFile(mpath);
+  }
+  // Files no committed state references: segments of uncommitted updates, stale manifests.
   for (const std::string& name : env->listDir(dir)) {
     unsigned n = 0;
     if (std::sscanf(name.c_str(), "SEG-%u.dat", &n) == 1 && !liveBytes.count(n)) env->removeFile(dir + "/" + name);
+    unsigned long long m = 0;
+    if (std::sscanf(name.c_str(), "MANIFEST-%llu", &m) == 1 && m != manifestNumber) env->removeFile(dir + "/" + name);
   }
 }
 
@@ -399,6 +415,7 @@ void PatchStore::Impl::recover() {
 PatchStore::PatchStore(std::unique_ptr<Impl> impl, std::string dir) : impl_(std::move(impl)), dir_(std::move(dir)) {}
 
 PatchStore::~PatchStore() {
+  if (!impl_->failedCommit.empty()) return;
   try {
     sync();
   } catch (const std::exception& e) {
@@ -600,6 +617,7 @@ std::vector<PatchId> PatchStore::writeBack(const LoadedMesh& loaded, const Repla
   }
 
   std::lock_guard<std::mutex> writer(impl_->writeMutex);
+  if (!impl_->failedCommit.empty()) fail(dir_, "store refuses updates after a failed commit; reopen it");
   std::vector<PatchId> newIds(out.size());
   {
     std::unique_lock lock(impl_->stateMutex);

@@ -47,6 +47,9 @@ struct PatchStore::Impl {
   std::map<PatchId, PatchRecord> pendingUpserted;
   std::map<std::string, std::string> pendingBlobs;
   bool pendingDirty = false;
+  // Set when a commit failed half-way: the in-memory state is ahead of the disk, so every later
+  // update is refused until the store is reopened (after LevelDB's background error).
+  std::string failedCommit;
 
   mutable std::shared_mutex stateMutex;  // guards the maps above against concurrent readers
   std::mutex writeMutex;                 // serializes writeBack/sync/putBlob
@@ -64,6 +67,7 @@ struct PatchStore::Impl {
   std::string encodeSnapshot() const;
   void writeNewManifest();  // snapshot into MANIFEST-(n+1), then switch CURRENT
   void commitPending();     // segment fsync, edit append, manifest fsync (the commit point)
+  void commitPendingUnchecked();
   void recover();           // open: CURRENT -> manifest replay
   void dropDeadSegments();
 

@@ -1,0 +1,575 @@
+// PLY reader: ascii, binary_little_endian and binary_big_endian, streamed element by element.
+//
+// The header is turned into a flat description of every element (property types, which
+// InputVertex field each vertex property feeds, fixed record sizes), so the data loops only do
+// a switch on a scalar type per mapped property. The common binary layout (little-endian,
+// "list uchar int|uint vertex_indices" as the face's only property) has a dedicated triangle
+// loop that copies 13-byte records straight into the batch; any face that is not a triangle
+// drops to the generic path for that one record.
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "patchstore/io/reader_util.h"
+
+namespace mt::io {
+namespace {
+
+enum class Type : uint8_t { Int8, UInt8, Int16, UInt16, Int32, UInt32, Float32, Float64 };
+
+bool parseType(std::string_view name, Type& type) {
+  static const struct {
+    const char* name;
+    Type type;
+  } kNames[] = {{"char", Type::Int8},     {"int8", Type::Int8},       {"uchar", Type::UInt8},
+                {"uint8", Type::UInt8},   {"short", Type::Int16},     {"int16", Type::Int16},
+                {"ushort", Type::UInt16}, {"uint16", Type::UInt16},   {"int", Type::Int32},
+                {"int32", Type::Int32},   {"uint", Type::UInt32},     {"uint32", Type::UInt32},
+                {"float", Type::Float32}, {"float32", Type::Float32}, {"double", Type::Float64},
+                {"float64", Type::Float64}};
+  for (const auto& n : kNames)
+    if (name == n.name) {
+      type = n.type;
+      return true;
+    }
+  return false;
+}
+
+size_t typeSize(Type t) {
+  static const size_t kSizes[] = {1, 1, 2, 2, 4, 4, 4, 8};
+  return kSizes[size_t(t)];
+}
+
+bool isInteger(Type t) { return t != Type::Float32 && t != Type::Float64; }
+
+// The InputVertex field a vertex property feeds; Indices marks the face's index list.
+enum Slot : int8_t { kNone = -1, kX, kY, kZ, kNX, kNY, kNZ, kRed, kGreen, kBlue, kAlpha, kIndices };
+
+struct Property {
+  std::string name;
+  Type type = Type::Float32;  // item type for lists
+  bool isList = false;
+  Type countType = Type::UInt8;
+  Slot slot = kNone;
+};
+
+struct Element {
+  std::string name;
+  uint64_t count = 0;
+  std::vector<Property> properties;
+  bool fixedSize = true;  // no list properties: every record is recordSize bytes
+  size_t recordSize = 0;
+};
+
+template <class U>
+U loadBits(const char* p, bool swap) {
+  U u;
+  std::memcpy(&u, p, sizeof u);
+  if (swap) {
+    if constexpr (sizeof(U) == 2) u = __builtin_bswap16(u);
+    if constexpr (sizeof(U) == 4) u = __builtin_bswap32(u);
+    if constexpr (sizeof(U) == 8) u = __builtin_bswap64(u);
+  }
+  return u;
+}
+
+template <class T, class U>
+T loadAs(const char* p, bool swap) {
+  U u = loadBits<U>(p, swap);
+  T t;
+  std::memcpy(&t, &u, sizeof t);
+  return t;
+}
+
+double loadScalar(const char* p, Type t, bool swap) {
+  switch (t) {
+    case Type::Int8: return double(int8_t(*p));
+    case Type::UInt8: return double(uint8_t(*p));
+    case Type::Int16: return double(loadAs<int16_t, uint16_t>(p, swap));
+    case Type::UInt16: return double(loadBits<uint16_t>(p, swap));
+    case Type::Int32: return double(loadAs<int32_t, uint32_t>(p, swap));
+    case Type::UInt32: return double(loadBits<uint32_t>(p, swap));
+    case Type::Float32: return double(loadAs<float, uint32_t>(p, swap));
+    case Type::Float64: return loadAs<double, uint64_t>(p, swap);
+  }
+  return 0;
+}
+
+// Integer-typed list counts and indices (checked at header time to be integer types).
+int64_t loadInteger(const char* p, Type t, bool swap) {
+  switch (t) {
+    case Type::Int8: return int8_t(*p);
+    case Type::UInt8: return uint8_t(*p);
+    case Type::Int16: return loadAs<int16_t, uint16_t>(p, swap);
+    case Type::UInt16: return loadBits<uint16_t>(p, swap);
+    case Type::Int32: return loadAs<int32_t, uint32_t>(p, swap);
+    case Type::UInt32: return loadBits<uint32_t>(p, swap);
+    default: return 0;
+  }
+}
+
+// Colour channels: 8-bit as is, 16-bit scaled down, floats taken as 0..1.
+uint8_t colorByte(double value, Type t) {
+  switch (t) {
+    case Type::Float32:
+    case Type::Float64: return unitToByte(value);
+    case Type::Int16:
+    case Type::UInt16: return uint8_t(std::clamp(value / 257.0, 0.0, 255.0));
+    default: return uint8_t(std::clamp(value, 0.0, 255.0));
+  }
+}
+
+void store(InputVertex& v, Slot slot, double value, Type t) {
+  switch (slot) {
+    case kX:
+    case kY:
+    case kZ: v.p[slot - kX] = value; break;
+    case kNX:
+    case kNY:
+    case kNZ: v.n[slot - kNX] = float(value); break;
+    case kRed:
+    case kGreen:
+    case kBlue:
+    case kAlpha: v.c[slot - kRed] = colorByte(value, t); break;
+    default: break;
+  }
+}
+
+class PlyReader final : public MeshReader {
+ public:
+  explicit PlyReader(std::unique_ptr<InputFile> in) : in_(std::move(in)), path_(in_->path()) {
+    parseHeader();
+  }
+
+  const MeshHeader& header() const override { return header_; }
+
+  ReadStats read(MeshSink& sink) override {
+    ReadStats stats;
+    Batcher batch(sink, stats);
+    sink.begin(header_);
+    for (const Element& e : elements_) {
+      if (&e == vertex_) {
+        readVertices(e, batch);
+      } else if (&e == face_) {
+        readFaces(e, batch);
+      } else {
+        skipElement(e);
+      }
+    }
+    checkTrailing();
+    batch.flush();
+    stats.bytes = in_->offset();
+    if (stats.triangles == 0) fail(path_, "mesh has no triangles");
+    sink.end(stats);
+    return stats;
+  }
+
+ private:
+  // ---- header ----
+
+  [[noreturn]] void headerError(const std::string& what) {
+    fail(path_, what + " in PLY header" + atLine(in_->line()));
+  }
+
+  void parseHeader() {
+    std::string_view line;
+    if (!in_->nextLine(line) || line.substr(0, 3) != "ply" || !Tokens{line.substr(3)}.empty())
+      fail(path_, "not a PLY file (first line is not 'ply')");
+    bool haveFormat = false;
+    for (;;) {
+      // A header is small; a file that never says end_header is not a PLY file.
+      if (in_->offset() > (1u << 20)) headerError("no end_header within 1 MiB");
+      if (!in_->nextLine(line)) fail(path_, "unexpected end of file in PLY header (no end_header)");
+      Tokens tok{line};
+      std::string_view word;
+      if (!tok.next(word) || word == "comment" || word == "obj_info") continue;
+      if (word == "end_header") break;
+      if (word == "format") {
+        std::string_view kind, version;
+        tok.next(kind);
+        if (!tok.next(version) || version.substr(0, 1) != "1") headerError("unsupported PLY version");
+        if (kind == "ascii") header_.format = MeshFormat::PlyAscii;
+        else if (kind == "binary_little_endian") header_.format = MeshFormat::PlyBinaryLE;
+        else if (kind == "binary_big_endian") header_.format = MeshFormat::PlyBinaryBE;
+        else headerError("unknown format " + quoted(kind));
+        haveFormat = true;
+      } else if (word == "element") {
+        std::string_view name, count;
+        Element e;
+        if (!tok.next(name) || !tok.next(count) || !parseNumber(count, e.count))
+          headerError("malformed element line");
+        e.name = name;
+        elements_.push_back(std::move(e));
+      } else if (word == "property") {
+        if (elements_.empty()) headerError("property before any element");
+        parseProperty(tok, elements_.back());
+      } else {
+        headerError("unexpected keyword " + quoted(word));
+      }
+    }
+    if (!haveFormat) fail(path_, "PLY header has no format line");
+    binary_ = header_.format != MeshFormat::PlyAscii;
+    swap_ = header_.format == MeshFormat::PlyBinaryBE;
+    for (Element& e : elements_) {
+      if (e.name == "vertex" && !vertex_) vertex_ = &e;
+      if (e.name == "face" && !face_) {
+        if (!vertex_) fail(path_, "PLY face element comes before the vertex element (cannot be streamed)");
+        face_ = &e;
+      }
+    }
+    if (!vertex_) fail(path_, "PLY file has no vertex element");
+    if (!face_ || face_->count == 0 || vertex_->count == 0) fail(path_, "mesh has no triangles");
+    if (vertex_->count > kMaxVertices)
+      fail(path_, std::to_string(vertex_->count) + " vertices is more than the supported " +
+                      std::to_string(kMaxVertices));
+    mapVertexProperties(*vertex_);
+    mapFaceProperties(*face_);
+    header_.declaredVertices = int64_t(vertex_->count);
+    header_.declaredFaces = int64_t(face_->count);
+  }
+
+  void parseProperty(Tokens& tok, Element& e) {
+    Property p;
+    std::string_view word, name;
+    if (!tok.next(word)) headerError("malformed property line");
+    if (word == "list") {
+      std::string_view countType, itemType;
+      if (!tok.next(countType) || !tok.next(itemType)) headerError("malformed list property");
+      if (!parseType(countType, p.countType)) headerError("unknown type " + quoted(countType));
+      if (!isInteger(p.countType)) headerError("list count type must be an integer type");
+      if (!parseType(itemType, p.type)) headerError("unknown type " + quoted(itemType));
+      p.isList = true;
+      e.fixedSize = false;
+    } else if (!parseType(word, p.type)) {
+      headerError("unknown type " + quoted(word));
+    }
+    if (!tok.next(name)) headerError("property without a name");
+    p.name = name;
+    if (!p.isList) e.recordSize += typeSize(p.type);
+    e.properties.push_back(std::move(p));
+  }
+
+  Property* findScalar(Element& e, std::initializer_list<const char*> names) {
+    for (Property& p : e.properties)
+      for (const char* n : names)
+        if (p.name == n && !p.isList) return &p;
+    return nullptr;
+  }
+
+  void mapVertexProperties(Element& e) {
+    Property* xyz[3] = {findScalar(e, {"x"}), findScalar(e, {"y"}), findScalar(e, {"z"})};
+    if (!xyz[0] || !xyz[1] || !xyz[2]) fail(path_, "PLY vertex element lacks scalar x, y and z");
+    for (int k = 0; k < 3; ++k) {
+      xyz[k]->slot = Slot(kX + k);
+      Type t = xyz[k]->type;
+      if (t == Type::Float64 || t == Type::Int32 || t == Type::UInt32) header_.doublePrecision = true;
+    }
+    Property* n[3] = {findScalar(e, {"nx"}), findScalar(e, {"ny"}), findScalar(e, {"nz"})};
+    if (n[0] && n[1] && n[2]) {
+      for (int k = 0; k < 3; ++k) n[k]->slot = Slot(kNX + k);
+      header_.hasNormals = true;
+    }
+    Property* c[4] = {findScalar(e, {"red", "diffuse_red"}), findScalar(e, {"green", "diffuse_green"}),
+                      findScalar(e, {"blue", "diffuse_blue"}), findScalar(e, {"alpha", "diffuse_alpha"})};
+    if (c[0] && c[1] && c[2]) {
+      for (int k = 0; k < 4; ++k)
+        if (c[k]) c[k]->slot = Slot(kRed + k);
+      header_.hasColors = true;
+    }
+    // Offsets for the fixed-record path; only mapped properties are decoded.
+    size_t offset = 0;
+    for (const Property& p : e.properties) {
+      if (p.slot != kNone) fields_.push_back({offset, p.type, p.slot});
+      if (p.slot > kZ) extraFields_.push_back({offset, p.type, p.slot});
+      offset += p.isList ? 0 : typeSize(p.type);
+    }
+    fastXyz_ = !swap_ && e.fixedSize && xyz[0]->type == Type::Float32 &&
+               xyz[1]->type == Type::Float32 && xyz[2]->type == Type::Float32;
+    for (int k = 0; k < 3; ++k) xyzOffset_[k] = fieldOffset(Slot(kX + k));
+  }
+
+  size_t fieldOffset(Slot slot) const {
+    for (const Field& f : fields_)
+      if (f.slot == slot) return f.offset;
+    return 0;
+  }
+
+  void mapFaceProperties(Element& e) {
+    Property* list = nullptr;
+    for (Property& p : e.properties)
+      if ((p.name == "vertex_indices" || p.name == "vertex_index") && !list) list = &p;
+    if (!list || !list->isList) fail(path_, "PLY face element has no vertex_indices list");
+    if (!isInteger(list->type)) fail(path_, "PLY vertex_indices must have an integer index type");
+    list->slot = kIndices;
+    fastFaces_ = binary_ && !swap_ && e.properties.size() == 1 &&
+                 (list->countType == Type::UInt8 || list->countType == Type::Int8) &&
+                 (list->type == Type::Int32 || list->type == Type::UInt32);
+    indexType_ = list->type;
+  }
+
+  // ---- errors ----
+
+  // Binary: where the current record starts; ascii: the current line.
+  std::string where(uint64_t recordStart) const {
+    return binary_ ? atByte(recordStart) : atLine(in_->line());
+  }
+  [[noreturn]] void truncated(const char* element, uint64_t index) {
+    fail(path_, std::string("unexpected end of file in ") + element + " " + std::to_string(index) +
+                    (binary_ ? atByte(in_->size()) : atLine(in_->line())));
+  }
+
+  // ---- vertices ----
+
+  void readVertices(const Element& e, Batcher& batch) {
+    if (binary_ && e.fixedSize) {
+      readFixedVertices(e, batch);
+      return;
+    }
+    double values[kIndices];
+    for (uint64_t i = 0; i < e.count; ++i) {
+      uint64_t start = in_->offset();
+      readRecord(e, "vertex", i, values, nullptr);
+      InputVertex& v = batch.addVertex();
+      v = blankVertex();
+      for (const Field& f : fields_) store(v, f.slot, values[f.slot], f.type);
+      if (!isFinite(v)) nonFinite(i, start);
+    }
+  }
+
+  [[noreturn]] void nonFinite(uint64_t index, uint64_t start) {
+    fail(path_, "vertex " + std::to_string(index) + " has a non-finite coordinate" + where(start));
+  }
+
+  void readFixedVertices(const Element& e, Batcher& batch) {
+    const size_t rs = e.recordSize;
+    const InputVertex blank = blankVertex();
+    for (uint64_t i = 0; i < e.count;) {
+      if (!in_->ensure(rs)) truncated("vertex", i);
+      size_t room;
+      InputVertex* out = batch.vertexSlots(room);
+      size_t n = size_t(std::min<uint64_t>({room, e.count - i, in_->available() / rs}));
+      const char* p = in_->data();
+      if (fastXyz_) {
+        for (size_t k = 0; k < n; ++k, p += rs) {
+          uint32_t bits[3];
+          for (int a = 0; a < 3; ++a) std::memcpy(&bits[a], p + xyzOffset_[a], 4);
+          // A float is NaN or Inf exactly when its exponent bits are all ones.
+          constexpr uint32_t kExponent = 0x7f800000;
+          if (((bits[0] & kExponent) == kExponent) | ((bits[1] & kExponent) == kExponent) |
+              ((bits[2] & kExponent) == kExponent))
+            nonFinite(i + k, in_->offset() + uint64_t(p - in_->data()));
+          float f[3];
+          std::memcpy(f, bits, sizeof f);
+          InputVertex v = blank;
+          v.p[0] = f[0];
+          v.p[1] = f[1];
+          v.p[2] = f[2];
+          for (const Field& fd : extraFields_) store(v, fd.slot, loadScalar(p + fd.offset, fd.type, false), fd.type);
+          out[k] = v;
+        }
+      } else {
+        for (size_t k = 0; k < n; ++k, p += rs) {
+          InputVertex v = blank;
+          for (const Field& fd : fields_) store(v, fd.slot, loadScalar(p + fd.offset, fd.type, swap_), fd.type);
+          if (!isFinite(v)) nonFinite(i + k, in_->offset() + uint64_t(p - in_->data()));
+          out[k] = v;
+        }
+      }
+      in_->consume(n * rs);
+      batch.commitVertices(n);
+      i += n;
+    }
+  }
+
+  // ---- faces ----
+
+  void readFaces(const Element& e, Batcher& batch) {
+    if (fastFaces_) {
+      readTriangleFaces(e, batch);
+      return;
+    }
+    for (uint64_t i = 0; i < e.count; ++i) readRecord(e, "face", i, nullptr, &batch);
+  }
+
+  // Little-endian "uchar count, int/uint indices" faces: whole runs of triangles are copied from
+  // the read buffer into the batch; anything else (a polygon, a bad count, a record split by the
+  // end of the buffer) goes through readRecord for that one face.
+  void readTriangleFaces(const Element& e, Batcher& batch) {
+    constexpr size_t kRecord = 13;
+    const uint64_t vertexCount = vertex_->count;
+    // Signed indices at or above 2^31 are negative; both are out of range.
+    const uint64_t limit = std::min<uint64_t>(vertexCount, indexType_ == Type::Int32 ? 0x80000000ull : ~0ull);
+    for (uint64_t i = 0; i < e.count;) {
+      if (!in_->ensure(kRecord)) {
+        readRecord(e, "face", i++, nullptr, &batch);
+        continue;
+      }
+      size_t room;
+      uint32_t* out = batch.triangleSlots(room);
+      const char* begin = in_->data();
+      const char* p = begin;
+      size_t n = size_t(std::min<uint64_t>({room, e.count - i, in_->available() / kRecord}));
+      size_t made = 0, degenerate = 0;
+      for (; made < n && uint8_t(p[0]) == 3; ++made, p += kRecord) {
+        uint32_t a, b, c;
+        std::memcpy(&a, p + 1, 4);
+        std::memcpy(&b, p + 5, 4);
+        std::memcpy(&c, p + 9, 4);
+        if (std::max({a, b, c}) >= limit) break;  // reported by readRecord below
+        out[made * 3 + 0] = a;
+        out[made * 3 + 1] = b;
+        out[made * 3 + 2] = c;
+        degenerate += (a == b) | (b == c) | (a == c);
+      }
+      in_->consume(size_t(p - begin));
+      batch.commitTriangles(made, degenerate);
+      i += made;
+      if (made < n) readRecord(e, "face", i++, nullptr, &batch);
+    }
+  }
+
+  // ---- generic record walk (ascii, big-endian, lists anywhere) ----
+
+  // Reads record `index` of element e. Scalars with a slot land in values[slot] (when given);
+  // the index list of a face goes to the batch as a polygon; everything else is read and dropped.
+  void readRecord(const Element& e, const char* kind, uint64_t index, double* values, Batcher* batch) {
+    const uint64_t start = in_->offset();
+    for (const Property& p : e.properties) {
+      if (!p.isList) {
+        double v = scalar(p.type, kind, index, p.slot >= kX && p.slot <= kZ);
+        if (values && p.slot != kNone) values[p.slot] = v;
+        continue;
+      }
+      int64_t count = integer(p.countType, kind, index);
+      if (count < 0)
+        fail(path_, "negative list length " + std::to_string(count) + " at " + kind + " " +
+                        std::to_string(index) + where(start));
+      if (p.slot == kIndices && batch) {
+        batch->beginFace();
+        for (int64_t k = 0; k < count; ++k) {
+          int64_t vi = integer(p.type, kind, index);
+          if (vi < 0 || uint64_t(vi) >= vertex_->count)
+            fail(path_, "index " + std::to_string(vi) + " out of range (" + std::to_string(vertex_->count) +
+                            " vertices) at face " + std::to_string(index) + where(start));
+          batch->addCorner(uint32_t(vi));
+        }
+        if (batch->endFace() < 3)
+          fail(path_, "face " + std::to_string(index) + " has " + std::to_string(count) +
+                          " corners (at least 3 needed)" + where(start));
+      } else if (binary_) {
+        if (!in_->skip(uint64_t(count) * typeSize(p.type))) truncated(kind, index);
+      } else {
+        for (int64_t k = 0; k < count; ++k) scalar(p.type, kind, index, false);
+      }
+    }
+  }
+
+  // One scalar of the current record; ascii coordinates of float type parse to the nearest
+  // float32, as the contract says text input is float precision unless declared double.
+  double scalar(Type t, const char* kind, uint64_t index, bool coordinate) {
+    if (binary_) {
+      if (!in_->ensure(typeSize(t))) truncated(kind, index);
+      double v = loadScalar(in_->data(), t, swap_);
+      in_->consume(typeSize(t));
+      return v;
+    }
+    std::string_view tok = token(kind, index);
+    if (isInteger(t)) {
+      int64_t v;
+      if (!parseNumber(tok, v)) badNumber(tok, kind, index);
+      return double(v);
+    }
+    if (t == Type::Float32 || !coordinate) {
+      float f;
+      if (!parseNumber(tok, f)) badNumber(tok, kind, index);
+      return f;
+    }
+    double d;
+    if (!parseNumber(tok, d)) badNumber(tok, kind, index);
+    return d;
+  }
+
+  int64_t integer(Type t, const char* kind, uint64_t index) {
+    if (binary_) {
+      if (!in_->ensure(typeSize(t))) truncated(kind, index);
+      int64_t v = loadInteger(in_->data(), t, swap_);
+      in_->consume(typeSize(t));
+      return v;
+    }
+    std::string_view tok = token(kind, index);
+    int64_t v;
+    if (!parseNumber(tok, v)) badNumber(tok, kind, index);
+    return v;
+  }
+
+  [[noreturn]] void badNumber(std::string_view tok, const char* kind, uint64_t index) {
+    fail(path_, "invalid number " + quoted(tok) + " at " + kind + " " + std::to_string(index) +
+                    atLine(in_->line()));
+  }
+
+  // Ascii PLY is a stream of whitespace-separated tokens; records usually match lines but need not.
+  std::string_view token(const char* kind, uint64_t index) {
+    std::string_view tok;
+    while (!tokens_.next(tok)) {
+      std::string_view line;
+      if (!in_->nextLine(line)) truncated(kind, index);
+      tokens_.rest = line;
+    }
+    return tok;
+  }
+
+  void skipElement(const Element& e) {
+    if (binary_ && e.fixedSize) {
+      const uint64_t start = in_->offset();
+      if (!in_->skip(e.count * e.recordSize))
+        truncated(e.name.c_str(), (in_->size() - start) / std::max<size_t>(e.recordSize, 1));
+      return;
+    }
+    for (uint64_t i = 0; i < e.count; ++i) readRecord(e, e.name.c_str(), i, nullptr, nullptr);
+  }
+
+  // Data beyond the declared elements means the counts are wrong; refuse rather than guess.
+  void checkTrailing() {
+    if (binary_) {
+      if (!in_->atEnd())
+        fail(path_, "unexpected data after the last element" + atByte(in_->offset()));
+      return;
+    }
+    std::string_view line;
+    for (;;) {
+      if (!tokens_.empty())
+        fail(path_, "unexpected data after the last element" + atLine(in_->line()));
+      if (!in_->nextLine(line)) return;
+      tokens_.rest = line;
+    }
+  }
+
+  struct Field {
+    size_t offset;
+    Type type;
+    Slot slot;
+  };
+
+  std::unique_ptr<InputFile> in_;
+  std::string path_;
+  MeshHeader header_;
+  std::vector<Element> elements_;
+  Element* vertex_ = nullptr;  // into elements_, which no longer changes after the header
+  Element* face_ = nullptr;
+  bool binary_ = false, swap_ = false;
+  std::vector<Field> fields_;  // mapped vertex properties with their offsets in a fixed record
+  std::vector<Field> extraFields_;  // the same without x, y, z: normals and colours
+  bool fastXyz_ = false;
+  size_t xyzOffset_[3] = {0, 0, 0};
+  bool fastFaces_ = false;
+  Type indexType_ = Type::Int32;
+  Tokens tokens_;  // ascii: the rest of the current line
+};
+
+}  // namespace
+
+std::unique_ptr<MeshReader> openPly(std::unique_ptr<InputFile> in) {
+  return std::make_unique<PlyReader>(std::move(in));
+}
+
+}  // namespace mt::io

@@ -1,0 +1,389 @@
+// Patch store: round trips, boundary lists, load/write-back semantics, crash safety.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <filesystem>
+#include <map>
+#include <random>
+#include <set>
+
+#include "patchstore/io/ply_writer.h"
+#include "patchstore/patch_store.h"
+#include "tests/test_support.h"
+
+namespace mt {
+namespace {
+
+namespace fs = std::filesystem;
+using test::TempDir;
+
+// A small displaced torus (closed), optionally with round holes and shuffled faces, as PLY.
+struct TestMesh {
+  std::vector<double> positions;
+  std::vector<uint32_t> triangles;
+};
+
+TestMesh makeTorus(int rings, int sides, int holes, bool shuffle, uint32_t seed = 1) {
+  TestMesh m;
+  std::mt19937 rng(seed);
+  std::vector<std::array<double, 2>> holeCentres;
+  std::uniform_real_distribution<double> uni(0, 1);
+  for (int h = 0; h < holes; ++h) holeCentres.push_back({uni(rng) * rings, uni(rng) * sides});
+  auto inHole = [&](double i, double j) {
+    for (auto& c : holeCentres) {
+      double di = std::min(std::abs(i - c[0]), rings - std::abs(i - c[0]));
+      double dj = std::min(std::abs(j - c[1]), sides - std::abs(j - c[1]));
+      if (di * di + dj * dj < 9.0) return true;
+    }
+    return false;
+  };
+  std::vector<int> index(size_t(rings) * sides, -1);
+  std::vector<std::array<uint32_t, 3>> faces;
+  auto vid = [&](int i, int j) { return size_t((i % rings) * sides + (j % sides)); };
+  std::vector<std::array<size_t, 3>> raw;
+  for (int i = 0; i < rings; ++i)
+    for (int j = 0; j < sides; ++j) {
+      if (inHole(i + 0.5, j + 0.5)) continue;
+      raw.push_back({vid(i, j), vid(i + 1, j), vid(i + 1, j + 1)});
+      raw.push_back({vid(i, j), vid(i + 1, j + 1), vid(i, j + 1)});
+    }
+  for (auto& f : raw)
+    for (size_t v : f) index[v] = 0;
+  for (int i = 0; i < rings; ++i)
+    for (int j = 0; j < sides; ++j) {
+      if (index[vid(i, j)] < 0) continue;
+      index[vid(i, j)] = int(m.positions.size() / 3);
+      double u = 2 * M_PI * i / rings, v = 2 * M_PI * j / sides;
+      double r = 1 + 0.3 * std::cos(v) + 0.01 * std::sin(7 * u) * std::cos(5 * v);
+      const float p[3] = {float(r * std::cos(u)), float(r * std::sin(u)), float(0.3 * std::sin(v))};
+      m.positions.insert(m.positions.end(), p, p + 3);  // float-exact, as a float PLY stores it
+    }
+  if (shuffle) std::shuffle(raw.begin(), raw.end(), rng);
+  for (auto& f : raw)
+    for (size_t v : f) m.triangles.push_back(uint32_t(index[v]));
+  return m;
+}
+
+void writePly(const TestMesh& m, const std::string& path) {
+  PlyWriter w(path, {});
+  for (size_t i = 0; i < m.positions.size(); i += 3) w.addVertex(&m.positions[i]);
+  for (size_t i = 0; i < m.triangles.size(); i += 3) w.addTriangle(m.triangles[i], m.triangles[i + 1], m.triangles[i + 2]);
+  w.finish();
+}
+
+// Triangles as sorted triples of exact coordinates: the multiset a round trip must keep.
+using CoordTriangle = std::array<std::array<double, 3>, 3>;
+std::vector<CoordTriangle> coordTriangles(const std::vector<double>& pos, const std::vector<uint32_t>& tris) {
+  std::vector<CoordTriangle> out;
+  for (size_t t = 0; t < tris.size(); t += 3) {
+    CoordTriangle c;
+    for (int k = 0; k < 3; ++k) c[k] = {pos[3 * tris[t + k]], pos[3 * tris[t + k] + 1], pos[3 * tris[t + k] + 2]};
+    std::sort(c.begin(), c.end());
+    out.push_back(c);
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+// Reads a mesh back through the project's own readers into positions + triangles.
+struct Collect : MeshSink {
+  std::vector<double> positions;
+  std::vector<uint32_t> tris;
+  void vertices(const InputVertex* v, size_t n, uint64_t) override {
+    for (size_t i = 0; i < n; ++i) positions.insert(positions.end(), v[i].p, v[i].p + 3);
+  }
+  void triangles(const uint32_t* idx, size_t n) override { tris.insert(tris.end(), idx, idx + 3 * n); }
+};
+// Compares two triangle multisets without printing thousands of coordinates on failure.
+::testing::AssertionResult sameTriangles(const std::vector<CoordTriangle>& a, const std::vector<CoordTriangle>& b) {
+  if (a == b) return ::testing::AssertionSuccess();
+  size_t common = 0;
+  for (size_t i = 0, j = 0; i < a.size() && j < b.size();) {
+    if (a[i] == b[j]) ++common, ++i, ++j;
+    else if (a[i] < b[j]) ++i;
+    else ++j;
+  }
+  return ::testing::AssertionFailure() << "triangle multisets differ: " << a.size() << " vs " << b.size() << " triangles, "
+                                       << common << " in common";
+}
+
+std::vector<CoordTriangle> readTriangles(const std::string& path) {
+  Collect c;
+  openMesh(path)->read(c);
+  return coordTriangles(c.positions, c.tris);
+}
+
+std::unique_ptr<PatchStore> ingestMesh(const std::string& input, const std::string& dir, uint32_t patchTriangles,
+                                       uint64_t memory = 64ull << 20) {
+  auto assigner = makeGridAssigner(patchTriangles);
+  IngestOptions o;
+  o.memoryBytes = memory;
+  o.progress = false;
+  PatchStore::ingest(input, dir, *assigner, o);
+  return PatchStore::open(dir);
+}
+
+TEST(PatchStore, RoundTripIsExactWithHolesAndShuffledFaces) {
+  TempDir tmp;
+  TestMesh m = makeTorus(120, 60, 6, true);
+  writePly(m, tmp.file("in.ply"));
+  ASSERT_TRUE(sameTriangles(readTriangles(tmp.file("in.ply")), coordTriangles(m.positions, m.triangles)));
+  auto store = ingestMesh(tmp.file("in.ply"), tmp.file("store"), 500);
+  EXPECT_GT(store->patchIds().size(), 8u);
+  EXPECT_TRUE(store->check().ok);
+  store->exportPly(tmp.file("out.ply"));
+  EXPECT_TRUE(sameTriangles(readTriangles(tmp.file("out.ply")), coordTriangles(m.positions, m.triangles)));
+  StoreInfo info = store->info();
+  EXPECT_EQ(info.triangles, m.triangles.size() / 3);
+}
+
+TEST(PatchStore, TinyMemoryCapGivesTheSameStore) {
+  // Same input under a cap that forces every external sort to spill and the centroid pass to
+  // work in chunks: identical patches, so the store does not depend on the cap.
+  TempDir tmp;
+  TestMesh m = makeTorus(400, 200, 4, true);
+  writePly(m, tmp.file("in.ply"));
+  auto big = ingestMesh(tmp.file("in.ply"), tmp.file("big"), 800, 1ull << 30);
+  auto small = ingestMesh(tmp.file("in.ply"), tmp.file("small"), 800, 600 << 10);
+  ASSERT_EQ(big->patchIds(), small->patchIds());
+  for (PatchId id : big->patchIds()) {
+    Patch a = big->patch(id), b = small->patch(id);
+    EXPECT_EQ(a.positions, b.positions);
+    EXPECT_EQ(a.triangles, b.triangles);
+    ASSERT_EQ(a.boundary.size(), b.boundary.size());
+    for (size_t i = 0; i < a.boundary.size(); ++i) {
+      EXPECT_EQ(a.boundary[i].local, b.boundary[i].local);
+      EXPECT_EQ(a.boundary[i].neighbour, b.boundary[i].neighbour);
+      EXPECT_EQ(a.boundary[i].remote, b.boundary[i].remote);
+    }
+  }
+}
+
+// Every vertex position held by several patches (the torus has no duplicate positions) must be
+// listed in each of them, pointing at all the others, symmetrically.
+TEST(PatchStore, BoundaryListsAreCompleteAndSymmetric) {
+  TempDir tmp;
+  TestMesh m = makeTorus(100, 50, 3, false);
+  writePly(m, tmp.file("in.ply"));
+  auto store = ingestMesh(tmp.file("in.ply"), tmp.file("store"), 300);
+  std::map<std::array<double, 3>, std::set<std::pair<PatchId, uint32_t>>> holders;
+  std::map<PatchId, Patch> patches;
+  for (PatchId id : store->patchIds()) {
+    Patch p = store->patch(id);
+    for (uint32_t v = 0; v < p.vertexCount(); ++v)
+      holders[{p.positions[3 * v], p.positions[3 * v + 1], p.positions[3 * v + 2]}].insert({id, v});
+    patches[id] = std::move(p);
+  }
+  size_t shared = 0;
+  for (auto& [pos, hs] : holders) {
+    if (hs.size() > 1) ++shared;
+    for (auto& [p, v] : hs) {
+      std::set<std::pair<PatchId, uint32_t>> listed;
+      for (const BoundaryEntry& e : patches[p].boundary)
+        if (e.local == v) listed.insert({e.neighbour, e.remote});
+      std::set<std::pair<PatchId, uint32_t>> expected = hs;
+      expected.erase({p, v});
+      EXPECT_EQ(listed, expected) << "patch " << p << " vertex " << v;
+    }
+  }
+  EXPECT_GT(shared, 50u);
+  EXPECT_TRUE(store->check().ok);
+}
+
+TEST(PatchStore, LoadLocksExactlyTheVerticesSharedWithUnloadedPatches) {
+  TempDir tmp;
+  TestMesh m = makeTorus(100, 50, 3, true);
+  writePly(m, tmp.file("in.ply"));
+  auto store = ingestMesh(tmp.file("in.ply"), tmp.file("store"), 300);
+  std::vector<PatchId> ids = store->patchIds();
+  std::map<std::array<double, 3>, std::set<PatchId>> holders;
+  for (PatchId id : ids) {
+    Patch p = store->patch(id);
+    for (uint32_t v = 0; v < p.vertexCount(); ++v)
+      holders[{p.positions[3 * v], p.positions[3 * v + 1], p.positions[3 * v + 2]}].insert(id);
+  }
+  std::mt19937 rng(7);
+  for (int trial = 0; trial < 6; ++trial) {
+    std::vector<PatchId> subset;
+    for (PatchId id : ids)
+      if (rng() % 3 == 0) subset.push_back(id);
+    if (subset.empty()) subset.push_back(ids[0]);
+    LoadedMesh l = store->load(subset);
+    std::set<PatchId> in(subset.begin(), subset.end());
+    std::set<std::array<double, 3>> seen;
+    for (uint32_t v = 0; v < l.vertexCount(); ++v) {
+      std::array<double, 3> pos = {l.positions[3 * v], l.positions[3 * v + 1], l.positions[3 * v + 2]};
+      EXPECT_TRUE(seen.insert(pos).second) << "vertex unified twice";
+      bool outside = false;
+      for (PatchId h : holders[pos]) outside |= !in.count(h);
+      EXPECT_EQ(bool(l.locked[v]), outside);
+    }
+    size_t expectTris = 0;
+    for (PatchId id : subset) expectTris += store->meta(id).triangles;
+    EXPECT_EQ(l.triangleCount(), expectTris);
+  }
+}
+
+// Re-partition a loaded region by a different rule (slabs along x) and write it back.
+ReplacementMesh repartition(const LoadedMesh& l, int slabs) {
+  ReplacementMesh r;
+  r.positions = l.positions;
+  r.triangles = l.triangles;
+  r.origin.resize(l.vertexCount());
+  for (uint32_t v = 0; v < l.vertexCount(); ++v) r.origin[v] = v;
+  for (uint32_t t = 0; t < l.triangleCount(); ++t) {
+    double x = (l.positions[3 * l.triangles[3 * t]] + l.positions[3 * l.triangles[3 * t + 1]] +
+                l.positions[3 * l.triangles[3 * t + 2]]) / 3;
+    r.triangleCell.push_back(uint64_t(std::clamp(int((x + 1.4) / 2.8 * slabs), 0, slabs - 1)));
+  }
+  r.level = 1;
+  return r;
+}
+
+TEST(PatchStore, WriteBackWithANewPartitionKeepsTheSurfaceAndTheLists) {
+  TempDir tmp;
+  TestMesh m = makeTorus(120, 60, 5, true);
+  writePly(m, tmp.file("in.ply"));
+  auto store = ingestMesh(tmp.file("in.ply"), tmp.file("store"), 400);
+  auto before = coordTriangles(m.positions, m.triangles);
+  std::vector<PatchId> ids = store->patchIds();
+  std::vector<PatchId> subset(ids.begin(), ids.begin() + ids.size() / 2);
+  LoadedMesh l = store->load(subset);
+  std::vector<PatchId> created = store->writeBack(l, repartition(l, 5), true);
+  EXPECT_FALSE(created.empty());
+  for (PatchId id : subset) EXPECT_THROW(store->meta(id), Error);
+  for (PatchId id : created) EXPECT_EQ(store->meta(id).level, 1u);
+  CheckReport c = store->check();
+  for (auto& p : c.problems) ADD_FAILURE() << p;
+  store->exportPly(tmp.file("a.ply"));
+  EXPECT_TRUE(sameTriangles(readTriangles(tmp.file("a.ply")), before));
+  // Reopen: the update is durable; a second write-back over old and new patches still holds.
+  store.reset();
+  store = PatchStore::open(tmp.file("store"));
+  ids = store->patchIds();
+  std::vector<PatchId> second;
+  for (size_t i = 0; i < ids.size(); i += 2) second.push_back(ids[i]);
+  LoadedMesh l2 = store->load(second);
+  store->writeBack(l2, repartition(l2, 3), false);
+  store->sync();
+  EXPECT_TRUE(store->check().ok);
+  store->exportPly(tmp.file("b.ply"));
+  EXPECT_TRUE(sameTriangles(readTriangles(tmp.file("b.ply")), before));
+}
+
+TEST(PatchStore, WriteBackRefusesToMoveOrDropALockedVertex) {
+  TempDir tmp;
+  TestMesh m = makeTorus(60, 30, 0, false);
+  writePly(m, tmp.file("in.ply"));
+  auto store = ingestMesh(tmp.file("in.ply"), tmp.file("store"), 200);
+  std::vector<PatchId> ids = store->patchIds();
+  LoadedMesh l = store->load({ids[0]});
+  ASSERT_FALSE(l.external.empty());
+  ReplacementMesh moved = repartition(l, 2);
+  moved.positions[3 * l.external[0].vertex] += 1e-3;
+  EXPECT_THROW(store->writeBack(l, moved), Error);
+  EXPECT_TRUE(store->check().ok);
+}
+
+// Fault injection: fail every write, fsync and rename of a write-back in turn; after each
+// failure the reopened store exports either exactly the old surface with the old patches, or the
+// new patches — never a mix, never a broken store.
+TEST(PatchStore, EveryFailurePointLeavesTheOldOrTheNewStore) {
+  TempDir tmp;
+  TestMesh m = makeTorus(80, 40, 2, true);
+  writePly(m, tmp.file("in.ply"));
+  ingestMesh(tmp.file("in.ply"), tmp.file("base"), 300).reset();
+  auto surface = coordTriangles(m.positions, m.triangles);
+  std::vector<PatchId> oldIds = PatchStore::open(tmp.file("base"))->patchIds();
+
+  auto attempt = [&](FaultInjectionEnv::Op op, int64_t n, FaultInjectionEnv& env) {
+    fs::remove_all(tmp.file("s"));
+    fs::copy(tmp.file("base"), tmp.file("s"), fs::copy_options::recursive);
+    auto store = PatchStore::open(tmp.file("s"), &env);
+    env.failAfter(op, n);
+    bool failed = false;
+    try {
+      std::vector<PatchId> ids = store->patchIds();
+      LoadedMesh l = store->load(std::vector<PatchId>(ids.begin(), ids.begin() + ids.size() / 2));
+      store->writeBack(l, repartition(l, 4), true);
+      for (int i = 0; i < 3; ++i) store->putBlob("x", std::string(400000, char('a' + i)));  // grow the log
+      store->sync();
+    } catch (const Error&) {
+      failed = true;
+    }
+    store.reset();
+    return failed;
+  };
+  FaultInjectionEnv counting(Env::Default());
+  ASSERT_FALSE(attempt(FaultInjectionEnv::Op::Write, -1, counting));
+  const int64_t counts[3] = {counting.writes, counting.syncs, counting.renames};
+  const FaultInjectionEnv::Op ops[3] = {FaultInjectionEnv::Op::Write, FaultInjectionEnv::Op::Sync, FaultInjectionEnv::Op::Rename};
+  int failures = 0;
+  for (int o = 0; o < 3; ++o)
+    for (int64_t n = 1; n <= counts[o]; ++n) {
+      FaultInjectionEnv env(Env::Default());
+      bool failed = attempt(ops[o], n, env);
+      failures += failed;
+      auto store = PatchStore::open(tmp.file("s"));
+      CheckReport c = store->check();
+      ASSERT_TRUE(c.ok) << "op " << o << " n " << n << ": " << (c.problems.empty() ? "" : c.problems[0]);
+      std::vector<PatchId> ids = store->patchIds();
+      bool isOld = ids == oldIds;
+      bool isNew = !isOld && ids.front() != oldIds.front();
+      EXPECT_TRUE(isOld || isNew) << "op " << o << " n " << n;
+      store->exportPly(tmp.file("e.ply"));
+      EXPECT_TRUE(sameTriangles(readTriangles(tmp.file("e.ply")), surface)) << "op " << o << " n " << n;
+    }
+  EXPECT_GT(failures, 3);
+}
+
+TEST(PatchStore, FailedIngestLeavesNothingUnderTheFinalName) {
+  TempDir tmp;
+  TestMesh m = makeTorus(60, 30, 0, false);
+  writePly(m, tmp.file("in.ply"));
+  for (auto op : {FaultInjectionEnv::Op::Write, FaultInjectionEnv::Op::Sync, FaultInjectionEnv::Op::Rename}) {
+    FaultInjectionEnv env(Env::Default());
+    env.failAfter(op, 1);
+    auto assigner = makeGridAssigner(200);
+    IngestOptions o;
+    o.progress = false;
+    EXPECT_THROW(PatchStore::ingest(tmp.file("in.ply"), tmp.file("store"), *assigner, o, &env), Error);
+    EXPECT_FALSE(fs::exists(tmp.file("store")));
+    for (auto& e : fs::directory_iterator(tmp.path())) EXPECT_EQ(e.path().filename().string().find("store"), std::string::npos) << e.path();
+  }
+}
+
+TEST(PatchStore, CorruptedBlockIsReportedWithPatchAndOffset) {
+  TempDir tmp;
+  TestMesh m = makeTorus(60, 30, 0, false);
+  writePly(m, tmp.file("in.ply"));
+  ingestMesh(tmp.file("in.ply"), tmp.file("store"), 200).reset();
+  std::string seg;
+  for (auto& e : fs::directory_iterator(tmp.file("store")))
+    if (e.path().filename().string().rfind("SEG-", 0) == 0) seg = e.path();
+  ASSERT_FALSE(seg.empty());
+  std::string bytes = test::readFile(seg);
+  bytes[bytes.size() / 2] ^= 0x5A;
+  test::writeFile(seg, bytes);
+  auto store = PatchStore::open(tmp.file("store"));
+  CheckReport c = store->check();
+  ASSERT_FALSE(c.ok);
+  EXPECT_NE(c.problems[0].find("checksum mismatch"), std::string::npos) << c.problems[0];
+  EXPECT_NE(c.problems[0].find("patch "), std::string::npos);
+  EXPECT_NE(c.problems[0].find("byte offset"), std::string::npos);
+}
+
+TEST(PatchStore, ParseSize) {
+  EXPECT_EQ(parseSize("256M"), 256ull << 20);
+  EXPECT_EQ(parseSize("4G"), 4ull << 30);
+  EXPECT_EQ(parseSize("512MiB"), 512ull << 20);
+  EXPECT_EQ(parseSize("1000"), 1000u);
+  EXPECT_THROW(parseSize("lots"), Error);
+  EXPECT_THROW(parseSize("5X"), Error);
+  EXPECT_THROW(parseSize("-1M"), Error);
+}
+
+}  // namespace
+}  // namespace mt
