@@ -316,6 +316,75 @@ struct EdgeLess {
   bool operator()(const EdgeRec& a, const EdgeRec& b) const { return a.key != b.key ? a.key < b.key : a.count < b.count; }
 };
 
+// STL is a triangle soup: three new vertices per triangle. Vertices with bit-identical positions
+// are welded (out of core: sort by position, then rewrite the corners in vertex order), so the
+// store holds a connected mesh; the duplicates stay in vert.bin, unreferenced. Returns the count
+// of vertices merged into an earlier one.
+uint64_t weldSoup(const std::string& scratch, const VertexRecordLayout& layout, uint64_t nv, uint64_t budget) {
+  struct PosRec {
+    double p[3];
+    uint32_t vertex, pad;
+  };
+  struct PosLess {
+    bool operator()(const PosRec& a, const PosRec& b) const {
+      for (int k = 0; k < 3; ++k)
+        if (a.p[k] != b.p[k]) return a.p[k] < b.p[k];
+      return a.vertex < b.vertex;
+    }
+  };
+  struct MapRec {
+    uint32_t vertex, canonical;
+  };
+  struct MapLess {
+    bool operator()(const MapRec& a, const MapRec& b) const { return a.vertex < b.vertex; }
+  };
+  ExternalSorter<PosRec, PosLess> byPosition(scratch + "/w1", budget / 2);
+  {
+    TempReader vr(scratch + "/vert.bin", 4 << 20);
+    std::vector<char> rec(layout.size());
+    for (uint32_t v = 0; v < nv; ++v) {
+      if (vr.read(rec.data(), rec.size()) != rec.size()) fail(scratch, "vertex scratch file is short");
+      PosRec r{};
+      layout.position(rec.data(), r.p);
+      for (double& x : r.p) x += 0.0;  // -0.0 welds with +0.0
+      r.vertex = v;
+      byPosition.add(r);
+    }
+  }
+  byPosition.finish();
+  ExternalSorter<MapRec, MapLess> byVertex(scratch + "/w2", budget / 2);
+  uint64_t welded = 0;
+  {
+    PosRec r, first{};
+    bool have = byPosition.next(r);
+    while (have) {
+      first = r;
+      byVertex.add({r.vertex, r.vertex});
+      while ((have = byPosition.next(r)) && r.p[0] == first.p[0] && r.p[1] == first.p[1] && r.p[2] == first.p[2]) {
+        byVertex.add({r.vertex, first.vertex});
+        ++welded;
+      }
+    }
+  }
+  byVertex.finish();
+  TempReader fr(scratch + "/face.bin", 4 << 20);
+  TempWriter fw(scratch + "/face.welded", 4 << 20);
+  std::vector<uint32_t> batch;
+  uint64_t corner = 0;
+  MapRec m;
+  while (fr.getBatch(batch, 3 * 65536)) {
+    for (uint32_t& v : batch) {
+      if (v != corner || !byVertex.next(m) || m.vertex != v) fail(scratch, "internal: STL corners are not in vertex order");
+      v = m.canonical;
+      ++corner;
+    }
+    fw.write(batch.data(), batch.size() * 4);
+  }
+  fw.close();
+  std::rename((scratch + "/face.welded").c_str(), (scratch + "/face.bin").c_str());
+  return welded;
+}
+
 std::string encodeReport(const IngestReport& r) {
   std::ostringstream s;
   s << "input=" << r.input << "\nformat=" << r.format << "\ninputVertices=" << r.inputVertices
@@ -355,6 +424,12 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
   const VertexRecordLayout vlayout = sink.layout;
   if (Full != (vlayout.doublePrecision || vlayout.normals || vlayout.colors)) fail(input, "internal: wrong record type");
   const uint64_t nv = sink.vertexCount, nf = sink.faceCount;
+  const MeshFormat format = reader->header().format;
+  if (format == MeshFormat::StlAscii || format == MeshFormat::StlBinary) {
+    Progress progress(opt.progress, "ingest: weld", nv, "vert");
+    report.weldedVertices = weldSoup(scratch, vlayout, nv, B * 6 / 10);
+    progress.finish(nv);
+  }
 
   // 2 centroids
   computeCentroids(scratch, vlayout, nv, nf, B / 2, opt.progress);
@@ -545,7 +620,7 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
     }
     progress.finish(facesDone);
   }
-  report.unreferencedVertices = nv - distinctReferenced;
+  report.unreferencedVertices = nv - distinctReferenced - report.weldedVertices;
   std::remove((scratch + "/pface.bin").c_str());
 
   // Edges shared between patches: sum their uses.
