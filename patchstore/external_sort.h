@@ -31,7 +31,9 @@ class ExternalSorter {
   }
 
   void add(const Record& r) {
-    if (buffer_.empty()) buffer_.reserve(std::min<size_t>(capacity_, 1 << 16));
+    // Reserve the whole budget at once: untouched pages cost no RSS, while growth by doubling
+    // would briefly hold 1.5x the budget.
+    if (buffer_.capacity() < capacity_) buffer_.reserve(capacity_);
     if (buffer_.size() == capacity_) spill();
     buffer_.push_back(r);
     ++count_;

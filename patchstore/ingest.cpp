@@ -197,14 +197,37 @@ void computeCentroids(const std::string& dir, const VertexRecordLayout& layout, 
       progress.update(++done);
     };
     if (c == 0) {
+      // Most faces have all corners in the first chunk (always, when everything fits): compute
+      // those in parallel, then write results and carry the rest in face order.
       TempReader fr(input, 4 << 20);
       std::vector<uint32_t> batch;
+      std::vector<Centroid> cents;
+      std::vector<uint8_t> inChunk;
       uint32_t face = 0;
       while (fr.getBatch(batch, 3 * 65536)) {
-        for (size_t i = 0; i < batch.size(); i += 3) {
-          Pending f{face++, {batch[i], batch[i + 1], batch[i + 2]}, {}, 0};
-          resolve(f);
+        const size_t n = batch.size() / 3;
+        cents.resize(n);
+        inChunk.resize(n);
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096), [&](const tbb::blocked_range<size_t>& r) {
+          for (size_t i = r.begin(); i < r.end(); ++i) {
+            const uint32_t* v = &batch[3 * i];
+            inChunk[i] = v[0] < hi && v[1] < hi && v[2] < hi;
+            if (!inChunk[i]) continue;
+            const float* p[3] = {&pos[size_t(v[0]) * 3], &pos[size_t(v[1]) * 3], &pos[size_t(v[2]) * 3]};
+            cents[i] = centroidOf(v, p);
+          }
+        });
+        for (size_t i = 0; i < n; ++i, ++face) {
+          if (inChunk[i]) {
+            if (chunks > 1) out.put(face);
+            out.put(cents[i]);
+            ++done;
+          } else {
+            Pending f{face, {batch[3 * i], batch[3 * i + 1], batch[3 * i + 2]}, {}, 0};
+            resolve(f);
+          }
         }
+        progress.update(done);
       }
     } else {
       TempReader fr(dir + "/carry" + std::to_string(c - 1), 4 << 20);
@@ -548,74 +571,91 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
   ExternalSorter<LocalRec, KeyLess<LocalRec>> shared(scratch + "/s4", B / 8);
   ExternalSorter<EdgeRec, EdgeLess> edges(scratch + "/s5", B / 16);
   {
+    // Patches are gathered from the sorted streams in batches, built in parallel, and written in
+    // patch order, so the store does not depend on the thread count.
+    struct PatchWork {
+      Patch p;
+      std::vector<uint32_t> globalIds, holders;
+      std::string payload;
+      uint64_t duplicates = 0, nonManifold = 0;
+      std::vector<EdgeRec> crossEdges;  // edges between two shared vertices: may continue elsewhere
+    };
+    auto buildPatch = [&](PatchWork& w) {
+      Patch& p = w.p;
+      for (uint32_t& v : p.triangles) {
+        auto it = std::lower_bound(w.globalIds.begin(), w.globalIds.end(), v);
+        if (it == w.globalIds.end() || *it != v) fail(scratch, "internal: patch vertex missing");
+        v = uint32_t(it - w.globalIds.begin());
+      }
+      std::vector<std::array<uint32_t, 3>> sortedTris;
+      std::vector<uint64_t> edgeList;
+      for (size_t t = 0; t < p.triangles.size(); t += 3) {
+        std::array<uint32_t, 3> s3 = {p.triangles[t], p.triangles[t + 1], p.triangles[t + 2]};
+        std::sort(s3.begin(), s3.end());
+        sortedTris.push_back(s3);
+        if (s3[0] == s3[1] || s3[1] == s3[2]) continue;  // degenerate: no proper edges
+        for (int e = 0; e < 3; ++e) {
+          uint32_t a = p.triangles[t + e], b = p.triangles[t + (e + 1) % 3];
+          edgeList.push_back(uint64_t(std::min(a, b)) << 32 | std::max(a, b));
+        }
+      }
+      std::sort(sortedTris.begin(), sortedTris.end());
+      for (size_t i = 1; i < sortedTris.size(); ++i) w.duplicates += sortedTris[i] == sortedTris[i - 1];
+      std::sort(edgeList.begin(), edgeList.end());
+      for (size_t i = 0; i < edgeList.size();) {
+        size_t j = i;
+        while (j < edgeList.size() && edgeList[j] == edgeList[i]) ++j;
+        uint32_t a = uint32_t(edgeList[i] >> 32), b = uint32_t(edgeList[i]);
+        if (w.holders[a] > 1 && w.holders[b] > 1)
+          w.crossEdges.push_back({uint64_t(w.globalIds[a]) << 32 | w.globalIds[b], uint32_t(j - i), 0});
+        else if (j - i > 2)
+          ++w.nonManifold;
+        i = j;
+      }
+      w.payload = encodeGeometry(p, impl->layout);
+    };
     Progress progress(opt.progress, "ingest: patches", nf);
     TempReader pface(scratch + "/pface.bin", 4 << 20);
     VertexData<Full> d;
     bool have = byPatch.next(d);
-    std::vector<uint32_t> globalIds, holders, tris;
-    std::vector<std::array<uint32_t, 3>> sortedTris;
-    std::vector<std::pair<uint64_t, uint32_t>> edgeList;
     uint64_t facesDone = 0;
-    for (uint32_t k = 0; k < P; ++k) {
-      Patch p;
-      p.id = k;
-      p.cell = patchKey[k];
-      globalIds.clear();
-      holders.clear();
-      while (have && uint32_t(d.key >> 32) == k) {
-        globalIds.push_back(uint32_t(d.key));
-        holders.push_back(d.holders);
-        for (int a = 0; a < 3; ++a) p.positions.push_back(d.p[a]);
-        if constexpr (Full) {
-          if (vlayout.normals) p.normals.insert(p.normals.end(), d.n, d.n + 3);
-          if (vlayout.colors) p.colors.insert(p.colors.end(), d.c, d.c + 4);
+    constexpr uint32_t kBatch = 64;
+    std::vector<PatchWork> work;
+    for (uint32_t k0 = 0; k0 < P; k0 += kBatch) {
+      const uint32_t k1 = std::min(P, k0 + kBatch);
+      work.assign(k1 - k0, PatchWork());
+      for (uint32_t k = k0; k < k1; ++k) {
+        PatchWork& w = work[k - k0];
+        w.p.id = k;
+        w.p.cell = patchKey[k];
+        while (have && uint32_t(d.key >> 32) == k) {
+          w.globalIds.push_back(uint32_t(d.key));
+          w.holders.push_back(d.holders);
+          for (int a = 0; a < 3; ++a) w.p.positions.push_back(d.p[a]);
+          if constexpr (Full) {
+            if (vlayout.normals) w.p.normals.insert(w.p.normals.end(), d.n, d.n + 3);
+            if (vlayout.colors) w.p.colors.insert(w.p.colors.end(), d.c, d.c + 4);
+          }
+          have = byPatch.next(d);
         }
-        have = byPatch.next(d);
+        w.p.triangles.resize(size_t(patchTris[k]) * 3);
+        if (pface.read(w.p.triangles.data(), w.p.triangles.size() * 4) != w.p.triangles.size() * 4)
+          fail(scratch, "patch face scratch file is short");
       }
-      tris.resize(size_t(patchTris[k]) * 3);
-      if (pface.read(tris.data(), tris.size() * 4) != tris.size() * 4) fail(scratch, "patch face scratch file is short");
-      p.triangles.resize(tris.size());
-      for (size_t i = 0; i < tris.size(); ++i) {
-        auto it = std::lower_bound(globalIds.begin(), globalIds.end(), tris[i]);
-        if (it == globalIds.end() || *it != tris[i]) fail(scratch, "internal: patch vertex missing");
-        p.triangles[i] = uint32_t(it - globalIds.begin());
+      tbb::parallel_for(size_t(0), work.size(), [&](size_t i) { buildPatch(work[i]); });
+      for (PatchWork& w : work) {
+        const Patch& p = w.p;
+        report.duplicateTriangles += w.duplicates;
+        report.nonManifoldEdges += w.nonManifold;
+        for (const EdgeRec& e : w.crossEdges) edges.add(e);
+        for (uint32_t v = 0; v < w.globalIds.size(); ++v)
+          if (w.holders[v] > 1) shared.add({uint64_t(w.globalIds[v]) << 32 | p.id, v, 0});
+        PatchRecord rec;
+        rec.meta = {p.id, p.cell, 0, p.vertexCount(), p.triangleCount(), 0, boundsOf(p.positions)};
+        rec.geometry = impl->appendBlock(w.payload);
+        impl->patches[p.id] = rec;
+        facesDone += p.triangleCount();
       }
-      // Duplicate faces (same vertex set) and edge use counts.
-      sortedTris.clear();
-      edgeList.clear();
-      for (size_t t = 0; t < p.triangles.size(); t += 3) {
-        std::array<uint32_t, 3> s = {p.triangles[t], p.triangles[t + 1], p.triangles[t + 2]};
-        std::sort(s.begin(), s.end());
-        sortedTris.push_back(s);
-        if (s[0] == s[1] || s[1] == s[2]) continue;  // degenerate: no proper edges
-        for (int e = 0; e < 3; ++e) {
-          uint32_t a = p.triangles[t + e], b = p.triangles[t + (e + 1) % 3];
-          if (a > b) std::swap(a, b);
-          edgeList.push_back({uint64_t(a) << 32 | b, 1});
-        }
-      }
-      std::sort(sortedTris.begin(), sortedTris.end());
-      for (size_t i = 1; i < sortedTris.size(); ++i)
-        if (sortedTris[i] == sortedTris[i - 1]) ++report.duplicateTriangles;
-      std::sort(edgeList.begin(), edgeList.end());
-      for (size_t i = 0; i < edgeList.size();) {
-        size_t j = i;
-        while (j < edgeList.size() && edgeList[j].first == edgeList[i].first) ++j;
-        uint32_t a = uint32_t(edgeList[i].first >> 32), b = uint32_t(edgeList[i].first);
-        uint32_t count = uint32_t(j - i);
-        if (holders[a] > 1 && holders[b] > 1)
-          edges.add({uint64_t(globalIds[a]) << 32 | globalIds[b], count, 0});  // may continue in other patches
-        else if (count > 2)
-          ++report.nonManifoldEdges;
-        i = j;
-      }
-      for (uint32_t v = 0; v < globalIds.size(); ++v)
-        if (holders[v] > 1) shared.add({uint64_t(globalIds[v]) << 32 | k, v, 0});
-      PatchRecord rec;
-      rec.meta = {k, p.cell, 0, p.vertexCount(), p.triangleCount(), 0, boundsOf(p.positions)};
-      rec.geometry = impl->appendBlock(encodeGeometry(p, impl->layout));
-      impl->patches[k] = rec;
-      facesDone += p.triangleCount();
       progress.update(facesDone);
     }
     progress.finish(facesDone);
