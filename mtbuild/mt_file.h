@@ -1,0 +1,97 @@
+// Writing and reading MT files (layout in mt_format.h).
+//
+// MtFileWriter streams: payloads are appended as the builder produces patches, the DAG and the
+// patch index are written at the end, and the file is built under PATH.tmp and renamed to PATH
+// only once complete and synced, so a crash never leaves a half-written file under the final name.
+//
+// MtFileReader validates everything it trusts before returning from open(): magic, version,
+// footer, the metadata checksum, and every offset and count against the file size and each other.
+// Payloads are verified when read (their own checksum). Every error is a one-line mt::Error of the
+// form "PATH: what, where (patch N / byte offset X)".
+//
+// Both use plain POSIX file calls: mtrender links this library without the patch store.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "mtbuild/mt_format.h"
+#include "mtbuild/patch_codec.h"
+
+namespace mt {
+
+// An arc as the builder describes it: the patches (ids from appendPatch) that `from`'s fragment
+// holds inside `to`'s floor.
+struct DagArc {
+  uint32_t from = 0, to = 0;
+  std::vector<uint32_t> patches;
+};
+
+class MtFileWriter {
+ public:
+  // `header` gives codec, vertexFlags, levelCount, input counts, bounds and grid; the writer fills
+  // magic, version, sizes, counts and offsets. Creates (truncates) PATH.tmp. Throws mt::Error.
+  MtFileWriter(const std::string& path, const format::FileHeader& header);
+  ~MtFileWriter();  // removes PATH.tmp unless finish() completed
+  MtFileWriter(const MtFileWriter&) = delete;
+  MtFileWriter& operator=(const MtFileWriter&) = delete;
+
+  // Appends one payload (aligned); returns its patch id (0, 1, 2, ... in call order).
+  uint32_t appendPatch(const uint8_t* data, size_t size, uint32_t triangles, uint32_t vertices);
+  uint32_t patchCount() const { return uint32_t(patches_.size()); }
+  uint64_t bytesWritten() const { return offset_; }
+
+  // Writes the DAG, the index and the footer, syncs, renames PATH.tmp to PATH and syncs the
+  // directory. nodes: every field except firstArc/arcCount/firstBackArc/backArcCount/triangles,
+  // which are derived from `arcs`. Every patch must be on exactly one arc. Throws mt::Error.
+  void finish(std::vector<format::NodeRecord> nodes, std::vector<DagArc> arcs);
+
+  // Stops and removes PATH.tmp (also done by the destructor).
+  void abandon();
+
+ private:
+  void write(const void* data, size_t size);
+  std::string path_, tmp_;
+  int fd_ = -1;
+  uint64_t offset_ = 0;
+  format::FileHeader header_;
+  std::vector<format::PatchRecord> patches_;
+};
+
+class MtFileReader {
+ public:
+  static std::unique_ptr<MtFileReader> open(const std::string& path);
+  ~MtFileReader();
+
+  const std::string& path() const { return path_; }
+  const format::FileHeader& header() const { return header_; }
+  format::Codec codec() const { return format::Codec(header_.codec); }
+  QuantizationGrid grid() const;
+  uint64_t fileSize() const { return size_; }
+
+  const std::vector<format::NodeRecord>& nodes() const { return nodes_; }
+  const std::vector<format::ArcRecord>& arcs() const { return arcs_; }
+  const std::vector<uint32_t>& backArcs() const { return backArcs_; }
+  const std::vector<uint32_t>& patchRefs() const { return patchRefs_; }
+  const std::vector<format::PatchRecord>& patches() const { return patches_; }
+
+  // The payload bytes of patch i, checksum verified. Thread-safe (pread).
+  std::vector<uint8_t> readPayload(uint32_t patch) const;
+  // readPayload + decodePatch; a damaged payload throws "PATH: patch N: ...".
+  DecodedPatch readPatch(uint32_t patch) const;
+
+ private:
+  MtFileReader() = default;
+  std::string path_;
+  int fd_ = -1;
+  uint64_t size_ = 0;
+  format::FileHeader header_{};
+  std::vector<format::NodeRecord> nodes_;
+  std::vector<format::ArcRecord> arcs_;
+  std::vector<uint32_t> backArcs_, patchRefs_;
+  std::vector<format::PatchRecord> patches_;
+};
+
+}  // namespace mt

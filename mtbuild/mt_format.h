@@ -1,0 +1,198 @@
+// The MT file format: the one place where it is written down. mtbuild writes it (mt_file.h),
+// mtrender reads it and needs nothing else from the build side. docs/mt-format.md is a summary.
+//
+// A file holds one batched Multi-Triangulation (BMT sections 3.1, 4.1): a DAG whose nodes are
+// fragments (one per region of V(i+1) per level, plus a source and a sink) and whose arcs carry
+// patches. Every patch payload is coded on its own (BMT section 6: "individually compressed using
+// a quick decompression algorithm") so the renderer can load any patch with one read.
+//
+// Layout (all integers little-endian, all structs below are the exact on-disk bytes):
+//
+//   offset 0            FileHeader (kHeaderSize bytes)
+//   kHeaderSize...      patch payloads, each starting at a multiple of header.payloadAlignment
+//   header.metaOffset   NodeRecord[nodeCount]
+//                       ArcRecord[arcCount]          sorted by (from, to): a node's forward star
+//                       uint32 backArcs[arcCount]    arc ids sorted by (to, from): backward stars
+//                       uint32 patchRefs[patchRefCount]  arc -> its patches
+//                       PatchRecord[patchCount]      the patch index
+//   end - kFooterSize   Footer
+//
+// The section offsets in the header are absolute and must tile [metaOffset, footer) exactly in
+// the order above. Footer.checksum = XXH64(header bytes, then bytes [metaOffset, footer), seed 0):
+// it covers everything a reader trusts before touching a payload. Each payload has its own
+// XXH64 (seed 0) in its PatchRecord, checked when the patch is read, so a damaged payload is
+// reported as "patch N" without spoiling the rest of the file.
+//
+// DAG orientation (BMT 3.1): node 0 is the source, whose fragment is the full-resolution mesh
+// (level 0); the last node is the sink (level = levelCount, error = +inf, no patches). An arc
+// from -> to carries the patches of `from`'s fragment that lie in the floor of `to`, i.e. that
+// `to` replaces; `to` is the coarser node. A cut is the set of arcs leaving a set of nodes that
+// contains the source and is closed under predecessors (for every node in it, all its from-nodes
+// are in it); its patches, welded by exact grid position, form a conforming mesh. Refining a cut
+// means removing a node from the set (moving towards the source), coarsening means adding one.
+//
+// Positions: every vertex of every patch is stored as integer coordinates q on ONE global grid,
+// p = gridOrigin + gridStep * q (per axis, computed in double). Vertices that neighbouring patches
+// share therefore decode to bit-identical positions and cuts cannot crack. The grid step is chosen
+// by the builder; quantization moves a vertex by at most quantizationError = gridStep*sqrt(3)/2,
+// which is already added to every node's error.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+namespace mt::format {
+
+constexpr char kMagic[8] = {'B', 'M', 'T', '-', 'M', 'T', '\r', '\n'};
+constexpr char kFooterMagic[8] = {'B', 'M', 'T', '-', 'E', 'N', 'D', '\n'};
+constexpr uint32_t kVersion = 1;
+constexpr uint32_t kHeaderSize = 256;
+constexpr uint32_t kFooterSize = 32;
+// Payload alignment: 16 keeps the padding cost at ~8 bytes per patch (patches are ~1-4 KB)
+// while every payload starts on a SIMD/cache-friendly boundary. Readers wanting O_DIRECT read
+// the enclosing 4 KiB-aligned range. Stored in the header so a writer may choose another power
+// of two.
+constexpr uint32_t kDefaultPayloadAlignment = 16;
+
+// How the payloads are coded (patch_codec.h has the payload layouts).
+enum class Codec : uint32_t {
+  Meshopt = 1,  // meshoptimizer index (+attribute) codecs, parallelogram positions, then zstd
+  Draco = 2,    // Draco edgebreaker, positions as lossless integer attribute
+};
+
+// FileHeader::vertexFlags
+constexpr uint32_t kHasNormals = 1u << 0;  // every patch stores octahedral normals
+constexpr uint32_t kHasColors = 1u << 1;   // every patch stores RGBA8 colours
+
+struct FileHeader {
+  char magic[8];             // kMagic
+  uint32_t version;          // kVersion
+  uint32_t headerSize;       // kHeaderSize
+  uint32_t codec;            // Codec
+  uint32_t vertexFlags;      // kHasNormals | kHasColors
+  uint32_t payloadAlignment; // power of two >= 1
+  uint32_t levelCount;       // levels 0..levelCount-1 (the sink has level levelCount)
+  uint64_t nodeCount;
+  uint64_t arcCount;
+  uint64_t patchRefCount;
+  uint64_t patchCount;
+  uint64_t inputTriangles;   // triangles of the input mesh
+  uint64_t inputVertices;
+  uint64_t storedTriangles;  // sum over all patches
+  double boundsMin[3];       // bounding box of the input, object space
+  double boundsMax[3];
+  double gridOrigin[3];      // p = gridOrigin + gridStep * q
+  double gridStep;
+  double quantizationError;  // gridStep * sqrt(3) / 2, included in every node error
+  uint32_t gridBits;         // every q component is < 2^gridBits (<= 31)
+  uint32_t reserved0;
+  uint64_t metaOffset;       // start of the DAG + index section (end of payloads)
+  uint64_t nodesOffset;
+  uint64_t arcsOffset;
+  uint64_t backArcsOffset;
+  uint64_t patchRefsOffset;
+  uint64_t patchesOffset;
+  uint8_t reserved[24];      // zero
+};
+static_assert(sizeof(FileHeader) == kHeaderSize, "FileHeader is the first 256 bytes of the file");
+
+// A DAG node: one fragment (BMT 3.1). Invariants (checked by the reader only where cheap, by
+// mtverify in full): error >= every predecessor's error (monotone towards the sink), the sphere
+// contains every predecessor's sphere.
+struct NodeRecord {
+  double center[3];      // bounding sphere of the fragment and everything it replaces
+  float radius;
+  float error;           // object-space error bound of the fragment (incl. quantization); sink: +inf
+  float coneAxis[3];     // normal cone: unit axis ...
+  float coneCutoff;      // ... and cos(half angle); -1 when the cone is the whole sphere
+  uint32_t level;        // 0 = source (full resolution)
+  uint32_t region;       // the region's index in V(level) (builder-defined; 0 for source/sink)
+  uint32_t firstArc;     // forward star: arcs[firstArc, firstArc + arcCount)
+  uint32_t arcCount;
+  uint32_t firstBackArc; // backward star: backArcs[firstBackArc, firstBackArc + backArcCount)
+  uint32_t backArcCount;
+  uint32_t triangles;    // triangles of the node's fragment (sum over its out-arcs' patches)
+  uint32_t reserved;
+};
+static_assert(sizeof(NodeRecord) == 80, "NodeRecord layout");
+
+struct ArcRecord {
+  uint32_t from;         // finer node (whose fragment holds the patches)
+  uint32_t to;           // coarser node (whose floor the patches are)
+  uint32_t firstPatchRef;  // patchRefs[firstPatchRef, firstPatchRef + patchCount)
+  uint32_t patchCount;
+};
+static_assert(sizeof(ArcRecord) == 16, "ArcRecord layout");
+
+struct PatchRecord {
+  uint64_t offset;       // absolute file offset of the payload, a multiple of payloadAlignment
+  uint32_t size;         // payload bytes
+  uint32_t arc;          // the arc that carries it
+  uint32_t triangles;
+  uint32_t vertices;
+  uint64_t checksum;     // XXH64 of the payload bytes, seed 0
+};
+static_assert(sizeof(PatchRecord) == 32, "PatchRecord layout");
+
+struct Footer {
+  uint64_t metaOffset;   // == header.metaOffset (lets a reader find the index from the end)
+  uint64_t checksum;     // XXH64(header || bytes[metaOffset, fileSize - kFooterSize))
+  uint32_t version;      // kVersion
+  uint32_t reserved;
+  char magic[8];         // kFooterMagic
+};
+static_assert(sizeof(Footer) == kFooterSize, "Footer is the last 32 bytes of the file");
+
+// ---- Patch payloads (the bytes a PatchRecord points at) ----
+//
+// Every payload starts with this header; the rest depends on the file's codec.
+struct PayloadHeader {
+  uint32_t vertexCount;
+  uint32_t triangleCount;
+  uint32_t qMin[3];      // per-axis minimum grid coordinate of the patch; stored q are relative
+  uint8_t flags;         // kPayload* below
+  uint8_t reserved[3];
+};
+static_assert(sizeof(PayloadHeader) == 24, "PayloadHeader layout");
+
+constexpr uint8_t kPayloadNormals = 1u << 0;  // octahedral normals present
+constexpr uint8_t kPayloadColors = 1u << 1;   // RGBA8 colours present
+constexpr uint8_t kPayloadWide = 1u << 2;     // meshopt: position residuals need 32 bits (else 16)
+constexpr uint8_t kPayloadStrip = 1u << 3;    // meshopt: indices are a strip (restart ~0u)
+
+// Codec::Meshopt, after the PayloadHeader:
+//   uint32 rawSize, uint32 zstdSize, then zstdSize bytes (one zstd frame) that decompress to
+//   rawSize bytes:
+//     uint32 indexBytes, uint32 indexCount, uint32 attributeBytes,
+//     indexBytes: meshopt_encodeIndexBuffer of the triangle list (indexCount = 3 * triangles),
+//         or with kPayloadStrip meshopt_encodeIndexSequence of a strip with restart index ~0u
+//         (decoded with meshopt_unstripify);
+//     attributeBytes: meshopt_encodeVertexBuffer of vertexCount records of attributeStride(flags)
+//         bytes: uint8[2] octahedral normal if kPayloadNormals, then uint8[4] RGBA if
+//         kPayloadColors, zero-padded (absent, 0 bytes, when neither flag is set);
+//     positions: 3 axes x P byte planes x vertexCount bytes (P = 4 with kPayloadWide, else 2):
+//         plane b of axis x holds byte b of zigzag(r) for every vertex, r = qRel - prediction.
+//   Prediction (parallelogram rule): walk the decoded triangles in order; at the first use of a
+//   vertex v in triangle (v, a, b) (rotated so v comes first):
+//     a, b known and a visited triangle has directed edge (b, a) or else (a, b) with third vertex
+//       c: a + b - c;   a, b known otherwise: (a + b) >> 1 (arithmetic shift);
+//     only one of a, b known: that one;   none: the previously visited vertex, or 0 for the first;
+//   per component in int64, clamped to [0, 2^31 - 1]. After a triangle is processed its three
+//   directed edges (a,b)->c, (b,c)->a, (c,a)->b are recorded (a later record replaces an earlier).
+//   zigzag(r) = (r << 1) ^ (r >> 63), kept in 32 bits.
+// Codec::Draco, after the PayloadHeader:
+//   a Draco mesh buffer (edgebreaker): POSITION as 3 x INT32 (qRel, lossless, no quantization),
+//   and when flagged GENERIC 2 x UINT8 (octahedral normal) and COLOR 4 x UINT8. Draco may split
+//   non-manifold vertices, so a decoder may see more vertices than vertexCount.
+//
+// qRel = q - qMin per axis. Octahedral normals (8 bits per component): n = (x, y, z) / (|x| + |y|
+// + |z|); if z < 0 the xy pair is folded: (x, y) <- ((1 - |y|) * sign(x), (1 - |x|) * sign(y));
+// each of x, y is stored as round((v * 0.5 + 0.5) * 255). Decoding reverses this, renormalizes.
+inline uint32_t attributeStride(uint8_t payloadFlags) {
+  uint32_t s = 0;
+  if (payloadFlags & kPayloadNormals) s += 2;
+  if (payloadFlags & kPayloadColors) s += 4;
+  return (s + 3) & ~3u;
+}
+
+}  // namespace mt::format

@@ -1,0 +1,593 @@
+// Patch codec (see patch_codec.h; byte layouts in mt_format.h).
+#include "mtbuild/patch_codec.h"
+
+#include <meshoptimizer.h>
+#include <zstd.h>
+
+#include <algorithm>
+#include <cassert>
+#include <cmath>
+#include <cstring>
+#include <mutex>
+#include <string>
+
+#include <draco/compression/decode.h>
+#include <draco/compression/encode.h>
+#include <draco/core/decoder_buffer.h>
+#include <draco/core/encoder_buffer.h>
+#include <draco/mesh/mesh.h>
+
+#include "patchstore/error.h"
+
+namespace mt {
+
+using format::Codec;
+using format::PayloadHeader;
+
+// ---------------------------------------------------------------------------------------------
+// Grid
+
+QuantizationGrid QuantizationGrid::fromBounds(const double minCorner[3], const double maxCorner[3],
+                                              double step) {
+  if (!(step > 0) || !std::isfinite(step)) throw Error("quantization grid: step must be > 0");
+  QuantizationGrid g;
+  g.step = step;
+  uint32_t bits = 1;
+  for (int a = 0; a < 3; ++a) {
+    g.origin[a] = minCorner[a];
+    double cells = std::floor((maxCorner[a] - minCorner[a]) / step + 0.5) + 1;
+    if (!(cells < double(1u << 31)))
+      throw Error("quantization grid: box needs more than 31 bits per axis at step " +
+                  std::to_string(step));
+    while (double(1ull << bits) < cells) ++bits;
+  }
+  g.bits = bits;
+  return g;
+}
+
+void QuantizationGrid::quantize(const double p[3], uint32_t q[3]) const {
+  for (int a = 0; a < 3; ++a) {
+    // round half up, the same on every machine: shared vertices must get the same q everywhere
+    double v = std::floor((p[a] - origin[a]) / step + 0.5);
+    if (!(v >= 0 && v < double(1ull << bits)))
+      throw Error("quantization grid: position " + std::to_string(p[a]) + " outside the grid on axis " +
+                  std::to_string(a));
+    q[a] = uint32_t(v);
+  }
+}
+
+double QuantizationGrid::maxError() const { return step * std::sqrt(3.0) * 0.5; }
+
+// ---------------------------------------------------------------------------------------------
+// Octahedral normals (Meyer et al. 2010, "On floating-point normal vectors"), 8 bits per component.
+
+static float signNotZero(float v) { return v >= 0 ? 1.f : -1.f; }
+
+void encodeOctahedral8(const float n[3], uint8_t out[2]) {
+  float l1 = std::fabs(n[0]) + std::fabs(n[1]) + std::fabs(n[2]);
+  float x = 0, y = 0;
+  if (l1 > 0) {
+    x = n[0] / l1;
+    y = n[1] / l1;
+    if (n[2] < 0) {
+      float fx = (1 - std::fabs(y)) * signNotZero(x);
+      float fy = (1 - std::fabs(x)) * signNotZero(y);
+      x = fx;
+      y = fy;
+    }
+  } else {
+    x = 0, y = 0;  // degenerate normal: +z
+  }
+  out[0] = uint8_t(std::lround(std::clamp(x * 0.5f + 0.5f, 0.f, 1.f) * 255.f));
+  out[1] = uint8_t(std::lround(std::clamp(y * 0.5f + 0.5f, 0.f, 1.f) * 255.f));
+}
+
+void decodeOctahedral8(const uint8_t in[2], float n[3]) {
+  float x = in[0] / 255.f * 2 - 1, y = in[1] / 255.f * 2 - 1;
+  float z = 1 - std::fabs(x) - std::fabs(y);
+  if (z < 0) {
+    float fx = (1 - std::fabs(y)) * signNotZero(x);
+    float fy = (1 - std::fabs(x)) * signNotZero(y);
+    x = fx;
+    y = fy;
+  }
+  float len = std::sqrt(x * x + y * y + z * z);
+  n[0] = x / len, n[1] = y / len, n[2] = z / len;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Shared preparation: compact, quantize, order.
+
+namespace {
+
+struct Prepared {
+  PayloadHeader header{};
+  std::vector<uint32_t> q;       // relative to header.qMin, 3 per vertex, fetch order
+  std::vector<uint8_t> oct;      // 2 per vertex or empty
+  std::vector<uint8_t> colors;   // 4 per vertex or empty
+  std::vector<uint32_t> indices; // vertex-cache order
+};
+
+void appendBytes(std::vector<uint8_t>& out, const void* data, size_t size) {
+  const uint8_t* p = static_cast<const uint8_t*>(data);
+  out.insert(out.end(), p, p + size);
+}
+
+Prepared prepare(const PatchInput& in, const QuantizationGrid& grid, const PatchCodecOptions& options) {
+  if (in.triangleCount > 0 && (!in.triangles || !in.positions))
+    throw Error("encodePatch: null positions or triangles");
+  for (size_t i = 0; i < in.triangleCount * 3; ++i)
+    if (in.triangles[i] >= in.vertexCount)
+      throw Error("encodePatch: triangle " + std::to_string(i / 3) + " uses vertex " +
+                  std::to_string(in.triangles[i]) + " of " + std::to_string(in.vertexCount));
+
+  Prepared out;
+  size_t indexCount = in.triangleCount * 3;
+  // Vertex-cache order first (Forsyth-like, meshoptimizer), then renumber vertices by first use:
+  // both make the index and vertex deltas small, which is what the codecs exploit.
+  std::vector<uint32_t> ordered(indexCount);
+  meshopt_optimizeVertexCache(ordered.data(), in.triangles, indexCount, in.vertexCount);
+  std::vector<uint32_t> remap(in.vertexCount);
+  size_t used = meshopt_optimizeVertexFetchRemap(remap.data(), ordered.data(), indexCount, in.vertexCount);
+  out.indices.resize(indexCount);
+  meshopt_remapIndexBuffer(out.indices.data(), ordered.data(), indexCount, remap.data());
+
+  std::vector<uint32_t> qAbs(used * 3);
+  uint32_t qMin[3] = {~0u, ~0u, ~0u};
+  for (size_t v = 0; v < in.vertexCount; ++v) {
+    if (remap[v] == ~0u) continue;
+    uint32_t* q = &qAbs[remap[v] * 3];
+    grid.quantize(in.positions + v * 3, q);
+    for (int a = 0; a < 3; ++a) qMin[a] = std::min(qMin[a], q[a]);
+  }
+  if (used == 0) qMin[0] = qMin[1] = qMin[2] = 0;
+
+  PayloadHeader& h = out.header;
+  h.vertexCount = uint32_t(used);
+  h.triangleCount = uint32_t(in.triangleCount);
+  for (int a = 0; a < 3; ++a) h.qMin[a] = qMin[a];
+  h.flags = 0;
+  out.q.resize(used * 3);
+  for (size_t i = 0; i < used * 3; ++i) out.q[i] = qAbs[i] - qMin[i % 3];
+
+  if (options.normals) {
+    h.flags |= format::kPayloadNormals;
+    std::vector<float> n(used * 3, 0.f);
+    if (in.normals) {
+      for (size_t v = 0; v < in.vertexCount; ++v)
+        if (remap[v] != ~0u) std::memcpy(&n[remap[v] * 3], in.normals + v * 3, 12);
+    } else {
+      // Area-weighted face normals of the QUANTIZED geometry (what the renderer will draw).
+      for (size_t t = 0; t < indexCount; t += 3) {
+        const uint32_t* a = &out.q[out.indices[t] * 3];
+        const uint32_t* b = &out.q[out.indices[t + 1] * 3];
+        const uint32_t* c = &out.q[out.indices[t + 2] * 3];
+        double e1[3], e2[3];
+        for (int k = 0; k < 3; ++k) e1[k] = double(b[k]) - a[k], e2[k] = double(c[k]) - a[k];
+        double fn[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
+                        e1[0] * e2[1] - e1[1] * e2[0]};
+        for (int j = 0; j < 3; ++j)
+          for (int k = 0; k < 3; ++k) n[out.indices[t + j] * 3 + k] += float(fn[k]);
+      }
+    }
+    out.oct.resize(used * 2);
+    for (size_t v = 0; v < used; ++v) encodeOctahedral8(&n[v * 3], &out.oct[v * 2]);
+  }
+  if (in.colors && options.colors) {
+    h.flags |= format::kPayloadColors;
+    out.colors.resize(used * 4);
+    for (size_t v = 0; v < in.vertexCount; ++v)
+      if (remap[v] != ~0u) std::memcpy(&out.colors[remap[v] * 4], in.colors + v * 4, 4);
+  }
+  return out;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Codec::Meshopt
+//
+// Indices: meshopt_encodeIndexBuffer (list) or meshopt_encodeIndexSequence (strip); per patch the
+// smaller one is kept. Positions: parallelogram prediction (Touma-Gotsman) along the decoded
+// triangle order, residuals zigzag-coded in byte planes; normals/colours: meshopt vertex codec.
+// Then zstd over everything. Measured on scan-like patches the parallelogram residuals take ~40%
+// fewer bytes than meshopt_encodeVertexBuffer on the raw grid coordinates (docs/mt-format.md).
+
+void setMeshoptVersions() {
+  static std::once_flag once;
+  // Index codec v1 (0.14+) codes triangle lists ~10% smaller than v0; vertex codec v0 is the
+  // only one 0.18 has. Set once: these are process-wide settings in meshoptimizer.
+  std::call_once(once, [] {
+    meshopt_encodeIndexVersion(1);
+    meshopt_encodeVertexVersion(0);
+  });
+}
+
+// Directed edge -> opposite vertex, for the parallelogram rule. Open addressing, no deletes.
+class EdgeMap {
+ public:
+  explicit EdgeMap(size_t edges) {
+    size_t n = 16;
+    while (n < edges * 2) n *= 2;
+    keys_.assign(n, ~0ull);
+    vals_.resize(n);
+    mask_ = n - 1;
+  }
+  void put(uint32_t a, uint32_t b, uint32_t c) {
+    uint64_t k = (uint64_t(a) << 32) | b;
+    for (uint64_t i = hash(k);; i = (i + 1) & mask_)
+      if (keys_[i] == ~0ull || keys_[i] == k) {
+        keys_[i] = k, vals_[i] = c;
+        return;
+      }
+  }
+  bool get(uint32_t a, uint32_t b, uint32_t* c) const {
+    uint64_t k = (uint64_t(a) << 32) | b;
+    for (uint64_t i = hash(k);; i = (i + 1) & mask_) {
+      if (keys_[i] == ~0ull) return false;
+      if (keys_[i] == k) return *c = vals_[i], true;
+    }
+  }
+
+ private:
+  uint64_t hash(uint64_t k) const { return ((k * 0x9E3779B97F4A7C15ull) >> 20) & mask_; }
+  std::vector<uint64_t> keys_;
+  std::vector<uint32_t> vals_;
+  uint64_t mask_;
+};
+
+// Visits the vertices in first-use order of `indices` and calls f(v, pred) with the prediction of
+// v from already visited vertices; f must make q[v] known before returning (the encoder already
+// has it, the decoder computes it from the residual). Predictions are clamped to [0, range].
+template <typename F>
+void parallelogramWalk(const uint32_t* indices, size_t indexCount, size_t vertexCount, const int64_t* q,
+                       const int64_t range[3], F&& f) {
+  std::vector<uint8_t> known(vertexCount, 0);
+  EdgeMap edges(indexCount);
+  uint32_t last = ~0u;
+  for (size_t t = 0; t < indexCount; t += 3) {
+    for (int k = 0; k < 3; ++k) {
+      uint32_t v = indices[t + k];
+      if (known[v]) continue;
+      uint32_t a = indices[t + (k + 1) % 3], b = indices[t + (k + 2) % 3], c;
+      int64_t pred[3] = {0, 0, 0};
+      if (known[a] && known[b]) {
+        if (edges.get(b, a, &c) || edges.get(a, b, &c)) {
+          for (int x = 0; x < 3; ++x) pred[x] = q[a * 3 + x] + q[b * 3 + x] - q[c * 3 + x];
+        } else {
+          for (int x = 0; x < 3; ++x) pred[x] = (q[a * 3 + x] + q[b * 3 + x]) >> 1;
+        }
+      } else if (known[a] || known[b]) {
+        uint32_t s = known[a] ? a : b;
+        for (int x = 0; x < 3; ++x) pred[x] = q[s * 3 + x];
+      } else if (last != ~0u) {
+        for (int x = 0; x < 3; ++x) pred[x] = q[last * 3 + x];
+      }
+      for (int x = 0; x < 3; ++x) pred[x] = std::clamp<int64_t>(pred[x], 0, range[x]);
+      f(v, pred);
+      known[v] = 1;
+      last = v;
+    }
+    uint32_t a = indices[t], b = indices[t + 1], c = indices[t + 2];
+    edges.put(a, b, c), edges.put(b, c, a), edges.put(c, a, b);
+  }
+}
+
+// Predictions are clamped to [0, kMaxQ] (the same on both sides), so |residual| < 2^31 and its
+// zigzag code fits 32 bits.
+constexpr int64_t kMaxQ = 0x7FFFFFFF;
+
+inline uint32_t zigzag(int64_t r) { return uint32_t((uint64_t(r) << 1) ^ uint64_t(r >> 63)); }
+inline int64_t unzigzag(uint32_t z) { return int64_t(z >> 1) ^ -int64_t(z & 1); }
+
+// One candidate encoding of the patch with the given triangle list (already in final order).
+std::vector<uint8_t> encodeMeshoptWith(const Prepared& p, const std::vector<uint32_t>& tri,
+                                       const std::vector<uint8_t>& ibuf, uint32_t indexCount, bool strip,
+                                       const PatchCodecOptions& options) {
+  const PayloadHeader& h = p.header;
+  size_t n = h.vertexCount;
+  const int64_t range[3] = {kMaxQ, kMaxQ, kMaxQ};
+  std::vector<int64_t> q(n * 3);
+  for (size_t i = 0; i < n * 3; ++i) q[i] = p.q[i];
+  std::vector<uint32_t> res(n * 3, 0);
+  uint32_t maxZ = 0;
+  parallelogramWalk(tri.data(), tri.size(), n, q.data(), range, [&](uint32_t v, const int64_t pred[3]) {
+    for (int x = 0; x < 3; ++x) {
+      res[v * 3 + x] = zigzag(q[v * 3 + x] - pred[x]);
+      maxZ = std::max(maxZ, res[v * 3 + x]);
+    }
+  });
+  bool wide = maxZ > 0xFFFFu;
+  int planes = wide ? 4 : 2;
+  // Byte planes: for each axis, the low bytes of all vertices, then the next byte, ...: zstd then
+  // sees long runs of similar small values instead of interleaved high zero bytes.
+  std::vector<uint8_t> posBytes(n * 3 * size_t(planes));
+  for (int x = 0; x < 3; ++x)
+    for (int b = 0; b < planes; ++b)
+      for (size_t v = 0; v < n; ++v) posBytes[(size_t(x) * planes + b) * n + v] = uint8_t(res[v * 3 + x] >> (8 * b));
+
+  uint8_t flags = uint8_t((h.flags & (format::kPayloadNormals | format::kPayloadColors)) |
+                          (wide ? format::kPayloadWide : 0) | (strip ? format::kPayloadStrip : 0));
+  uint32_t attrStride = format::attributeStride(flags);
+  std::vector<uint8_t> abuf;
+  if (attrStride > 0) {
+    std::vector<uint8_t> attrs(n * attrStride, 0);
+    for (size_t v = 0; v < n; ++v) {
+      uint8_t* d = &attrs[v * attrStride];
+      if (!p.oct.empty()) std::memcpy(d, &p.oct[v * 2], 2), d += 2;
+      if (!p.colors.empty()) std::memcpy(d, &p.colors[v * 4], 4);
+    }
+    abuf.resize(meshopt_encodeVertexBufferBound(n, attrStride));
+    abuf.resize(meshopt_encodeVertexBuffer(abuf.data(), abuf.size(), attrs.data(), n, attrStride));
+  }
+
+  std::vector<uint8_t> raw;
+  uint32_t sizes[3] = {uint32_t(ibuf.size()), indexCount, uint32_t(abuf.size())};
+  appendBytes(raw, sizes, sizeof sizes);
+  appendBytes(raw, ibuf.data(), ibuf.size());
+  appendBytes(raw, abuf.data(), abuf.size());
+  appendBytes(raw, posBytes.data(), posBytes.size());
+
+  PayloadHeader hh = h;
+  hh.flags = flags;
+  std::vector<uint8_t> out;
+  appendBytes(out, &hh, sizeof hh);
+  uint32_t rawSize = uint32_t(raw.size());
+  std::vector<uint8_t> z(ZSTD_compressBound(raw.size()));
+  size_t zs = ZSTD_compress(z.data(), z.size(), raw.data(), raw.size(), options.zstdLevel);
+  if (ZSTD_isError(zs)) throw Error(std::string("encodePatch: zstd: ") + ZSTD_getErrorName(zs));
+  uint32_t zSize = uint32_t(zs);
+  appendBytes(out, &rawSize, 4);
+  appendBytes(out, &zSize, 4);
+  appendBytes(out, z.data(), zs);
+  return out;
+}
+
+std::vector<uint8_t> encodeMeshopt(const Prepared& p, const PatchCodecOptions& options) {
+  setMeshoptVersions();
+  size_t n = p.header.vertexCount;
+  std::vector<uint8_t> ibuf(meshopt_encodeIndexBufferBound(p.indices.size(), n));
+  ibuf.resize(meshopt_encodeIndexBuffer(ibuf.data(), ibuf.size(), p.indices.data(), p.indices.size()));
+  std::vector<uint8_t> best =
+      encodeMeshoptWith(p, p.indices, ibuf, uint32_t(p.indices.size()), false, options);
+  if (options.strips && !p.indices.empty()) {
+    // Strips (BMT 6 stores strips): on regular grids (level 0 of a range scan) a strip codes in
+    // far fewer bytes than the list; on simplified patches the list wins. Keep the smaller.
+    std::vector<uint32_t> s(meshopt_stripifyBound(p.indices.size()));
+    s.resize(meshopt_stripify(s.data(), p.indices.data(), p.indices.size(), n, ~0u));
+    std::vector<uint8_t> sbuf(meshopt_encodeIndexSequenceBound(s.size(), n));
+    sbuf.resize(meshopt_encodeIndexSequence(sbuf.data(), sbuf.size(), s.data(), s.size()));
+    std::vector<uint32_t> tri(meshopt_unstripifyBound(s.size()));
+    tri.resize(meshopt_unstripify(tri.data(), s.data(), s.size(), ~0u));
+    if (tri.size() == p.indices.size()) {  // stripify drops nothing on valid input; be safe
+      std::vector<uint8_t> alt = encodeMeshoptWith(p, tri, sbuf, uint32_t(s.size()), true, options);
+      if (alt.size() < best.size()) best.swap(alt);
+    }
+  }
+  return best;
+}
+
+[[noreturn]] void bad(const std::string& what) { throw Error("bad patch payload: " + what); }
+
+void decodeMeshopt(const uint8_t* data, size_t size, const PayloadHeader& h, DecodedPatch& out,
+                   std::vector<uint32_t>& qRel) {
+  size_t pos = sizeof(PayloadHeader);
+  uint32_t rawSize, zSize;
+  if (size < pos + 8) bad("truncated before the zstd frame");
+  std::memcpy(&rawSize, data + pos, 4);
+  std::memcpy(&zSize, data + pos + 4, 4);
+  pos += 8;
+  if (size - pos != zSize) bad("zstd frame size " + std::to_string(zSize) + " does not match payload");
+  // rawSize is bounded by what the counts allow, so a damaged header cannot make us allocate GBs
+  size_t n = h.vertexCount;
+  uint64_t tri3 = uint64_t(h.triangleCount) * 3;
+  uint64_t maxRaw = 12 + meshopt_encodeIndexSequenceBound(tri3 + h.triangleCount, n) +
+                    meshopt_encodeIndexBufferBound(tri3, n) + meshopt_encodeVertexBufferBound(n, 8) + n * 12;
+  if (rawSize > maxRaw) bad("raw size " + std::to_string(rawSize) + " too large for its counts");
+  std::vector<uint8_t> raw(rawSize);
+  size_t got = ZSTD_decompress(raw.data(), raw.size(), data + pos, zSize);
+  if (ZSTD_isError(got) || got != rawSize) bad("zstd frame does not decompress");
+  if (rawSize < 12) bad("raw stream too short");
+  uint32_t sizes[3];
+  std::memcpy(sizes, raw.data(), 12);
+  bool wide = h.flags & format::kPayloadWide;
+  size_t planes = wide ? 4 : 2;
+  if (uint64_t(sizes[0]) + sizes[2] + 12 + n * 3 * planes != rawSize) bad("stream sizes do not add up");
+  const uint8_t* ib = raw.data() + 12;
+  const uint8_t* ab = ib + sizes[0];
+  const uint8_t* pb = ab + sizes[2];
+
+  uint32_t indexCount = sizes[1];
+  if (h.flags & format::kPayloadStrip) {
+    if (indexCount > tri3 + h.triangleCount + 3) bad("strip too long");
+    std::vector<uint32_t> s(indexCount);
+    if (indexCount && meshopt_decodeIndexSequence(s.data(), indexCount, 4, ib, sizes[0]) != 0)
+      bad("index sequence does not decode");
+    for (uint32_t i : s)
+      if (i != ~0u && i >= n) bad("strip index out of range");
+    out.triangles.resize(meshopt_unstripifyBound(indexCount));
+    out.triangles.resize(meshopt_unstripify(out.triangles.data(), s.data(), indexCount, ~0u));
+  } else {
+    if (indexCount != tri3) bad("index count does not match triangle count");
+    out.triangles.resize(indexCount);
+    if (indexCount && meshopt_decodeIndexBuffer(out.triangles.data(), indexCount, 4, ib, sizes[0]) != 0)
+      bad("index stream does not decode");
+  }
+  if (out.triangles.size() != tri3) bad("triangle count mismatch");
+  for (uint32_t i : out.triangles)
+    if (i >= n) bad("triangle index " + std::to_string(i) + " out of range");
+
+  uint32_t attrStride = format::attributeStride(h.flags);
+  if (attrStride > 0) {
+    std::vector<uint8_t> attrs(n * attrStride);
+    if (n && meshopt_decodeVertexBuffer(attrs.data(), n, attrStride, ab, sizes[2]) != 0)
+      bad("attribute stream does not decode");
+    if (h.flags & format::kPayloadNormals) out.normals.resize(n * 3);
+    if (h.flags & format::kPayloadColors) out.colors.resize(n * 4);
+    for (size_t v = 0; v < n; ++v) {
+      const uint8_t* d = &attrs[v * attrStride];
+      if (h.flags & format::kPayloadNormals) decodeOctahedral8(d, &out.normals[v * 3]), d += 2;
+      if (h.flags & format::kPayloadColors) std::memcpy(&out.colors[v * 4], d, 4);
+    }
+  } else if (sizes[2] != 0) {
+    bad("attribute stream present without attributes");
+  }
+
+  // Positions: replay the encoder's walk; each residual plus its prediction gives q.
+  std::vector<int64_t> q(n * 3, 0);
+  const int64_t range[3] = {kMaxQ, kMaxQ, kMaxQ};
+  std::vector<uint8_t> seen(n, 0);
+  size_t seenCount = 0;
+  parallelogramWalk(out.triangles.data(), out.triangles.size(), n, q.data(), range,
+                    [&](uint32_t v, const int64_t pred[3]) {
+                      for (int x = 0; x < 3; ++x) {
+                        uint32_t z = 0;
+                        for (size_t b = 0; b < planes; ++b) z |= uint32_t(pb[(x * planes + b) * n + v]) << (8 * b);
+                        q[v * 3 + x] = pred[x] + unzigzag(z);
+                      }
+                      seen[v] = 1, ++seenCount;
+                    });
+  if (seenCount != n) bad("vertices not referenced by any triangle");
+  qRel.resize(n * 3);
+  for (size_t i = 0; i < n * 3; ++i) {
+    if (q[i] < 0 || q[i] > kMaxQ) bad("decoded grid coordinate out of range");
+    qRel[i] = uint32_t(q[i]);
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Codec::Draco
+
+std::vector<uint8_t> encodeDraco(const Prepared& p, const PatchCodecOptions& options) {
+  const PayloadHeader& h = p.header;
+  size_t n = h.vertexCount;
+  draco::Mesh mesh;
+  mesh.set_num_points(uint32_t(n));
+  // Positions as lossless 3 x INT32: Draco predicts them (parallelogram) and entropy-codes the
+  // residuals without quantizing, so the grid coordinates survive bit for bit.
+  draco::GeometryAttribute pa;
+  pa.Init(draco::GeometryAttribute::POSITION, nullptr, 3, draco::DT_INT32, false, 12, 0);
+  int posId = mesh.AddAttribute(pa, true, uint32_t(n));
+  for (size_t v = 0; v < n; ++v)
+    mesh.attribute(posId)->SetAttributeValue(draco::AttributeValueIndex(uint32_t(v)), &p.q[v * 3]);
+  if (!p.oct.empty()) {
+    draco::GeometryAttribute na;
+    na.Init(draco::GeometryAttribute::GENERIC, nullptr, 2, draco::DT_UINT8, false, 2, 0);
+    int id = mesh.AddAttribute(na, true, uint32_t(n));
+    for (size_t v = 0; v < n; ++v)
+      mesh.attribute(id)->SetAttributeValue(draco::AttributeValueIndex(uint32_t(v)), &p.oct[v * 2]);
+  }
+  if (!p.colors.empty()) {
+    draco::GeometryAttribute ca;
+    ca.Init(draco::GeometryAttribute::COLOR, nullptr, 4, draco::DT_UINT8, true, 4, 0);
+    int id = mesh.AddAttribute(ca, true, uint32_t(n));
+    for (size_t v = 0; v < n; ++v)
+      mesh.attribute(id)->SetAttributeValue(draco::AttributeValueIndex(uint32_t(v)), &p.colors[v * 4]);
+  }
+  mesh.SetNumFaces(h.triangleCount);
+  for (uint32_t t = 0; t < h.triangleCount; ++t)
+    mesh.SetFace(draco::FaceIndex(t), {draco::PointIndex(p.indices[t * 3]), draco::PointIndex(p.indices[t * 3 + 1]),
+                                       draco::PointIndex(p.indices[t * 3 + 2])});
+
+  draco::Encoder encoder;
+  encoder.SetSpeedOptions(options.dracoSpeed, options.dracoSpeed);
+  encoder.SetEncodingMethod(draco::MESH_EDGEBREAKER_ENCODING);
+  draco::EncoderBuffer buffer;
+  draco::Status status = encoder.EncodeMeshToBuffer(mesh, &buffer);
+  if (!status.ok()) throw Error("encodePatch: draco: " + status.error_msg_string());
+
+  std::vector<uint8_t> out;
+  appendBytes(out, &h, sizeof h);
+  appendBytes(out, buffer.data(), buffer.size());
+  return out;
+}
+
+void decodeDraco(const uint8_t* data, size_t size, const PayloadHeader& h, DecodedPatch& out,
+                 std::vector<uint32_t>& qRel) {
+  draco::DecoderBuffer buffer;
+  buffer.Init(reinterpret_cast<const char*>(data + sizeof(PayloadHeader)), size - sizeof(PayloadHeader));
+  draco::Decoder decoder;
+  auto result = decoder.DecodeMeshFromBuffer(&buffer);
+  if (!result.ok()) bad("draco: " + result.status().error_msg_string());
+  std::unique_ptr<draco::Mesh> mesh = std::move(result).value();
+  if (mesh->num_faces() != h.triangleCount) bad("draco triangle count does not match the header");
+  // Draco may split non-manifold vertices, so up to 3 points per triangle are acceptable.
+  uint64_t n = mesh->num_points();
+  if (n > uint64_t(h.triangleCount) * 3 + h.vertexCount) bad("draco vertex count out of range");
+  const draco::PointAttribute* pos = mesh->GetNamedAttribute(draco::GeometryAttribute::POSITION);
+  if (!pos || pos->num_components() != 3 || pos->data_type() != draco::DT_INT32) bad("draco positions missing");
+  const draco::PointAttribute* nor = nullptr;
+  const draco::PointAttribute* col = nullptr;
+  if (h.flags & format::kPayloadNormals) {
+    nor = mesh->GetNamedAttribute(draco::GeometryAttribute::GENERIC);
+    if (!nor || nor->num_components() != 2 || nor->data_type() != draco::DT_UINT8) bad("draco normals missing");
+    out.normals.resize(n * 3);
+  }
+  if (h.flags & format::kPayloadColors) {
+    col = mesh->GetNamedAttribute(draco::GeometryAttribute::COLOR);
+    if (!col || col->num_components() != 4 || col->data_type() != draco::DT_UINT8) bad("draco colours missing");
+    out.colors.resize(n * 4);
+  }
+  qRel.resize(n * 3);
+  for (uint32_t v = 0; v < n; ++v) {
+    draco::PointIndex pi(v);
+    int32_t q[3];
+    pos->GetValue(pos->mapped_index(pi), q);
+    std::memcpy(&qRel[size_t(v) * 3], q, 12);
+    if (nor) {
+      uint8_t o[2];
+      nor->GetValue(nor->mapped_index(pi), o);
+      decodeOctahedral8(o, &out.normals[size_t(v) * 3]);
+    }
+    if (col) col->GetValue(col->mapped_index(pi), &out.colors[size_t(v) * 4]);
+  }
+  out.triangles.resize(size_t(h.triangleCount) * 3);
+  for (uint32_t t = 0; t < h.triangleCount; ++t) {
+    const auto& f = mesh->face(draco::FaceIndex(t));
+    for (int k = 0; k < 3; ++k) out.triangles[size_t(t) * 3 + k] = f[k].value();
+  }
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------
+
+std::vector<uint8_t> encodePatch(const PatchInput& patch, const QuantizationGrid& grid,
+                                 const PatchCodecOptions& options) {
+  Prepared p = prepare(patch, grid, options);
+  switch (options.codec) {
+    case Codec::Meshopt: return encodeMeshopt(p, options);
+    case Codec::Draco: return encodeDraco(p, options);
+  }
+  throw Error("encodePatch: unknown codec " + std::to_string(uint32_t(options.codec)));
+}
+
+DecodedPatch decodePatch(const uint8_t* data, size_t size, Codec codec, const QuantizationGrid& grid) {
+  if (size < sizeof(PayloadHeader)) bad("shorter than its header (" + std::to_string(size) + " bytes)");
+  PayloadHeader h;
+  std::memcpy(&h, data, sizeof h);
+  if (h.flags & ~uint8_t(0x0F)) bad("unknown flags");
+  // A payload cannot describe more than ~8 triangles per byte in any codec; this bounds every
+  // allocation below by the payload size even when the header is damaged.
+  if (uint64_t(h.triangleCount) > uint64_t(size) * 64 + 64 || uint64_t(h.vertexCount) > uint64_t(size) * 64 + 64)
+    bad("counts too large for the payload size");
+  DecodedPatch out;
+  std::vector<uint32_t> qRel;
+  switch (codec) {
+    case Codec::Meshopt: decodeMeshopt(data, size, h, out, qRel); break;
+    case Codec::Draco: decodeDraco(data, size, h, out, qRel); break;
+    default: bad("unknown codec " + std::to_string(uint32_t(codec)));
+  }
+  size_t n = qRel.size() / 3;
+  for (uint32_t i : out.triangles)
+    if (i >= n) bad("triangle index " + std::to_string(i) + " out of range");
+  out.q.resize(n * 3);
+  out.positions.resize(n * 3);
+  for (size_t i = 0; i < n * 3; ++i) {
+    uint64_t q = uint64_t(qRel[i]) + h.qMin[i % 3];
+    if (q >= (1ull << grid.bits)) bad("grid coordinate outside the grid");
+    out.q[i] = uint32_t(q);
+    out.positions[i] = float(grid.dequantize(int(i % 3), uint32_t(q)));
+  }
+  return out;
+}
+
+}  // namespace mt

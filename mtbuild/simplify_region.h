@@ -1,0 +1,61 @@
+// Simplify one region of the level loop (BMT section 4: "we simplify them without touching the
+// borders of Vi+1 patches") to about a target triangle count.
+//
+// Rules the builder relies on:
+//   * a locked vertex (used by a patch outside the loaded region) is never moved or removed;
+//   * every other vertex may go, including vertices on real mesh boundaries (scan holes), so a
+//     scan with holes still reaches a small coarsest level; borders between patches inside the
+//     region are not borders of the loaded mesh at all, hence free;
+//   * simplification is by half-edge collapse: every output vertex IS an input vertex (origin[]),
+//     with its position copied bit for bit, so shared vertices keep their identity and position;
+//   * the returned error is MEASURED on the result (see SimplifiedRegion::error), so the builder
+//     can accumulate a real, monotone error bound level by level (BMT 4.1, issue 4 item 2).
+//
+// Approach: meshoptimizer 0.18's quadric simplifier (meshopt_simplify). It has no per-vertex lock
+// argument, and meshopt_SimplifyLockBorder would freeze scan holes too. But it classifies a vertex
+// that shares its position with another vertex and has no matching seam as "locked": so every
+// locked vertex gets one unreferenced duplicate appended to the position array, which makes the
+// simplifier keep it exactly while every other vertex (borders included) stays collapsible.
+// Measured ~10x faster than OpenMesh's decimater for the same job (see docs/mt-format.md).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+namespace mt {
+
+struct LoadedMesh;
+
+struct SimplifyRegionOptions {
+  size_t targetTriangles = 0;  // aim; the result may stop above it (topology, locks)
+  // Measure SimplifiedRegion::error (costs about as much as the simplification itself).
+  bool measureError = true;
+};
+
+struct SimplifiedRegion {
+  std::vector<double> positions;   // 3 per vertex: exact copies of the input positions
+  std::vector<uint32_t> triangles; // 3 per triangle, indices into positions
+  std::vector<uint32_t> origin;    // 1 per vertex: its index in the input (ascending)
+  // Measured symmetric deviation between the result and the input region, a sampled Hausdorff
+  // estimate: max of (a) the exact distance from every removed input vertex to the result and
+  // (b) the distance from every result triangle centroid to the input; kept vertices lie on both
+  // surfaces. Sampled, so a deviation between samples can be missed. It bounds the distance to
+  // the region's INPUT (the previous level); the builder adds the previous level's bound.
+  double error = 0;
+  double quadricError = 0;  // meshoptimizer's own estimate (absolute units), for reference
+  uint32_t vertexCount() const { return uint32_t(origin.size()); }
+  uint32_t triangleCount() const { return uint32_t(triangles.size() / 3); }
+};
+
+// positions: 3 doubles per vertex; triangles: 3 indices per triangle; locked: 1 byte per vertex
+// (non-zero = frozen) or null. Vertices no triangle uses are dropped from the result. Every
+// locked vertex that a triangle uses appears in the result. Throws mt::Error on bad indices.
+SimplifiedRegion simplifyRegion(const double* positions, size_t vertexCount, const uint32_t* triangles,
+                                size_t triangleCount, const uint8_t* locked,
+                                const SimplifyRegionOptions& options);
+
+// The same for a region loaded from the patch store (its `locked` flags).
+SimplifiedRegion simplifyRegion(const LoadedMesh& mesh, const SimplifyRegionOptions& options);
+
+}  // namespace mt

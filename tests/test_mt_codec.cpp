@@ -1,0 +1,228 @@
+// Patch codec (mtbuild/patch_codec.h): exact round trip of grid coordinates and triangles for both
+// codecs, with and without normals/colours; shared border vertices quantize identically.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <map>
+#include <set>
+#include <tuple>
+
+#include "mtbuild/patch_codec.h"
+#include "mtbuild/scan_grid.h"
+#include "patchstore/error.h"
+
+using namespace mt;
+
+namespace {
+
+using Tri = std::array<std::array<uint32_t, 3>, 3>;
+
+// Triangles as a multiset of grid-coordinate triples, rotated to a canonical first corner (the
+// winding is kept: rotation only).
+std::multiset<Tri> triangleSet(const std::vector<uint32_t>& q, const std::vector<uint32_t>& tris) {
+  std::multiset<Tri> out;
+  for (size_t t = 0; t < tris.size(); t += 3) {
+    Tri c;
+    for (int k = 0; k < 3; ++k) c[k] = {q[tris[t + k] * 3], q[tris[t + k] * 3 + 1], q[tris[t + k] * 3 + 2]};
+    int m = int(std::min_element(c.begin(), c.end()) - c.begin());
+    std::rotate(c.begin(), c.begin() + m, c.end());
+    out.insert(c);
+  }
+  return out;
+}
+
+QuantizationGrid gridFor(double step) {
+  double lo[3] = {-50, -50, -50}, hi[3] = {200, 200, 50};
+  return QuantizationGrid::fromBounds(lo, hi, step);
+}
+
+std::vector<uint32_t> quantizeAll(const std::vector<double>& p, const QuantizationGrid& g) {
+  std::vector<uint32_t> q(p.size());
+  for (size_t i = 0; i < p.size(); i += 3) g.quantize(&p[i], &q[i]);
+  return q;
+}
+
+using Codec = format::Codec;
+
+class CodecRoundTrip : public ::testing::TestWithParam<std::tuple<format::Codec, bool, bool>> {};
+
+TEST_P(CodecRoundTrip, ExactGridCoordinatesAndTriangles) {
+  auto [codec, normals, colors] = GetParam();
+  ScanGridOptions o;
+  o.nx = o.ny = 40;
+  o.holes = 2;
+  o.holeRadius = 3;
+  ScanGrid g = makeScanGrid(o);
+  QuantizationGrid grid = gridFor(1.0 / 32);
+  std::vector<uint8_t> rgba(g.vertexCount() * 4);
+  for (size_t i = 0; i < rgba.size(); ++i) rgba[i] = uint8_t(i * 37 + (i >> 3));
+
+  PatchInput in;
+  in.positions = g.positions.data();
+  in.vertexCount = g.vertexCount();
+  in.triangles = g.triangles.data();
+  in.triangleCount = g.triangleCount();
+  in.colors = colors ? rgba.data() : nullptr;
+  PatchCodecOptions opt;
+  opt.codec = codec;
+  opt.normals = normals;
+  std::vector<uint8_t> payload = encodePatch(in, grid, opt);
+  DecodedPatch d = decodePatch(payload.data(), payload.size(), codec, grid);
+
+  std::vector<uint32_t> q = quantizeAll(g.positions, grid);
+  ASSERT_EQ(d.triangleCount(), g.triangleCount());
+  EXPECT_EQ(triangleSet(d.q, d.triangles), triangleSet(q, g.triangles));
+  // float positions are origin + step * q
+  for (size_t i = 0; i < d.q.size(); ++i)
+    ASSERT_EQ(d.positions[i], float(grid.origin[i % 3] + grid.step * double(d.q[i])));
+  // and within the quantization error of some input vertex: check via the set of q
+  std::set<std::array<uint32_t, 3>> inputQ;
+  for (size_t i = 0; i < q.size(); i += 3) inputQ.insert({q[i], q[i + 1], q[i + 2]});
+  for (size_t v = 0; v < d.vertexCount(); ++v) ASSERT_TRUE(inputQ.count({d.q[v * 3], d.q[v * 3 + 1], d.q[v * 3 + 2]}));
+
+  EXPECT_EQ(d.normals.empty(), !normals);
+  EXPECT_EQ(d.colors.empty(), !colors);
+  if (normals || colors) {
+    // Map decoded vertices back to input vertices by grid position (unique on this grid).
+    std::map<std::array<uint32_t, 3>, uint32_t> byQ;
+    for (uint32_t v = 0; v < g.vertexCount(); ++v) byQ[{q[v * 3], q[v * 3 + 1], q[v * 3 + 2]}] = v;
+    for (size_t v = 0; v < d.vertexCount(); ++v) {
+      uint32_t src = byQ.at({d.q[v * 3], d.q[v * 3 + 1], d.q[v * 3 + 2]});
+      if (colors) {
+        for (int k = 0; k < 4; ++k) ASSERT_EQ(d.colors[v * 4 + k], rgba[src * 4 + k]);
+      }
+      if (normals) {
+        float len = std::sqrt(d.normals[v * 3] * d.normals[v * 3] + d.normals[v * 3 + 1] * d.normals[v * 3 + 1] +
+                              d.normals[v * 3 + 2] * d.normals[v * 3 + 2]);
+        ASSERT_NEAR(len, 1.f, 1e-4f);
+        ASSERT_GT(d.normals[v * 3 + 2], 0.2f) << "a height field's normals point up";
+      }
+    }
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(AllCodecs, CodecRoundTrip,
+                         ::testing::Combine(::testing::Values(format::Codec::Meshopt, format::Codec::Draco),
+                                            ::testing::Bool(), ::testing::Bool()));
+
+TEST(Codec, GivenNormalsSurviveOctahedral8) {
+  ScanGrid g = makeScanGrid({});
+  std::vector<float> n(g.vertexCount() * 3);
+  for (size_t v = 0; v < g.vertexCount(); ++v) {
+    float x = std::sin(float(v)), y = std::cos(float(v) * 0.7f), z = std::sin(float(v) * 1.3f) - 0.2f;
+    float l = std::sqrt(x * x + y * y + z * z);
+    n[v * 3] = x / l, n[v * 3 + 1] = y / l, n[v * 3 + 2] = z / l;
+  }
+  QuantizationGrid grid = gridFor(1.0 / 16);
+  std::vector<uint32_t> q = quantizeAll(g.positions, grid);
+  std::map<std::array<uint32_t, 3>, uint32_t> byQ;
+  for (uint32_t v = 0; v < g.vertexCount(); ++v) byQ[{q[v * 3], q[v * 3 + 1], q[v * 3 + 2]}] = v;
+  for (Codec codec : {Codec::Meshopt, Codec::Draco}) {
+    PatchInput in{g.positions.data(), g.vertexCount(), g.triangles.data(), g.triangleCount(), n.data(), nullptr};
+    PatchCodecOptions opt;
+    opt.codec = codec;
+    opt.normals = true;
+    auto payload = encodePatch(in, grid, opt);
+    DecodedPatch d = decodePatch(payload.data(), payload.size(), codec, grid);
+    for (size_t v = 0; v < d.vertexCount(); ++v) {
+      uint32_t src = byQ.at({d.q[v * 3], d.q[v * 3 + 1], d.q[v * 3 + 2]});
+      float dot = 0;
+      for (int k = 0; k < 3; ++k) dot += d.normals[v * 3 + k] * n[src * 3 + k];
+      ASSERT_GT(dot, std::cos(2.0f * 3.14159f / 180.f)) << "octahedral 8-bit error is under ~1.5 degrees";
+    }
+  }
+}
+
+TEST(Codec, SharedBorderVerticesQuantizeIdentically) {
+  // Two patches cut from one mesh along a column: the border vertices are the same doubles in
+  // both, so they must decode to the same grid coordinates and the same floats (crack-free).
+  ScanGridOptions o;
+  o.nx = 30, o.ny = 20;
+  o.offset[0] = 123456.789;  // far from the origin: float positions would not be exact
+  o.offset[1] = -98765.4321;
+  ScanGrid g = makeScanGrid(o);
+  double lo[3] = {123400, -98800, -50}, hi[3] = {123600, -98700, 50};
+  QuantizationGrid grid = QuantizationGrid::fromBounds(lo, hi, 1.0 / 1024);
+  std::vector<uint32_t> left, right;
+  for (size_t t = 0; t < g.triangles.size(); t += 3) {
+    double cx = 0;
+    for (int k = 0; k < 3; ++k) cx += g.positions[g.triangles[t + k] * 3];
+    auto& dst = cx / 3 < o.offset[0] + 14.5 ? left : right;
+    dst.insert(dst.end(), &g.triangles[t], &g.triangles[t + 3]);
+  }
+  std::set<uint32_t> lv(left.begin(), left.end()), rv(right.begin(), right.end()), shared;
+  std::set_intersection(lv.begin(), lv.end(), rv.begin(), rv.end(), std::inserter(shared, shared.end()));
+  ASSERT_GT(shared.size(), 10u);
+  for (Codec codec : {Codec::Meshopt, Codec::Draco}) {
+    PatchCodecOptions opt;
+    opt.codec = codec;
+    PatchInput a{g.positions.data(), g.vertexCount(), left.data(), left.size() / 3, nullptr, nullptr};
+    PatchInput b{g.positions.data(), g.vertexCount(), right.data(), right.size() / 3, nullptr, nullptr};
+    auto pa = encodePatch(a, grid, opt), pb = encodePatch(b, grid, opt);
+    DecodedPatch da = decodePatch(pa.data(), pa.size(), codec, grid);
+    DecodedPatch db = decodePatch(pb.data(), pb.size(), codec, grid);
+    std::set<std::array<float, 3>> fa, fb;
+    for (size_t v = 0; v < da.vertexCount(); ++v) fa.insert({da.positions[v * 3], da.positions[v * 3 + 1], da.positions[v * 3 + 2]});
+    for (size_t v = 0; v < db.vertexCount(); ++v) fb.insert({db.positions[v * 3], db.positions[v * 3 + 1], db.positions[v * 3 + 2]});
+    for (uint32_t v : shared) {
+      uint32_t q[3];
+      grid.quantize(&g.positions[v * 3], q);
+      std::array<float, 3> f = {float(grid.dequantize(0, q[0])), float(grid.dequantize(1, q[1])),
+                                float(grid.dequantize(2, q[2]))};
+      EXPECT_TRUE(fa.count(f) && fb.count(f)) << "shared vertex " << v << " decodes differently";
+      for (int k = 0; k < 3; ++k) EXPECT_LE(std::fabs(grid.dequantize(k, q[k]) - g.positions[v * 3 + k]), grid.step / 2 + 1e-9);
+    }
+  }
+}
+
+TEST(Codec, EmptyPatchAndSingleTriangle) {
+  QuantizationGrid grid = gridFor(0.5);
+  double p[9] = {0, 0, 0, 1, 0, 0, 0, 1, 0};
+  uint32_t t[3] = {0, 1, 2};
+  for (Codec codec : {Codec::Meshopt, Codec::Draco}) {
+    PatchCodecOptions opt;
+    opt.codec = codec;
+    auto one = encodePatch({p, 3, t, 1, nullptr, nullptr}, grid, opt);
+    DecodedPatch d = decodePatch(one.data(), one.size(), codec, grid);
+    EXPECT_EQ(d.triangleCount(), 1u);
+    EXPECT_EQ(d.vertexCount(), 3u);
+    if (codec == Codec::Meshopt) {  // Draco refuses meshes without faces; the builder never writes one
+      auto none = encodePatch({p, 3, t, 0, nullptr, nullptr}, grid, opt);
+      EXPECT_EQ(decodePatch(none.data(), none.size(), codec, grid).triangleCount(), 0u);
+    }
+  }
+}
+
+TEST(Codec, BadInputAndDamagedPayloadsThrow) {
+  QuantizationGrid grid = gridFor(0.5);
+  double p[9] = {0, 0, 0, 1, 0, 0, 0, 1, 0};
+  uint32_t bad[3] = {0, 1, 7};
+  EXPECT_THROW(encodePatch({p, 3, bad, 1, nullptr, nullptr}, grid, {}), Error);
+  double far[9] = {1e9, 0, 0, 1, 0, 0, 0, 1, 0};
+  uint32_t t[3] = {0, 1, 2};
+  EXPECT_THROW(encodePatch({far, 3, t, 1, nullptr, nullptr}, grid, {}), Error);
+
+  ScanGrid g = makeScanGrid({});
+  for (Codec codec : {Codec::Meshopt, Codec::Draco}) {
+    PatchCodecOptions opt;
+    opt.codec = codec;
+    auto payload = encodePatch({g.positions.data(), g.vertexCount(), g.triangles.data(), g.triangleCount(), nullptr, nullptr},
+                               grid, opt);
+    // truncations and byte flips must throw mt::Error or decode to something valid, never crash
+    for (size_t cut : {size_t(0), size_t(10), size_t(30), payload.size() / 2, payload.size() - 1})
+      EXPECT_THROW(decodePatch(payload.data(), cut, codec, grid), Error) << "cut at " << cut;
+    for (size_t i = 0; i < payload.size(); i += std::max<size_t>(1, payload.size() / 97)) {
+      auto damaged = payload;
+      damaged[i] ^= 0x5A;
+      try {
+        DecodedPatch d = decodePatch(damaged.data(), damaged.size(), codec, grid);
+        for (uint32_t idx : d.triangles) ASSERT_LT(idx, d.vertexCount());
+      } catch (const Error&) {
+      }
+    }
+  }
+}
+
+}  // namespace

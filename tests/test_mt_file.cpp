@@ -1,0 +1,205 @@
+// MT file writer/reader (mtbuild/mt_file.h): round trip, temporary name until complete, and clear
+// one-line errors naming the file (and the patch or byte offset) for every kind of damage.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <string>
+
+#include "mtbuild/mt_file.h"
+#include "mtbuild/scan_grid.h"
+#include "patchstore/error.h"
+#include "tests/test_support.h"
+
+using namespace mt;
+using namespace mt::format;
+
+namespace {
+
+struct Built {
+  std::string path;
+  std::vector<std::vector<uint8_t>> payloads;
+  uint32_t triangles[4];
+};
+
+// A tiny DAG: source -> {A, B} -> sink, four patches (source has 2, A and B one each).
+Built writeSmall(const std::string& path, Codec codec) {
+  Built b;
+  b.path = path;
+  FileHeader h{};
+  h.codec = uint32_t(codec);
+  h.levelCount = 2;
+  h.inputTriangles = 1234;
+  double lo[3] = {-1, -1, -10}, hi[3] = {100, 100, 10};
+  QuantizationGrid grid = QuantizationGrid::fromBounds(lo, hi, 1.0 / 64);
+  for (int a = 0; a < 3; ++a) h.gridOrigin[a] = grid.origin[a], h.boundsMin[a] = lo[a], h.boundsMax[a] = hi[a];
+  h.gridStep = grid.step;
+  h.gridBits = grid.bits;
+  h.quantizationError = grid.maxError();
+  MtFileWriter w(path, h);
+  EXPECT_FALSE(test::fileExists(path)) << "nothing under the final name before finish()";
+  for (int i = 0; i < 4; ++i) {
+    ScanGridOptions o;
+    o.nx = 10 + i * 3, o.ny = 12;
+    o.seed = uint64_t(i + 1);
+    ScanGrid g = makeScanGrid(o);
+    PatchCodecOptions opt;
+    opt.codec = codec;
+    b.payloads.push_back(encodePatch({g.positions.data(), g.vertexCount(), g.triangles.data(), g.triangleCount(), nullptr, nullptr},
+                                     grid, opt));
+    b.triangles[i] = g.triangleCount();
+    EXPECT_EQ(w.appendPatch(b.payloads.back().data(), b.payloads.back().size(), g.triangleCount(), g.vertexCount()),
+              uint32_t(i));
+  }
+  std::vector<NodeRecord> nodes(4);
+  for (uint32_t i = 0; i < 4; ++i) {
+    nodes[i] = NodeRecord{};
+    nodes[i].level = i == 0 ? 0 : i == 3 ? 2 : 1;
+    nodes[i].error = i == 3 ? INFINITY : float(i) * 0.5f;
+    nodes[i].radius = 10.f + float(i);
+    nodes[i].coneCutoff = -1;
+  }
+  std::vector<DagArc> arcs = {{2, 3, {3}}, {0, 1, {0}}, {0, 2, {1}}, {1, 3, {2}}};  // any order
+  w.finish(nodes, arcs);
+  return b;
+}
+
+TEST(MtFile, RoundTrip) {
+  test::TempDir dir;
+  for (Codec codec : {Codec::Meshopt, Codec::Draco}) {
+    Built b = writeSmall(dir.file(codec == Codec::Draco ? "draco.mt" : "meshopt.mt"), codec);
+    EXPECT_TRUE(test::fileExists(b.path));
+    EXPECT_FALSE(test::fileExists(b.path + ".tmp"));
+    auto r = MtFileReader::open(b.path);
+    EXPECT_EQ(r->codec(), codec);
+    EXPECT_EQ(r->header().levelCount, 2u);
+    EXPECT_EQ(r->header().inputTriangles, 1234u);
+    ASSERT_EQ(r->nodes().size(), 4u);
+    ASSERT_EQ(r->arcs().size(), 4u);
+    ASSERT_EQ(r->patches().size(), 4u);
+    // forward stars sorted by (from, to), backward stars consistent
+    EXPECT_EQ(r->nodes()[0].arcCount, 2u);
+    EXPECT_EQ(r->arcs()[r->nodes()[0].firstArc].to, 1u);
+    EXPECT_EQ(r->nodes()[3].backArcCount, 2u);
+    EXPECT_EQ(r->nodes()[0].backArcCount, 0u);
+    EXPECT_EQ(r->nodes()[0].triangles, b.triangles[0] + b.triangles[1]);
+    EXPECT_TRUE(std::isinf(r->nodes()[3].error));
+    uint64_t stored = 0;
+    for (uint32_t p = 0; p < 4; ++p) {
+      EXPECT_EQ(r->patches()[p].offset % r->header().payloadAlignment, 0u);
+      EXPECT_EQ(r->readPayload(p), b.payloads[p]);
+      DecodedPatch d = r->readPatch(p);
+      EXPECT_EQ(d.triangleCount(), b.triangles[p]);
+      stored += d.triangleCount();
+      const ArcRecord& a = r->arcs()[r->patches()[p].arc];
+      bool listed = false;
+      for (uint32_t k = 0; k < a.patchCount; ++k) listed |= r->patchRefs()[a.firstPatchRef + k] == p;
+      EXPECT_TRUE(listed);
+    }
+    EXPECT_EQ(r->header().storedTriangles, stored);
+  }
+}
+
+void expectOpenError(const std::string& path, const std::string& needle) {
+  try {
+    MtFileReader::open(path);
+    FAIL() << "opened a damaged file; expected: " << needle;
+  } catch (const Error& e) {
+    std::string m = e.what();
+    EXPECT_EQ(m.rfind(path + ": ", 0), 0u) << m;
+    EXPECT_NE(m.find(needle), std::string::npos) << m;
+    EXPECT_EQ(m.find('\n'), std::string::npos) << "one line: " << m;
+  }
+}
+
+TEST(MtFile, CorruptedPayloadNamesThePatch) {
+  test::TempDir dir;
+  Built b = writeSmall(dir.file("c.mt"), Codec::Meshopt);
+  std::string bytes = test::readFile(b.path);
+  uint64_t off;
+  {
+    auto r = MtFileReader::open(b.path);
+    off = r->patches()[2].offset + r->patches()[2].size / 2;
+  }
+  bytes[off] ^= 0x01;
+  test::writeFile(b.path, bytes);
+  auto r = MtFileReader::open(b.path);  // the index is intact: open succeeds
+  EXPECT_NO_THROW(r->readPatch(1));
+  try {
+    r->readPatch(2);
+    FAIL();
+  } catch (const Error& e) {
+    std::string m = e.what();
+    EXPECT_NE(m.find(b.path + ": patch 2 is damaged"), std::string::npos) << m;
+    EXPECT_NE(m.find("byte offset"), std::string::npos) << m;
+  }
+}
+
+TEST(MtFile, TruncatedBadMagicBadFooterBadIndex) {
+  test::TempDir dir;
+  Built b = writeSmall(dir.file("d.mt"), Codec::Draco);
+  const std::string good = test::readFile(b.path);
+
+  test::writeFile(b.path, good.substr(0, good.size() - 5));
+  expectOpenError(b.path, "footer");
+  test::writeFile(b.path, good.substr(0, 100));
+  expectOpenError(b.path, "shorter than header");
+  test::writeFile(b.path, "");
+  expectOpenError(b.path, "shorter than header");
+
+  std::string bad = good;
+  bad[0] = 'X';
+  test::writeFile(b.path, bad);
+  expectOpenError(b.path, "bad magic");
+
+  bad = good;
+  bad[bad.size() - 3] ^= 0x20;
+  test::writeFile(b.path, bad);
+  expectOpenError(b.path, "footer magic");
+
+  bad = good;  // a bit flip in the DAG
+  bad[good.size() - kFooterSize - 40] ^= 0x10;
+  test::writeFile(b.path, bad);
+  expectOpenError(b.path, "checksum mismatch");
+
+  bad = good;  // a bit flip in the header (grid step)
+  bad[offsetof(FileHeader, gridStep)] ^= 0x10;
+  test::writeFile(b.path, bad);
+  expectOpenError(b.path, "checksum mismatch");
+
+  bad = good;  // version
+  bad[8] = 99;
+  test::writeFile(b.path, bad);
+  expectOpenError(b.path, "unsupported MT version");
+
+  expectOpenError(dir.file("missing.mt"), "cannot open");
+
+  // Truncating in the middle of the payloads shifts the footer: detected, never a crash.
+  for (size_t cut = kHeaderSize; cut < good.size(); cut += 97) {
+    test::writeFile(b.path, good.substr(0, cut));
+    EXPECT_THROW(MtFileReader::open(b.path), Error) << "cut " << cut;
+  }
+}
+
+TEST(MtFile, AbandonedWriterLeavesNothing) {
+  test::TempDir dir;
+  std::string path = dir.file("x.mt");
+  {
+    FileHeader h{};
+    h.codec = uint32_t(Codec::Meshopt);
+    MtFileWriter w(path, h);
+    uint8_t junk[100] = {};
+    w.appendPatch(junk, sizeof junk, 0, 0);
+    EXPECT_TRUE(test::fileExists(path + ".tmp"));
+  }  // destroyed without finish(): a crash or an error in the builder
+  EXPECT_FALSE(test::fileExists(path));
+  EXPECT_FALSE(test::fileExists(path + ".tmp"));
+
+  FileHeader h{};
+  MtFileWriter w(path, h);
+  uint8_t junk[10] = {};
+  w.appendPatch(junk, sizeof junk, 1, 3);
+  EXPECT_THROW(w.finish(std::vector<NodeRecord>(2), {}), Error) << "patch on no arc";
+  EXPECT_FALSE(test::fileExists(path));
+}
+
+}  // namespace
