@@ -200,6 +200,11 @@ std::string PatchStore::Impl::readBlock(const BlockHandle& h, const std::string&
   {
     std::lock_guard<std::mutex> lock(readersMutex);
     auto it = readers.find(h.segment);
+    // The segment being appended to grows: reopen a reader opened before the block was written.
+    if (it != readers.end() && h.offset + sizeof(BlockHeader) + h.size > it->second->size()) {
+      readers.erase(it);
+      it = readers.end();
+    }
     if (it == readers.end())
       it = readers.emplace(h.segment, std::shared_ptr<RandomAccessFile>(env->newRandomAccessFile(segmentPath(h.segment)))).first;
     file = it->second;
@@ -544,6 +549,7 @@ LoadedMesh PatchStore::load(const std::vector<PatchId>& idsIn) const {
     for (uint32_t i : p.triangles) m.triangles.push_back(map[i]);
     m.trianglePatch.insert(m.trianglePatch.end(), p.triangleCount(), id);
   }
+  for (PatchId id : ids) m.unifiedOf.push_back(std::move(unified[id]));
   std::sort(m.external.begin(), m.external.end(), [](const auto& a, const auto& b) {
     return std::tie(a.vertex, a.patch, a.remote) < std::tie(b.vertex, b.patch, b.remote);
   });
@@ -555,7 +561,43 @@ LoadedMesh PatchStore::load(const std::vector<PatchId>& idsIn) const {
   return m;
 }
 
-std::vector<PatchId> PatchStore::writeBack(const LoadedMesh& loaded, const ReplacementMesh& r, bool syncNow) {
+std::vector<PatchId> PatchStore::writeBack(const LoadedMesh& loadedIn, const ReplacementMesh& r, bool syncNow) {
+  std::lock_guard<std::mutex> writer(impl_->writeMutex);
+  if (!impl_->failedCommit.empty()) fail(dir_, "store refuses updates after a failed commit; reopen it");
+  // The outside patches may have been replaced since the load (a neighbouring region written back
+  // in between): re-read where they hold our vertices from the loaded patches' current lists.
+  LoadedMesh refreshed;
+  const LoadedMesh* current = &loadedIn;
+  if (loadedIn.unifiedOf.size() == loadedIn.patches.size()) {
+    refreshed.patches = loadedIn.patches;
+    for (size_t k = 0; k < loadedIn.patches.size(); ++k) {
+      PatchRecord rec;
+      {
+        std::shared_lock lock(impl_->stateMutex);
+        auto it = impl_->patches.find(loadedIn.patches[k]);
+        if (it == impl_->patches.end()) fail(dir_, "write back: loaded patch " + std::to_string(loadedIn.patches[k]) + " no longer exists");
+        rec = it->second;
+      }
+      auto entries = decodeBoundary(impl_->readBlock(rec.boundary, "patch " + std::to_string(rec.meta.id) + " boundary list"), dir_);
+      for (const BoundaryEntry& e : entries)
+        if (!std::binary_search(loadedIn.patches.begin(), loadedIn.patches.end(), e.neighbour)) {
+          uint32_t v = loadedIn.unifiedOf[k].at(e.local);
+          if (!loadedIn.locked[v]) fail(dir_, "write back: vertex " + std::to_string(v) + " became shared after the load");
+          refreshed.external.push_back({v, e.neighbour, e.remote});
+        }
+    }
+    std::sort(refreshed.external.begin(), refreshed.external.end(), [](const auto& a, const auto& b) {
+      return std::tie(a.vertex, a.patch, a.remote) < std::tie(b.vertex, b.patch, b.remote);
+    });
+    refreshed.external.erase(std::unique(refreshed.external.begin(), refreshed.external.end(),
+                                         [](const auto& a, const auto& b) {
+                                           return a.vertex == b.vertex && a.patch == b.patch && a.remote == b.remote;
+                                         }),
+                             refreshed.external.end());
+    current = &refreshed;
+  }
+  const LoadedMesh& loaded = *current;
+  auto vertexCountOf = [&]() { return loadedIn.vertexCount(); };
   const VertexLayout& layout = impl_->layout;
   const size_t nv = r.positions.size() / 3, nt = r.triangles.size() / 3;
   auto bad = [&](const std::string& what) { fail(dir_, "write back: " + what); };
@@ -567,11 +609,11 @@ std::vector<PatchId> PatchStore::writeBack(const LoadedMesh& loaded, const Repla
     if (r.triangles[i] >= nv) bad("triangle " + std::to_string(i / 3) + " references vertex out of range");
 
   // Where each loaded vertex went, and which replacement vertices are referenced.
-  std::vector<uint32_t> newOf(loaded.vertexCount(), kNoVertex);
+  std::vector<uint32_t> newOf(vertexCountOf(), kNoVertex);
   for (uint32_t v = 0; v < nv; ++v) {
     uint32_t o = r.origin[v];
     if (o == kNoVertex) continue;
-    if (o >= loaded.vertexCount()) bad("origin of vertex " + std::to_string(v) + " out of range");
+    if (o >= vertexCountOf()) bad("origin of vertex " + std::to_string(v) + " out of range");
     if (newOf[o] != kNoVertex) bad("loaded vertex " + std::to_string(o) + " appears twice");
     newOf[o] = v;
   }
@@ -580,7 +622,7 @@ std::vector<PatchId> PatchStore::writeBack(const LoadedMesh& loaded, const Repla
     uint32_t v = newOf[ext.vertex];
     if (v == kNoVertex) bad("locked vertex " + std::to_string(ext.vertex) + " was removed");
     for (int a = 0; a < 3; ++a)
-      if (r.positions[3 * v + a] != loaded.positions[3 * ext.vertex + a]) bad("locked vertex " + std::to_string(ext.vertex) + " was moved");
+      if (r.positions[3 * v + a] != loadedIn.positions[3 * ext.vertex + a]) bad("locked vertex " + std::to_string(ext.vertex) + " was moved");
   }
 
   // Group triangles by cell key -> new patches, in key order.
@@ -616,8 +658,6 @@ std::vector<PatchId> PatchStore::writeBack(const LoadedMesh& loaded, const Repla
     if (it == holders.end() || it->first != v) bad("locked vertex " + std::to_string(ext.vertex) + " is used by no triangle");
   }
 
-  std::lock_guard<std::mutex> writer(impl_->writeMutex);
-  if (!impl_->failedCommit.empty()) fail(dir_, "store refuses updates after a failed commit; reopen it");
   std::vector<PatchId> newIds(out.size());
   {
     std::unique_lock lock(impl_->stateMutex);
@@ -724,11 +764,16 @@ std::vector<PatchId> PatchStore::writeBack(const LoadedMesh& loaded, const Repla
     }
     impl_->pendingDirty = true;
   }
-  if (syncNow || impl_->pendingUpserted.size() * 128 > kPendingCommitBytes) {
+  if (syncNow || (impl_->autoCommit && impl_->pendingUpserted.size() * 128 > kPendingCommitBytes)) {
     std::unique_lock lock(impl_->stateMutex);
     impl_->commitPending();
   }
   return newIds;
+}
+
+void PatchStore::setAutoCommit(bool on) {
+  std::lock_guard<std::mutex> writer(impl_->writeMutex);
+  impl_->autoCommit = on;
 }
 
 void PatchStore::sync() {

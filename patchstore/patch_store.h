@@ -80,6 +80,10 @@ struct LoadedMesh {
   // For each locked vertex, where outside patches hold it: (vertex, outside patch, index there).
   struct ExternalRef { uint32_t vertex; PatchId patch; uint32_t remote; };
   std::vector<ExternalRef> external;  // sorted by vertex
+  // Per loaded patch (same order as `patches`), its local vertex -> unified index. writeBack()
+  // uses it to re-read where outside patches hold the locked vertices at commit time, since a
+  // neighbouring region written back after this load has replaced those outside patches.
+  std::vector<std::vector<uint32_t>> unifiedOf;
   uint32_t vertexCount() const { return uint32_t(positions.size() / 3); }
   uint32_t triangleCount() const { return uint32_t(triangles.size() / 3); }
 };
@@ -158,10 +162,14 @@ class PatchStore {
   Patch patch(PatchId id) const;                  // reads and verifies one patch
   LoadedMesh load(const std::vector<PatchId>& ids) const;
   // Replaces the loaded patches by the replacement's partition; returns the new patch ids in
-  // ascending cell-key order. Durable once sync() returns (or at once with syncNow).
+  // ascending cell-key order. Durable once sync() returns (or at once with syncNow). Regions with
+  // disjoint patch sets may be loaded concurrently and written back in any order.
+  // With autoCommit off, write-backs are committed only by sync() (so a checkpointed build can
+  // resume from exactly its last sync); on by default, large batches commit by themselves.
   std::vector<PatchId> writeBack(const LoadedMesh& loaded, const ReplacementMesh& replacement,
                                  bool syncNow = false);
   void sync();
+  void setAutoCommit(bool on);
   // Streams every triangle (welded by vertex identity across patches) to a binary PLY.
   void exportPly(const std::string& path, bool progress = false) const;
   CheckReport check() const;

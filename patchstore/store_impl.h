@@ -50,6 +50,7 @@ struct PatchStore::Impl {
   // Set when a commit failed half-way: the in-memory state is ahead of the disk, so every later
   // update is refused until the store is reopened (after LevelDB's background error).
   std::string failedCommit;
+  bool autoCommit = true;
 
   mutable std::shared_mutex stateMutex;  // guards the maps above against concurrent readers
   std::mutex writeMutex;                 // serializes writeBack/sync/putBlob

@@ -273,6 +273,27 @@ TEST(PatchStore, WriteBackWithANewPartitionKeepsTheSurfaceAndTheLists) {
   EXPECT_TRUE(sameTriangles(readTriangles(tmp.file("b.ply")), before));
 }
 
+// Two neighbouring regions loaded at once and written back in the opposite order: the second
+// write-back's view of its outside neighbours is stale, and must be refreshed, not trusted.
+TEST(PatchStore, InterleavedWriteBacksOfNeighbouringRegions) {
+  TempDir tmp;
+  TestMesh m = makeTorus(120, 60, 4, true);
+  writePly(m, tmp.file("in.ply"));
+  auto store = ingestMesh(tmp.file("in.ply"), tmp.file("store"), 300);
+  std::vector<PatchId> ids = store->patchIds();
+  std::vector<PatchId> a, b;
+  for (PatchId id : ids) (store->meta(id).bounds.lo[0] + store->meta(id).bounds.hi[0] < 0 ? a : b).push_back(id);
+  LoadedMesh la = store->load(a), lb = store->load(b);
+  ASSERT_FALSE(la.external.empty());
+  store->writeBack(lb, repartition(lb, 3));
+  store->writeBack(la, repartition(la, 4));
+  store->sync();
+  CheckReport c = store->check();
+  for (auto& p : c.problems) ADD_FAILURE() << p;
+  store->exportPly(tmp.file("x.ply"));
+  EXPECT_TRUE(sameTriangles(readTriangles(tmp.file("x.ply")), coordTriangles(m.positions, m.triangles)));
+}
+
 TEST(PatchStore, WriteBackRefusesToMoveOrDropALockedVertex) {
   TempDir tmp;
   TestMesh m = makeTorus(60, 30, 0, false);
