@@ -41,6 +41,9 @@ class MtFileWriter {
   // Appends one payload (aligned); returns its patch id (0, 1, 2, ... in call order).
   uint32_t appendPatch(const uint8_t* data, size_t size, uint32_t triangles, uint32_t vertices);
   uint32_t patchCount() const { return uint32_t(patches_.size()); }
+  // Header fields known only at the end of a build (levelCount, input counts) may be set here
+  // before finish(); finish() fills the counts and offsets itself.
+  format::FileHeader& header() { return header_; }
   uint64_t bytesWritten() const { return offset_; }
 
   // Writes the DAG, the index and the footer, syncs, renames PATH.tmp to PATH and syncs the
