@@ -197,19 +197,25 @@ BuildReport buildMt(const std::string& input, const std::string& output, const B
 
   // 1. The level-0 patch store, partitioned by V*0 (BMT 4: "the mesh partitioned according to V*0").
   if (!fs::exists(storeDir + "/CURRENT")) {
-    fs::remove_all(storeDir, ec);
-    if (isStoreDir(input)) {
-      fs::copy(input, storeDir, fs::copy_options::recursive, ec);
-      if (ec) fail(input, "cannot copy the store into " + work + ": " + ec.message());
-    } else {
-      VPartitionOptions vp;
-      vp.kind = options.partition;
-      vp.patchTriangles = options.patchTriangles;
-      VPartitionAssigner assigner(vp);
-      IngestOptions io;
-      io.memoryBytes = options.memoryBytes;
-      io.progress = options.progress;
-      PatchStore::ingest(input, storeDir, assigner, io);
+    // Nothing to resume from yet: a failure here leaves no work directory behind.
+    try {
+      fs::remove_all(storeDir, ec);
+      if (isStoreDir(input)) {
+        fs::copy(input, storeDir, fs::copy_options::recursive, ec);
+        if (ec) fail(input, "cannot copy the store into " + work + ": " + ec.message());
+      } else {
+        VPartitionOptions vp;
+        vp.kind = options.partition;
+        vp.patchTriangles = options.patchTriangles;
+        VPartitionAssigner assigner(vp);
+        IngestOptions io;
+        io.memoryBytes = options.memoryBytes;
+        io.progress = options.progress;
+        PatchStore::ingest(input, storeDir, assigner, io);
+      }
+    } catch (...) {
+      fs::remove_all(work, ec);
+      throw;
     }
   }
   report.ingestSeconds = secondsSince(t0);

@@ -1,0 +1,105 @@
+// mtbuild end to end on small generated scans: determinism (threads, memory cap), the DAG's
+// invariants (monotone errors, nested spheres, every patch on one arc), holes still simplify.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+
+#include "mtbuild/mt_file.h"
+#include "tests/test_support.h"
+
+namespace mt::test {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string makeScan(const TempDir& tmp, const std::string& name, const std::string& options) {
+  std::string path = tmp.file(name);
+  CommandResult r = runTool("mtgen", "-o " + path + " " + options);
+  EXPECT_EQ(r.exitCode, 0) << r.output;
+  return path;
+}
+
+void build(const std::string& in, const std::string& out, const std::string& options) {
+  CommandResult r = runTool("mtbuild", in + " -o " + out + " -q " + options);
+  ASSERT_EQ(r.exitCode, 0) << r.output;
+}
+
+TEST(Mtbuild, SameBytesWhateverTheThreadsAndTheMemoryCap) {
+  TempDir tmp;
+  std::string in = makeScan(tmp, "scan.ply", "--triangles 60k --holes 12 --shuffle --seed 5");
+  build(in, tmp.file("t1.mt"), "--threads 1 --memory 1G");
+  build(in, tmp.file("t2.mt"), "--threads 2 --memory 1G");
+  build(in, tmp.file("m.mt"), "--threads 2 --memory 24M");
+  std::string a = readFile(tmp.file("t1.mt"));
+  EXPECT_GT(a.size(), 10000u);
+  EXPECT_TRUE(a == readFile(tmp.file("t2.mt"))) << "--threads 1 and 2 differ";
+  EXPECT_TRUE(a == readFile(tmp.file("m.mt"))) << "--memory 1G and 24M differ";
+  for (auto& e : fs::directory_iterator(tmp.path()))
+    EXPECT_EQ(e.path().string().find(".work"), std::string::npos) << "work directory left behind: " << e.path();
+}
+
+TEST(Mtbuild, DagInvariantsHold) {
+  TempDir tmp;
+  std::string in = makeScan(tmp, "scan.ply", "--triangles 40k --holes 8 --components 2 --seed 9");
+  build(in, tmp.file("a.mt"), "--patch-triangles 300");
+  auto mt = MtFileReader::open(tmp.file("a.mt"));
+  const auto& nodes = mt->nodes();
+  const auto& arcs = mt->arcs();
+  ASSERT_GT(nodes.size(), 10u);
+  EXPECT_TRUE(std::isinf(nodes.back().error));
+  std::vector<int> onArc(mt->patches().size(), 0);
+  for (const auto& arc : arcs) {
+    const auto& from = nodes[arc.from];
+    const auto& to = nodes[arc.to];
+    EXPECT_GE(to.error, from.error) << "error must not shrink towards the sink";
+    EXPECT_LT(from.level, to.level);
+    if (arc.from != 0) {
+      double d = std::sqrt(std::pow(to.center[0] - from.center[0], 2) + std::pow(to.center[1] - from.center[1], 2) +
+                           std::pow(to.center[2] - from.center[2], 2));
+      EXPECT_LE(d + from.radius, to.radius * (1 + 1e-6)) << "sphere of node " << arc.to << " must contain node " << arc.from;
+    }
+    for (uint32_t i = 0; i < arc.patchCount; ++i) ++onArc[mt->patchRefs()[arc.firstPatchRef + i]];
+  }
+  for (size_t p = 0; p < onArc.size(); ++p) EXPECT_EQ(onArc[p], 1) << "patch " << p;
+  // Every patch decodes and lies within its producing node's sphere.
+  for (uint32_t p = 0; p < mt->patches().size(); ++p) {
+    DecodedPatch d = mt->readPatch(p);
+    const auto& node = nodes[arcs[mt->patches()[p].arc].from];
+    if (mt->patches()[p].arc == 0 || arcs[mt->patches()[p].arc].from == 0) continue;
+    for (size_t v = 0; v < d.positions.size(); v += 3) {
+      double d2 = 0;
+      for (int a = 0; a < 3; ++a) d2 += std::pow(d.positions[v + a] - node.center[a], 2);
+      EXPECT_LE(std::sqrt(d2), node.radius + 2 * mt->header().quantizationError);
+    }
+  }
+}
+
+TEST(Mtbuild, AScanWithManyHolesReachesASmallCoarsestLevel) {
+  TempDir tmp;
+  std::string in = makeScan(tmp, "holes.ply", "--triangles 80k --holes 60 --seed 2");
+  build(in, tmp.file("h.mt"), "--patch-triangles 200");
+  auto mt = MtFileReader::open(tmp.file("h.mt"));
+  const uint32_t sink = uint32_t(mt->nodes().size() - 1);
+  uint64_t top = 0;
+  for (const auto& arc : mt->arcs())
+    if (arc.to == sink)
+      for (uint32_t i = 0; i < arc.patchCount; ++i) top += mt->patches()[mt->patchRefs()[arc.firstPatchRef + i]].triangles;
+  EXPECT_LE(top, mt->header().inputTriangles / 100) << "coarsest level has " << top << " triangles";
+}
+
+TEST(Mtbuild, BadInputIsAClearErrorAndLeavesNoFile) {
+  TempDir tmp;
+  writeFile(tmp.file("bad.ply"), "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+                                 "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
+                                 "0 0 0\n1 0 0\n0 1 0\n3 0 1 9\n");
+  CommandResult r = runTool("mtbuild", tmp.file("bad.ply") + " -o " + tmp.file("bad.mt") + " -q");
+  EXPECT_EQ(r.exitCode, 1);
+  EXPECT_NE(r.output.find(tmp.file("bad.ply")), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(tmp.file("bad.mt")));
+  EXPECT_FALSE(fs::exists(tmp.file("bad.mt.tmp")));
+  EXPECT_NE(runTool("mtbuild", "x.ply -o y.mt --codec zip").exitCode, 0);
+}
+
+}  // namespace
+}  // namespace mt::test
