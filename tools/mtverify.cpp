@@ -1,0 +1,249 @@
+// mtverify: check the invariants an MT file promises (BRIEF "Invariants", issue 4 item 5).
+//   mtverify OUT.mt [--cuts K] [--seed S]
+// 1. every payload's checksum and decode (each damaged patch reported, and checking goes on);
+// 2. DAG shape: source has no predecessors, sink no successors, acyclic, every inner node on arcs;
+// 3. monotone errors (BMT 4.1, 5.1): a node's error >= each predecessor's, the sink's is +inf;
+// 4. nested spheres: each node's sphere contains its predecessors' spheres and the vertices of its
+//    fragment (patches on its out-arcs) and of its floor (patches on its in-arcs, up to the node's
+//    error), with a relative tolerance for the float radius plus the quantization error. The
+//    source is left out: it is in every cut, never refined past, so its sphere means nothing
+//    (the builder writes radius 0); what a node must hold of it is its floor;
+// 5. crack-free cuts: the finest and coarsest cuts and K random valid cuts, each welded by exact
+//    grid position, are conforming by the rule in mtbuild/mt_cut.h (no boundary / non-manifold
+//    edge away from the input's own).
+// One line per problem on stderr, a summary on stdout; exit 0 only if everything holds.
+#include <CLI/CLI.hpp>
+
+#include <cinttypes>
+#include <cmath>
+#include <cstdio>
+#include <map>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include "mtbuild/mt_cut.h"
+#include "mtbuild/mt_file.h"
+#include "patchstore/error.h"
+
+namespace {
+
+using mt::format::NodeRecord;
+
+// Problem lines, capped per kind so a badly broken file does not flood the terminal.
+class Problems {
+ public:
+  explicit Problems(std::string path) : path_(std::move(path)) {}
+  void add(const std::string& kind, const std::string& line) {
+    std::lock_guard<std::mutex> g(lock_);
+    ++total_;
+    uint64_t& n = perKind_[kind];
+    if (++n <= kCap) std::fprintf(stderr, "%s\n", line.c_str());
+  }
+  void flushCaps() {
+    for (const auto& [kind, n] : perKind_)
+      if (n > kCap) std::fprintf(stderr, "%s: ... and %" PRIu64 " more %s problems\n", path_.c_str(), n - kCap, kind.c_str());
+  }
+  uint64_t total() const { return total_; }
+  uint64_t count(const std::string& kind) const {
+    auto it = perKind_.find(kind);
+    return it == perKind_.end() ? 0 : it->second;
+  }
+
+ private:
+  static constexpr uint64_t kCap = 50;
+  std::string path_;
+  std::mutex lock_;
+  std::map<std::string, uint64_t> perKind_;
+  uint64_t total_ = 0;
+};
+
+double distance(const double a[3], const double b[3]) {
+  double s = 0;
+  for (int i = 0; i < 3; ++i) s += (a[i] - b[i]) * (a[i] - b[i]);
+  return std::sqrt(s);
+}
+
+std::string nodeName(const mt::MtFileReader& r, uint32_t v) {
+  return "node " + std::to_string(v) + " (level " + std::to_string(r.nodes()[v].level) + ")";
+}
+
+int run(const std::string& path, uint32_t randomCuts, uint64_t seed) {
+  auto reader = mt::MtFileReader::open(path);
+  const mt::MtFileReader& r = *reader;
+  const auto& nodes = r.nodes();
+  Problems problems(path);
+  if (nodes.size() < 2) mt::fail(path, "the DAG has fewer than 2 nodes (no source and sink)");
+  const uint32_t sink = uint32_t(nodes.size() - 1);
+  const double qErr = r.header().quantizationError;
+  // Radii are floats: allow their rounding (2^-24 relative, with margin) plus one quantization
+  // step, since a builder may bound the input's positions rather than the quantized ones.
+  auto slack = [&](double radius) { return 1e-6 * std::abs(radius) + qErr; };
+
+  // 2. DAG shape.
+  if (nodes[0].backArcCount) problems.add("dag", path + ": the source (node 0) has predecessors");
+  if (nodes[sink].arcCount) problems.add("dag", path + ": the sink (node " + std::to_string(sink) + ") has successors");
+  for (uint32_t v = 0; v < sink; ++v)
+    if (!nodes[v].arcCount) problems.add("dag", path + ": " + nodeName(r, v) + " has no outgoing arc (not connected to the sink)");
+  mt::topologicalOrder(r);  // throws on a cycle: nothing else can be checked then
+
+  // 3. Monotone errors.
+  if (!std::isinf(nodes[sink].error) || nodes[sink].error < 0)
+    problems.add("error", path + ": the sink's error is " + std::to_string(nodes[sink].error) + ", not +inf");
+  for (uint32_t v = 0; v < nodes.size(); ++v) {
+    if (std::isnan(nodes[v].error) || nodes[v].error < 0)
+      problems.add("error", path + ": " + nodeName(r, v) + " has error " + std::to_string(nodes[v].error));
+    const NodeRecord& n = nodes[v];
+    for (uint32_t k = 0; k < n.backArcCount; ++k) {
+      uint32_t u = r.arcs()[r.backArcs()[n.firstBackArc + k]].from;
+      if (!(n.error >= nodes[u].error)) {
+        char buf[256];
+        std::snprintf(buf, sizeof buf, "%s: error not monotone: %s has error %.9g < its predecessor node %u's %.9g",
+                      path.c_str(), nodeName(r, v).c_str(), double(n.error), u, double(nodes[u].error));
+        problems.add("error", buf);
+      }
+    }
+  }
+
+  // 4a. Spheres nested. The source is left out as a predecessor: it is never refined past and its
+  // sphere means nothing; what a node must contain of it is its floor, the patches on the arc
+  // source -> node (checked with the payloads below). The sink's sphere means nothing either.
+  for (uint32_t v = 1; v < sink; ++v) {
+    const NodeRecord& n = nodes[v];
+    for (uint32_t k = 0; k < n.backArcCount; ++k) {
+      uint32_t u = r.arcs()[r.backArcs()[n.firstBackArc + k]].from;
+      if (u == 0) continue;
+      double reach = distance(n.center, nodes[u].center) + double(nodes[u].radius);
+      if (reach > double(n.radius) + slack(n.radius)) {
+        char buf[256];
+        std::snprintf(buf, sizeof buf, "%s: sphere of %s (radius %.9g) does not contain predecessor node %u's (reaches %.9g)",
+                      path.c_str(), nodeName(r, v).c_str(), double(n.radius), u, reach);
+        problems.add("sphere", buf);
+      }
+    }
+  }
+
+  // 1 + 4b. Every payload: checksum, decode, and its vertices inside the sphere of the node whose
+  // fragment it is (arc.from) and of the node whose floor it is (arc.to); source and sink skipped.
+  const mt::QuantizationGrid grid = r.grid();
+  std::vector<double> worstOutside(nodes.size(), 0.0);  // per node: max distance beyond the sphere
+  std::mutex worstLock;
+  std::vector<mt::PatchDamage> damaged = mt::checkAllPatches(r, [&](uint32_t p, const mt::DecodedPatch& d) {
+    const mt::format::ArcRecord& arc = r.arcs()[r.patches()[p].arc];
+    for (uint32_t v : {arc.from, arc.to}) {
+      if (v == 0 || v == sink) continue;
+      const NodeRecord& n = nodes[v];
+      // The floor may stick out of a sphere fitted to the fragment by up to the node's error
+      // (the fragment is within that of its floor).
+      const double allowed = double(n.radius) + slack(n.radius) + (v == arc.to ? double(n.error) : 0.0);
+      double worst = 0;
+      for (uint32_t i = 0; i < d.vertexCount(); ++i) {
+        double pos[3];
+        for (int a = 0; a < 3; ++a) pos[a] = grid.dequantize(a, d.q[3 * i + a]);
+        worst = std::max(worst, distance(pos, n.center) - allowed);
+      }
+      if (worst > 0) {
+        std::lock_guard<std::mutex> g(worstLock);
+        worstOutside[v] = std::max(worstOutside[v], worst);
+      }
+    }
+  });
+  for (const auto& d : damaged) {
+    uint32_t v = r.arcs()[r.patches()[d.patch].arc].from;
+    problems.add("checksum", d.message + " [" + nodeName(r, v) + "]");
+  }
+  for (uint32_t v = 0; v < nodes.size(); ++v)
+    if (worstOutside[v] > 0) {
+      char buf[256];
+      std::snprintf(buf, sizeof buf, "%s: %s has vertices of its fragment or floor up to %.9g outside its sphere", path.c_str(),
+                    nodeName(r, v).c_str(), worstOutside[v]);
+      problems.add("sphere", buf);
+    }
+
+  // 5. Crack-free cuts. Cuts touching a damaged patch cannot be assembled: reported and skipped.
+  std::vector<std::pair<std::string, mt::Cut>> cuts;
+  cuts.push_back({"finest cut", mt::finestCut(r)});
+  cuts.push_back({"coarsest cut", mt::coarsestCut(r)});
+  std::mt19937_64 rng(seed);
+  for (uint32_t k = 0; k < randomCuts; ++k) cuts.push_back({"random cut " + std::to_string(k), mt::randomCut(r, rng)});
+  mt::ConformityReference reference;
+  bool haveReference = false;
+  uint32_t cutsChecked = 0, cutsConforming = 0;
+  for (size_t i = 0; i < cuts.size(); ++i) {
+    const auto& [name, cut] = cuts[i];
+    std::string why;
+    if (!mt::isValidCut(r, cut.inSet, &why)) {
+      problems.add("cut", path + ": " + name + " is not a valid cut: " + why);  // a bug in mt_cut, not in the file
+      continue;
+    }
+    mt::CutStats stats = mt::cutStats(r, cut.inSet);
+    mt::WeldedMesh mesh;
+    try {
+      mesh = mt::assembleCut(r, mt::cutArcs(r, cut.inSet));
+    } catch (const mt::Error&) {
+      // Only a damaged payload makes this throw, and those are reported above, each once.
+      if (i == 0) problems.add("cut", path + ": crack-free check skipped: the finest cut (the reference) has a damaged patch");
+      continue;
+    }
+    if (i == 0) {
+      reference = mt::makeConformityReference(mesh);
+      haveReference = true;
+    }
+    if (!haveReference) continue;  // nothing to compare with
+    ++cutsChecked;
+    mt::ConformityReport rep = mt::checkConforming(mesh, reference, &r);
+    if (rep.conforming()) {
+      ++cutsConforming;
+    } else {
+      problems.add("crack", path + ": crack in " + name + " (" + std::to_string(stats.nodes) + " nodes, " +
+                                std::to_string(stats.triangles) + " triangles): " + std::to_string(rep.newBoundaryEdges) +
+                                " boundary and " + std::to_string(rep.newNonManifoldEdges) +
+                                " non-manifold edges the input does not have; first: " + rep.firstProblem);
+    }
+  }
+
+  problems.flushCaps();
+  std::fflush(stderr);
+  std::printf("%s: %zu nodes, %zu arcs, %zu patches\n", path.c_str(), nodes.size(), r.arcs().size(), r.patches().size());
+  std::printf("  payloads         %zu checked, %zu damaged\n", r.patches().size(), damaged.size());
+  std::printf("  DAG shape        %s\n", problems.count("dag") ? "PROBLEMS" : "ok");
+  std::printf("  monotone errors  %s\n", problems.count("error") ? "PROBLEMS" : "ok");
+  std::printf("  nested spheres   %s\n", problems.count("sphere") ? "PROBLEMS" : "ok");
+  std::printf("  crack-free cuts  %u of %u conforming (finest, coarsest, %u random; seed %" PRIu64 ")", cutsConforming,
+              cutsChecked, randomCuts, seed);
+  if (cutsChecked < cuts.size()) std::printf(", %zu not checked (damaged patches)", cuts.size() - cutsChecked);
+  if (haveReference)
+    std::printf(", input has %" PRIu64 " boundary and %" PRIu64 " non-manifold edges", reference.edges.boundaryEdges,
+                reference.edges.nonManifoldEdges);
+  std::printf("\n%s\n", problems.total() ? "FAILED" : "OK");
+  return problems.total() ? 1 : 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"mtverify: check that a batched Multi-Triangulation file (.mt) keeps its promises: every payload's\n"
+               "checksum; the DAG's shape; errors monotone towards the sink (sink +inf); bounding spheres nested\n"
+               "and containing their patches; and crack-free cuts: the finest, the coarsest and K random valid\n"
+               "cuts, each welded by exact grid position, may have no boundary or non-manifold edge away from the\n"
+               "input's own (rule in mtbuild/mt_cut.h). One line per problem on stderr; exit 0 only if all hold.\n"
+               "Memory: a cut is held whole, so about 60 bytes per input triangle."};
+  std::string path;
+  uint32_t cuts = 8;
+  uint64_t seed = 1;
+  app.add_option("file", path, "The MT file to verify")->required();
+  app.add_option("--cuts", cuts, "Random valid cuts to check besides the finest and coarsest")->capture_default_str();
+  app.add_option("--seed", seed, "Seed of the random cuts (the same seed checks the same cuts)")->capture_default_str();
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e) == 0 ? 0 : 1;
+  }
+  try {
+    return run(path, cuts, seed);
+  } catch (const std::exception& e) {
+    std::fflush(stdout);
+    std::fprintf(stderr, "mtverify: %s\n", e.what());
+    return 1;
+  }
+}
