@@ -155,7 +155,7 @@ double chooseGridStep(const PatchStore& store) {
       }
   }
   double mean = edges ? sum / double(edges) : 0;
-  return mean > 0 ? mean / 16 : 1e-6;
+  return mean > 0 ? mean / 8 : 1e-6;
 }
 
 }  // namespace

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cfloat>
+#include <cmath>
 #include <string>
 
 #include "mtbuild/surface_distance.h"
@@ -15,23 +16,24 @@ namespace mt {
 
 namespace {
 
-// Runs meshopt_simplify with `lock` frozen; returns the kept triangle list (input indices).
-std::vector<uint32_t> simplifyLocked(const std::vector<float>& pos, size_t vertexCount, const uint32_t* triangles,
-                                     size_t indexCount, const std::vector<uint8_t>& lock, size_t targetIndexCount,
-                                     float* relError) {
+// Runs meshopt_simplify with `lock` frozen; returns the kept triangle list (input indices) in `out`.
+// `pos` holds the vertexCount float positions; it is extended in place (and trimmed back on the
+// next call) with the lock duplicates, so retries reuse its storage.
+void simplifyLocked(std::vector<float>& pos, size_t vertexCount, const uint32_t* triangles, size_t indexCount,
+                    const std::vector<uint8_t>& lock, size_t targetIndexCount, float* relError,
+                    std::vector<uint32_t>& out) {
   // One unreferenced duplicate per locked vertex: meshopt 0.18 then sees a position shared by two
   // vertices without a matching attribute seam and classifies it Kind_Locked (never collapsed,
   // but still a valid collapse target). Vertices are compared by float position, so two input
   // vertices that round to the same float are also kept: conservative, never wrong.
-  std::vector<float> p(pos.begin(), pos.begin() + vertexCount * 3);
+  pos.resize(vertexCount * 3);
   for (size_t v = 0; v < vertexCount; ++v)
-    if (lock[v]) p.insert(p.end(), &pos[v * 3], &pos[v * 3 + 3]);
-  std::vector<uint32_t> out(indexCount);
+    if (lock[v]) pos.push_back(pos[v * 3]), pos.push_back(pos[v * 3 + 1]), pos.push_back(pos[v * 3 + 2]);
+  out.resize(indexCount);
   // Error limit: none (FLT_MAX); the target count decides, the error is measured afterwards.
-  size_t n = meshopt_simplify(out.data(), triangles, indexCount, p.data(), p.size() / 3, 12, targetIndexCount,
+  size_t n = meshopt_simplify(out.data(), triangles, indexCount, pos.data(), pos.size() / 3, 12, targetIndexCount,
                               FLT_MAX, 0, relError);
   out.resize(n);
-  return out;
 }
 
 }  // namespace
@@ -39,60 +41,97 @@ std::vector<uint32_t> simplifyLocked(const std::vector<float>& pos, size_t verte
 SimplifiedRegion simplifyRegion(const double* positions, size_t vertexCount, const uint32_t* triangles,
                                 size_t triangleCount, const uint8_t* locked, const SimplifyRegionOptions& options) {
   size_t indexCount = triangleCount * 3;
-  for (size_t i = 0; i < indexCount; ++i)
+  std::vector<uint8_t> used(vertexCount, 0);
+  for (size_t i = 0; i < indexCount; ++i) {
     if (triangles[i] >= vertexCount)
       throw Error("simplifyRegion: triangle " + std::to_string(i / 3) + " uses vertex " +
                   std::to_string(triangles[i]) + " of " + std::to_string(vertexCount));
+    used[triangles[i]] = 1;
+  }
 
   // meshopt works in float: center the region first so far-from-origin scans keep their precision
   // (positions are only used to rank collapses; the output copies the double input positions).
   double lo[3] = {DBL_MAX, DBL_MAX, DBL_MAX}, hi[3] = {-DBL_MAX, -DBL_MAX, -DBL_MAX};
   for (size_t v = 0; v < vertexCount; ++v)
     for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], positions[v * 3 + a]), hi[a] = std::max(hi[a], positions[v * 3 + a]);
-  std::vector<float> pos(vertexCount * 3);
+  std::vector<uint8_t> lock(vertexCount, 0);
+  size_t lockCount = 0;
+  if (locked)
+    for (size_t v = 0; v < vertexCount; ++v) lockCount += lock[v] = locked[v] ? 1 : 0;
+  std::vector<float> pos;
+  pos.reserve((vertexCount + lockCount) * 3);  // room for the lock duplicates of the first attempt
+  pos.resize(vertexCount * 3);
   for (size_t v = 0; v < vertexCount; ++v)
     for (int a = 0; a < 3; ++a) pos[v * 3 + a] = float(positions[v * 3 + a] - 0.5 * (lo[a] + hi[a]));
-
-  std::vector<uint8_t> used(vertexCount, 0), lock(vertexCount, 0);
-  for (size_t i = 0; i < indexCount; ++i) used[triangles[i]] = 1;
-  if (locked)
-    for (size_t v = 0; v < vertexCount; ++v) lock[v] = locked[v] ? 1 : 0;
 
   size_t targetIndexCount = std::min(options.targetTriangles, triangleCount) * 3;
   float relError = 0;
   std::vector<uint32_t> out;
-  // Two things meshopt 0.18 does not promise and the builder needs: (1) a locked vertex can vanish
+  // Things meshopt 0.18 does not promise and the builder needs: (1) a locked vertex can vanish
   // when all its triangles collapse away (a locked corner whose other two vertices merge); (2) a
   // border collapse can create a non-manifold edge (two hole borders pinched together), which a
   // cut would show as a crack-like defect the input did not have. Either way: lock the input
   // triangles around the offending vertices and redo. Deterministic; usually runs once.
   auto edgeKey = [](uint32_t a, uint32_t b) { return a < b ? (uint64_t(a) << 32) | b : (uint64_t(b) << 32) | a; };
-  std::vector<uint64_t> inputEdges;
-  inputEdges.reserve(indexCount);
-  for (size_t t = 0; t < indexCount; t += 3)
-    for (int k = 0; k < 3; ++k) inputEdges.push_back(edgeKey(triangles[t + k], triangles[t + (k + 1) % 3]));
-  std::sort(inputEdges.begin(), inputEdges.end());
+  std::vector<uint64_t> inputEdges;  // sorted, built only when an output edge has 3+ triangles
   auto inputUses = [&](uint64_t e) {
+    if (inputEdges.empty()) {
+      inputEdges.reserve(indexCount);
+      for (size_t t = 0; t < indexCount; t += 3)
+        for (int k = 0; k < 3; ++k) inputEdges.push_back(edgeKey(triangles[t + k], triangles[t + (k + 1) % 3]));
+      std::sort(inputEdges.begin(), inputEdges.end());
+    }
     auto range = std::equal_range(inputEdges.begin(), inputEdges.end(), e);
     return size_t(range.second - range.first);
   };
+  // Output edges bucketed by their smaller vertex (counting sort), to find edges with 3+ triangles.
+  std::vector<uint32_t> edgeStart, edgeOther, edgeFill;
+  std::vector<uint8_t> kept(vertexCount), bad(vertexCount), multiplicity(vertexCount, 0);
   for (int attempt = 0;; ++attempt) {
-    out = simplifyLocked(pos, vertexCount, triangles, indexCount, lock, targetIndexCount, &relError);
-    std::vector<uint8_t> kept(vertexCount, 0), bad(vertexCount, 0);
+    simplifyLocked(pos, vertexCount, triangles, indexCount, lock, targetIndexCount, &relError, out);
+    std::fill(kept.begin(), kept.end(), 0);
+    std::fill(bad.begin(), bad.end(), 0);
     for (uint32_t v : out) kept[v] = 1;
     bool problem = false;
     for (size_t v = 0; v < vertexCount; ++v)
       if (lock[v] && used[v] && !kept[v]) bad[v] = 1, problem = true;
-    std::vector<uint64_t> outEdges;
-    outEdges.reserve(out.size());
+    edgeStart.assign(vertexCount + 1, 0);
     for (size_t t = 0; t < out.size(); t += 3)
-      for (int k = 0; k < 3; ++k) outEdges.push_back(edgeKey(out[t + k], out[t + (k + 1) % 3]));
-    std::sort(outEdges.begin(), outEdges.end());
-    for (size_t i = 0; i + 2 < outEdges.size(); ++i)
-      if (outEdges[i] == outEdges[i + 2] && inputUses(outEdges[i]) <= 2) {
-        bad[outEdges[i] >> 32] = bad[outEdges[i] & 0xFFFFFFFFu] = 1;
-        problem = true;
+      for (int k = 0; k < 3; ++k) ++edgeStart[std::min(out[t + k], out[t + (k + 1) % 3]) + 1];
+    for (size_t v = 0; v < vertexCount; ++v) edgeStart[v + 1] += edgeStart[v];
+    edgeFill.assign(edgeStart.begin(), edgeStart.end() - 1);
+    edgeOther.resize(out.size());
+    for (size_t t = 0; t < out.size(); t += 3)
+      for (int k = 0; k < 3; ++k) {
+        uint32_t a = out[t + k], b = out[t + (k + 1) % 3];
+        edgeOther[edgeFill[std::min(a, b)]++] = std::max(a, b);
       }
+    for (size_t v = 0; v < vertexCount; ++v) {
+      uint32_t e0 = edgeStart[v], e1 = edgeStart[v + 1];
+      if (e1 - e0 < 3) continue;
+      for (uint32_t e = e0; e < e1; ++e) ++multiplicity[edgeOther[e]];
+      for (uint32_t e = e0; e < e1; ++e) {
+        uint32_t w = edgeOther[e];
+        if (multiplicity[w] >= 3 && inputUses(edgeKey(uint32_t(v), w)) <= 2) {
+          bad[v] = bad[w] = 1;
+          problem = true;
+        }
+      }
+      for (uint32_t e = e0; e < e1; ++e) multiplicity[edgeOther[e]] = 0;
+    }
+    // (3) A new edge between two locked vertices (a chord across the region's border) can
+    // duplicate an edge an outside patch already has: the two sheets would touch along it, a
+    // non-manifold edge in the cut. The region cannot see outside edges, so no new locked-locked
+    // edge is allowed.
+    if (locked)
+      for (size_t t = 0; t < out.size(); t += 3)
+        for (int k = 0; k < 3; ++k) {
+          uint32_t a = out[t + k], b = out[t + (k + 1) % 3];
+          if (locked[a] && locked[b] && inputUses(edgeKey(a, b)) == 0) {
+            bad[a] = bad[b] = 1;
+            problem = true;
+          }
+        }
     if (!problem) break;
     if (attempt == 8) throw Error("simplifyRegion: could not keep locked vertices and manifold edges");
     for (size_t t = 0; t < indexCount; t += 3)
@@ -101,29 +140,50 @@ SimplifiedRegion simplifyRegion(const double* positions, size_t vertexCount, con
   }
 
   SimplifiedRegion r;
-  std::vector<uint32_t> remap(vertexCount, ~0u);
-  for (uint32_t v : out) remap[v] = 0;
+  std::vector<uint32_t>& remap = edgeFill;  // reuse: vertexCount entries
+  remap.assign(vertexCount, ~0u);
+  size_t keptCount = 0;
+  for (size_t v = 0; v < vertexCount; ++v) keptCount += kept[v];
+  r.origin.reserve(keptCount);
+  r.positions.resize(keptCount * 3);
   for (size_t v = 0; v < vertexCount; ++v)
-    if (remap[v] == 0) {
-      remap[v] = uint32_t(r.origin.size());
+    if (kept[v]) {
+      uint32_t i = uint32_t(r.origin.size());
+      remap[v] = i;
       r.origin.push_back(uint32_t(v));
-      r.positions.insert(r.positions.end(), positions + v * 3, positions + v * 3 + 3);
+      for (int a = 0; a < 3; ++a) r.positions[size_t(i) * 3 + a] = positions[v * 3 + a];
     }
   r.triangles.resize(out.size());
   for (size_t i = 0; i < out.size(); ++i) r.triangles[i] = remap[out[i]];
   if (vertexCount) r.quadricError = double(relError) * double(meshopt_simplifyScale(pos.data(), vertexCount, 12));
 
   if (options.measureError && out.size() < indexCount) {
-    // (a) input -> result: removed vertices; kept vertices are on the result.
+    // max over samples of the exact distance to the other surface, squared:
+    //   (a) input -> result: removed vertices (kept vertices are result vertices: distance 0);
+    //   (b) result -> input: result triangle centroids (result vertices are input vertices).
+    // Each query only has to decide whether its sample is farther than the worst so far
+    // (TriangleGrid::distance2Above), which most samples are not; the value is the same as
+    // computing every sample's distance exactly. A strided subset of both directions goes first
+    // so the running worst is large early and the other queries stop at their first close triangle.
     TriangleGrid resultGrid(r.positions.data(), r.origin.size(), r.triangles.data(), r.triangleCount());
-    double a = 0;
-    for (size_t v = 0; v < vertexCount; ++v)
-      if (used[v] && remap[v] == ~0u) a = std::max(a, resultGrid.distance(positions + v * 3));
-    // (b) result -> input: result centroids (its vertices are input vertices, distance 0).
     TriangleGrid inputGrid(positions, vertexCount, triangles, triangleCount);
-    std::vector<uint8_t> all(r.origin.size(), 1);
-    double b = sampledDistance(r.positions.data(), r.triangles.data(), r.triangleCount(), inputGrid, all.data());
-    r.error = std::max(a, b);
+    constexpr size_t kStride = 16;
+    double worst2 = 0;
+    for (int pass = 0; pass < 2; ++pass) {
+      size_t k = 0;
+      for (size_t v = 0; v < vertexCount; ++v)
+        if (used[v] && !kept[v] && ((k++ % kStride == 0) == (pass == 0)))
+          worst2 = std::max(worst2, resultGrid.distance2Above(positions + v * 3, worst2));
+      for (size_t t = 0; t < out.size() / 3; ++t) {
+        if ((t % kStride == 0) != (pass == 0)) continue;
+        const double *p0 = positions + size_t(out[t * 3]) * 3, *p1 = positions + size_t(out[t * 3 + 1]) * 3,
+                     *p2 = positions + size_t(out[t * 3 + 2]) * 3;
+        double c[3];
+        for (int a = 0; a < 3; ++a) c[a] = (p0[a] + p1[a] + p2[a]) / 3;
+        worst2 = std::max(worst2, inputGrid.distance2Above(c, worst2));
+      }
+    }
+    r.error = std::sqrt(worst2);
   }
   return r;
 }

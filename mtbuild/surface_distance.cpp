@@ -15,10 +15,10 @@ struct V3 {
 };
 inline V3 sub(V3 a, V3 b) { return {a.x - b.x, a.y - b.y, a.z - b.z}; }
 inline double dot(V3 a, V3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
-inline V3 at(const double* p, uint32_t i) { return {p[i * 3], p[i * 3 + 1], p[i * 3 + 2]}; }
+inline V3 at(const double* p, uint32_t i) { return {p[size_t(i) * 3], p[size_t(i) * 3 + 1], p[size_t(i) * 3 + 2]}; }
 
 // Squared distance from p to triangle abc (Ericson, Real-Time Collision Detection, 5.1.5).
-double pointTriangle2(V3 p, V3 a, V3 b, V3 c) {
+inline double pointTriangle2(V3 p, V3 a, V3 b, V3 c) {
   V3 ab = sub(b, a), ac = sub(c, a), ap = sub(p, a);
   double d1 = dot(ab, ap), d2 = dot(ac, ap);
   auto len2 = [](V3 v) { return dot(v, v); };
@@ -51,39 +51,105 @@ double pointTriangle2(V3 p, V3 a, V3 b, V3 c) {
   return len2(sub(p, q));
 }
 
-inline uint64_t hashKey(int64_t x, int64_t y, int64_t z) {
-  uint64_t h = uint64_t(x) * 0x9E3779B97F4A7C15ull ^ uint64_t(y) * 0xC2B2AE3D27D4EB4Full ^
-               uint64_t(z) * 0x165667B19E3779F9ull;
-  return h ^ (h >> 29);
-}
+// Relative slack on every pruning bound (cell boxes, bounding spheres): rounding in the bounds is
+// ~1e-16 relative, so a triangle is never skipped unless it is clearly farther than the best.
+constexpr double kSlack = 1e-9;
+// Cell side in mean triangle circumradii (about the centroid), tuned with callgrind on scan-like
+// regions: smaller cells list each triangle more often (build cost), larger ones hold more
+// triangles to filter per query.
+constexpr double kCellPerRadius = 2.0;
 
 }  // namespace
 
-// Cells are cubes of side `cell`; each triangle is listed in every cell its bounding box touches.
-// Cells live in an open-addressing table keyed by their integer coordinates, with the triangle
-// lists stored CSR-style (one sort, no per-cell allocation).
+double squaredPointTriangleDistance(const double p[3], const double a[3], const double b[3], const double c[3]) {
+  return pointTriangle2({p[0], p[1], p[2]}, {a[0], a[1], a[2]}, {b[0], b[1], b[2]}, {c[0], c[1], c[2]});
+}
+
+// A dense grid of cubic cells (side `cell`) over the bounding box of the triangles, with the
+// triangle lists in CSR form built by counting sort (two linear passes, no sort, no hashing).
+// Each triangle is listed in every cell its bounding box touches. The cell side is a small
+// multiple of the mean triangle size; it is enlarged when the box would need more than ~8 cells
+// per triangle (a thin curved region in a big box), so memory stays linear.
+// Per triangle a bounding sphere (centroid, radius) gives a cheap lower bound of its distance.
 struct TriangleGrid::Impl {
   const double* positions;
   const uint32_t* triangles;
   size_t triangleCount;
-  double origin[3] = {0, 0, 0};
-  double cell = 1;
-  struct Slot {
-    int32_t x, y, z;
-    uint32_t begin, end;  // into items; begin == end means empty slot
-  };
-  std::vector<Slot> table;
-  uint64_t mask = 0;
-  std::vector<uint32_t> items;
-  mutable std::vector<uint32_t> stamp;  // per triangle: last query that tested it
+  double lo[3] = {0, 0, 0};
+  double cell = 1, inv = 1;
+  int32_t n[3] = {0, 0, 0};
+  std::vector<uint32_t> start;  // n0*n1*n2 + 1 offsets into items
+  std::vector<uint32_t> items;  // triangle ids, ascending within a cell
+  std::vector<double> sphere;   // 4 per triangle: center xyz, radius
+  mutable std::vector<uint32_t> stamp;  // per triangle: last query that reached it
   mutable uint32_t query = 0;
 
-  const Slot* find(int32_t x, int32_t y, int32_t z) const {
-    for (uint64_t i = hashKey(x, y, z) & mask;; i = (i + 1) & mask) {
-      const Slot& s = table[i];
-      if (s.begin == s.end) return nullptr;
-      if (s.x == x && s.y == y && s.z == z) return &s;
+  size_t cellIndex(int32_t x, int32_t y, int32_t z) const { return (size_t(z) * size_t(n[1]) + size_t(y)) * size_t(n[0]) + size_t(x); }
+
+  // The query state: point, best squared distance so far and its square root.
+  struct Q {
+    V3 p;
+    double best2, best;
+    double floor2;
+  };
+  // First look for an early exit: among the triangles of cell `c` whose bounding sphere reaches
+  // within `floor` of p, test the one with the nearest center first (usually the triangle p
+  // projects onto), then the others. Triangles that cannot be within floor stay unstamped for
+  // scan(). True once best2 <= floor2.
+  bool scanNear(size_t c, Q& q, double floor) const {
+    const uint32_t i0 = start[c], i1 = start[c + 1];
+    uint32_t cand = ~0u;
+    double candD2 = std::numeric_limits<double>::infinity();
+    for (uint32_t i = i0; i < i1; ++i) {
+      uint32_t t = items[i];
+      const double* s = &sphere[size_t(t) * 4];
+      double dx = q.p.x - s[0], dy = q.p.y - s[1], dz = q.p.z - s[2];
+      double d2 = dx * dx + dy * dy + dz * dz, lim = floor + s[3];
+      if (d2 < candD2 && d2 <= lim * lim * (1 + kSlack)) candD2 = d2, cand = t;
     }
+    if (cand == ~0u) return false;
+    if (test(cand, q)) return true;
+    for (uint32_t i = i0; i < i1; ++i) {
+      uint32_t t = items[i];
+      const double* s = &sphere[size_t(t) * 4];
+      double dx = q.p.x - s[0], dy = q.p.y - s[1], dz = q.p.z - s[2];
+      double lim = floor + s[3];
+      if (dx * dx + dy * dy + dz * dz > lim * lim * (1 + kSlack)) continue;  // cannot be within floor
+      if (stamp[t] != query && test(t, q)) return true;
+    }
+    return false;
+  }
+  // Stamps and tests triangle t; true once best2 <= floor2.
+  bool test(uint32_t t, Q& q) const {
+    stamp[t] = query;
+    const uint32_t* tri = triangles + size_t(t) * 3;
+    double d2 = pointTriangle2(q.p, at(positions, tri[0]), at(positions, tri[1]), at(positions, tri[2]));
+    if (d2 < q.best2) {
+      q.best2 = d2;
+      q.best = std::sqrt(d2);
+      return d2 <= q.floor2;
+    }
+    return false;
+  }
+  // Tests the (not yet tested) triangles of cell `c`; true once best2 <= floor2 (the caller may stop).
+  bool scan(size_t c, Q& q) const {
+    for (uint32_t i = start[c], e = start[c + 1]; i < e; ++i) {
+      uint32_t t = items[i];
+      if (stamp[t] == query) continue;
+      stamp[t] = query;
+      const double* s = &sphere[size_t(t) * 4];
+      double dx = q.p.x - s[0], dy = q.p.y - s[1], dz = q.p.z - s[2];
+      double lim = q.best + s[3];
+      if (dx * dx + dy * dy + dz * dz > lim * lim * (1 + kSlack)) continue;  // sphere is farther
+      const uint32_t* tri = triangles + size_t(t) * 3;
+      double d2 = pointTriangle2(q.p, at(positions, tri[0]), at(positions, tri[1]), at(positions, tri[2]));
+      if (d2 < q.best2) {
+        q.best2 = d2;
+        q.best = std::sqrt(d2);
+        if (d2 <= q.floor2) return true;
+      }
+    }
+    return false;
   }
 };
 
@@ -92,126 +158,154 @@ TriangleGrid::TriangleGrid(const double* positions, size_t vertexCount, const ui
     : impl_(new Impl{positions, triangles, triangleCount}) {
   Impl& g = *impl_;
   if (triangleCount == 0 || vertexCount == 0) return;
-  double lo[3] = {1e300, 1e300, 1e300};
-  double edge = 0;
-  for (size_t t = 0; t < triangleCount; ++t)
-    for (int k = 0; k < 3; ++k) {
-      V3 a = at(positions, triangles[t * 3 + k]), b = at(positions, triangles[t * 3 + (k + 1) % 3]);
-      edge += std::sqrt(dot(sub(a, b), sub(a, b)));
-      lo[0] = std::min(lo[0], a.x), lo[1] = std::min(lo[1], a.y), lo[2] = std::min(lo[2], a.z);
-    }
-  edge /= double(triangleCount * 3);
-  // ~2 mean edges per cell side: a triangle touches ~1-4 cells, a cell holds ~10 triangles, and
-  // most queries end in their own cell.
-  g.cell = edge > 0 ? edge * 2.0 : 1.0;
-  for (int k = 0; k < 3; ++k) g.origin[k] = lo[k];
-
+  // Box: over all vertices (a superset of the triangles' corners is fine: cells are clamped).
+  double lo[3] = {1e300, 1e300, 1e300}, hi[3] = {-1e300, -1e300, -1e300};
+  for (size_t v = 0; v < vertexCount; ++v)
+    for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], positions[v * 3 + a]), hi[a] = std::max(hi[a], positions[v * 3 + a]);
+  // Cell side from the mean circumradius (about the centroid) of up to ~1000 evenly spread triangles.
+  const size_t step = std::max<size_t>(1, triangleCount / 1024);
+  double radiusSum = 0;
+  size_t sampled = 0;
+  for (size_t t = 0; t < triangleCount; t += step, ++sampled) {
+    V3 a = at(positions, triangles[t * 3]), b = at(positions, triangles[t * 3 + 1]), c = at(positions, triangles[t * 3 + 2]);
+    V3 m = {(a.x + b.x + c.x) / 3, (a.y + b.y + c.y) / 3, (a.z + b.z + c.z) / 3};
+    radiusSum += std::sqrt(std::max({dot(sub(a, m), sub(a, m)), dot(sub(b, m), sub(b, m)), dot(sub(c, m), sub(c, m))}));
+  }
+  double meanRadius = radiusSum / double(sampled);
+  double extent = std::max({hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]});
+  double cell = meanRadius > 0 ? meanRadius * kCellPerRadius : (extent > 0 ? extent : 1.0);
+  const double maxCells = 8.0 * double(triangleCount) + 64;
+  for (;;) {
+    double cells = 1;
+    for (int a = 0; a < 3; ++a) cells *= std::floor((hi[a] - lo[a]) / cell) + 1;
+    if (cells <= maxCells) break;
+    cell *= std::max(1.01, std::cbrt(cells / maxCells));
+  }
+  g.cell = cell;
+  g.inv = 1 / cell;
+  for (int a = 0; a < 3; ++a) {
+    g.lo[a] = lo[a];
+    g.n[a] = int32_t(std::floor((hi[a] - lo[a]) * g.inv)) + 1;
+  }
+  const double nMax[3] = {double(g.n[0] - 1), double(g.n[1] - 1), double(g.n[2] - 1)};
+  // clamp, then truncate (== floor on [0, n-1]); monotone in x, so a point of a triangle always
+  // falls in a cell of the triangle's cell box
+  auto cellOf = [&](double x, int a) { return int32_t(std::min(std::max((x - g.lo[a]) * g.inv, 0.0), nMax[a])); };
+  const size_t cellCount = size_t(g.n[0]) * size_t(g.n[1]) * size_t(g.n[2]);
+  // One pass: bounding spheres, and (cell, triangle) entries with per-cell counts at [cell + 2].
+  g.sphere.resize(triangleCount * 4);
+  g.start.assign(cellCount + 2, 0);
   struct Entry {
-    uint64_t key;
-    int32_t x, y, z;
-    uint32_t tri;
+    uint32_t cell, tri;
   };
   std::vector<Entry> entries;
   entries.reserve(triangleCount * 3);
   for (size_t t = 0; t < triangleCount; ++t) {
-    int32_t mn[3] = {INT32_MAX, INT32_MAX, INT32_MAX}, mx[3] = {INT32_MIN, INT32_MIN, INT32_MIN};
-    for (int k = 0; k < 3; ++k) {
-      const double* p = positions + size_t(triangles[t * 3 + k]) * 3;
-      for (int a = 0; a < 3; ++a) {
-        int32_t c = int32_t(std::floor((p[a] - g.origin[a]) / g.cell));
-        mn[a] = std::min(mn[a], c), mx[a] = std::max(mx[a], c);
-      }
-    }
-    for (int32_t z = mn[2]; z <= mx[2]; ++z)
-      for (int32_t y = mn[1]; y <= mx[1]; ++y)
-        for (int32_t x = mn[0]; x <= mx[0]; ++x) entries.push_back({hashKey(x, y, z), x, y, z, uint32_t(t)});
+    V3 a = at(positions, triangles[t * 3]), b = at(positions, triangles[t * 3 + 1]), c = at(positions, triangles[t * 3 + 2]);
+    V3 m = {(a.x + b.x + c.x) / 3, (a.y + b.y + c.y) / 3, (a.z + b.z + c.z) / 3};
+    double r2 = std::max(std::max(dot(sub(a, m), sub(a, m)), dot(sub(b, m), sub(b, m))), dot(sub(c, m), sub(c, m)));
+    double* s = &g.sphere[t * 4];
+    s[0] = m.x, s[1] = m.y, s[2] = m.z, s[3] = std::sqrt(r2) * (1 + kSlack);
+    int32_t x0 = cellOf(std::min(std::min(a.x, b.x), c.x), 0), x1 = cellOf(std::max(std::max(a.x, b.x), c.x), 0);
+    int32_t y0 = cellOf(std::min(std::min(a.y, b.y), c.y), 1), y1 = cellOf(std::max(std::max(a.y, b.y), c.y), 1);
+    int32_t z0 = cellOf(std::min(std::min(a.z, b.z), c.z), 2), z1 = cellOf(std::max(std::max(a.z, b.z), c.z), 2);
+    for (int32_t z = z0; z <= z1; ++z)
+      for (int32_t y = y0; y <= y1; ++y)
+        for (int32_t x = x0; x <= x1; ++x) {
+          uint32_t k = uint32_t(g.cellIndex(x, y, z));
+          entries.push_back({k, uint32_t(t)});
+          ++g.start[k + 2];
+        }
   }
-  std::sort(entries.begin(), entries.end(), [](const Entry& a, const Entry& b) {
-    if (a.key != b.key) return a.key < b.key;
-    if (a.x != b.x) return a.x < b.x;
-    if (a.y != b.y) return a.y < b.y;
-    if (a.z != b.z) return a.z < b.z;
-    return a.tri < b.tri;
-  });
-  size_t cells = 0;
-  for (size_t i = 0; i < entries.size(); ++i)
-    if (i == 0 || entries[i].key != entries[i - 1].key || entries[i].x != entries[i - 1].x ||
-        entries[i].y != entries[i - 1].y || entries[i].z != entries[i - 1].z)
-      ++cells;
-  size_t slots = 16;
-  while (slots < cells * 2) slots *= 2;
-  g.table.assign(slots, Impl::Slot{0, 0, 0, 0, 0});
-  g.mask = slots - 1;
+  for (size_t k = 2; k < cellCount + 2; ++k) g.start[k] += g.start[k - 1];
+  // counting sort: start[k + 1] runs from the begin to the end of cell k; triangles ascending
   g.items.resize(entries.size());
-  for (size_t i = 0; i < entries.size();) {
-    size_t j = i;
-    while (j < entries.size() && entries[j].key == entries[i].key && entries[j].x == entries[i].x &&
-           entries[j].y == entries[i].y && entries[j].z == entries[i].z) {
-      g.items[j] = entries[j].tri;
-      ++j;
-    }
-    uint64_t s = entries[i].key & g.mask;
-    while (g.table[s].begin != g.table[s].end) s = (s + 1) & g.mask;
-    g.table[s] = {entries[i].x, entries[i].y, entries[i].z, uint32_t(i), uint32_t(j)};
-    i = j;
-  }
+  for (const Entry& e : entries) g.items[g.start[e.cell + 1]++] = e.tri;
+  g.start.pop_back();
   g.stamp.assign(triangleCount, 0);
 }
 
 TriangleGrid::~TriangleGrid() { delete impl_; }
 
-double TriangleGrid::distance(const double p[3]) const {
+double TriangleGrid::distance(const double p[3]) const { return std::sqrt(distance2Above(p, -1.0)); }
+
+double TriangleGrid::distance2Above(const double p[3], double floor2) const {
   const Impl& g = *impl_;
-  if (g.items.empty()) return std::numeric_limits<double>::infinity();
+  constexpr double inf = std::numeric_limits<double>::infinity();
+  if (g.items.empty()) return inf;
   if (++g.query == 0) {  // stamp wrap-around
     std::fill(g.stamp.begin(), g.stamp.end(), 0);
     g.query = 1;
   }
-  V3 q = {p[0], p[1], p[2]};
+  Impl::Q q{{p[0], p[1], p[2]}, inf, inf, floor2};
+  // Cell coordinates: u in cell units; c = the (clamped) cell holding p.
+  double u[3];
   int32_t c[3];
-  double inner = g.cell;
   for (int a = 0; a < 3; ++a) {
-    double u = (p[a] - g.origin[a]) / g.cell;
-    c[a] = int32_t(std::floor(u));
-    double f = u - std::floor(u);
-    inner = std::min(inner, std::min(f, 1 - f) * g.cell);
+    u[a] = (p[a] - g.lo[a]) * g.inv;
+    // clamp, then truncate (== floor on [0, n-1]); NaN -> 0
+    c[a] = int32_t(std::min(std::max(u[a], 0.0), double(g.n[a] - 1)));
   }
-  double best2 = std::numeric_limits<double>::infinity();
-  // Visit growing shells of cells; after shell r every unvisited triangle is farther than
-  // r * cell, so stop once the best distance found is within that.
-  for (int32_t r = 0; r < 64; ++r) {
-    for (int32_t dz = -r; dz <= r; ++dz)
-      for (int32_t dy = -r; dy <= r; ++dy)
-        for (int32_t dx = -r; dx <= r; ++dx) {
-          if (std::max({std::abs(dx), std::abs(dy), std::abs(dz)}) != r) continue;
-          const Impl::Slot* s = g.find(c[0] + dx, c[1] + dy, c[2] + dz);
-          if (!s) continue;
-          for (uint32_t i = s->begin; i < s->end; ++i) {
-            uint32_t t = g.items[i];
-            if (g.stamp[t] == g.query) continue;
-            g.stamp[t] = g.query;
-            const uint32_t* tri = g.triangles + size_t(t) * 3;
-            best2 = std::min(best2, pointTriangle2(q, at(g.positions, tri[0]), at(g.positions, tri[1]),
-                                                    at(g.positions, tri[2])));
+  const size_t home = g.cellIndex(c[0], c[1], c[2]);
+  if (floor2 > 0 && g.scanNear(home, q, std::sqrt(floor2))) return q.best2;
+  if (g.scan(home, q)) return q.best2;
+  if (q.best2 == inf) {
+    // Empty home cell: visit growing shells of cells (clamped to the grid) until a triangle is
+    // found; the ball pass below then settles the exact nearest one.
+    int32_t rmax = 0;
+    for (int a = 0; a < 3; ++a) rmax = std::max({rmax, c[a], g.n[a] - 1 - c[a]});
+    for (int32_t r = 1; r <= rmax && q.best2 == inf; ++r) {
+      int32_t z0 = std::max(c[2] - r, 0), z1 = std::min(c[2] + r, g.n[2] - 1);
+      int32_t y0 = std::max(c[1] - r, 0), y1 = std::min(c[1] + r, g.n[1] - 1);
+      int32_t x0 = std::max(c[0] - r, 0), x1 = std::min(c[0] + r, g.n[0] - 1);
+      for (int32_t z = z0; z <= z1; ++z)
+        for (int32_t y = y0; y <= y1; ++y) {
+          if (std::abs(z - c[2]) == r || std::abs(y - c[1]) == r) {  // a whole row of the shell
+            for (int32_t x = x0; x <= x1; ++x)
+              if (g.scan(g.cellIndex(x, y, z), q)) return q.best2;
+          } else {  // only the row's two ends belong to the shell
+            if (c[0] - r >= 0 && g.scan(g.cellIndex(c[0] - r, y, z), q)) return q.best2;
+            if (c[0] + r < g.n[0] && g.scan(g.cellIndex(c[0] + r, y, z), q)) return q.best2;
           }
         }
-    // every unvisited cell is beyond the query cell's faces plus r whole cells
-    double reach = inner + double(r) * g.cell;
-    if (best2 <= reach * reach) break;
-  }
-  if (std::isinf(best2)) {  // farther than 64 cells from everything: brute force
-    for (size_t t = 0; t < g.triangleCount; ++t) {
-      const uint32_t* tri = g.triangles + t * 3;
-      best2 = std::min(best2, pointTriangle2(q, at(g.positions, tri[0]), at(g.positions, tri[1]),
-                                              at(g.positions, tri[2])));
     }
   }
-  return std::sqrt(best2);
+  // Ball pass: every cell within the best distance (in cell units b, with slack) of p. A cell is
+  // skipped when its box is farther than b; b shrinks as better triangles are found.
+  auto radius = [&] { return q.best * g.inv * (1 + kSlack) + kSlack; };
+  double b = radius();
+  int32_t r0[3], r1[3];
+  for (int a = 0; a < 3; ++a) {
+    double l = std::floor(u[a] - b), h = std::floor(u[a] + b);
+    r0[a] = int32_t(std::min(std::max(l, 0.0), double(g.n[a] - 1)));
+    r1[a] = int32_t(std::min(std::max(h, 0.0), double(g.n[a] - 1)));
+  }
+  auto gap = [](double u, int32_t i) {
+    double g = std::max(double(i) - u, u - double(i + 1));
+    return g > 0 ? g * g : 0.0;
+  };
+  for (int32_t z = r0[2]; z <= r1[2]; ++z) {
+    double gz = gap(u[2], z);
+    if (gz > b * b) continue;
+    for (int32_t y = r0[1]; y <= r1[1]; ++y) {
+      double gyz = gz + gap(u[1], y);
+      if (gyz > b * b) continue;
+      for (int32_t x = r0[0]; x <= r1[0]; ++x) {
+        if (gyz + gap(u[0], x) > b * b) continue;
+        size_t cell = g.cellIndex(x, y, z);
+        if (cell == home) continue;
+        double before = q.best2;
+        if (g.scan(cell, q)) return q.best2;
+        if (q.best2 != before) b = radius();
+      }
+    }
+  }
+  return q.best2;
 }
 
 double sampledDistance(const double* positions, const uint32_t* triangles, size_t triangleCount,
                        const TriangleGrid& to, const uint8_t* skipVertex) {
-  double worst = 0;
+  double worst2 = 0;
   // vertices: each once (the first triangle corner that uses it tests it)
   std::vector<uint8_t> seen;
   uint32_t maxIndex = 0;
@@ -221,16 +315,16 @@ double sampledDistance(const double* positions, const uint32_t* triangles, size_
     uint32_t v = triangles[i];
     if (seen[v] || (skipVertex && skipVertex[v])) continue;
     seen[v] = 1;
-    worst = std::max(worst, to.distance(positions + size_t(v) * 3));
+    worst2 = std::max(worst2, to.distance2Above(positions + size_t(v) * 3, worst2));
   }
   for (size_t t = 0; t < triangleCount; ++t) {
     double c[3];
     for (int a = 0; a < 3; ++a)
       c[a] = (positions[size_t(triangles[t * 3]) * 3 + a] + positions[size_t(triangles[t * 3 + 1]) * 3 + a] +
               positions[size_t(triangles[t * 3 + 2]) * 3 + a]) / 3;
-    worst = std::max(worst, to.distance(c));
+    worst2 = std::max(worst2, to.distance2Above(c, worst2));
   }
-  return worst;
+  return std::sqrt(worst2);
 }
 
 }  // namespace mt

@@ -3,13 +3,17 @@
 //   mtstore info STORE [--json]
 //   mtstore export STORE -o OUT.ply
 //   mtstore check STORE
+//   mtstore heal STORE [--weld EPS] [--remove-degenerate] ... [--memory SIZE]  (passes in order given)
 #include <CLI/CLI.hpp>
 
+#include <algorithm>
 #include <cinttypes>
+#include <filesystem>
 #include <cstdio>
 #include <iostream>
 #include <sstream>
 
+#include "patchstore/heal/heal.h"
 #include "patchstore/patch_store.h"
 #include "tools/partition_choice.h"
 
@@ -115,6 +119,32 @@ int main(int argc, char** argv) {
   CLI::App* check = app.add_subcommand("check", "Verify checksums and that every boundary entry is mirrored");
   check->add_option("store", dir, "Store directory")->required();
 
+  // heal: passes run in the order they appear on the command line (CLI11's parse order).
+  CLI::App* heal = app.add_subcommand("heal", "Run healing passes on a store, out of core, in the order given");
+  double weldEps = 0;
+  uint64_t minComponent = 0;
+  uint32_t maxHoleEdges = 0, smoothIterations = 0;
+  std::string healMemory = "256M";
+  bool flagDegenerate = false, flagDuplicate = false, flagUnreferenced = false, flagNonManifold = false;
+  heal->add_option("store", dir, "Store directory (changed in place)")->required();
+  CLI::Option* optWeld = heal->add_option(
+      "--weld", weldEps, "Merge vertices closer than EPS into one, across patches too (0: exactly equal positions)");
+  CLI::Option* optDegenerate = heal->add_flag("--remove-degenerate", flagDegenerate, "Remove triangles with a repeated vertex");
+  CLI::Option* optDuplicate =
+      heal->add_flag("--remove-duplicate-faces", flagDuplicate, "Remove triangles with the same three vertices as an earlier one");
+  CLI::Option* optUnreferenced = heal->add_flag("--remove-unreferenced", flagUnreferenced, "Remove vertices no triangle uses");
+  CLI::Option* optComponents = heal->add_option(
+      "--remove-small-components", minComponent, "Remove connected components with fewer than N triangles (even across patches)");
+  CLI::Option* optNonManifold = heal->add_flag(
+      "--fix-nonmanifold", flagNonManifold, "Split non-manifold edges (more than two triangles) and vertices (several fans) into manifold ones");
+  CLI::Option* optHoles = heal->add_option(
+      "--fill-holes", maxHoleEdges,
+      "Fill holes whose border has at most MAXEDGES edges: triangulate, refine and fair (CGAL), across patch borders too");
+  CLI::Option* optSmooth = heal->add_option(
+      "--smooth", smoothIterations, "Taubin smoothing (lambda 0.5, mu -0.53), ITER iterations, borders included");
+  heal->add_option("--memory", healMemory, "Memory cap for sorts and tables, e.g. 512M, 4G (default 256M)");
+  heal->add_flag("-q,--quiet", quiet, "No progress lines on stderr");
+
   CLI11_PARSE(app, argc, argv);
   try {
     if (*ingest) {
@@ -137,6 +167,39 @@ int main(int argc, char** argv) {
     if (*exportCmd) {
       auto store = mt::PatchStore::open(dir);
       store->exportPly(output, !quiet);
+      return 0;
+    }
+    if (*heal) {
+      mt::heal::HealOptions options;
+      options.memoryBytes = mt::parseSize(healMemory);
+      options.progress = !quiet;
+      if (heal->parse_order().empty() ||
+          std::none_of(heal->parse_order().begin(), heal->parse_order().end(), [&](const CLI::Option* o) {
+            return o == optWeld || o == optDegenerate || o == optDuplicate || o == optUnreferenced || o == optComponents ||
+                   o == optNonManifold || o == optHoles || o == optSmooth;
+          })) {
+        std::fprintf(stderr, "mtstore heal: no pass given (see mtstore heal --help)\n");
+        return 1;
+      }
+      auto store = mt::PatchStore::open(dir);
+      for (const CLI::Option* o : heal->parse_order()) {
+        mt::heal::PassReport r;
+        if (o == optWeld) r = mt::heal::weld(*store, weldEps, options);
+        else if (o == optDegenerate) r = mt::heal::removeDegenerate(*store, options);
+        else if (o == optDuplicate) r = mt::heal::removeDuplicateFaces(*store, options);
+        else if (o == optUnreferenced) r = mt::heal::removeUnreferenced(*store, options);
+        else if (o == optComponents) r = mt::heal::removeSmallComponents(*store, minComponent, options);
+        else if (o == optNonManifold) r = mt::heal::fixNonManifold(*store, options);
+        else if (o == optHoles) r = mt::heal::fillHoles(*store, maxHoleEdges, options);
+        else if (o == optSmooth) r = mt::heal::smooth(*store, smoothIterations, options);
+        else continue;  // --memory, --quiet, the store
+        std::printf("%s\n", r.line().c_str());
+        std::fflush(stdout);
+      }
+      store->sync();
+      std::error_code ec;
+      std::filesystem::remove_all(dir + "/tmp", ec);
+      std::fprintf(stderr, "heal: peak RSS %.1f MiB\n", double(mt::peakRssBytes()) / (1 << 20));
       return 0;
     }
     if (*check) {

@@ -1,5 +1,5 @@
 // The --partition choice shared by mtstore and mtbuild: which CellAssigner ingest uses, and the
-// partition metrics `mtstore info` prints. Until the V-partitions are wired in, only the grid.
+// partition metrics `mtstore info` prints.
 #pragma once
 
 #include <memory>
@@ -8,19 +8,27 @@
 #include "patchstore/cell_assigner.h"
 #include "patchstore/error.h"
 #include "patchstore/patch_store.h"
+#include "vpartition/vpartition.h"
 
 namespace mt::tools {
 
-inline const char* kDefaultPartition = "grid";
+inline const char* kDefaultPartition = "irregular";
 
-inline std::string partitionHelp() { return "Cell assignment for level-0 patches: grid (default)"; }
-
-inline std::unique_ptr<CellAssigner> makeAssigner(const std::string& kind, uint32_t patchTriangles) {
-  if (kind == "grid") return makeGridAssigner(patchTriangles);
-  throw Error("unknown --partition '" + kind + "' (expected grid)");
+inline std::string partitionHelp() {
+  return "Cell assignment of level-0 patches: irregular (default; V-partition, BMT 4.2.2), regular "
+         "(3D cube/octahedron V-partition, 4.2.1), regular2d (terrains), or grid (a plain uniform grid, "
+         "no multiresolution sequence)";
 }
 
-// Per-level shape metrics of the store's partition (text or a JSON value), or "" if none.
-inline std::string partitionMetrics(const PatchStore&, bool) { return ""; }
+inline std::unique_ptr<CellAssigner> makeAssigner(const std::string& kind, uint32_t patchTriangles) {
+  if (kind == "grid") return makeGridAssigner(patchTriangles ? patchTriangles : kDefaultPatchTriangles);
+  VPartitionOptions o;
+  o.kind = parsePartitionKind(kind);
+  o.patchTriangles = patchTriangles;
+  return makeVPartitionAssigner(o);
+}
+
+// Per-level shape metrics of the store's partition (text, or a JSON value), or "" if none.
+inline std::string partitionMetrics(const PatchStore& store, bool json) { return storePartitionMetrics(store, json); }
 
 }  // namespace mt::tools

@@ -1,0 +1,390 @@
+// Triangle -> cell assignment and the crossing V*i = Vi x V(i+1) (BMT section 4: "a rule that
+// uniquely assigns a triangle t to a region of space, e.g. the one where the barycenter of t
+// falls"), plus the sequence's serialized form and the ingest CellAssigner.
+//
+// Serialized form (little endian), kept by the store as blob "assigner":
+//   "MTVPSEQ1" | u32 version=1 | u8 kind | u32 levelCount | levels | u64 XXH64(all before)
+//   level: u8 type | f64 scale | u64 target | f64 origin[3] | u32 n[3] | u8 axis0 | u8 axis1 |
+//          u32 seedCount | f32 seeds[3*seedCount]
+// The seeds are stored bit-exactly, so a deserialized sequence assigns exactly like the original.
+#include <algorithm>
+#include <unordered_map>
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+#include <sstream>
+
+#include <xxhash.h>
+
+#include "patchstore/error.h"
+#include "vpartition/level.h"
+#include "vpartition/vpartition.h"
+
+namespace mt {
+
+namespace vp {
+
+uint32_t PartitionLevel::cellCount() const {
+  return type == Seeds ? uint32_t(seeds.size() / 3) : regularCellCount(*this);
+}
+
+uint32_t PartitionLevel::cellOf(const float c[3]) const {
+  if (type != Seeds) return regularCellOf(*this, c);
+  if (!(std::isfinite(c[0]) && std::isfinite(c[1]) && std::isfinite(c[2]))) return 0;
+  return index.nearestCached(c);
+}
+
+void PartitionLevel::seedOf(uint32_t cell, float out[3]) const {
+  if (type != Seeds) return regularSeedOf(*this, cell, out);
+  assert(cell < seeds.size() / 3);
+  std::memcpy(out, &seeds[3 * size_t(cell)], 12);
+}
+
+}  // namespace vp
+
+PartitionKind parsePartitionKind(const std::string& text) {
+  if (text == "irregular") return PartitionKind::Irregular;
+  if (text == "regular") return PartitionKind::Regular;
+  if (text == "regular2d") return PartitionKind::Regular2D;
+  throw Error("--partition: expected irregular, regular or regular2d, got '" + text + "'");
+}
+
+const char* partitionKindName(PartitionKind kind) {
+  switch (kind) {
+    case PartitionKind::Irregular: return "irregular";
+    case PartitionKind::Regular: return "regular";
+    case PartitionKind::Regular2D: return "regular2d";
+  }
+  return "?";
+}
+
+uint32_t parsePatchTriangles(const std::string& text) {
+  char* end = nullptr;
+  errno = 0;
+  unsigned long long v = text.empty() ? 0 : std::strtoull(text.c_str(), &end, 10);
+  if (text.empty() || *end != '\0' || errno || text[0] == '-' || v < 16 || v > (1u << 24))
+    throw Error("--patch-triangles: expected an integer in [16, 16777216], got '" + text + "'");
+  return uint32_t(v);
+}
+
+PartitionSequence::PartitionSequence() = default;
+PartitionSequence::~PartitionSequence() = default;
+PartitionSequence::PartitionSequence(PartitionSequence&&) noexcept = default;
+PartitionSequence& PartitionSequence::operator=(PartitionSequence&&) noexcept = default;
+
+PartitionSequence PartitionSequence::build(const CentroidSource& centroids,
+                                           const VPartitionOptions& options) {
+  return options.kind == PartitionKind::Irregular ? buildIrregularSequence(centroids, options)
+                                                  : buildRegularSequence(centroids, options);
+}
+
+void PartitionSequence::addLevel(std::unique_ptr<PartitionLevel> level) {
+  assert(level);
+  if (level->type == PartitionLevel::Seeds) level->finishSeeds();
+  levels_.push_back(std::move(level));
+}
+
+uint32_t PartitionSequence::cellCount(uint32_t level) const {
+  assert(level < levels_.size());
+  return levels_[level]->cellCount();
+}
+
+uint32_t PartitionSequence::cellOf(uint32_t level, const float c[3]) const {
+  assert(level < levels_.size());
+  uint32_t id = levels_[level]->cellOf(c);
+  assert(id < levels_[level]->cellCount());
+  return id;
+}
+
+uint64_t PartitionSequence::crossKey(uint32_t level, const float c[3]) const {
+  uint64_t hi = cellOf(level, c);
+  // Past the coarsest level the next partition is the single root cell 0.
+  uint64_t lo = level + 1 < levels_.size() ? cellOf(level + 1, c) : 0;
+  return (hi << 32) | lo;
+}
+
+void PartitionSequence::seedOf(uint32_t level, uint32_t cell, float out[3]) const {
+  assert(level < levels_.size());
+  levels_[level]->seedOf(cell, out);
+}
+
+const std::vector<float>& PartitionSequence::seeds(uint32_t level) const {
+  assert(level < levels_.size());
+  return levels_[level]->seeds;
+}
+
+double PartitionSequence::levelScale(uint32_t level) const {
+  assert(level < levels_.size());
+  return levels_[level]->scale;
+}
+
+uint64_t PartitionSequence::memoryBytes() const {
+  uint64_t bytes = 0;
+  for (const auto& L : levels_) bytes += L->seeds.capacity() * sizeof(float) + L->index.bytes();
+  return bytes;
+}
+
+uint64_t PartitionSequence::levelTarget(uint32_t level) const {
+  assert(level < levels_.size());
+  return levels_[level]->target;
+}
+
+std::string PartitionSequence::describe() const {
+  std::ostringstream s;
+  s << partitionKindName(kind_) << " V-partition, " << levels_.size() << " levels";
+  if (kind_ == PartitionKind::Irregular) {
+    s << ", seeds";
+    for (size_t l = 0; l < levels_.size(); ++l) s << (l ? "/" : " ") << levels_[l]->cellCount();
+  } else if (!levels_.empty()) {
+    s << ", finest spacing " << levels_[0]->scale;
+  }
+  return s.str();
+}
+
+namespace {
+
+const char kMagic[8] = {'M', 'T', 'V', 'P', 'S', 'E', 'Q', '1'};
+constexpr uint32_t kVersion = 1;
+
+template <class T> void put(std::string& out, const T& v) {
+  out.append(reinterpret_cast<const char*>(&v), sizeof(T));
+}
+
+struct Reader {
+  const std::string& in;
+  size_t pos = 0;
+  template <class T> T get() {
+    T v;
+    need(sizeof(T));
+    std::memcpy(&v, in.data() + pos, sizeof(T));
+    pos += sizeof(T);
+    return v;
+  }
+  void need(size_t n) {
+    if (in.size() - pos < n)
+      throw Error("V-partition blob: truncated at byte " + std::to_string(pos));
+  }
+};
+
+}  // namespace
+
+std::string PartitionSequence::serialize() const {
+  std::string out(kMagic, 8);
+  put(out, kVersion);
+  put(out, uint8_t(kind_));
+  put(out, uint32_t(levels_.size()));
+  for (const auto& L : levels_) {
+    put(out, uint8_t(L->type));
+    put(out, L->scale);
+    put(out, L->target);
+    for (int a = 0; a < 3; ++a) put(out, L->origin[a]);
+    for (int a = 0; a < 3; ++a) put(out, L->n[a]);
+    put(out, L->axis0);
+    put(out, L->axis1);
+    put(out, uint32_t(L->seeds.size() / 3));
+    out.append(reinterpret_cast<const char*>(L->seeds.data()), L->seeds.size() * sizeof(float));
+  }
+  put(out, uint64_t(XXH64(out.data(), out.size(), 0)));
+  return out;
+}
+
+PartitionSequence PartitionSequence::deserialize(const std::string& bytes) {
+  if (bytes.size() < 8 + 4 + 1 + 4 + 8 || std::memcmp(bytes.data(), kMagic, 8) != 0)
+    throw Error("V-partition blob: bad magic (not a serialized PartitionSequence)");
+  uint64_t stored;
+  std::memcpy(&stored, bytes.data() + bytes.size() - 8, 8);
+  if (XXH64(bytes.data(), bytes.size() - 8, 0) != stored)
+    throw Error("V-partition blob: checksum mismatch (corrupt)");
+  std::string body = bytes.substr(0, bytes.size() - 8);
+  Reader r{body, 8};
+  uint32_t version = r.get<uint32_t>();
+  if (version != kVersion)
+    throw Error("V-partition blob: unsupported version " + std::to_string(version));
+  uint8_t kind = r.get<uint8_t>();
+  if (kind > 2) throw Error("V-partition blob: bad kind " + std::to_string(kind));
+  PartitionSequence seq;
+  seq.kind_ = PartitionKind(kind);
+  uint32_t levels = r.get<uint32_t>();
+  for (uint32_t l = 0; l < levels; ++l) {
+    auto L = std::make_unique<PartitionLevel>();
+    uint8_t type = r.get<uint8_t>();
+    if (type > PartitionLevel::Diamond)
+      throw Error("V-partition blob: level " + std::to_string(l) + ": bad type");
+    L->type = PartitionLevel::Type(type);
+    L->scale = r.get<double>();
+    L->target = r.get<uint64_t>();
+    for (int a = 0; a < 3; ++a) L->origin[a] = r.get<double>();
+    for (int a = 0; a < 3; ++a) L->n[a] = r.get<uint32_t>();
+    L->axis0 = r.get<uint8_t>();
+    L->axis1 = r.get<uint8_t>();
+    uint32_t count = r.get<uint32_t>();
+    if (!(L->scale > 0) || L->axis0 > 2 || L->axis1 > 2 || L->n[0] == 0 || L->n[1] == 0 ||
+        L->n[2] == 0 || (L->type == PartitionLevel::Seeds) != (count > 0))
+      throw Error("V-partition blob: level " + std::to_string(l) + ": bad header");
+    r.need(size_t(count) * 12);
+    L->seeds.resize(size_t(count) * 3);
+    std::memcpy(L->seeds.data(), body.data() + r.pos, size_t(count) * 12);
+    r.pos += size_t(count) * 12;
+    seq.addLevel(std::move(L));
+  }
+  if (r.pos != body.size()) throw Error("V-partition blob: trailing bytes");
+  return seq;
+}
+
+void VPartitionAssigner::prepare(const CentroidSource& centroids, uint64_t memoryBytes) {
+  sequence_ = PartitionSequence::build(centroids, options_);
+  mergeSlivers(centroids);
+  // The seeds must stay in core (BMT 4.2.2: "about one seed per thousand triangles"); refuse
+  // rather than silently exceed the caller's share of --memory.
+  if (memoryBytes && sequence_.stats().seedBytes > memoryBytes)
+    throw Error("V-partition: seeds and grids need " +
+                std::to_string(sequence_.stats().seedBytes >> 20) + " MiB, more than the " +
+                std::to_string(memoryBytes >> 20) + " MiB allowed; raise --memory or " +
+                "--patch-triangles");
+}
+
+// Balancing the patches (the V*0 cells). Crossing V0 with V1 gives uneven pieces: where a V1
+// border runs close to a V0 border it leaves slivers of a handful of triangles, and a V0 cell no
+// V1 border crosses stays whole (~kCrossPerCell patches' worth). The level loop reads only the V1
+// half of a patch's key (its region), so the V0 half may be refined freely:
+//   * a piece with fewer than a quarter of the target joins the largest piece of its V0 cell
+//     (its V1 half changes: the V1 region border follows the V0 border there); a V0 cell that is
+//     tiny as a whole joins the piece of its V1 region with the nearest V0 seed;
+//   * a piece with more than 1.6x the target is cut into k = round(n / target) slabs along the
+//     longest axis of its bounding box, at quantiles (slab index in the key's top 8 bits).
+// Two extra streaming passes (piece counts and boxes; histograms of the pieces to cut); memory
+// is per piece, not per triangle.
+namespace {
+constexpr int kSlabShift = 56;  // V0 cell ids stay below 2^24 (checked); slab index above them
+}
+
+void VPartitionAssigner::mergeSlivers(const CentroidSource& centroids) {
+  remap_.clear();
+  slabs_.clear();
+  if (sequence_.levels() < 2 || sequence_.cellCount(0) >= (1u << 24)) return;
+  struct Piece {
+    uint32_t count = 0;
+    float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+  };
+  std::unordered_map<uint64_t, Piece> pieces;
+  centroids.forEach([&](const float* c, size_t n) {
+    for (size_t i = 0; i < n; ++i) {
+      Piece& p = pieces[sequence_.crossKey(0, c + 4 * i)];
+      ++p.count;
+      for (int a = 0; a < 3; ++a) {
+        p.lo[a] = std::min(p.lo[a], c[4 * i + a]);
+        p.hi[a] = std::max(p.hi[a], c[4 * i + a]);
+      }
+    }
+  });
+  const uint32_t target = options_.patchTriangles ? options_.patchTriangles : kDefaultPatchTriangles;
+  const uint32_t small = std::max<uint32_t>(1, target / 4);
+  std::vector<std::pair<uint64_t, Piece>> sorted(pieces.begin(), pieces.end());
+  std::sort(sorted.begin(), sorted.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  auto join = [&](size_t from, size_t into) {
+    remap_[sorted[from].first] = sorted[into].first;
+    Piece& big = sorted[into].second;
+    big.count += sorted[from].second.count;
+    for (int a = 0; a < 3; ++a) {
+      big.lo[a] = std::min(big.lo[a], sorted[from].second.lo[a]);
+      big.hi[a] = std::max(big.hi[a], sorted[from].second.hi[a]);
+    }
+  };
+  // 1. Slivers join the largest piece of their V0 cell.
+  std::vector<size_t> lonely;  // small pieces that are their V0 cell's largest
+  for (size_t i = 0; i < sorted.size();) {  // grouped by V0 cell (the high half)
+    size_t j = i, largest = i;
+    while (j < sorted.size() && PartitionSequence::crossHigh(sorted[j].first) == PartitionSequence::crossHigh(sorted[i].first)) {
+      if (sorted[j].second.count > sorted[largest].second.count) largest = j;
+      ++j;
+    }
+    for (size_t k = i; k < j; ++k)
+      if (k != largest && sorted[k].second.count < small) join(k, largest);
+    if (sorted[largest].second.count < small) lonely.push_back(largest);
+    i = j;
+  }
+  // 2. A whole V0 cell that is still tiny (debris, a thin strip) joins the piece of the same V1
+  //    region whose V0 seed is nearest, so the region is unchanged.
+  std::unordered_map<uint32_t, std::vector<size_t>> byRegion;
+  for (size_t k = 0; k < sorted.size(); ++k)
+    if (!remap_.count(sorted[k].first)) byRegion[PartitionSequence::crossLow(sorted[k].first)].push_back(k);
+  for (size_t k : lonely) {
+    float a[3], b[3];
+    sequence_.seedOf(0, PartitionSequence::crossHigh(sorted[k].first), a);
+    size_t best = k;
+    double bestD = INFINITY;
+    for (size_t o : byRegion[PartitionSequence::crossLow(sorted[k].first)]) {
+      if (o == k || remap_.count(sorted[o].first) || sorted[o].second.count < small) continue;
+      sequence_.seedOf(0, PartitionSequence::crossHigh(sorted[o].first), b);
+      double d = double(a[0] - b[0]) * (a[0] - b[0]) + double(a[1] - b[1]) * (a[1] - b[1]) + double(a[2] - b[2]) * (a[2] - b[2]);
+      if (d < bestD) bestD = d, best = o;
+    }
+    if (best != k) join(k, best);
+  }
+  // 3. Oversized pieces are cut into slabs of about `target` triangles along their longest axis,
+  //    at quantiles of a histogram gathered in one more pass.
+  constexpr int kBins = 256;
+  struct Cut {
+    int axis;
+    float lo, width;
+    std::vector<uint32_t> histogram;
+  };
+  std::unordered_map<uint64_t, Cut> cuts;
+  for (auto& [key, p] : sorted) {
+    if (remap_.count(key) || p.count <= target * 8 / 5) continue;
+    int axis = 0;
+    for (int a = 1; a < 3; ++a)
+      if (p.hi[a] - p.lo[a] > p.hi[axis] - p.lo[axis]) axis = a;
+    if (!(p.hi[axis] > p.lo[axis])) continue;
+    cuts[key] = {axis, p.lo[axis], (p.hi[axis] - p.lo[axis]) / kBins, std::vector<uint32_t>(kBins, 0)};
+  }
+  if (cuts.empty()) return;
+  centroids.forEach([&](const float* c, size_t n) {
+    for (size_t i = 0; i < n; ++i) {
+      uint64_t key = sequence_.crossKey(0, c + 4 * i);
+      auto r = remap_.find(key);
+      if (r != remap_.end()) key = r->second;
+      auto it = cuts.find(key);
+      if (it == cuts.end()) continue;
+      Cut& cut = it->second;
+      int bin = int(std::clamp((c[4 * i + cut.axis] - cut.lo) / cut.width, 0.0f, float(kBins - 1)));
+      ++cut.histogram[bin];
+    }
+  });
+  for (auto& [key, cut] : cuts) {
+    uint64_t total = 0;
+    for (uint32_t h : cut.histogram) total += h;
+    uint32_t slabs = uint32_t(std::clamp<uint64_t>((total + target / 2) / target, 1, 255));
+    if (slabs < 2) continue;
+    Slabs s;
+    s.axis = cut.axis;
+    uint64_t run = 0;
+    for (int b = 0; b < kBins && s.bounds.size() + 1 < slabs; ++b) {
+      run += cut.histogram[b];
+      if (run * slabs >= total * (s.bounds.size() + 1)) s.bounds.push_back(cut.lo + cut.width * float(b + 1));
+    }
+    slabs_[key] = std::move(s);
+  }
+}
+
+uint64_t VPartitionAssigner::cellKey(const float c[3]) const {
+  uint64_t key = sequence_.crossKey(0, c);
+  auto it = remap_.find(key);
+  if (it != remap_.end()) key = it->second;
+  auto s = slabs_.find(key);
+  if (s == slabs_.end()) return key;
+  const std::vector<float>& bounds = s->second.bounds;
+  uint64_t slab = uint64_t(std::upper_bound(bounds.begin(), bounds.end(), c[s->second.axis]) - bounds.begin());
+  return key | slab << kSlabShift;
+}
+
+std::string VPartitionAssigner::describe() const {
+  return sequence_.describe() + "; patches balanced: " + std::to_string(remap_.size()) + " V*0 slivers merged, " +
+         std::to_string(slabs_.size()) + " large cells cut into slabs";
+}
+
+std::unique_ptr<CellAssigner> makeVPartitionAssigner(const VPartitionOptions& options) {
+  return std::make_unique<VPartitionAssigner>(options);
+}
+
+}  // namespace mt

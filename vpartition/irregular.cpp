@@ -1,0 +1,546 @@
+// Irregular V-partitioning (BMT section 4.2.2): seed sets Q0..Q(L-1) from streaming passes.
+//
+// "We sequentially scan the surface triangles, adding the barycenter of the triangle t to the seed
+// set Q every time t is farther than r from all the other points of Q. Then, in a second
+// sequential scan, we remove small patches and we apply a step of Lloyd's relaxation." All levels
+// are seeded in the same scans, each with its own radius r_i and its own hash grid.
+//
+// Radii: level i should hold N / (T0 * 2^i) cells, where T0 is the triangles of a V0 cell; BMT
+// halves the triangles per level and the cells with them ("decreasing the triangle count, from a
+// level to the next, by the same ratio as the number of seeds"), so on a surface r_(i+1) ~ sqrt(2)
+// r_i. T0 = patchTriangles * kCrossPerCell because the patches are the V*0 cells, and each V0 cell
+// is cut into ~kCrossPerCell pieces by the V1 cells (measured, docs/vpartition.md).
+//
+// Passes (each one sequential scan of the centroid stream):
+//   1. total area (the area channel) -> r_i from the mean area per cell, and a coarse density
+//      grid (mean triangle area per diag/256 cell) so the radius follows the local density;
+//   2. Poisson-disk seeding of every level; if a level's seed count misses its target by more
+//      than kCalibrationTolerance, r_i is rescaled (counts go as 1/r^2) and this pass is repeated
+//      (at most kMaxCalibrations times; typically 1, since the packing density of the stream
+//      order is not known in advance);
+//   3. nearest-seed assignment: drop seeds whose cells are below kMinCellFraction of the mean
+//      (their triangles go to the next nearest seed), move the others to their cell's
+//      centroid (one Lloyd step, in the triangle-count measure);
+//   4. recount with the moved seeds and drop the cells that became too small or empty, so every
+//      cell is non-empty and no smaller than kMinCellFraction of the mean.
+// Memory: seeds + one hash grid per level (~1 seed per kCrossPerCell * patchTriangles triangles,
+// times 2 for all levels), independent of the mesh size otherwise. Every pass is sequential per
+// level (levels run on separate threads), so the seeds are the same whatever the thread count.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <iterator>
+#include <thread>
+#include <unordered_map>
+#include <unordered_set>
+
+#include "vpartition/level.h"
+#include "vpartition/vpartition.h"
+
+namespace mt {
+
+namespace {
+
+using vp::PartitionLevel;
+
+constexpr double kCrossPerCell = 3.1;      // V*0 cells per V0 cell (measured, docs)
+constexpr double kAreaPerSeed = 1.45;      // first guess of cell area / r^2 (measured on scans)
+constexpr double kMinCellFraction = 0.35;  // "remove small patches": below this share of the mean
+constexpr double kCalibrationTolerance = 0.05;
+constexpr int kMaxCalibrations = 2;
+constexpr double kCalibrationAim = 1.05;   // seed a bit over the target, then trim (pass 4)
+constexpr double kTrimTolerance = 0.12;
+constexpr double kSplitFactor = 1.6;       // pass 3 splits cells above this multiple of the mean
+constexpr double kFinalSplitFactor = 1.9;  // pass 4 splits cells above this (then pass 5)
+constexpr double kCountTolerance = 0.15;   // a level's final count stays within this of target    // pass 4 trims levels above target * (1 + this)
+
+// Runs fn(level) for every level, levels spread over threads; each level stays on one thread and
+// sees the batches in order, which keeps the result independent of the thread count.
+template <class Fn> void forLevels(uint32_t requested, uint32_t levels, const Fn& fn) {
+  uint32_t hw = requested ? requested : std::max(1u, std::thread::hardware_concurrency());
+  uint32_t threads = std::min<uint32_t>(levels, hw);
+  if (threads <= 1) {
+    for (uint32_t l = 0; l < levels; ++l) fn(l);
+    return;
+  }
+  std::vector<std::thread> pool;
+  for (uint32_t t = 1; t < threads; ++t)
+    pool.emplace_back([&, t] { for (uint32_t l = t; l < levels; l += threads) fn(l); });
+  for (uint32_t l = 0; l < levels; l += threads) fn(l);
+  for (auto& th : pool) th.join();
+}
+
+// Local inverse density: mean triangle area around a point, from a coarse hash grid filled in the
+// area pass (cell size diag/256, so at most a few hundred thousand cells on any surface whatever
+// the triangle count), smoothed over the 3x3x3 neighbourhood. BMT wants "cells, within each
+// partition, [with] approximatively the same number of triangles"; scans have density varying by
+// 10x or more, so the seed radius follows sqrt(local mean area) instead of being one radius.
+class DensityGrid {
+ public:
+  explicit DensityGrid(const Box3& box) {
+    double e[3], d2 = 0;
+    for (int a = 0; a < 3; ++a) { e[a] = box.hi[a] - box.lo[a]; d2 += e[a] * e[a]; lo_[a] = box.lo[a]; }
+    double diag = std::sqrt(d2);
+    inv_ = diag > 0 ? 256.0 / diag : 1.0;
+  }
+  void add(const float* xyza, size_t count) {
+    for (size_t t = 0; t < count; ++t) {
+      auto& c = cells_[key(xyza + 4 * t, 0, 0, 0)];
+      c.area += std::max(0.0f, xyza[4 * t + 3]);
+      c.count += 1;
+    }
+  }
+  void finish(double globalMean) {
+    global_ = globalMean;
+    for (const auto& [k, v] : cells_) {
+      (void)v;
+      int64_t c[3] = {int64_t(k & kMask) - kBias, int64_t((k >> 21) & kMask) - kBias,
+                      int64_t(k >> 42) - kBias};
+      double area = 0, count = 0;
+      for (int64_t dz = -1; dz <= 1; ++dz)
+        for (int64_t dy = -1; dy <= 1; ++dy)
+          for (int64_t dx = -1; dx <= 1; ++dx) {
+            auto it = cells_.find(vp::packCell(c[0] + dx, c[1] + dy, c[2] + dz));
+            if (it != cells_.end()) { area += it->second.area; count += it->second.count; }
+          }
+      mean_[k] = count > 0 && area > 0 ? float(area / count) : float(globalMean);
+    }
+    cells_.clear();
+  }
+  double meanArea(const float* p) const {
+    auto it = mean_.find(key(p, 0, 0, 0));
+    return it == mean_.end() ? global_ : it->second;
+  }
+  uint64_t bytes() const { return (cells_.size() + mean_.size()) * 48; }
+
+ private:
+  static constexpr int64_t kBias = int64_t(1) << 20;
+  static constexpr uint64_t kMask = (1u << 21) - 1;
+  uint64_t key(const float* p, int dx, int dy, int dz) const {
+    return vp::packCell(int64_t(std::floor((p[0] - lo_[0]) * inv_)) + dx,
+                        int64_t(std::floor((p[1] - lo_[1]) * inv_)) + dy,
+                        int64_t(std::floor((p[2] - lo_[2]) * inv_)) + dz);
+  }
+  struct Sum { double area = 0; uint64_t count = 0; };
+  double lo_[3], inv_ = 1, global_ = 1;
+  std::unordered_map<uint64_t, Sum> cells_;
+  std::unordered_map<uint64_t, float> mean_;
+};
+
+// Seeding state of one level: the seeds so far in a hash grid of cell size `cell` (the level's
+// radius at the mean density). A triangle becomes a seed when no seed lies within its local
+// radius r(p) = scale * sqrt(meanArea(p)).
+class StreamSeeder {
+ public:
+  StreamSeeder(double cell, const Box3& box) : inv_(1.0 / cell) {
+    for (int a = 0; a < 3; ++a) lo_[a] = box.lo[a];
+  }
+  void offer(const float* p, float r) {
+    const float r2 = r * r;
+    // Stream coherence: the seed that covered the previous triangle usually covers this one.
+    if (last_ != UINT32_MAX && vp::dist2(p, &seeds_[3 * size_t(last_)]) <= r2) {
+      ++covered_[last_];
+      return;
+    }
+    int64_t c[3];
+    for (int a = 0; a < 3; ++a) c[a] = int64_t(std::floor((p[a] - lo_[a]) * inv_));
+    const int64_t k = std::max<int64_t>(1, int64_t(std::ceil(r * inv_)));
+    for (int64_t dz = -k; dz <= k; ++dz)
+      for (int64_t dy = -k; dy <= k; ++dy)
+        for (int64_t dx = -k; dx <= k; ++dx) {
+          auto it = head_.find(vp::packCell(c[0] + dx, c[1] + dy, c[2] + dz));
+          if (it == head_.end()) continue;
+          for (uint32_t s = it->second; s != UINT32_MAX; s = next_[s])
+            if (vp::dist2(p, &seeds_[3 * size_t(s)]) <= r2) {
+              last_ = s;
+              ++covered_[s];
+              return;
+            }
+        }
+    uint32_t id = uint32_t(seeds_.size() / 3);
+    seeds_.insert(seeds_.end(), p, p + 3);
+    radii_.push_back(r);
+    covered_.push_back(1);
+    auto [it, fresh] = head_.try_emplace(vp::packCell(c[0], c[1], c[2]), id);
+    next_.push_back(fresh ? UINT32_MAX : it->second);
+    it->second = id;
+    last_ = id;
+  }
+  uint32_t count() const { return uint32_t(seeds_.size() / 3); }
+  // Seeds that will likely survive the small-cell removal: the triangles a seed covered first in
+  // the stream approximate its cell, so small components and slivers show up here already and
+  // the calibration can aim at the count after removal.
+  uint32_t viable(uint64_t triangles) const {
+    double mean = double(triangles) / std::max(1u, count());
+    uint32_t n = 0;
+    for (uint32_t c : covered_) n += c >= kMinCellFraction * mean ? 1 : 0;
+    return std::max(1u, n);
+  }
+  std::vector<float>& seeds() { return seeds_; }
+  const std::vector<float>& radii() const { return radii_; }
+  uint64_t bytes() const {
+    return seeds_.capacity() * 4 + radii_.capacity() * 4 + next_.capacity() * 4 + head_.size() * 32;
+  }
+
+ private:
+  double inv_, lo_[3];
+  std::vector<float> seeds_, radii_;
+  std::vector<uint32_t> covered_;
+  std::unordered_map<uint64_t, uint32_t> head_;
+  std::vector<uint32_t> next_;
+  uint32_t last_ = UINT32_MAX;
+};
+
+// Per-seed sums of one level over one assignment pass.
+struct CellSums {
+  std::vector<uint32_t> count;
+  std::vector<double> plain;       // 3 per seed: sum of x, y, z
+  std::vector<double> second;      // 6 per seed (pass 3): sum of d d^T, d = centroid - seed
+};
+
+std::vector<CellSums> assignAll(const CentroidSource& src,
+                                const std::vector<std::vector<float>>& seeds,
+                                const std::vector<double>& radii, const Box3& box,
+                                uint32_t threads, uint32_t& passes,
+                                std::vector<std::vector<uint64_t>>* queryCells = nullptr) {
+  uint32_t levels = uint32_t(seeds.size());
+  std::vector<vp::SeedIndex> index(levels);
+  std::vector<CellSums> sums(levels);
+  for (uint32_t l = 0; l < levels; ++l) {
+    uint32_t n = uint32_t(seeds[l].size() / 3);
+    index[l].build(seeds[l].data(), n, radii[l], box.lo);
+    sums[l].count.assign(n, 0);
+    sums[l].plain.assign(3 * size_t(n), 0.0);
+    sums[l].second.assign(6 * size_t(n), 0.0);
+  }
+  std::vector<std::unordered_set<uint64_t>> cells(queryCells ? levels : 0);
+  src.forEach([&](const float* xyza, size_t count) {
+    forLevels(threads, levels, [&](uint32_t l) {
+      CellSums& s = sums[l];
+      uint64_t previous = ~0ull;
+      for (size_t t = 0; t < count; ++t) {
+        const float* c = xyza + 4 * t;
+        if (queryCells) {
+          uint64_t key = index[l].queryCell(c);
+          if (key != previous) cells[l].insert(key);  // stream coherence: skip repeats
+          previous = key;
+        }
+        uint32_t id = index[l].nearestCached(c);
+        ++s.count[id];
+        for (int a = 0; a < 3; ++a) s.plain[3 * size_t(id) + a] += c[a];
+        if (!s.second.empty()) {
+          const float* q = &seeds[l][3 * size_t(id)];
+          double d[3] = {double(c[0]) - q[0], double(c[1]) - q[1], double(c[2]) - q[2]};
+          double* m = &s.second[6 * size_t(id)];
+          m[0] += d[0] * d[0]; m[1] += d[0] * d[1]; m[2] += d[0] * d[2];
+          m[3] += d[1] * d[1]; m[4] += d[1] * d[2]; m[5] += d[2] * d[2];
+        }
+      }
+    });
+  });
+  ++passes;
+  if (queryCells) {
+    queryCells->resize(levels);
+    for (uint32_t l = 0; l < levels; ++l) {
+      (*queryCells)[l].assign(cells[l].begin(), cells[l].end());
+      std::sort((*queryCells)[l].begin(), (*queryCells)[l].end());
+    }
+  }
+  return sums;
+}
+
+// The two seeds that split cell i along its principal axis, at the centroids of the halves
+// (+-0.87 sigma for an even spread); false for a degenerate cell.
+bool splitCell(const CellSums& s, uint32_t i, const float* seed, float out[6]) {
+  double k = s.count[i];
+  if (k < 2) return false;
+  double mu[3], e[3];
+  for (int a = 0; a < 3; ++a) {
+    mu[a] = s.plain[3 * size_t(i) + a] / k;
+    e[a] = mu[a] - seed[a];  // moments are about the seed
+  }
+  const double* m2 = &s.second[6 * size_t(i)];
+  double C[3][3] = {{m2[0], m2[1], m2[2]}, {m2[1], m2[3], m2[4]}, {m2[2], m2[4], m2[5]}};
+  for (int a = 0; a < 3; ++a)
+    for (int b = 0; b < 3; ++b) C[a][b] = C[a][b] / k - e[a] * e[b];
+  double v[3] = {1, 0.7, 0.4}, lambda = 0;
+  for (int it = 0; it < 32; ++it) {  // power iteration: fixed start, deterministic
+    double w[3];
+    for (int a = 0; a < 3; ++a) w[a] = C[a][0] * v[0] + C[a][1] * v[1] + C[a][2] * v[2];
+    lambda = std::sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
+    if (!(lambda > 0)) return false;
+    for (int a = 0; a < 3; ++a) v[a] = w[a] / lambda;
+  }
+  double off = 0.87 * std::sqrt(lambda);
+  for (int a = 0; a < 3; ++a) {
+    out[a] = float(mu[a] - off * v[a]);
+    out[3 + a] = float(mu[a] + off * v[a]);
+  }
+  return off > 0;
+}
+
+}  // namespace
+
+PartitionSequence buildIrregularSequence(const CentroidSource& src, const VPartitionOptions& o) {
+  auto start = std::chrono::steady_clock::now();
+  PartitionBuildStats stats;
+  const uint32_t P = o.patchTriangles ? o.patchTriangles : kDefaultPatchTriangles;
+  const uint64_t N = src.count();
+  const Box3 box = src.bounds();
+  const uint32_t threads = o.threads;
+
+  // Pass 1: the surface area, globally for the radii and locally for the density grid.
+  double area = 0;
+  DensityGrid density(box);
+  src.forEach([&](const float* xyza, size_t count) {
+    for (size_t t = 0; t < count; ++t) area += std::max(0.0f, xyza[4 * t + 3]);
+    density.add(xyza, count);
+  });
+  ++stats.passes;
+
+  PartitionSequence seq;
+  seq.setKind(PartitionKind::Irregular);
+  if (N == 0) {
+    // Nothing to partition: one cell, seeded at the box centre, so cellOf() still works.
+    auto L = std::make_unique<PartitionLevel>();
+    L->scale = 1;
+    L->target = 1;
+    for (int a = 0; a < 3; ++a) L->seeds.push_back(float(0.5 * (box.lo[a] + box.hi[a])));
+    seq.addLevel(std::move(L));
+    seq.mutableStats() = stats;
+    return seq;
+  }
+  if (!(area > 0)) {
+    // Degenerate input (all triangles zero-area): use the bounding box faces as the area.
+    double e[3];
+    for (int a = 0; a < 3; ++a) e[a] = std::max(1e-30, box.hi[a] - box.lo[a]);
+    area = 2 * (e[0] * e[1] + e[1] * e[2] + e[0] * e[2]);
+  }
+
+  // Level targets: N / (T0 2^i) cells, down to the first level with <= maxCoarsestCells.
+  const double T0 = P * kCrossPerCell;
+  std::vector<double> target;
+  for (uint32_t l = 0; l < o.maxLevels; ++l) {
+    double t = std::max(1.0, std::round(double(N) / (T0 * std::ldexp(1.0, int(l)))));
+    target.push_back(t);
+    if (t <= o.maxCoarsestCells) break;
+  }
+  const uint32_t levels = uint32_t(target.size());
+  // Level radius at the mean density; locally r_l(p) = radius[l] * sqrt(meanArea(p) / meanArea).
+  const double meanArea = area / double(N);
+  density.finish(meanArea);
+  stats.seedBytes = density.bytes();
+  std::vector<double> radius(levels);
+  for (uint32_t l = 0; l < levels; ++l) radius[l] = std::sqrt(area / (target[l] * kAreaPerSeed));
+  std::vector<double> indexCell(levels);
+
+  // Pass 2 (+ calibration repeats): stream seeding of all levels.
+  std::vector<std::vector<float>> seeds(levels);
+  for (int attempt = 0;; ++attempt) {
+    std::vector<StreamSeeder> seeders;
+    for (uint32_t l = 0; l < levels; ++l) seeders.emplace_back(radius[l], box);
+    std::vector<float> local;  // sqrt(meanArea(p) / meanArea) per triangle of the batch
+    src.forEach([&](const float* xyza, size_t count) {
+      local.resize(count);
+      for (size_t t = 0; t < count; ++t)
+        local[t] = float(std::sqrt(density.meanArea(xyza + 4 * t) / meanArea));
+      forLevels(threads, levels, [&](uint32_t l) {
+        float r = float(radius[l]);
+        for (size_t t = 0; t < count; ++t) seeders[l].offer(xyza + 4 * t, r * local[t]);
+      });
+    });
+    ++stats.passes;
+    uint64_t bytes = density.bytes();
+    bool off = false;
+    for (uint32_t l = 0; l < levels; ++l) {
+      bytes += seeders[l].bytes();
+      // Only levels with room to be off by a cell are worth another pass.
+      // A level of n cells cannot be closer than ~1/n, and its count fluctuates by ~1/sqrt(n)
+      // from one radius to the next, so small levels get a wider tolerance.
+      double ratio = seeders[l].viable(N) / (target[l] * kCalibrationAim);
+      double tolerance = std::max(kCalibrationTolerance, 1.0 / std::sqrt(target[l]));
+      if (target[l] >= 8 && std::fabs(ratio - 1) > tolerance) off = true;
+    }
+    stats.seedBytes = std::max(stats.seedBytes, bytes);
+    if (off && attempt < kMaxCalibrations) {
+      for (uint32_t l = 0; l < levels; ++l)
+        radius[l] *= std::sqrt(double(seeders[l].viable(N)) / (target[l] * kCalibrationAim));
+      ++stats.calibrationPasses;
+      continue;
+    }
+    for (uint32_t l = 0; l < levels; ++l) {
+      // The nearest-seed index works best with grid cells about the seed spacing of the denser
+      // parts (candidate lists stay short there, where most triangles are).
+      std::vector<float> r = seeders[l].radii();
+      std::nth_element(r.begin(), r.begin() + r.size() / 5, r.end());
+      indexCell[l] = std::max(double(r[r.size() / 5]), radius[l] * 1e-3);
+      seeds[l] = std::move(seeders[l].seeds());
+    }
+    break;
+  }
+
+  // Pass 3: remove small cells, split big ones, one Lloyd step.
+  {
+    std::vector<CellSums> sums = assignAll(src, seeds, indexCell, box, o.threads, stats.passes);
+    for (uint32_t l = 0; l < levels; ++l) {
+      const CellSums& s = sums[l];
+      uint32_t n = uint32_t(s.count.size());
+      double mean = double(N) / n;
+      std::vector<float> moved;
+      moved.reserve(seeds[l].size());
+      // Splits are budgeted so the level stays under the trim limit of pass 4 (trimming would
+      // otherwise drop small separate components, dumping them into a neighbour's cell).
+      std::vector<uint8_t> split(n, 0);
+      {
+        uint64_t kept = 0;
+        std::vector<uint32_t> big;
+        for (uint32_t i = 0; i < n; ++i) {
+          if (s.count[i] == 0 || (n > 1 && s.count[i] < kMinCellFraction * mean)) continue;
+          ++kept;
+          if (s.count[i] > kSplitFactor * mean) big.push_back(i);
+        }
+        std::stable_sort(big.begin(), big.end(),
+                         [&](uint32_t a, uint32_t b) { return s.count[a] > s.count[b]; });
+        uint64_t limit = uint64_t(std::floor(target[l] * (1 + kTrimTolerance)));
+        if (l + 1 == levels) limit = std::min<uint64_t>(limit, o.maxCoarsestCells);
+        for (uint32_t i : big) {
+          if (kept + 1 > limit) break;
+          split[i] = 1;
+          ++kept;
+        }
+      }
+      for (uint32_t i = 0; i < n; ++i) {
+        if (s.count[i] == 0 || (n > 1 && s.count[i] < kMinCellFraction * mean)) {
+          ++stats.removedSeeds;
+          continue;
+        }
+        // Lloyd step in the triangle-count measure (plain centroid of the centroids, not the
+        // area-weighted one): it pulls seeds towards denser parts, which evens out triangle
+        // counts per cell, the quantity BMT wants constant.
+        double k = s.count[i];
+        double mu[3];
+        for (int a = 0; a < 3; ++a) mu[a] = s.plain[3 * size_t(i) + a] / k;
+        if (!split[i]) {
+          for (int a = 0; a < 3; ++a) moved.push_back(float(mu[a]));
+          continue;
+        }
+        // Too big a cell (a thin part whose both sides one ball covered, a region the stream
+        // order packed loosely): split it along its principal axis. Pass 4 checks the result.
+        float two[6];
+        if (splitCell(s, i, &seeds[l][3 * size_t(i)], two)) {
+          moved.insert(moved.end(), two, two + 6);
+          ++stats.splitSeeds;
+        } else {
+          for (int a = 0; a < 3; ++a) moved.push_back(float(mu[a]));
+        }
+      }
+      assert(!moved.empty());
+      seeds[l] = std::move(moved);
+    }
+  }
+
+  std::vector<std::vector<uint64_t>> queryCells;
+  bool recount = false;
+  // Pass 4: recount with the moved seeds; drop empty and too small cells, then, where a level
+  // still has more cells than aimed for (thin parts and separate components hold more seeds than
+  // their area predicts), the smallest cells down to the target. Removing a seed only grows its
+  // neighbours, so every kept cell stays non-empty; the coarsest level is cut to
+  // maxCoarsestCells, which bounds the root's backward star.
+  {
+    // The query cells the mesh touches, for the shared candidate table of the final index
+    // (same frame: origin box.lo, cell indexCell[l]), so random-order lookups stay fast.
+    std::vector<CellSums> sums =
+        assignAll(src, seeds, indexCell, box, o.threads, stats.passes, &queryCells);
+    for (uint32_t l = 0; l < levels; ++l) {
+      const CellSums& s = sums[l];
+      uint32_t n = uint32_t(s.count.size());
+      double mean = double(N) / n;
+      std::vector<uint32_t> keep;
+      for (uint32_t i = 0; i < n; ++i)
+        if (s.count[i] > 0 && (n == 1 || s.count[i] >= kMinCellFraction * mean)) keep.push_back(i);
+      uint64_t limit = uint64_t(std::floor(target[l] * (1 + kTrimTolerance)));
+      if (l + 1 == levels) limit = std::min<uint64_t>(limit, o.maxCoarsestCells);
+      limit = std::max<uint64_t>(1, limit);
+      if (keep.size() > limit) {
+        std::vector<uint32_t> bySize = keep;
+        std::stable_sort(bySize.begin(), bySize.end(),
+                         [&](uint32_t a, uint32_t b) { return s.count[a] < s.count[b]; });
+        bySize.resize(keep.size() - limit);
+        std::sort(bySize.begin(), bySize.end());
+        std::vector<uint32_t> rest;
+        std::set_difference(keep.begin(), keep.end(), bySize.begin(), bySize.end(),
+                            std::back_inserter(rest));
+        keep.swap(rest);
+      }
+      stats.removedSeeds += n - keep.size();
+      // Cells still far above the mean (a Lloyd step can move a seed off a curved part, e.g.
+      // into a small torus' hole, where it captures the whole ring) are split once more; pass 5
+      // then recounts. Budget: the count may reach target * (1 + kCountTolerance).
+      double keptMean = double(N) / keep.size();
+      uint64_t room = uint64_t(std::floor(target[l] * (1 + kCountTolerance)));
+      if (l + 1 == levels) room = std::min<uint64_t>(room, o.maxCoarsestCells);
+      room = room > keep.size() ? room - keep.size() : 0;
+      std::vector<float> kept;
+      kept.reserve(3 * keep.size());
+      for (uint32_t i : keep) {
+        float two[6];
+        if (room > 0 && s.count[i] > kFinalSplitFactor * keptMean &&
+            splitCell(s, i, &seeds[l][3 * size_t(i)], two)) {
+          kept.insert(kept.end(), two, two + 6);
+          --room;
+          ++stats.splitSeeds;
+          recount = true;
+          continue;
+        }
+        kept.insert(kept.end(), &seeds[l][3 * size_t(i)], &seeds[l][3 * size_t(i)] + 3);
+      }
+      assert(!kept.empty());
+      seeds[l] = std::move(kept);
+    }
+  }
+
+  // Pass 5, only after a late split: drop the cells that became empty or too small.
+  if (recount) {
+    std::vector<CellSums> sums = assignAll(src, seeds, indexCell, box, o.threads, stats.passes);
+    for (uint32_t l = 0; l < levels; ++l) {
+      const CellSums& s = sums[l];
+      uint32_t n = uint32_t(s.count.size());
+      double mean = double(N) / n;
+      std::vector<float> kept;
+      for (uint32_t i = 0; i < n; ++i) {
+        if (s.count[i] == 0 || (n > 1 && s.count[i] < kMinCellFraction * mean)) {
+          ++stats.removedSeeds;
+          continue;
+        }
+        kept.insert(kept.end(), &seeds[l][3 * size_t(i)], &seeds[l][3 * size_t(i)] + 3);
+      }
+      assert(!kept.empty());
+      seeds[l] = std::move(kept);
+    }
+  }
+
+  uint64_t tableBudget = o.lookupTableBytes;
+  for (uint32_t l = 0; l < levels; ++l) {
+    auto L = std::make_unique<PartitionLevel>();
+    L->type = PartitionLevel::Seeds;
+    L->scale = indexCell[l];
+    L->target = uint64_t(target[l]);
+    L->seeds = std::move(seeds[l]);
+    for (int a = 0; a < 3; ++a) L->origin[a] = box.lo[a];
+    // ~64 bytes per query cell (slot + candidates); finest levels first: ingest asks V0 and V1.
+    uint64_t tableBytes = 64 * queryCells[l].size();
+    if (tableBytes <= tableBudget) {
+      tableBudget -= tableBytes;
+      L->queryCells = std::move(queryCells[l]);
+    } else {
+      tableBudget = 0;
+    }
+    seq.addLevel(std::move(L));
+  }
+  stats.seedBytes = std::max(stats.seedBytes, seq.memoryBytes() + density.bytes());
+  stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  seq.mutableStats() = stats;
+  return seq;
+}
+
+}  // namespace mt
