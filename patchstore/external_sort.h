@@ -25,9 +25,14 @@ class ExternalSorter {
       : prefix_(std::move(tempPrefix)), less_(less) {
     capacity_ = std::max<size_t>(1024, size_t(budgetBytes / sizeof(Record)));
   }
-  ~ExternalSorter() {
+  ~ExternalSorter() { release(); }
+
+  void release() {
     readers_.clear();
     for (auto& path : runs_) std::remove(path.c_str());
+    runs_.clear();
+    std::vector<Record>().swap(buffer_);
+    memoryPos_ = 0;
   }
 
   void add(const Record& r) {
@@ -60,13 +65,21 @@ class ExternalSorter {
     }
   }
 
+  // Once it returns false the sorter has released its memory and run files, so the next pass
+  // gets the budget (and the disk) back before the sorter object goes out of scope.
   bool next(Record& out) {
     if (runs_.empty()) {
-      if (memoryPos_ >= buffer_.size()) return false;
+      if (memoryPos_ >= buffer_.size()) {
+        release();
+        return false;
+      }
       out = buffer_[memoryPos_++];
       return true;
     }
-    if (heap_.empty()) return false;
+    if (heap_.empty()) {
+      release();
+      return false;
+    }
     Entry top = heap_.top();
     heap_.pop();
     out = top.record;

@@ -15,6 +15,7 @@
 //                vertices -> (vertex, patch, local) sorted by vertex; edge use counts
 //   7 boundary   grouped by vertex -> (p, vp, q, vq) sorted by p -> one boundary block per patch
 // Determinism: every sort key is total, so the store does not depend on the cap or thread count.
+#include <malloc.h>
 #include <tbb/parallel_for.h>
 #include <unistd.h>
 
@@ -428,6 +429,11 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
   IngestReport report;
   report.input = input;
   const uint64_t B = opt.memoryBytes;
+  // The cap is about RSS, and glibc's dynamic mmap threshold would serve later multi-MiB buffers
+  // from the heap, where freed memory stays resident behind live blocks: keep every buffer of a
+  // MiB or more in its own mapping, so that what a pass frees leaves the process at once.
+  mallopt(M_MMAP_THRESHOLD, 1 << 20);
+  auto endOfPass = [] { malloc_trim(0); };
 
   // 1 parse
   auto reader = openMesh(input);
@@ -455,13 +461,14 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
   }
 
   // 2 centroids
-  computeCentroids(scratch, vlayout, nv, nf, B / 2, opt.progress);
+  computeCentroids(scratch, vlayout, nv, nf, B * 2 / 5, opt.progress);
+  endOfPass();
 
   // 3 assign
   CentroidFile centroids(scratch + "/cent.bin", nf, sink.bounds);
   assigner.prepare(centroids, B / 2);
   report.assigner = assigner.describe();
-  ExternalSorter<FaceRec, FaceLess> byCell(scratch + "/s1", B * 3 / 10);
+  ExternalSorter<FaceRec, FaceLess> byCell(scratch + "/s1", B / 4);
   {
     Progress progress(opt.progress, "ingest: assign", nf);
     TempReader cr(scratch + "/cent.bin", 4 << 20), fr(scratch + "/face.bin", 4 << 20);
@@ -482,12 +489,13 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
     progress.finish(face);
   }
   std::remove((scratch + "/face.bin").c_str());
+  endOfPass();
 
   // 4 group into patches
   byCell.finish();
   std::vector<uint64_t> patchKey;
   std::vector<uint32_t> patchTris;
-  ExternalSorter<uint64_t, U64Less> pairs(scratch + "/s2", B * 3 / 10);
+  ExternalSorter<uint64_t, U64Less> pairs(scratch + "/s2", B / 4);
   {
     TempWriter pface(scratch + "/pface.bin", 4 << 20);
     FaceRec f;
@@ -517,7 +525,7 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
 
   // 5 join pairs with vertex data
   pairs.finish();
-  ExternalSorter<VertexData<Full>, KeyLess<VertexData<Full>>> byPatch(scratch + "/s3", B * 3 / 10);
+  ExternalSorter<VertexData<Full>, KeyLess<VertexData<Full>>> byPatch(scratch + "/s3", B / 4);
   uint64_t distinctReferenced = 0;
   {
     Progress progress(opt.progress, "ingest: vertices", nv, "vert");
@@ -560,6 +568,7 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
     progress.finish(nv);
   }
   std::remove((scratch + "/vert.bin").c_str());
+  endOfPass();
 
   // 6 patches
   byPatch.finish();
@@ -663,6 +672,7 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
   report.unreferencedVertices = nv - distinctReferenced - report.weldedVertices;
   std::remove((scratch + "/pface.bin").c_str());
 
+  endOfPass();
   // Edges shared between patches: sum their uses.
   edges.finish();
   {

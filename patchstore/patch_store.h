@@ -140,6 +140,27 @@ struct CheckReport {
   uint64_t patchesChecked = 0, entriesChecked = 0;
 };
 
+// One patch's new content for PatchStore::rewritePatches (healing support).
+struct PatchRewrite {
+  Patch patch;                // id names the live patch to replace; cell and level are kept
+  bool boundaryOnly = false;  // keep the geometry block, replace only the boundary list
+};
+
+// Positions staged by PatchStore::stageGeometry, made live by commitStaged (healing support).
+class StagedUpdate {
+ public:
+  StagedUpdate();
+  ~StagedUpdate();
+  StagedUpdate(const StagedUpdate&) = delete;
+  StagedUpdate& operator=(const StagedUpdate&) = delete;
+  size_t size() const;
+  struct Entries;
+
+ private:
+  friend class PatchStore;
+  std::unique_ptr<Entries> entries_;
+};
+
 class PatchStore {
  public:
   // Builds a new store at `dir` (which must not exist or be empty) from a mesh file. The store is
@@ -173,6 +194,28 @@ class PatchStore {
   // Streams every triangle (welded by vertex identity across patches) to a binary PLY.
   void exportPly(const std::string& path, bool progress = false) const;
   CheckReport check() const;
+
+  // ---- Healing support (heal_support.cpp; used by patchstore/heal) ----
+  // writeBack() gives the loaded patches new ids and refuses to drop a vertex an outside patch
+  // holds. Healing needs finer edits: change a few patches in place (same ids, so later passes
+  // and their precomputed tables stay valid), drop a shared vertex from one patch while its other
+  // holders keep it, and move every copy of a shared vertex at once (smoothing).
+  //
+  // Replaces the content of existing patches in place, in one update: geometry and boundary list
+  // of each rewrite (or only the boundary list when boundaryOnly). A rewrite with no triangles
+  // removes the patch. The update is checked before anything is written: every boundary entry of
+  // a rewritten patch, and every entry of an outside patch that points into the rewritten set,
+  // must be mirrored with an equal position (the crack-free rule of writeBack, stated on the
+  // result instead of the edit). Throws mt::Error and writes nothing when it is not.
+  void rewritePatches(const std::vector<PatchRewrite>& rewrites, bool syncNow = false);
+  // A staged update of positions (same topology): stageGeometry() appends a patch's new geometry
+  // block at once but leaves the manifest alone, so every later patch()/load() still reads the
+  // old positions (Jacobi iterations read the old mesh while writing the new one).
+  // commitStaged() then makes all staged blocks live in ONE manifest edit (the commit point of
+  // store_format.h). Vertex and triangle counts must equal the live patch's; a patch written by
+  // anything else after staging is a conflict (mt::Error, nothing committed).
+  void stageGeometry(StagedUpdate& staged, const Patch& p);
+  void commitStaged(StagedUpdate& staged);
 
   struct Impl;
  private:

@@ -1,0 +1,339 @@
+// Regions (load in place, edit, commit in place), global vertex keys, the edge census, reports.
+#include "patchstore/heal/region.h"
+
+#include <algorithm>
+#include <cinttypes>
+#include <cstdio>
+#include <filesystem>
+#include <map>
+#include <set>
+#include <tuple>
+
+#include "patchstore/external_sort.h"
+#include "patchstore/progress.h"
+
+namespace mt::heal {
+
+uint64_t PassReport::get(const std::string& name) const {
+  for (auto& [k, v] : counts)
+    if (k == name) return v;
+  return 0;
+}
+
+std::string PassReport::line() const {
+  std::string s = pass + ":";
+  for (size_t i = 0; i < counts.size(); ++i)
+    s += (i ? ", " : " ") + counts[i].first + " " + std::to_string(counts[i].second);
+  char t[32];
+  std::snprintf(t, sizeof t, " (%.2f s)", seconds);
+  return s + t;
+}
+
+std::string scratchPrefix(const PatchStore& store, const HealOptions& options, const std::string& name) {
+  std::string dir = options.tempDir.empty() ? store.dir() + "/tmp" : options.tempDir;
+  std::filesystem::create_directories(dir);
+  return dir + "/heal-" + name;
+}
+
+std::vector<uint64_t> ownerKeys(const Patch& p) {
+  std::vector<uint64_t> key(p.vertexCount());
+  for (uint32_t v = 0; v < p.vertexCount(); ++v) key[v] = gidOf(p.id, v);
+  for (const BoundaryEntry& e : p.boundary)
+    if (e.neighbour < gidPatch(key[e.local])) key[e.local] = gidOf(e.neighbour, e.remote);
+  return key;
+}
+
+int Region::indexOf(PatchId id) const {
+  auto it = std::lower_bound(patches.begin(), patches.end(), id);
+  return it != patches.end() && *it == id ? int(it - patches.begin()) : -1;
+}
+
+uint32_t Region::vertexOf(PatchId id, uint32_t local) const {
+  int k = indexOf(id);
+  if (k < 0 || local >= unifiedOf[k].size()) return kNoVertex;
+  return unifiedOf[k][local];
+}
+
+Region loadRegion(const PatchStore& store, std::vector<PatchId> ids) {
+  std::sort(ids.begin(), ids.end());
+  ids.erase(std::unique(ids.begin(), ids.end()), ids.end());
+  Region r;
+  r.patches = ids;
+  const VertexLayout& layout = store.layout();
+  auto loaded = [&](PatchId q) { return std::binary_search(ids.begin(), ids.end(), q); };
+  for (size_t k = 0; k < ids.size(); ++k) {
+    Patch p = store.patch(ids[k]);
+    std::vector<uint32_t> map(p.vertexCount(), kNoVertex);
+    // A vertex a lower loaded patch also holds takes the index that patch's copy got.
+    for (const BoundaryEntry& e : p.boundary)
+      if (e.neighbour < p.id && loaded(e.neighbour) && map[e.local] == kNoVertex)
+        map[e.local] = r.unifiedOf[r.indexOf(e.neighbour)].at(e.remote);
+    for (uint32_t v = 0; v < p.vertexCount(); ++v) {
+      if (map[v] != kNoVertex) continue;
+      map[v] = r.vertexCount();
+      r.positions.insert(r.positions.end(), &p.positions[3 * v], &p.positions[3 * v] + 3);
+      if (layout.normals) r.normals.insert(r.normals.end(), &p.normals[3 * v], &p.normals[3 * v] + 3);
+      if (layout.colors) r.colors.insert(r.colors.end(), &p.colors[4 * v], &p.colors[4 * v] + 4);
+      r.locked.push_back(0);
+    }
+    for (const BoundaryEntry& e : p.boundary)
+      if (!loaded(e.neighbour)) {
+        r.locked[map[e.local]] = 1;
+        r.external.push_back({map[e.local], e.neighbour, e.remote});
+      }
+    for (uint32_t i : p.triangles) r.triangles.push_back(map[i]);
+    r.trianglePatch.insert(r.trianglePatch.end(), p.triangleCount(), uint32_t(k));
+    r.unifiedOf.push_back(std::move(map));
+    r.original.push_back(std::move(p));
+  }
+  std::sort(r.external.begin(), r.external.end(),
+            [](const auto& a, const auto& b) { return std::tie(a.vertex, a.patch, a.remote) < std::tie(b.vertex, b.patch, b.remote); });
+  // Two loaded holders of one vertex both list the unloaded third: keep one entry.
+  r.external.erase(std::unique(r.external.begin(), r.external.end(),
+                               [](const auto& a, const auto& b) { return a.vertex == b.vertex && a.patch == b.patch && a.remote == b.remote; }),
+                   r.external.end());
+  return r;
+}
+
+Region loadUnlocked(const PatchStore& store, std::vector<PatchId> ids,
+                    const std::function<bool(const Region&, uint32_t)>& wanted, size_t maxPatches) {
+  for (;;) {
+    Region r = loadRegion(store, ids);
+    std::set<PatchId> more;
+    for (const auto& e : r.external)
+      if (wanted(r, e.vertex)) more.insert(e.patch);
+    if (more.empty() || r.patches.size() + more.size() > maxPatches) return r;
+    ids = r.patches;
+    ids.insert(ids.end(), more.begin(), more.end());
+  }
+}
+
+uint32_t RegionEdit::addVertexCopy(const Region& r, uint32_t v) {
+  uint32_t id = vertexCount();
+  positions.insert(positions.end(), &r.positions[3 * v], &r.positions[3 * v] + 3);
+  if (!r.normals.empty()) normals.insert(normals.end(), &r.normals[3 * v], &r.normals[3 * v] + 3);
+  if (!r.colors.empty()) colors.insert(colors.end(), &r.colors[4 * v], &r.colors[4 * v] + 4);
+  origin.push_back(kNoVertex);
+  return id;
+}
+
+RegionEdit identityEdit(const Region& r) {
+  RegionEdit e;
+  e.positions = r.positions;
+  e.normals = r.normals;
+  e.colors = r.colors;
+  e.origin.resize(r.vertexCount());
+  for (uint32_t v = 0; v < r.vertexCount(); ++v) e.origin[v] = v;
+  e.triangles = r.triangles;
+  e.trianglePatch = r.trianglePatch;
+  return e;
+}
+
+namespace {
+bool entryLess(const BoundaryEntry& a, const BoundaryEntry& b) {
+  return std::tie(a.local, a.neighbour, a.remote) < std::tie(b.local, b.neighbour, b.remote);
+}
+bool samePatch(const Patch& a, const Patch& b) {
+  return a.positions == b.positions && a.triangles == b.triangles && a.normals == b.normals && a.colors == b.colors;
+}
+bool sameBoundary(const std::vector<BoundaryEntry>& a, const std::vector<BoundaryEntry>& b) {
+  if (a.size() != b.size()) return false;
+  for (size_t i = 0; i < a.size(); ++i)
+    if (entryLess(a[i], b[i]) || entryLess(b[i], a[i])) return false;
+  return true;
+}
+}  // namespace
+
+CommitStats commitRegion(PatchStore& store, const Region& r, const RegionEdit& e) {
+  const size_t np = r.patches.size();
+  const uint32_t nv = e.vertexCount();
+  const bool normals = store.layout().normals, colors = store.layout().colors;
+  CommitStats stats;
+  std::vector<uint32_t> newOf(r.vertexCount(), kNoVertex);
+  for (uint32_t v = 0; v < nv; ++v)
+    if (e.origin[v] != kNoVertex) {
+      if (newOf[e.origin[v]] != kNoVertex) fail(store.dir(), "heal: region vertex kept twice (internal error)");
+      newOf[e.origin[v]] = v;
+    }
+  // Each patch's vertex list: its surviving original vertices in their old order, then the
+  // vertices it newly uses in edit order.
+  std::vector<std::vector<uint32_t>> tris(np);
+  for (size_t t = 0; t < e.trianglePatch.size(); ++t) tris[e.trianglePatch[t]].push_back(uint32_t(t));
+  std::vector<uint8_t> used(nv, 0);
+  std::vector<std::vector<uint32_t>> verts(np);
+  std::vector<std::pair<uint32_t, uint32_t>> holders;  // (edit vertex, patch index)
+  std::vector<uint32_t> localOf(nv, kNoVertex);         // scratch, per patch
+  std::vector<std::vector<std::pair<uint32_t, uint32_t>>> localPairs(np);  // (edit vertex, local), sorted
+  for (size_t k = 0; k < np; ++k) {
+    std::vector<uint8_t> mine(nv, 0);
+    for (uint32_t t : tris[k])
+      for (int c = 0; c < 3; ++c) mine[e.triangles[3 * t + c]] = 1;
+    for (uint32_t u : r.unifiedOf[k]) {
+      uint32_t v = newOf[u];
+      if (v != kNoVertex && mine[v]) {
+        verts[k].push_back(v);
+        mine[v] = 0;
+      }
+    }
+    for (uint32_t v = 0; v < nv; ++v)
+      if (mine[v]) verts[k].push_back(v);
+    for (uint32_t l = 0; l < verts[k].size(); ++l) {
+      holders.push_back({verts[k][l], uint32_t(k)});
+      localPairs[k].push_back({verts[k][l], l});
+      used[verts[k][l]] = 1;
+    }
+    std::sort(localPairs[k].begin(), localPairs[k].end());
+  }
+  std::sort(holders.begin(), holders.end());
+  auto localIn = [&](size_t k, uint32_t v) {
+    auto it = std::lower_bound(localPairs[k].begin(), localPairs[k].end(), std::make_pair(v, 0u));
+    return it->second;
+  };
+  // The crack-free rule: a vertex unloaded patches hold keeps its position while it is used.
+  for (const auto& x : r.external) {
+    uint32_t v = newOf[x.vertex];
+    if (v == kNoVertex || !used[v]) continue;
+    for (int a = 0; a < 3; ++a)
+      if (e.positions[3 * v + a] != r.positions[3 * x.vertex + a])
+        fail(store.dir(), "heal: a vertex shared with an unloaded patch was moved (internal error)");
+  }
+  for (uint32_t u = 0; u < r.vertexCount(); ++u)
+    if (!r.locked[u] && (newOf[u] == kNoVertex || !used[newOf[u]])) ++stats.droppedVertices;
+
+  std::vector<Patch> out(np);
+  for (size_t k = 0; k < np; ++k) {
+    Patch& p = out[k];
+    p.id = r.patches[k];
+    for (uint32_t v : verts[k]) {
+      p.positions.insert(p.positions.end(), &e.positions[3 * v], &e.positions[3 * v] + 3);
+      if (normals) p.normals.insert(p.normals.end(), &e.normals[3 * v], &e.normals[3 * v] + 3);
+      if (colors) p.colors.insert(p.colors.end(), &e.colors[4 * v], &e.colors[4 * v] + 4);
+    }
+    for (uint32_t t : tris[k])
+      for (int c = 0; c < 3; ++c) p.triangles.push_back(localIn(k, e.triangles[3 * t + c]));
+  }
+  for (size_t i = 0; i < holders.size();) {
+    size_t j = i;
+    while (j < holders.size() && holders[j].first == holders[i].first) ++j;
+    for (size_t a = i; a < j; ++a)
+      for (size_t b = i; b < j; ++b)
+        if (a != b) {
+          uint32_t ka = holders[a].second, kb = holders[b].second;
+          out[ka].boundary.push_back({localIn(ka, holders[a].first), r.patches[kb], localIn(kb, holders[b].first)});
+        }
+    i = j;
+  }
+  std::map<PatchId, std::vector<BoundaryEntry>> outsideAdds;
+  std::set<PatchId> outsideIds;
+  for (const auto& x : r.external) {
+    outsideIds.insert(x.patch);
+    uint32_t v = newOf[x.vertex];
+    if (v == kNoVertex || !used[v]) continue;
+    auto lo = std::lower_bound(holders.begin(), holders.end(), std::make_pair(v, 0u));
+    for (auto it = lo; it != holders.end() && it->first == v; ++it) {
+      uint32_t local = localIn(it->second, v);
+      out[it->second].boundary.push_back({local, x.patch, x.remote});
+      outsideAdds[x.patch].push_back({x.remote, r.patches[it->second], local});
+    }
+  }
+  std::vector<PatchRewrite> rewrites;
+  for (size_t k = 0; k < np; ++k) {
+    std::sort(out[k].boundary.begin(), out[k].boundary.end(), entryLess);
+    const Patch& old = r.original[k];
+    bool geometry = !samePatch(out[k], old);
+    bool boundary = !sameBoundary(out[k].boundary, old.boundary);
+    if (!geometry && !boundary) continue;
+    rewrites.push_back({std::move(out[k]), !geometry});
+  }
+  for (PatchId q : outsideIds) {
+    Patch old = store.patch(q);
+    std::vector<BoundaryEntry> list;
+    for (const BoundaryEntry& b : old.boundary)
+      if (r.indexOf(b.neighbour) < 0) list.push_back(b);
+    auto& adds = outsideAdds[q];
+    list.insert(list.end(), adds.begin(), adds.end());
+    std::sort(list.begin(), list.end(), entryLess);
+    if (sameBoundary(list, old.boundary)) continue;
+    Patch p;
+    p.id = q;
+    p.boundary = std::move(list);
+    rewrites.push_back({std::move(p), true});
+  }
+  stats.changedPatches = rewrites.size();
+  if (!rewrites.empty()) store.rewritePatches(rewrites);
+  return stats;
+}
+
+// ---------------------------------------------------------------------------------------------
+
+namespace {
+struct EdgeRecord {
+  uint64_t a, b;
+  uint32_t count, patch, forward, pad;
+};
+struct EdgeLess {
+  bool operator()(const EdgeRecord& x, const EdgeRecord& y) const {
+    return std::tie(x.a, x.b, x.patch) < std::tie(y.a, y.b, y.patch);
+  }
+};
+}  // namespace
+
+void edgeCensus(const PatchStore& store, const HealOptions& options, const std::function<bool(uint32_t)>& want,
+                const std::function<void(const EdgeUse&)>& fn, const char* task) {
+  ExternalSorter<EdgeRecord, EdgeLess> sorter(scratchPrefix(store, options, "edges"), options.memoryBytes / 2);
+  std::vector<PatchId> ids = store.patchIds();
+  Progress progress(options.progress, task, ids.size(), "patches");
+  std::vector<EdgeRecord> local;
+  size_t done = 0;
+  for (PatchId id : ids) {
+    Patch p = store.patch(id);
+    std::vector<uint64_t> key = ownerKeys(p);
+    std::vector<uint8_t> shared(p.vertexCount(), 0);
+    for (const BoundaryEntry& e : p.boundary) shared[e.local] = 1;
+    local.clear();
+    for (size_t t = 0; t < p.triangles.size(); t += 3)
+      for (int c = 0; c < 3; ++c) {
+        uint32_t u = p.triangles[t + c], v = p.triangles[t + (c + 1) % 3];
+        if (u == v) continue;
+        uint64_t ku = key[u], kv = key[v];
+        bool fwd = ku < kv;
+        local.push_back({std::min(ku, kv), std::max(ku, kv), 1, id, fwd ? 1u : 0u, (shared[u] && shared[v]) ? 1u : 0u});
+      }
+    std::sort(local.begin(), local.end(), [](const EdgeRecord& x, const EdgeRecord& y) { return std::tie(x.a, x.b) < std::tie(y.a, y.b); });
+    for (size_t i = 0; i < local.size();) {
+      size_t j = i;
+      while (j < local.size() && local[j].a == local[i].a && local[j].b == local[i].b) ++j;
+      EdgeRecord rec = local[i];
+      rec.count = uint32_t(j - i);
+      if (rec.pad) {
+        rec.pad = 0;
+        sorter.add(rec);
+      } else if (want(rec.count)) {
+        fn({rec.a, rec.b, rec.count, rec.forward != 0, rec.patch});
+      }
+      i = j;
+    }
+    progress.update(++done);
+  }
+  sorter.finish();
+  EdgeRecord rec, cur{};
+  bool have = false;
+  uint32_t total = 0;
+  auto flush = [&]() {
+    if (have && want(total)) fn({cur.a, cur.b, total, cur.forward != 0, cur.patch});
+  };
+  while (sorter.next(rec)) {
+    if (have && rec.a == cur.a && rec.b == cur.b) {
+      total += rec.count;
+      continue;
+    }
+    flush();
+    cur = rec;
+    total = rec.count;
+    have = true;
+  }
+  flush();
+  progress.finish(done);
+}
+
+}  // namespace mt::heal
