@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
-# The main job on a built-in default input: set up, generate a scan-like mesh, ingest it into a
-# patch store, print the store's statistics, check it, and export it back.
-# Usage: scripts/demo.sh [TRIANGLES]   (default 2M; e.g. scripts/demo.sh 53M for the benchmark size)
+# The main job on a built-in default input: set up, generate a scan-like mesh, build its
+# multiresolution MT file, print mtinfo, run mtverify, and extract a cut as PLY.
+# Usage: scripts/demo.sh [TRIANGLES]   (default 2M; e.g. 53M for the benchmark size)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/setup.sh
@@ -9,14 +9,15 @@ triangles="${1:-2M}"
 out=out/demo
 rm -rf "$out" && mkdir -p "$out"
 bin=build/bin
-echo "== mtgen: a ${triangles}-triangle scan-like mesh with holes, shuffled faces"
+echo "== mtgen: a ${triangles}-triangle scan-like mesh with 40 holes and shuffled faces"
 "$bin/mtgen" -o "$out/scan.ply" --triangles "$triangles" --holes 40 --shuffle --seed 1
-echo "== mtstore ingest (memory cap 256M)"
-"$bin/mtstore" ingest "$out/scan.ply" -o "$out/scan.store" --memory 256M
-echo "== mtstore info"
-"$bin/mtstore" info "$out/scan.store"
-echo "== mtstore check"
-"$bin/mtstore" check "$out/scan.store"
-echo "== mtstore export"
-"$bin/mtstore" export "$out/scan.store" -o "$out/export.ply"
+echo "== mtbuild (memory cap 512M)"
+"$bin/mtbuild" "$out/scan.ply" -o "$out/scan.mt" --memory 512M --stats-json "$out/build.json"
+echo "== mtinfo"
+"$bin/mtinfo" "$out/scan.mt"
+echo "== mtverify (checksums, monotone errors, nested spheres, crack-free random cuts)"
+"$bin/mtverify" "$out/scan.mt" --cuts 8
+echo "== mtextract: the best cut of 200k triangles, and a view from the +x side"
+"$bin/mtextract" "$out/scan.mt" --triangles 200000 -o "$out/cut-200k.ply"
+"$bin/mtextract" "$out/scan.mt" --eye 4,0,1 --target 0,0,0 --fov 50 --width 1280 -o "$out/cut-view.ply"
 ls -l "$out"

@@ -153,6 +153,20 @@ TEST(Mtbuild, CutsAreCrackFreeOnClosedHoledMultiComponentAndNonManifoldMeshes) {
   }
 }
 
+// A store healed out of core (holes filled across patch borders, smoothed) is a valid build input.
+TEST(Mtbuild, AHealedStoreBuildsAndVerifies) {
+  TempDir tmp;
+  std::string in = makeScan(tmp, "h.ply", "--triangles 40k --holes 15 --seed 4");
+  ASSERT_EQ(runTool("mtstore", "ingest " + in + " -o " + tmp.file("s") + " -q --patch-triangles 300").exitCode, 0);
+  CommandResult heal = runTool("mtstore", "heal " + tmp.file("s") + " --fill-holes 100 --smooth 2");
+  ASSERT_EQ(heal.exitCode, 0) << heal.output;
+  EXPECT_NE(heal.output.find("filled 15"), std::string::npos) << heal.output;
+  build(tmp.file("s"), tmp.file("h.mt"), "--patch-triangles 300");
+  CommandResult v = runTool("mtverify", tmp.file("h.mt") + " --cuts 8");
+  EXPECT_EQ(v.exitCode, 0) << v.output;
+  EXPECT_NE(v.output.find("input has 0 boundary"), std::string::npos) << v.output;
+}
+
 TEST(Mtbuild, BadInputIsAClearErrorAndLeavesNoFile) {
   TempDir tmp;
   writeFile(tmp.file("bad.ply"), "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
