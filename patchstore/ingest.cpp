@@ -466,7 +466,13 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
 
   // 3 assign
   CentroidFile centroids(scratch + "/cent.bin", nf, sink.bounds);
-  assigner.prepare(centroids, B / 2);
+  {
+    // The assigner streams the centroids as often as it needs (the irregular V-partition: 5-7
+    // passes); report its time, since it is a separate cost from the sorts.
+    Progress progress(opt.progress, "ingest: partition", nf);
+    assigner.prepare(centroids, B / 2);
+    progress.finish(nf);
+  }
   report.assigner = assigner.describe();
   ExternalSorter<FaceRec, FaceLess> byCell(scratch + "/s1", B / 4);
   {
