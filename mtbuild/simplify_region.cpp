@@ -133,7 +133,14 @@ SimplifiedRegion simplifyRegion(const double* positions, size_t vertexCount, con
           }
         }
     if (!problem) break;
-    if (attempt == 8) throw Error("simplifyRegion: could not keep locked vertices and manifold edges");
+    if (attempt == 16) {
+      // Rare (seen on inputs that are non-manifold already): keep the region as it is. An
+      // unsimplified region is always a valid fragment; the level above simplifies it.
+      out.assign(triangles, triangles + indexCount);
+      std::fill(kept.begin(), kept.end(), 0);
+      for (uint32_t v : out) kept[v] = 1;
+      break;
+    }
     for (size_t t = 0; t < indexCount; t += 3)
       if (bad[triangles[t]] || bad[triangles[t + 1]] || bad[triangles[t + 2]])
         lock[triangles[t]] = lock[triangles[t + 1]] = lock[triangles[t + 2]] = 1;

@@ -22,7 +22,8 @@ struct Box3 {
 
 // A sequence of triangle centroids that can be read start to end any number of times with bounded
 // memory. Each triangle is 4 floats: centroid x,y,z and the triangle's area. One forEach() is one
-// pass: fn gets consecutive batches that cover every triangle exactly once, in triangle order.
+// pass: fn gets consecutive batches that cover every triangle exactly once, always in the same
+// order (ingest gives Morton order, so that consecutive centroids are close in space).
 class CentroidSource {
  public:
   virtual ~CentroidSource() = default;

@@ -268,6 +268,31 @@ void computeCentroids(const std::string& dir, const VertexRecordLayout& layout, 
   progress.finish(faceCount);
 }
 
+// 21 bits per axis interleaved: the Morton (Z-order) code of a point in the box.
+uint64_t mortonCode(const float c[3], const Box3& box) {
+  uint64_t code = 0;
+  uint32_t q[3];
+  for (int a = 0; a < 3; ++a) {
+    double extent = box.hi[a] - box.lo[a];
+    double t = extent > 0 ? (double(c[a]) - box.lo[a]) / extent : 0;
+    q[a] = uint32_t(std::clamp(t, 0.0, 1.0) * double((1u << 21) - 1));
+  }
+  for (int bit = 20; bit >= 0; --bit)
+    for (int a = 0; a < 3; ++a) code = code << 1 | ((q[a] >> bit) & 1u);
+  return code;
+}
+
+struct MortonCentroid {
+  uint64_t code;
+  uint32_t face, pad;
+  Centroid c;
+};
+struct MortonLess {
+  bool operator()(const MortonCentroid& a, const MortonCentroid& b) const {
+    return a.code != b.code ? a.code < b.code : a.face < b.face;
+  }
+};
+
 class CentroidFile : public CentroidSource {
  public:
   CentroidFile(std::string path, uint64_t count, Box3 bounds) : path_(std::move(path)), count_(count), bounds_(bounds) {}
@@ -464,8 +489,24 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
   computeCentroids(scratch, vlayout, nv, nf, B * 2 / 5, opt.progress);
   endOfPass();
 
-  // 3 assign
-  CentroidFile centroids(scratch + "/cent.bin", nf, sink.bounds);
+  // 3 assign. The assigner streams the centroids in Morton order rather than face order: its
+  // streaming passes (the irregular seeding) rely on consecutive triangles being close, which a
+  // scan with shuffled faces does not give. One external sort; deterministic (ties by face).
+  {
+    ExternalSorter<MortonCentroid, MortonLess> byCode(scratch + "/s0", B / 4);
+    TempReader cr(scratch + "/cent.bin", 4 << 20);
+    std::vector<Centroid> batch;
+    uint32_t face = 0;
+    while (cr.getBatch(batch, 65536))
+      for (const Centroid& c : batch) byCode.add({mortonCode(&c.x, sink.bounds), face++, 0, c});
+    byCode.finish();
+    TempWriter out(scratch + "/cent.morton", 4 << 20);
+    MortonCentroid m;
+    while (byCode.next(m)) out.put(m.c);
+    out.close();
+  }
+  endOfPass();
+  CentroidFile centroids(scratch + "/cent.morton", nf, sink.bounds);
   {
     // The assigner streams the centroids as often as it needs (the irregular V-partition: 5-7
     // passes); report its time, since it is a separate cost from the sorts.
@@ -495,6 +536,7 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
     progress.finish(face);
   }
   std::remove((scratch + "/face.bin").c_str());
+  std::remove((scratch + "/cent.morton").c_str());
   endOfPass();
 
   // 4 group into patches

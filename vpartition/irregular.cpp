@@ -145,9 +145,19 @@ class StreamSeeder {
     int64_t c[3];
     for (int a = 0; a < 3; ++a) c[a] = int64_t(std::floor((p[a] - lo_[a]) * inv_));
     const int64_t k = std::max<int64_t>(1, int64_t(std::ceil(r * inv_)));
+    // Without stream coherence (shuffled faces) the triangle's own cell usually holds a covering
+    // seed already: look there before the (2k+1)^3 - 1 neighbours.
+    if (auto it = head_.find(vp::packCell(c[0], c[1], c[2])); it != head_.end())
+      for (uint32_t s = it->second; s != UINT32_MAX; s = next_[s])
+        if (vp::dist2(p, &seeds_[3 * size_t(s)]) <= r2) {
+          last_ = s;
+          ++covered_[s];
+          return;
+        }
     for (int64_t dz = -k; dz <= k; ++dz)
       for (int64_t dy = -k; dy <= k; ++dy)
         for (int64_t dx = -k; dx <= k; ++dx) {
+          if (dx == 0 && dy == 0 && dz == 0) continue;
           auto it = head_.find(vp::packCell(c[0] + dx, c[1] + dy, c[2] + dz));
           if (it == head_.end()) continue;
           for (uint32_t s = it->second; s != UINT32_MAX; s = next_[s])
@@ -338,7 +348,7 @@ PartitionSequence buildIrregularSequence(const CentroidSource& src, const VParti
   std::vector<std::vector<float>> seeds(levels);
   for (int attempt = 0;; ++attempt) {
     std::vector<StreamSeeder> seeders;
-    for (uint32_t l = 0; l < levels; ++l) seeders.emplace_back(radius[l], box);
+    for (uint32_t l = 0; l < levels; ++l) seeders.emplace_back(2 * radius[l], box);  // cells of 2r: the own cell usually covers
     std::vector<float> local;  // sqrt(meanArea(p) / meanArea) per triangle of the batch
     src.forEach([&](const float* xyza, size_t count) {
       local.resize(count);
