@@ -134,7 +134,11 @@ Centroid centroidOf(const uint32_t v[3], const float* const p[3]) {
   return {float(c[0]), float(c[1]), float(c[2]), float(0.5 * std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]))};
 }
 
-// Stage 2. Chunk c holds float positions of vertices [c*chunk, (c+1)*chunk).
+// Stage 2. Chunk c holds the float positions of vertices [c*chunk, (c+1)*chunk). Pass c reads
+// the faces again (12 bytes each) and computes every face whose corners all lie in chunk c; a face
+// spanning chunks (rare: scans list vertices in scan order) is carried from pass to pass with the
+// corners resolved so far, until its last chunk. Each pass writes its completions in face order,
+// and the passes' streams are merged by face index.
 void computeCentroids(const std::string& dir, const VertexRecordLayout& layout, uint64_t vertexCount, uint64_t faceCount,
                       uint64_t budget, bool showProgress) {
   const uint64_t chunk = std::max<uint64_t>(1 << 16, budget / 12);
@@ -147,22 +151,14 @@ void computeCentroids(const std::string& dir, const VertexRecordLayout& layout, 
     float p[9];
     uint32_t resolved;  // bit mask of corners with positions
   };
-  std::vector<std::string> completedFiles;
-  std::string input = dir + "/face.bin";
+  std::vector<std::string> parts;
   uint64_t done = 0;
+  TempReader vr(dir + "/vert.bin", 4 << 20);  // chunks are read in order: one sequential pass
   for (uint64_t c = 0; c < chunks; ++c) {
     const uint64_t lo = c * chunk, hi = std::min(vertexCount, lo + chunk);
     pos.resize((hi - lo) * 3);
     {
-      TempReader vr(dir + "/vert.bin", 4 << 20);
-      // Skip to the chunk: scratch readers are sequential, so read and drop earlier records.
       std::vector<char> rec(layout.size() * 4096);
-      uint64_t skip = lo;
-      while (skip > 0) {
-        uint64_t n = std::min<uint64_t>(skip, 4096);
-        vr.read(rec.data(), n * layout.size());
-        skip -= n;
-      }
       for (uint64_t v = lo; v < hi;) {
         uint64_t n = std::min<uint64_t>(hi - v, 4096);
         if (vr.read(rec.data(), n * layout.size()) != n * layout.size()) fail(dir, "vertex scratch file is short");
@@ -174,12 +170,14 @@ void computeCentroids(const std::string& dir, const VertexRecordLayout& layout, 
         v += n;
       }
     }
-    const bool last = c + 1 == chunks;
-    std::string outPath = chunks == 1 ? dir + "/cent.bin" : dir + "/cent.part" + std::to_string(c);
+    const bool single = chunks == 1;
+    std::string outPath = single ? dir + "/cent.bin" : dir + "/cent.part" + std::to_string(c);
     TempWriter out(outPath, 4 << 20);
-    std::unique_ptr<TempWriter> carry;
-    std::string carryPath = dir + "/carry" + std::to_string(c);
-    if (!last) carry = std::make_unique<TempWriter>(carryPath, 4 << 20);
+    std::unique_ptr<TempReader> carryIn;
+    std::unique_ptr<TempWriter> carryOut;
+    std::string carryInPath = dir + "/carry" + std::to_string(c - 1);
+    if (c > 0) carryIn = std::make_unique<TempReader>(carryInPath, 1 << 20);
+    if (c + 1 < chunks) carryOut = std::make_unique<TempWriter>(dir + "/carry" + std::to_string(c), 1 << 20);
     auto resolve = [&](Pending& f) {
       for (int k = 0; k < 3; ++k)
         if (!(f.resolved & (1u << k)) && f.v[k] >= lo && f.v[k] < hi) {
@@ -187,83 +185,88 @@ void computeCentroids(const std::string& dir, const VertexRecordLayout& layout, 
           f.resolved |= 1u << k;
         }
       if (f.resolved != 7) {
-        if (last) fail(dir, "internal: unresolved face corner");
-        carry->put(f);
+        if (!carryOut) fail(dir, "internal: unresolved face corner");
+        carryOut->put(f);
         return;
       }
       const float* p[3] = {&f.p[0], &f.p[3], &f.p[6]};
-      Centroid cen = centroidOf(f.v, p);
-      if (chunks > 1) out.put(f.face);
-      out.put(cen);
-      progress.update(++done);
+      if (!single) out.put(f.face);
+      out.put(centroidOf(f.v, p));
+      ++done;
     };
-    if (c == 0) {
-      // Most faces have all corners in the first chunk (always, when everything fits): compute
-      // those in parallel, then write results and carry the rest in face order.
-      TempReader fr(input, 4 << 20);
-      std::vector<uint32_t> batch;
-      std::vector<Centroid> cents;
-      std::vector<uint8_t> inChunk;
-      uint32_t face = 0;
-      while (fr.getBatch(batch, 3 * 65536)) {
-        const size_t n = batch.size() / 3;
-        cents.resize(n);
-        inChunk.resize(n);
-        tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096), [&](const tbb::blocked_range<size_t>& r) {
-          for (size_t i = r.begin(); i < r.end(); ++i) {
-            const uint32_t* v = &batch[3 * i];
-            inChunk[i] = v[0] < hi && v[1] < hi && v[2] < hi;
-            if (!inChunk[i]) continue;
-            const float* p[3] = {&pos[size_t(v[0]) * 3], &pos[size_t(v[1]) * 3], &pos[size_t(v[2]) * 3]};
+    // One scan of the faces, in face order: faces wholly in this chunk are computed in parallel;
+    // faces spanning chunks that touch this one are resolved as far as this chunk allows (new
+    // ones start here, earlier ones come from the carry file, which is in face order too).
+    TempReader fr(dir + "/face.bin", 4 << 20);
+    std::vector<uint32_t> batch;
+    std::vector<Centroid> cents;
+    std::vector<uint8_t> kind;  // 0: not this pass, 1: wholly in this chunk, 2: spanning
+    uint32_t face = 0;
+    while (fr.getBatch(batch, 3 * 65536)) {
+      const size_t n = batch.size() / 3;
+      cents.resize(n);
+      kind.resize(n);
+      tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096), [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t i = r.begin(); i < r.end(); ++i) {
+          const uint32_t* v = &batch[3 * i];
+          uint32_t vmin = std::min({v[0], v[1], v[2]}), vmax = std::max({v[0], v[1], v[2]});
+          if (vmin >= lo && vmax < hi) {
+            kind[i] = 1;
+            const float* p[3] = {&pos[size_t(v[0] - lo) * 3], &pos[size_t(v[1] - lo) * 3], &pos[size_t(v[2] - lo) * 3]};
             cents[i] = centroidOf(v, p);
-          }
-        });
-        for (size_t i = 0; i < n; ++i, ++face) {
-          if (inChunk[i]) {
-            if (chunks > 1) out.put(face);
-            out.put(cents[i]);
-            ++done;
           } else {
-            Pending f{face, {batch[3 * i], batch[3 * i + 1], batch[3 * i + 2]}, {}, 0};
-            resolve(f);
+            kind[i] = (vmin < hi && vmax >= lo) ? 2 : 0;
           }
         }
-        progress.update(done);
+      });
+      for (size_t i = 0; i < n; ++i, ++face) {
+        if (kind[i] == 1) {
+          if (!single) out.put(face);
+          out.put(cents[i]);
+          ++done;
+        } else if (kind[i] == 2) {
+          Pending f;
+          if (std::min({batch[3 * i], batch[3 * i + 1], batch[3 * i + 2]}) >= lo) {
+            f = Pending{face, {batch[3 * i], batch[3 * i + 1], batch[3 * i + 2]}, {}, 0};
+          } else if (!carryIn || !carryIn->get(f) || f.face != face) {
+            fail(dir, "internal: carried face " + std::to_string(face) + " out of order");
+          }
+          resolve(f);
+        }
       }
-    } else {
-      TempReader fr(dir + "/carry" + std::to_string(c - 1), 4 << 20);
-      Pending f;
-      while (fr.get(f)) resolve(f);
-      std::remove((dir + "/carry" + std::to_string(c - 1)).c_str());
+      progress.update(done);
     }
     out.close();
-    if (carry) carry->close();
-    completedFiles.push_back(outPath);
+    if (carryOut) carryOut->close();
+    carryIn.reset();
+    if (c > 0) std::remove(carryInPath.c_str());
+    if (!single) parts.push_back(outPath);
   }
   if (chunks > 1) {
-    // Merge the per-chunk outputs (each ascending by face) into face order.
+    // Merge the per-pass outputs (each ascending by face) into face order.
     struct Tagged {
       uint32_t face;
       Centroid c;
     };
+    const size_t k = parts.size();
     std::vector<std::unique_ptr<TempReader>> readers;
-    std::vector<Tagged> heads(chunks);
-    std::vector<bool> live(chunks);
-    for (uint64_t c = 0; c < chunks; ++c) {
-      readers.push_back(std::make_unique<TempReader>(completedFiles[c], 1 << 20));
-      live[c] = readers[c]->get(heads[c].face) && readers[c]->get(heads[c].c);
+    std::vector<Tagged> heads(k);
+    std::vector<bool> live(k);
+    for (size_t i = 0; i < k; ++i) {
+      readers.push_back(std::make_unique<TempReader>(parts[i], 1 << 20));
+      live[i] = readers[i]->get(heads[i].face) && readers[i]->get(heads[i].c);
     }
     TempWriter out(dir + "/cent.bin", 4 << 20);
     for (uint64_t f = 0; f < faceCount; ++f) {
-      uint64_t c = 0;
-      while (c < chunks && !(live[c] && heads[c].face == f)) ++c;
-      if (c == chunks) fail(dir, "internal: centroid of face " + std::to_string(f) + " missing");
-      out.put(heads[c].c);
-      live[c] = readers[c]->get(heads[c].face) && readers[c]->get(heads[c].c);
+      size_t i = 0;
+      while (i < k && !(live[i] && heads[i].face == f)) ++i;
+      if (i == k) fail(dir, "internal: centroid of face " + std::to_string(f) + " missing");
+      out.put(heads[i].c);
+      live[i] = readers[i]->get(heads[i].face) && readers[i]->get(heads[i].c);
     }
     out.close();
     readers.clear();
-    for (auto& p : completedFiles) std::remove(p.c_str());
+    for (auto& p : parts) std::remove(p.c_str());
   }
   progress.finish(faceCount);
 }
