@@ -550,14 +550,8 @@ LoadedMesh PatchStore::load(const std::vector<PatchId>& idsIn) const {
     m.trianglePatch.insert(m.trianglePatch.end(), p.triangleCount(), id);
   }
   for (PatchId id : ids) m.unifiedOf.push_back(std::move(unified[id]));
-  std::sort(m.external.begin(), m.external.end(), [](const auto& a, const auto& b) {
-    return std::tie(a.vertex, a.patch, a.remote) < std::tie(b.vertex, b.patch, b.remote);
-  });
-  m.external.erase(std::unique(m.external.begin(), m.external.end(),
-                               [](const auto& a, const auto& b) {
-                                 return a.vertex == b.vertex && a.patch == b.patch && a.remote == b.remote;
-                               }),
-                   m.external.end());
+  std::sort(m.external.begin(), m.external.end());
+  m.external.erase(std::unique(m.external.begin(), m.external.end()), m.external.end());
   return m;
 }
 
@@ -586,14 +580,8 @@ std::vector<PatchId> PatchStore::writeBack(const LoadedMesh& loadedIn, const Rep
           refreshed.external.push_back({v, e.neighbour, e.remote});
         }
     }
-    std::sort(refreshed.external.begin(), refreshed.external.end(), [](const auto& a, const auto& b) {
-      return std::tie(a.vertex, a.patch, a.remote) < std::tie(b.vertex, b.patch, b.remote);
-    });
-    refreshed.external.erase(std::unique(refreshed.external.begin(), refreshed.external.end(),
-                                         [](const auto& a, const auto& b) {
-                                           return a.vertex == b.vertex && a.patch == b.patch && a.remote == b.remote;
-                                         }),
-                             refreshed.external.end());
+    std::sort(refreshed.external.begin(), refreshed.external.end());
+  refreshed.external.erase(std::unique(refreshed.external.begin(), refreshed.external.end()), refreshed.external.end());
     current = &refreshed;
   }
   const LoadedMesh& loaded = *current;
@@ -704,9 +692,7 @@ std::vector<PatchId> PatchStore::writeBack(const LoadedMesh& loadedIn, const Rep
     }
     for (uint32_t t : np.tris)
       for (int c = 0; c < 3; ++c) p.triangles.push_back(localIndex(k, r.triangles[3 * t + c]));
-    std::sort(p.boundary.begin(), p.boundary.end(), [](const BoundaryEntry& a, const BoundaryEntry& b) {
-      return std::tie(a.local, a.neighbour, a.remote) < std::tie(b.local, b.neighbour, b.remote);
-    });
+    std::sort(p.boundary.begin(), p.boundary.end());
     PatchRecord rec;
     rec.meta = {p.id, p.cell, p.level, p.vertexCount(), p.triangleCount(), uint32_t(p.boundary.size()), boundsOf(p.positions)};
     rec.geometry = impl_->appendBlock(encodeGeometry(p, layout));
@@ -728,12 +714,8 @@ std::vector<PatchId> PatchStore::writeBack(const LoadedMesh& loadedIn, const Rep
                                  [&](const BoundaryEntry& e) { return std::binary_search(loaded.patches.begin(), loaded.patches.end(), e.neighbour); }),
                   entries.end());
     for (auto& a : adds) entries.push_back(a.second);
-    std::sort(entries.begin(), entries.end(), [](const BoundaryEntry& a, const BoundaryEntry& b) {
-      return std::tie(a.local, a.neighbour, a.remote) < std::tie(b.local, b.neighbour, b.remote);
-    });
-    entries.erase(std::unique(entries.begin(), entries.end(), [](const BoundaryEntry& a, const BoundaryEntry& b) {
-                    return a.local == b.local && a.neighbour == b.neighbour && a.remote == b.remote;
-                  }),
+    std::sort(entries.begin(), entries.end());
+    entries.erase(std::unique(entries.begin(), entries.end()),
                   entries.end());
     PatchRecord next = rec;
     next.boundary = impl_->appendBlock(encodeBoundary(entries));
@@ -910,10 +892,7 @@ CheckReport PatchStore::check() const {
         report.problems.push_back(entry + " points past the neighbour's vertices");
         continue;
       }
-      bool mirrored = std::binary_search(q->boundary.begin(), q->boundary.end(), BoundaryEntry{e.remote, id, e.local},
-                                         [](const BoundaryEntry& a, const BoundaryEntry& b) {
-                                           return std::tie(a.local, a.neighbour, a.remote) < std::tie(b.local, b.neighbour, b.remote);
-                                         });
+      bool mirrored = std::binary_search(q->boundary.begin(), q->boundary.end(), BoundaryEntry{e.remote, id, e.local});
       if (!mirrored) report.problems.push_back(entry + " is not mirrored by patch " + std::to_string(e.neighbour));
       for (int a = 0; a < 3; ++a)
         if (self.positions[3 * e.local + a] != q->positions[3 * e.remote + a]) {

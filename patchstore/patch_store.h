@@ -18,6 +18,7 @@
 #include <memory>
 #include <mutex>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "patchstore/cell_assigner.h"
@@ -40,6 +41,13 @@ struct BoundaryEntry {
   uint32_t local;      // vp: vertex index inside this patch
   PatchId neighbour;   // q
   uint32_t remote;     // vq: the same vertex's index inside q
+  // Lists are kept sorted by (local, neighbour, remote).
+  friend bool operator<(const BoundaryEntry& a, const BoundaryEntry& b) {
+    return std::tie(a.local, a.neighbour, a.remote) < std::tie(b.local, b.neighbour, b.remote);
+  }
+  friend bool operator==(const BoundaryEntry& a, const BoundaryEntry& b) {
+    return a.local == b.local && a.neighbour == b.neighbour && a.remote == b.remote;
+  }
 };
 
 // One patch, decoded.
@@ -78,7 +86,17 @@ struct LoadedMesh {
   std::vector<PatchId> trianglePatch;  // the loaded patch each triangle came from
   std::vector<uint8_t> locked;     // 1 per vertex: used by a patch outside the loaded set
   // For each locked vertex, where outside patches hold it: (vertex, outside patch, index there).
-  struct ExternalRef { uint32_t vertex; PatchId patch; uint32_t remote; };
+  struct ExternalRef {
+    uint32_t vertex;
+    PatchId patch;
+    uint32_t remote;
+    friend bool operator<(const ExternalRef& a, const ExternalRef& b) {
+      return std::tie(a.vertex, a.patch, a.remote) < std::tie(b.vertex, b.patch, b.remote);
+    }
+    friend bool operator==(const ExternalRef& a, const ExternalRef& b) {
+      return a.vertex == b.vertex && a.patch == b.patch && a.remote == b.remote;
+    }
+  };
   std::vector<ExternalRef> external;  // sorted by vertex
   // Per loaded patch (same order as `patches`), its local vertex -> unified index. writeBack()
   // uses it to re-read where outside patches hold the locked vertices at commit time, since a
