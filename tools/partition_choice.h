@@ -28,7 +28,10 @@ inline std::unique_ptr<CellAssigner> makeAssigner(const std::string& kind, uint3
   return makeVPartitionAssigner(o);
 }
 
-// Per-level shape metrics of the store's partition (text, or a JSON value), or "" if none.
-inline std::string partitionMetrics(const PatchStore& store, bool json) { return storePartitionMetrics(store, json); }
+// Per-level shape metrics of the store's partition (text, or a JSON value), or "" if none. The
+// connected-component share reads every patch about twice per level: optional on huge stores.
+inline std::string partitionMetrics(const PatchStore& store, bool json, bool components) {
+  return storePartitionMetrics(store, json, components);
+}
 
 }  // namespace mt::tools
