@@ -10,6 +10,7 @@
 #include <chrono>
 #include <cinttypes>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <limits>
 #include <map>
@@ -188,7 +189,11 @@ BuildReport buildMt(const std::string& input, const std::string& output, const B
   std::string work = options.workDir.empty() ? output + ".work" : options.workDir;
   std::string storeDir = work + "/store";
   std::error_code ec;
-  if (!options.resume) fs::remove_all(work, ec);
+  // The MT writer's state is not checkpointed yet, so a store left by a killed build cannot be
+  // continued from: a DAG restarted on it would credit later levels' patches to the source.
+  if (options.resume && fs::exists(work) && options.progress)
+    std::fprintf(stderr, "mtbuild: --resume cannot continue a build yet (no checkpoint format); rebuilding from the input\n");
+  fs::remove_all(work, ec);
   fs::create_directories(work, ec);
   if (ec) fail(work, "cannot create the work directory: " + ec.message());
 

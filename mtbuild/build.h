@@ -24,7 +24,7 @@ struct BuildOptions {
   uint32_t patchTriangles = 0;        // 0: vpartition's default
   format::Codec codec = format::Codec::Meshopt;
   bool normals = false;               // store normals (else the renderer computes them)
-  bool resume = false;                // continue a killed build from its last finished level
+  bool resume = false;                // continue a killed build (not yet: restarts from the input)
   bool progress = true;
   std::string workDir;                // default: OUT.work
   // Stop adding levels once the top level has at most this many triangles (0: 2 x patch size),

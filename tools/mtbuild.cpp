@@ -25,7 +25,9 @@ int main(int argc, char** argv) {
   app.add_option("--codec", codec, "Patch coding: meshopt (default, fast decode) or draco (smallest files)");
   app.add_flag("--normals", normals, "Store per-vertex normals (2x8 bit) instead of letting the renderer compute them");
   app.add_flag("--no-normals", noNormals, "Store no normals (the default; kept for scripts that say so explicitly)");
-  app.add_flag("--resume", resume, "Continue a killed build from its work directory (OUT.work)");
+  app.add_flag("--resume", resume,
+               "Continue a killed build from its work directory (OUT.work). Not implemented yet: the build "
+               "restarts from the input and says so");
   app.add_option("--stats-json", statsJson, "Write build figures (per level, throughput, peak RSS, sizes) as JSON");
   app.add_option("--work-dir", workDir, "Scratch directory for the patch store (default OUT.work; up to ~3x the input)");
   app.add_flag("-q,--quiet", quiet, "No progress lines on stderr");
