@@ -115,11 +115,10 @@ struct RegionJob {
   float coneCutoff = -1;
 };
 
-std::vector<EncodedPatch> encodePatches(const PatchStore& store, const std::vector<PatchId>& ids,
-                                        const QuantizationGrid& grid, const PatchCodecOptions& codec) {
+std::vector<EncodedPatch> encodePatches(const std::vector<Patch>& patches, const QuantizationGrid& grid,
+                                        const PatchCodecOptions& codec) {
   std::vector<EncodedPatch> out;
-  for (PatchId id : ids) {
-    Patch p = store.patch(id);
+  for (const Patch& p : patches) {
     PatchInput in;
     in.positions = p.positions.data();
     in.vertexCount = p.vertexCount();
@@ -128,7 +127,7 @@ std::vector<EncodedPatch> encodePatches(const PatchStore& store, const std::vect
     in.normals = p.normals.empty() ? nullptr : p.normals.data();
     in.colors = p.colors.empty() ? nullptr : p.colors.data();
     EncodedPatch e;
-    e.storeId = id;
+    e.storeId = p.id;
     e.payload = encodePatch(in, grid, codec);
     e.triangles = p.triangleCount();
     e.vertices = p.vertexCount();
@@ -317,8 +316,11 @@ BuildReport buildMt(const std::string& input, const std::string& output, const B
                 tbb::filter_mode::parallel,
                 [&](RegionJob* job) {
                   // Load the floor, simplify with the region's border locked, split by V*(level+1).
-                  job->encoded = encodePatches(*store, job->floor, grid, codec);
-                  job->loaded = store->load(job->floor);
+                  // Each floor patch is read once: encoded for the file, then assembled.
+                  std::vector<Patch> floor;
+                  for (PatchId id : job->floor) floor.push_back(store->patch(id));
+                  job->encoded = encodePatches(floor, grid, codec);
+                  job->loaded = store->assemble(floor);
                   const LoadedMesh& lm = job->loaded;
                   SimplifyRegionOptions so;
                   so.targetTriangles = root ? std::min<size_t>(lm.triangleCount() / 2, rootTriangles / 2) : lm.triangleCount() / 2;
@@ -402,7 +404,9 @@ BuildReport buildMt(const std::string& input, const std::string& output, const B
   const uint32_t sink = uint32_t(nodes.size());
   {
     std::vector<PatchId> ids = store->patchIds();
-    std::vector<EncodedPatch> encoded = encodePatches(*store, ids, grid, codec);
+    std::vector<Patch> top;
+    for (PatchId id : ids) top.push_back(store->patch(id));
+    std::vector<EncodedPatch> encoded = encodePatches(top, grid, codec);
     for (const EncodedPatch& e : encoded) {
       uint32_t mtPatch = writer.appendPatch(e.payload.data(), e.payload.size(), e.triangles, e.vertices);
       arcPatches[{producer.at(e.storeId), sink}].push_back(mtPatch);

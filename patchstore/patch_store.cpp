@@ -515,6 +515,21 @@ LoadedMesh PatchStore::load(const std::vector<PatchId>& idsIn) const {
   std::vector<PatchId> ids = idsIn;
   std::sort(ids.begin(), ids.end());
   ids.erase(std::unique(ids.begin(), ids.end()), ids.end());
+  std::vector<Patch> patches;
+  patches.reserve(ids.size());
+  for (PatchId id : ids) patches.push_back(patch(id));
+  return assemble(patches);
+}
+
+LoadedMesh PatchStore::assemble(const std::vector<Patch>& patchesIn) const {
+  std::vector<const Patch*> sorted;
+  for (const Patch& p : patchesIn) sorted.push_back(&p);
+  std::sort(sorted.begin(), sorted.end(), [](const Patch* a, const Patch* b) { return a->id < b->id; });
+  std::vector<PatchId> ids;
+  for (const Patch* p : sorted) {
+    if (!ids.empty() && ids.back() == p->id) fail(dir_, "assemble: patch " + std::to_string(p->id) + " given twice");
+    ids.push_back(p->id);
+  }
   LoadedMesh m;
   m.patches = ids;
   const VertexLayout& layout = impl_->layout;
@@ -522,8 +537,9 @@ LoadedMesh PatchStore::load(const std::vector<PatchId>& idsIn) const {
   // loaded patch q < p also holds takes the index q's copy already got.
   std::unordered_map<PatchId, std::vector<uint32_t>> unified;
   auto loaded = [&](PatchId q) { return std::binary_search(ids.begin(), ids.end(), q); };
-  for (PatchId id : ids) {
-    Patch p = patch(id);
+  for (const Patch* patchPtr : sorted) {
+    const Patch& p = *patchPtr;
+    const PatchId id = p.id;
     std::vector<uint32_t>& map = unified[id];
     map.assign(p.vertexCount(), kNoVertex);
     for (const BoundaryEntry& e : p.boundary)

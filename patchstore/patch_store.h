@@ -200,6 +200,9 @@ class PatchStore {
 
   Patch patch(PatchId id) const;                  // reads and verifies one patch
   LoadedMesh load(const std::vector<PatchId>& ids) const;
+  // load() from patches the caller has already read with patch() (e.g. to encode them too), so
+  // they are not read and decoded twice. The patches must be current and distinct.
+  LoadedMesh assemble(const std::vector<Patch>& patches) const;
   // Replaces the loaded patches by the replacement's partition; returns the new patch ids in
   // ascending cell-key order. Durable once sync() returns (or at once with syncNow). Regions with
   // disjoint patch sets may be loaded concurrently and written back in any order.
