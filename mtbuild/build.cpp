@@ -6,9 +6,14 @@
 #include <tbb/parallel_pipeline.h>
 #include <tbb/task_arena.h>
 
+#include <xxhash.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cinttypes>
+#include <csignal>
+#include <cstdlib>
+#include <cstring>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -21,6 +26,7 @@
 #include "mtbuild/mt_file.h"
 #include "mtbuild/patch_codec.h"
 #include "mtbuild/simplify_region.h"
+#include "patchstore/byte_io.h"
 #include "patchstore/patch_store.h"
 #include "patchstore/progress.h"
 
@@ -95,47 +101,6 @@ void normalCone(const std::vector<double>& p, const std::vector<uint32_t>& t, fl
   cutoff = minDot <= 0.01 ? -1.0f : float(minDot - 1e-4);
 }
 
-// One floor patch, encoded for the MT file by a worker.
-struct EncodedPatch {
-  PatchId storeId = 0;
-  std::vector<uint8_t> payload;
-  uint32_t triangles = 0, vertices = 0;
-};
-
-struct RegionJob {
-  uint32_t region = 0;
-  std::vector<PatchId> floor;
-  // Filled by the worker:
-  std::vector<EncodedPatch> encoded;
-  LoadedMesh loaded;
-  ReplacementMesh replacement;
-  double deviation = 0;
-  Sphere sphere;
-  float coneAxis[3] = {0, 0, 1};
-  float coneCutoff = -1;
-};
-
-std::vector<EncodedPatch> encodePatches(const std::vector<Patch>& patches, const QuantizationGrid& grid,
-                                        const PatchCodecOptions& codec) {
-  std::vector<EncodedPatch> out;
-  for (const Patch& p : patches) {
-    PatchInput in;
-    in.positions = p.positions.data();
-    in.vertexCount = p.vertexCount();
-    in.triangles = p.triangles.data();
-    in.triangleCount = p.triangleCount();
-    in.normals = p.normals.empty() ? nullptr : p.normals.data();
-    in.colors = p.colors.empty() ? nullptr : p.colors.data();
-    EncodedPatch e;
-    e.storeId = p.id;
-    e.payload = encodePatch(in, grid, codec);
-    e.triangles = p.triangleCount();
-    e.vertices = p.vertexCount();
-    out.push_back(std::move(e));
-  }
-  return out;
-}
-
 bool isStoreDir(const std::string& path) { return fs::is_directory(path) && fs::exists(path + "/CURRENT"); }
 
 // The quantization step: 1/8 of the mean edge length (estimated from a sample of patches): the
@@ -159,6 +124,175 @@ double chooseGridStep(const PatchStore& store) {
   return mean > 0 ? mean / 8 : 1e-6;
 }
 
+std::vector<EncodedPatch> encodePatches(const std::vector<Patch>& patches, const QuantizationGrid& grid,
+                                        const PatchCodecOptions& codec) {
+  std::vector<EncodedPatch> out;
+  for (const Patch& p : patches) {
+    PatchInput in;
+    in.positions = p.positions.data();
+    in.vertexCount = p.vertexCount();
+    in.triangles = p.triangles.data();
+    in.triangleCount = p.triangleCount();
+    in.normals = p.normals.empty() ? nullptr : p.normals.data();
+    in.colors = p.colors.empty() ? nullptr : p.colors.data();
+    EncodedPatch e;
+    e.storeId = p.id;
+    e.payload = encodePatch(in, grid, codec);
+    e.triangles = p.triangleCount();
+    e.vertices = p.vertexCount();
+    out.push_back(std::move(e));
+  }
+  return out;
+}
+
+// The floor patches of an assembled region, rebuilt exactly (same local vertex order, same
+// triangles) from the assembly: PatchStore::assemble appends each patch's triangles in id order
+// and records each patch's local -> unified vertex map in unifiedOf. So a worker that only got the
+// assembled mesh (mtcluster ranks have no store) encodes the same payloads as one that read them.
+std::vector<Patch> floorPatches(const LoadedMesh& m) {
+  if (m.unifiedOf.size() != m.patches.size()) fail("region", "assembled mesh has no per-patch vertex maps");
+  std::vector<Patch> out(m.patches.size());
+  std::vector<uint32_t> localOf(m.vertexCount(), kNoVertex);
+  size_t t = 0;
+  for (size_t k = 0; k < m.patches.size(); ++k) {
+    Patch& p = out[k];
+    p.id = m.patches[k];
+    const std::vector<uint32_t>& map = m.unifiedOf[k];
+    for (uint32_t v = 0; v < map.size(); ++v) {
+      uint32_t u = map[v];
+      if (u >= m.vertexCount() || localOf[u] != kNoVertex)
+        fail("region", "patch " + std::to_string(p.id) + ": vertex " + std::to_string(v) + " maps to a unified vertex twice");
+      localOf[u] = v;
+      p.positions.insert(p.positions.end(), &m.positions[3 * size_t(u)], &m.positions[3 * size_t(u)] + 3);
+      if (!m.normals.empty()) p.normals.insert(p.normals.end(), &m.normals[3 * size_t(u)], &m.normals[3 * size_t(u)] + 3);
+      if (!m.colors.empty()) p.colors.insert(p.colors.end(), &m.colors[4 * size_t(u)], &m.colors[4 * size_t(u)] + 4);
+    }
+    for (; t < m.trianglePatch.size() && m.trianglePatch[t] == p.id; ++t)
+      for (int c = 0; c < 3; ++c) p.triangles.push_back(localOf[m.triangles[3 * t + c]]);
+    for (uint32_t u : map) localOf[u] = kNoVertex;
+  }
+  if (t != m.trianglePatch.size()) fail("region", "assembled triangles are not grouped by patch");
+  return out;
+}
+
+// Bytes a region's task and result take as messages (the cluster's serializer writes these
+// vectors back to back; used for the task-time log of plain mtbuild runs).
+uint64_t taskBytes(const LoadedMesh& m) {
+  uint64_t n = m.positions.size() * 8 + m.normals.size() * 4 + m.colors.size() + m.triangles.size() * 4 +
+               m.trianglePatch.size() * 4 + m.locked.size() + m.patches.size() * 4;
+  for (const auto& u : m.unifiedOf) n += u.size() * 4;
+  return n;
+}
+uint64_t resultBytes(const RegionResult& r) {
+  uint64_t n = 0;
+  for (const EncodedPatch& e : r.encoded) n += e.payload.size() + 16;
+  const ReplacementMesh& m = r.replacement;
+  return n + m.positions.size() * 8 + m.normals.size() * 4 + m.colors.size() + m.triangles.size() * 4 +
+         m.origin.size() * 4 + m.triangleCell.size() * 8;
+}
+
+uint64_t treeBytes(const std::string& path) {
+  std::error_code ec;
+  uint64_t n = 0;
+  if (fs::is_regular_file(path, ec)) return fs::file_size(path, ec);
+  for (auto it = fs::recursive_directory_iterator(path, ec); !ec && it != fs::recursive_directory_iterator(); it.increment(ec))
+    if (it->is_regular_file(ec)) n += it->file_size(ec);
+  return n;
+}
+
+// ---- Checkpoints ----------------------------------------------------------------------------
+
+constexpr char kCheckpointBlob[] = "mtbuild.checkpoint";
+constexpr uint64_t kCheckpointMagic = 0x31544b43544d4dull;  // "MMTCKT1"
+constexpr uint32_t kCheckpointVersion = 1;
+
+// "key=value" lines: the input's identity and every option that changes the bytes (not --threads
+// or --memory, which do not). Compared line by line so a refused resume can say what changed.
+std::string fingerprint(const std::string& input, const BuildOptions& o, bool storeInput) {
+  std::ostringstream s;
+  std::error_code ec;
+  s << "format=" << format::kVersion << "." << kCheckpointVersion << "\n";
+  s << "input=" << fs::weakly_canonical(input, ec).string() << "\n";
+  if (storeInput) {
+    uint64_t h = 0;
+    std::vector<std::pair<std::string, uint64_t>> files;
+    for (auto it = fs::recursive_directory_iterator(input, ec); !ec && it != fs::recursive_directory_iterator(); it.increment(ec))
+      if (it->is_regular_file(ec)) files.push_back({fs::relative(it->path(), input, ec).string(), it->file_size(ec)});
+    std::sort(files.begin(), files.end());
+    for (auto& [name, size] : files) {
+      h = XXH64(name.data(), name.size(), h);
+      h = XXH64(&size, sizeof size, h);
+    }
+    std::string current;
+    if (FILE* f = std::fopen((input + "/CURRENT").c_str(), "rb")) {
+      char buf[256];
+      size_t n = std::fread(buf, 1, sizeof buf, f);
+      current.assign(buf, n);
+      std::fclose(f);
+    }
+    s << "input_store_files=" << files.size() << "\ninput_store_hash=" << std::hex << XXH64(current.data(), current.size(), h)
+      << std::dec << "\n";
+  } else {
+    uint64_t size = fs::file_size(input, ec);
+    auto mtime = fs::last_write_time(input, ec).time_since_epoch().count();
+    // Size, modification time and a hash of the first and last MiB: cheap, and catches a
+    // regenerated or edited file without reading the whole scan again.
+    uint64_t h = 0;
+    if (FILE* f = std::fopen(input.c_str(), "rb")) {
+      std::vector<char> buf(1 << 20);
+      size_t n = std::fread(buf.data(), 1, buf.size(), f);
+      h = XXH64(buf.data(), n, 0);
+      if (size > buf.size() && std::fseek(f, long(size - buf.size()), SEEK_SET) == 0) {
+        n = std::fread(buf.data(), 1, buf.size(), f);
+        h = XXH64(buf.data(), n, h);
+      }
+      std::fclose(f);
+    }
+    s << "input_size=" << size << "\ninput_mtime=" << int64_t(mtime) << "\ninput_hash=" << std::hex << h << std::dec << "\n";
+  }
+  s << "partition=" << (o.partition == PartitionKind::Regular ? "regular" : "irregular") << "\n";
+  s << "patch_triangles=" << o.patchTriangles << "\n";
+  s << "codec=" << (o.codec == format::Codec::Draco ? "draco" : "meshopt") << "\n";
+  s << "normals=" << (o.normals ? 1 : 0) << "\n";
+  s << "root_triangles=" << o.rootTriangles << "\n";
+  return s.str();
+}
+
+// The first line that differs, as "key: A (checkpoint) vs B (this run)".
+std::string fingerprintDifference(const std::string& saved, const std::string& now) {
+  std::istringstream a(saved), b(now);
+  std::string la, lb;
+  while (true) {
+    bool ga = bool(std::getline(a, la)), gb = bool(std::getline(b, lb));
+    if (!ga && !gb) return "";
+    if (la != lb || ga != gb) {
+      std::string key = la.substr(0, la.find('='));
+      if (key.empty()) key = lb.substr(0, lb.find('='));
+      auto value = [](const std::string& l) { return l.find('=') == std::string::npos ? std::string("?") : l.substr(l.find('=') + 1); };
+      return key + " was " + value(la) + " for the killed build, is " + value(lb) + " now";
+    }
+  }
+}
+
+struct ProducerEntry {
+  PatchId patch;
+  uint32_t node;
+};
+
+template <class T>
+void putVector(ByteWriter& w, const std::vector<T>& v) {
+  w.put<uint64_t>(v.size());
+  if (!v.empty()) w.putRaw(v.data(), v.size() * sizeof(T));
+}
+template <class T>
+std::vector<T> getVector(ByteReader& r) {
+  uint64_t n = r.get<uint64_t>();
+  if (n > (uint64_t(1) << 40) / sizeof(T)) fail("checkpoint", "vector of " + std::to_string(n) + " elements");
+  std::vector<T> v(n);
+  if (n) std::memcpy(v.data(), r.getRaw(n * sizeof(T)), n * sizeof(T));
+  return v;
+}
+
 }  // namespace
 
 std::string BuildReport::toJson() const {
@@ -171,7 +305,8 @@ std::string BuildReport::toJson() const {
     << ",\n  \"ingest_seconds\": " << ingestSeconds << ",\n  \"build_seconds\": " << buildSeconds
     << ",\n  \"total_seconds\": " << totalSeconds << ",\n  \"input_triangles_per_second\": "
     << (totalSeconds > 0 ? double(inputTriangles) / totalSeconds : 0) << ",\n  \"peak_rss_bytes\": " << peakRssBytes
-    << ",\n  \"levels\": [";
+    << ",\n  \"resumed_at_level\": " << resumedAtLevel << ",\n  \"peak_temp_bytes\": " << peakTempBytes
+    << extraJson << ",\n  \"levels\": [";
   for (size_t i = 0; i < levels.size(); ++i) {
     const LevelReport& l = levels[i];
     s << (i ? "," : "") << "\n    {\"level\": " << l.level << ", \"regions\": " << l.regions << ", \"triangles_in\": "
@@ -182,69 +317,219 @@ std::string BuildReport::toJson() const {
   return s.str();
 }
 
-BuildReport buildMt(const std::string& input, const std::string& output, const BuildOptions& options) {
-  auto t0 = Clock::now();
+// ---- The per-region work ----------------------------------------------------------------------
+
+RegionResult processRegion(const RegionTask& task, const RegionContext& ctx) {
+  auto start = Clock::now();
+  RegionResult out;
+  const LoadedMesh& lm = task.mesh;
+  const uint32_t L = ctx.partitionLevels;
+  // The floor patches become the payloads of the arcs into this region's node.
+  out.encoded = encodePatches(floorPatches(lm), ctx.grid, ctx.codec);
+  // Simplify to about half with the region's border locked (BMT 4), split by V*(level).
+  SimplifyRegionOptions so;
+  so.targetTriangles = task.root ? std::min<size_t>(lm.triangleCount() / 2, ctx.rootTriangles / 2) : lm.triangleCount() / 2;
+  SimplifiedRegion sr = simplifyRegion(lm, so);
+  out.deviation = sr.error;
+  ReplacementMesh& rep = out.replacement;
+  rep.level = task.level;
+  rep.origin = sr.origin;
+  rep.triangles = sr.triangles;
+  for (uint32_t o : sr.origin) {
+    if (!lm.normals.empty()) rep.normals.insert(rep.normals.end(), &lm.normals[3 * o], &lm.normals[3 * o] + 3);
+    if (!lm.colors.empty()) rep.colors.insert(rep.colors.end(), &lm.colors[4 * o], &lm.colors[4 * o] + 4);
+  }
+  rep.triangleCell.resize(sr.triangleCount());
+  for (uint32_t t = 0; t < sr.triangleCount(); ++t) {
+    uint64_t low = 0;
+    if (task.level + 1 < L) {
+      float c[3];
+      triangleCentroid(&sr.positions[3 * sr.triangles[3 * t]], &sr.positions[3 * sr.triangles[3 * t + 1]],
+                       &sr.positions[3 * sr.triangles[3 * t + 2]], c);
+      low = ctx.sequence->cellOf(task.level + 1, c);
+    }
+    // The triangle belongs to region R by construction (BMT 4: "this simplified mesh portion ...
+    // corresponds to a blue patch"), whatever its new centroid.
+    rep.triangleCell[t] = uint64_t(task.root ? 0 : task.region) << 32 | low;
+  }
+  Sphere sphere = sphereOf(sr.positions);
+  for (int a = 0; a < 3; ++a) out.sphere[a] = sphere.c[a];
+  out.sphere[3] = sphere.r;
+  normalCone(sr.positions, sr.triangles, out.coneAxis, out.coneCutoff);
+  rep.positions = std::move(sr.positions);
+  out.seconds = secondsSince(start);
+  return out;
+}
+
+// ---- The level loop's state ---------------------------------------------------------------------
+
+struct LevelBuilder::State {
+  BuildOptions options;
+  std::string input, output, work, storeDir;
+  Clock::time_point t0, buildStart;
+  std::unique_ptr<PatchStore> store;
+  PartitionSequence sequence;
+  std::string sequenceBytes;
+  RegionContext ctx;
+  std::string fingerprint;
+  std::unique_ptr<MtFileWriter> writer;
+  format::FileHeader header{};
+  // The DAG so far (BMT 3.1). Node 0 is the source: the full-resolution fragment.
+  std::vector<format::NodeRecord> nodes;
+  std::vector<Sphere> spheres;
+  std::map<std::pair<uint32_t, uint32_t>, std::vector<uint32_t>> arcPatches;  // (from, to) -> MT patch ids
+  std::unordered_map<PatchId, uint32_t> producer;  // live store patch -> the node whose fragment holds it
   BuildReport report;
-  std::string work = options.workDir.empty() ? output + ".work" : options.workDir;
-  std::string storeDir = work + "/store";
+  uint64_t liveTriangles = 0;
+  uint32_t builtLevels = 0;
+  bool finished = false;   // no more levels to build
+  bool completed = false;  // the file is written
+  // The level in progress.
+  std::vector<uint32_t> regionIds;
+  std::vector<std::vector<PatchId>> floors;
+  std::vector<uint64_t> floorTriangles;
+  bool root = false;
+  size_t nextCommit = 0;
+  LevelReport lr;
+  Clock::time_point levelStart;
+  std::unique_ptr<Progress> progress;
+  uint64_t doneTriangles = 0, outTriangles = 0;
+  // Test hooks (SIGKILL at a chosen point) and the task-time log.
+  long killAfterLevel = -1, killAfterRegions = -1, committedRegions = 0;
+  FILE* taskTimes = nullptr;
+
+  std::string checkpointBytes() const;
+  void restore(const std::string& bytes);
+  void writeCheckpoint();
+  void startFresh(bool storeInput);
+  void say(const std::string& what) const {
+    if (options.progress) std::fprintf(stderr, "%s: %s\n", options.toolName.c_str(), what.c_str());
+  }
+};
+
+std::string LevelBuilder::State::checkpointBytes() const {
+  ByteWriter w;
+  w.put<uint64_t>(kCheckpointMagic);
+  w.put<uint32_t>(kCheckpointVersion);
+  w.putString(fingerprint);
+  w.put<uint32_t>(builtLevels);
+  w.put<uint8_t>(finished ? 1 : 0);
+  w.put<uint64_t>(liveTriangles);
+  w.put(header);
+  w.put<uint64_t>(writer->bytesWritten());
+  putVector(w, writer->patchRecords());
+  putVector(w, nodes);
+  putVector(w, spheres);
+  w.put<uint64_t>(arcPatches.size());
+  for (auto& [key, ids] : arcPatches) {
+    w.put<uint32_t>(key.first);
+    w.put<uint32_t>(key.second);
+    putVector(w, ids);
+  }
+  std::vector<ProducerEntry> prod;
+  for (auto& [id, node] : producer) prod.push_back({id, node});
+  std::sort(prod.begin(), prod.end(), [](const ProducerEntry& a, const ProducerEntry& b) { return a.patch < b.patch; });
+  putVector(w, prod);
+  w.put<uint64_t>(report.inputTriangles);
+  w.put<double>(report.gridStep);
+  w.put<double>(report.ingestSeconds);
+  w.put<uint64_t>(report.peakTempBytes);
+  putVector(w, report.levels);
+  w.put<uint64_t>(XXH64(w.bytes().data(), w.bytes().size(), 0));
+  return w.bytes();
+}
+
+void LevelBuilder::State::restore(const std::string& bytes) {
+  const std::string where = storeDir + " (blob " + kCheckpointBlob + ")";
+  if (bytes.size() < 8 || XXH64(bytes.data(), bytes.size() - 8, 0) != [&] {
+        uint64_t h;
+        std::memcpy(&h, bytes.data() + bytes.size() - 8, 8);
+        return h;
+      }())
+    fail(where, "checkpoint checksum mismatch (rerun without --resume to start over)");
+  ByteReader r(bytes, where);
+  if (r.get<uint64_t>() != kCheckpointMagic) fail(where, "not a checkpoint (bad magic at byte offset 0)");
+  if (uint32_t v = r.get<uint32_t>(); v != kCheckpointVersion)
+    fail(where, "checkpoint version " + std::to_string(v) + ", this build reads " + std::to_string(kCheckpointVersion));
+  std::string saved = r.getString();
+  if (saved != fingerprint)
+    fail(work, "cannot --resume: the killed build used other input or options (" + fingerprintDifference(saved, fingerprint) +
+                   "); rerun without --resume to start over");
+  builtLevels = r.get<uint32_t>();
+  finished = r.get<uint8_t>() != 0;
+  liveTriangles = r.get<uint64_t>();
+  header = r.get<format::FileHeader>();
+  uint64_t length = r.get<uint64_t>();
+  auto records = getVector<format::PatchRecord>(r);
+  nodes = getVector<format::NodeRecord>(r);
+  spheres = getVector<Sphere>(r);
+  uint64_t arcs = r.get<uint64_t>();
+  for (uint64_t i = 0; i < arcs; ++i) {
+    uint32_t from = r.get<uint32_t>(), to = r.get<uint32_t>();
+    arcPatches[{from, to}] = getVector<uint32_t>(r);
+  }
+  for (const ProducerEntry& e : getVector<ProducerEntry>(r)) producer[e.patch] = e.node;
+  report.inputTriangles = r.get<uint64_t>();
+  report.gridStep = r.get<double>();
+  report.ingestSeconds = r.get<double>();
+  report.peakTempBytes = r.get<uint64_t>();
+  report.levels = getVector<LevelReport>(r);
+  if (nodes.size() != spheres.size() || nodes.empty()) fail(where, "checkpoint DAG is inconsistent");
+  for (PatchId id : store->patchIds())
+    if (!producer.count(id)) fail(where, "checkpoint does not know live patch " + std::to_string(id));
+  if (producer.size() != store->patchIds().size()) fail(where, "checkpoint names patches the store does not hold");
+  writer = std::make_unique<MtFileWriter>(output, header, length, std::move(records));
+}
+
+void LevelBuilder::State::writeCheckpoint() {
+  // Payloads first: the checkpoint may only name bytes that are on disk. The store then commits
+  // the level's write-backs and the checkpoint blob in one manifest edit (store_format.h), so a
+  // kill at any point leaves either the previous level's state or this one's, never a mix.
+  writer->syncPayloads();
+  store->putBlob(kCheckpointBlob, checkpointBytes());
+  store->sync();
+  report.peakTempBytes = std::max(report.peakTempBytes, treeBytes(work) + treeBytes(output + ".tmp"));
+}
+
+void LevelBuilder::State::startFresh(bool storeInput) {
   std::error_code ec;
-  // The MT writer's state is not checkpointed yet, so a store left by a killed build cannot be
-  // continued from: a DAG restarted on it would credit later levels' patches to the source.
-  if (options.resume && fs::exists(work) && options.progress)
-    std::fprintf(stderr, "mtbuild: --resume cannot continue a build yet (no checkpoint format); rebuilding from the input\n");
   fs::remove_all(work, ec);
   fs::create_directories(work, ec);
   if (ec) fail(work, "cannot create the work directory: " + ec.message());
-
-  std::unique_ptr<tbb::global_control> threadLimit;
-  if (options.threads > 0)
-    threadLimit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, options.threads);
-
   // 1. The level-0 patch store, partitioned by V*0 (BMT 4: "the mesh partitioned according to V*0").
-  if (!fs::exists(storeDir + "/CURRENT")) {
-    // Nothing to resume from yet: a failure here leaves no work directory behind.
-    try {
-      fs::remove_all(storeDir, ec);
-      if (isStoreDir(input)) {
-        fs::copy(input, storeDir, fs::copy_options::recursive, ec);
-        if (ec) fail(input, "cannot copy the store into " + work + ": " + ec.message());
-      } else {
-        VPartitionOptions vp;
-        vp.kind = options.partition;
-        vp.patchTriangles = options.patchTriangles;
-        VPartitionAssigner assigner(vp);
-        IngestOptions io;
-        io.memoryBytes = options.memoryBytes;
-        io.progress = options.progress;
-        PatchStore::ingest(input, storeDir, assigner, io);
-      }
-    } catch (...) {
-      fs::remove_all(work, ec);
-      throw;
+  // Nothing to resume from yet: a failure here leaves no work directory behind.
+  try {
+    if (storeInput) {
+      fs::copy(input, storeDir, fs::copy_options::recursive, ec);
+      if (ec) fail(input, "cannot copy the store into " + work + ": " + ec.message());
+    } else {
+      VPartitionOptions vp;
+      vp.kind = options.partition;
+      vp.patchTriangles = options.patchTriangles;
+      VPartitionAssigner assigner(vp);
+      IngestOptions io;
+      io.memoryBytes = options.memoryBytes;
+      io.progress = options.progress;
+      PatchStore::ingest(input, storeDir, assigner, io);
     }
+  } catch (...) {
+    fs::remove_all(work, ec);
+    throw;
   }
   report.ingestSeconds = secondsSince(t0);
-  auto buildStart = Clock::now();
-  auto store = PatchStore::open(storeDir);
+  store = PatchStore::open(storeDir);
   store->setAutoCommit(false);
-  PartitionSequence sequence;
   if (!loadStoreSequence(*store, sequence))
     fail(input, "the patch store was not made with a V-partition (ingest it with --partition irregular or regular)");
-  const uint32_t L = sequence.levels();
   StoreInfo info = store->info();
   report.inputTriangles = info.triangles;
-  const uint32_t patchTriangles = options.patchTriangles ? options.patchTriangles : kDefaultPatchTriangles;
-  const uint64_t rootTriangles = options.rootTriangles ? options.rootTriangles : 2ull * patchTriangles;
+  liveTriangles = info.triangles;
 
   // 2. The global quantization grid (mt_format.h): shared vertices quantize identically.
   QuantizationGrid grid = QuantizationGrid::fromBounds(info.bounds.lo, info.bounds.hi, chooseGridStep(*store));
   report.gridStep = grid.step;
   const double qError = grid.maxError();
-  PatchCodecOptions codec;
-  codec.codec = options.codec;
-  codec.normals = options.normals;
-
-  format::FileHeader header{};
+  header = format::FileHeader{};
   header.codec = uint32_t(options.codec);
   header.vertexFlags = (options.normals ? format::kHasNormals : 0) | (info.layout.colors ? format::kHasColors : 0);
   header.payloadAlignment = format::kDefaultPayloadAlignment;
@@ -258,187 +543,320 @@ BuildReport buildMt(const std::string& input, const std::string& output, const B
   header.gridStep = grid.step;
   header.quantizationError = qError;
   header.gridBits = grid.bits;
-  MtFileWriter writer(output, header);
+  writer = std::make_unique<MtFileWriter>(output, header);
+  header = writer->header();
 
   // 3. The DAG. Node 0 is the source: the full-resolution fragment (BMT 3.1).
-  std::vector<format::NodeRecord> nodes(1);
-  std::vector<Sphere> spheres(1);
-  {
-    format::NodeRecord& source = nodes[0];
-    for (int a = 0; a < 3; ++a) source.center[a] = 0.5 * (info.bounds.lo[a] + info.bounds.hi[a]);
-    source.radius = 0;  // never refined past, so its sphere is not part of the nesting
-    source.error = float(qError);
-    source.coneCutoff = -1;
-    source.coneAxis[2] = 1;
-    source.level = 0;
-  }
-  std::map<std::pair<uint32_t, uint32_t>, std::vector<uint32_t>> arcPatches;  // (from, to) -> MT patch ids
-  std::unordered_map<PatchId, uint32_t> producer;
+  nodes.assign(1, format::NodeRecord{});
+  spheres.assign(1, Sphere{});
+  format::NodeRecord& source = nodes[0];
+  for (int a = 0; a < 3; ++a) source.center[a] = 0.5 * (info.bounds.lo[a] + info.bounds.hi[a]);
+  source.radius = 0;  // never refined past, so its sphere is not part of the nesting
+  source.error = float(qError);
+  source.coneCutoff = -1;
+  source.coneAxis[2] = 1;
+  source.level = 0;
   for (PatchId id : store->patchIds()) producer[id] = 0;
+  // Checkpoint 0: a build killed from here on resumes without ingesting again.
+  writeCheckpoint();
+}
 
-  uint64_t liveTriangles = info.triangles;
-  uint32_t level = 0;
-  for (;; ++level) {
-    // Regions of V(level+1): patches grouped by the low half of their V*level key.
-    std::map<uint32_t, std::vector<PatchId>> regions;
-    for (PatchId id : store->patchIds()) regions[PartitionSequence::crossLow(store->meta(id).cell)].push_back(id);
-    const bool root = level + 1 >= L;  // the last partition level: one region, everything
-    if (liveTriangles <= rootTriangles && level > 0) break;
-    auto levelStart = Clock::now();
-    LevelReport lr;
-    lr.level = level + 1;
-    lr.regions = uint32_t(regions.size());
-    lr.trianglesIn = liveTriangles;
-    std::vector<RegionJob*> order;
-    std::vector<std::unique_ptr<RegionJob>> jobs;
-    for (auto& [r, ids] : regions) {
-      auto job = std::make_unique<RegionJob>();
-      job->region = r;
-      job->floor = ids;
-      order.push_back(job.get());
-      jobs.push_back(std::move(job));
+// ---- LevelBuilder -------------------------------------------------------------------------------
+
+LevelBuilder::LevelBuilder(const std::string& input, const std::string& output, const BuildOptions& options)
+    : s_(std::make_unique<State>()) {
+  State& s = *s_;
+  s.t0 = Clock::now();
+  s.options = options;
+  s.input = input;
+  s.output = output;
+  s.work = options.workDir.empty() ? output + ".work" : options.workDir;
+  s.storeDir = s.work + "/store";
+  if (const char* k = std::getenv("MT_TEST_KILL_AFTER_LEVEL")) s.killAfterLevel = std::atol(k);
+  if (const char* k = std::getenv("MT_TEST_KILL_AFTER_REGIONS")) s.killAfterRegions = std::atol(k);
+  const bool storeInput = isStoreDir(input);
+  if (!storeInput && !fs::is_regular_file(input)) fail(input, "no such file");
+  s.fingerprint = fingerprint(input, options, storeInput);
+
+  bool resumed = false;
+  if (fs::exists(s.work)) {
+    if (!options.resume) {
+      s.say("removing the work directory " + s.work + " of an earlier build and starting over (--resume continues it)");
+    } else if (!fs::exists(s.storeDir + "/CURRENT")) {
+      s.say("--resume: " + s.work + " holds no finished ingest; starting from the input");
+    } else {
+      s.store = PatchStore::open(s.storeDir);
+      std::string bytes = s.store->blob(kCheckpointBlob);
+      if (bytes.empty()) {
+        s.say("--resume: " + s.work + " has no checkpoint yet; starting from the input");
+        s.store.reset();
+      } else if (!fs::exists(output + ".tmp")) {
+        s.say("--resume: " + output + ".tmp of the killed build is gone; starting from the input");
+        s.store.reset();
+      } else {
+        s.store->setAutoCommit(false);
+        if (!loadStoreSequence(*s.store, s.sequence)) fail(s.storeDir, "work store has no V-partition");
+        s.restore(bytes);
+        s.report.resumedAtLevel = s.builtLevels;
+        s.say("--resume: continuing after level " + std::to_string(s.builtLevels) + " from " + s.work);
+        resumed = true;
+      }
     }
-    Progress progress(options.progress, "mtbuild: level " + std::to_string(level + 1) + "/" + std::to_string(L), liveTriangles);
-    uint64_t doneTriangles = 0, outTriangles = 0;
-    size_t next = 0;
-    const size_t tokens = 2 * size_t(options.threads ? options.threads : tbb::this_task_arena::max_concurrency());
-    tbb::parallel_pipeline(
-        tokens,
-        tbb::make_filter<void, RegionJob*>(tbb::filter_mode::serial_in_order,
-                                           [&](tbb::flow_control& fc) -> RegionJob* {
-                                             if (next == order.size()) {
-                                               fc.stop();
-                                               return nullptr;
-                                             }
-                                             return order[next++];
-                                           }) &
-            tbb::make_filter<RegionJob*, RegionJob*>(
-                tbb::filter_mode::parallel,
-                [&](RegionJob* job) {
-                  // Load the floor, simplify with the region's border locked, split by V*(level+1).
-                  // Each floor patch is read once: encoded for the file, then assembled.
-                  std::vector<Patch> floor;
-                  for (PatchId id : job->floor) floor.push_back(store->patch(id));
-                  job->encoded = encodePatches(floor, grid, codec);
-                  job->loaded = store->assemble(floor);
-                  const LoadedMesh& lm = job->loaded;
-                  SimplifyRegionOptions so;
-                  so.targetTriangles = root ? std::min<size_t>(lm.triangleCount() / 2, rootTriangles / 2) : lm.triangleCount() / 2;
-                  SimplifiedRegion sr = simplifyRegion(lm, so);
-                  job->deviation = sr.error;
-                  ReplacementMesh& rep = job->replacement;
-                  rep.level = level + 1;
-                  rep.origin = sr.origin;
-                  rep.triangles = sr.triangles;
-                  for (uint32_t o : sr.origin) {
-                    if (!lm.normals.empty()) rep.normals.insert(rep.normals.end(), &lm.normals[3 * o], &lm.normals[3 * o] + 3);
-                    if (!lm.colors.empty()) rep.colors.insert(rep.colors.end(), &lm.colors[4 * o], &lm.colors[4 * o] + 4);
-                  }
-                  rep.triangleCell.resize(sr.triangleCount());
-                  for (uint32_t t = 0; t < sr.triangleCount(); ++t) {
-                    uint64_t low = 0;
-                    if (level + 2 < L) {
-                      float c[3];
-                      triangleCentroid(&sr.positions[3 * sr.triangles[3 * t]], &sr.positions[3 * sr.triangles[3 * t + 1]],
-                                       &sr.positions[3 * sr.triangles[3 * t + 2]], c);
-                      low = sequence.cellOf(level + 2, c);
-                    }
-                    // The triangle belongs to region R by construction (BMT 4: "this simplified
-                    // mesh portion ... corresponds to a blue patch"), whatever its new centroid.
-                    rep.triangleCell[t] = uint64_t(root ? 0 : job->region) << 32 | low;
-                  }
-                  job->sphere = sphereOf(sr.positions);
-                  normalCone(sr.positions, sr.triangles, job->coneAxis, job->coneCutoff);
-                  rep.positions = std::move(sr.positions);
-                  return job;
-                }) &
-            tbb::make_filter<RegionJob*, void>(tbb::filter_mode::serial_in_order, [&](RegionJob* job) {
-              // Commit in region order: ids, payload order and node numbers do not depend on
-              // which worker finished first.
-              const uint32_t node = uint32_t(nodes.size());
-              format::NodeRecord rec{};
-              float predecessorError = 0;
-              Sphere sphere = job->sphere;
-              for (const EncodedPatch& e : job->encoded) {
-                uint32_t from = producer.at(e.storeId);
-                uint32_t mtPatch = writer.appendPatch(e.payload.data(), e.payload.size(), e.triangles, e.vertices);
-                arcPatches[{from, node}].push_back(mtPatch);
-                predecessorError = std::max(predecessorError, nodes[from].error);
-                if (from != 0) enclose(sphere, spheres[from]);
-                producer.erase(e.storeId);
-              }
-              // A real, monotone bound (issue 4 item 2): the floor is within predecessorError of
-              // the input, the new fragment within `deviation` of the floor.
-              rec.error = std::nextafter(float(predecessorError + job->deviation), std::numeric_limits<float>::infinity());
-              for (int a = 0; a < 3; ++a) rec.center[a] = sphere.c[a];
-              rec.radius = std::nextafter(float(sphere.r), std::numeric_limits<float>::infinity());
-              for (int a = 0; a < 3; ++a) rec.coneAxis[a] = job->coneAxis[a];
-              rec.coneCutoff = job->coneCutoff;
-              rec.level = level + 1;
-              rec.region = job->region;
-              nodes.push_back(rec);
-              spheres.push_back(sphere);
-              std::vector<PatchId> created = store->writeBack(job->loaded, job->replacement);
-              for (PatchId id : created) producer[id] = node;
-              lr.maxError = std::max(lr.maxError, double(rec.error));
-              doneTriangles += job->loaded.triangleCount();
-              outTriangles += job->replacement.triangles.size() / 3;
-              progress.update(doneTriangles);
-              // Free the job's memory now; the pipeline keeps the pointer only.
-              *job = RegionJob();
-            }));
-    store->sync();  // the level is durable: the checkpoint a resumed build restarts from
-    progress.finish(doneTriangles);
-    lr.trianglesOut = outTriangles;
-    lr.seconds = secondsSince(levelStart);
-    report.levels.push_back(lr);
-    liveTriangles = outTriangles;
-    if (root || outTriangles <= rootTriangles || outTriangles * 10 > lr.trianglesIn * 9) {
-      ++level;
-      break;
-    }
+  } else if (options.resume) {
+    s.say("--resume: no work directory " + s.work + "; starting from the input");
   }
+  if (!resumed) s.startFresh(storeInput);
 
-  // 4. The sink: every remaining patch is on an arc from its producer to the sink (BMT 3.1:
-  // "all the leaf nodes ... are connected through an arc to a dummy sink node").
-  const uint32_t sink = uint32_t(nodes.size());
+  s.buildStart = Clock::now();
+  s.sequenceBytes = s.sequence.serialize();
+  const uint32_t patchTriangles = options.patchTriangles ? options.patchTriangles : kDefaultPatchTriangles;
+  s.ctx.grid.step = s.header.gridStep;
+  s.ctx.grid.bits = s.header.gridBits;
+  for (int a = 0; a < 3; ++a) s.ctx.grid.origin[a] = s.header.gridOrigin[a];
+  s.ctx.codec.codec = options.codec;
+  s.ctx.codec.normals = options.normals;
+  s.ctx.sequence = &s.sequence;
+  s.ctx.partitionLevels = s.sequence.levels();
+  s.ctx.rootTriangles = options.rootTriangles ? options.rootTriangles : 2ull * patchTriangles;
+  if (!options.taskTimesPath.empty()) {
+    s.taskTimes = std::fopen(options.taskTimesPath.c_str(), resumed ? "a" : "w");
+    if (!s.taskTimes) fail(options.taskTimesPath, "cannot write");
+    if (!resumed)
+      std::fprintf(s.taskTimes,
+                   "level,region,floor_patches,triangles_in,triangles_out,load_s,process_s,commit_s,task_bytes,result_bytes,moved_bytes\n");
+  }
+}
+
+LevelBuilder::~LevelBuilder() {
+  if (!s_) return;
+  if (s_->taskTimes) std::fclose(s_->taskTimes);
+  // Stopped by an error after a checkpoint: keep OUT.mt.tmp beside the work directory so that
+  // --resume can continue from the last finished level (the final name is never written).
+  if (!s_->completed && s_->writer && s_->store) {
+    s_->writer->detach();
+    s_->say("stopped; the work in " + s_->work + " continues with --resume (or delete it)");
+  }
+}
+
+const RegionContext& LevelBuilder::context() const { return s_->ctx; }
+const std::string& LevelBuilder::sequenceBytes() const { return s_->sequenceBytes; }
+const BuildOptions& LevelBuilder::options() const { return s_->options; }
+uint32_t LevelBuilder::level() const { return s_->builtLevels + 1; }
+size_t LevelBuilder::regionCount() const { return s_->regionIds.size(); }
+uint64_t LevelBuilder::regionTriangles(size_t i) const { return s_->floorTriangles.at(i); }
+
+bool LevelBuilder::beginLevel() {
+  State& s = *s_;
+  if (s.finished) return false;
+  const uint32_t level = s.builtLevels;  // building level + 1 from V*level
+  // Regions of V(level+1): patches grouped by the low half of their V*level key.
+  std::map<uint32_t, std::vector<PatchId>> regions;
+  std::map<uint32_t, uint64_t> triangles;
+  for (PatchId id : s.store->patchIds()) {
+    PatchMeta m = s.store->meta(id);
+    regions[PartitionSequence::crossLow(m.cell)].push_back(id);
+    triangles[PartitionSequence::crossLow(m.cell)] += m.triangles;
+  }
+  s.root = level + 1 >= s.ctx.partitionLevels;
+  if (s.liveTriangles <= s.ctx.rootTriangles && level > 0) {
+    s.finished = true;
+    return false;
+  }
+  s.regionIds.clear();
+  s.floors.clear();
+  s.floorTriangles.clear();
+  for (auto& [r, ids] : regions) {
+    s.regionIds.push_back(r);
+    s.floors.push_back(std::move(ids));
+    s.floorTriangles.push_back(triangles[r]);
+  }
+  s.levelStart = Clock::now();
+  s.lr = LevelReport{};
+  s.lr.level = level + 1;
+  s.lr.regions = uint32_t(s.regionIds.size());
+  s.lr.trianglesIn = s.liveTriangles;
+  s.nextCommit = 0;
+  s.doneTriangles = s.outTriangles = 0;
+  s.progress = std::make_unique<Progress>(
+      s.options.progress, s.options.toolName + ": level " + std::to_string(level + 1) + "/" + std::to_string(s.ctx.partitionLevels),
+      s.liveTriangles);
+  return true;
+}
+
+RegionTask LevelBuilder::loadRegion(size_t i) const {
+  const State& s = *s_;
+  auto start = Clock::now();
+  RegionTask task;
+  task.level = s.builtLevels + 1;
+  task.region = s.regionIds.at(i);
+  task.root = s.root;
+  std::vector<Patch> floor;
+  for (PatchId id : s.floors[i]) floor.push_back(s.store->patch(id));
+  task.mesh = s.store->assemble(floor);
+  task.loadSeconds = secondsSince(start);
+  return task;
+}
+
+void LevelBuilder::commitRegion(size_t i, RegionTask task, RegionResult result, uint64_t moveBytes) {
+  State& s = *s_;
+  if (i != s.nextCommit) fail(s.output, "region " + std::to_string(i) + " committed out of order");
+  auto start = Clock::now();
+  // Commit in region order: ids, payload order and node numbers do not depend on which worker
+  // finished first.
+  const uint32_t node = uint32_t(s.nodes.size());
+  format::NodeRecord rec{};
+  float predecessorError = 0;
+  Sphere sphere;
+  for (int a = 0; a < 3; ++a) sphere.c[a] = result.sphere[a];
+  sphere.r = result.sphere[3];
+  if (result.encoded.size() != task.mesh.patches.size()) fail(s.output, "region result has the wrong number of floor patches");
+  for (size_t k = 0; k < result.encoded.size(); ++k) {
+    const EncodedPatch& e = result.encoded[k];
+    if (e.storeId != task.mesh.patches[k]) fail(s.output, "region result names the wrong floor patch");
+    uint32_t from = s.producer.at(e.storeId);
+    uint32_t mtPatch = s.writer->appendPatch(e.payload.data(), e.payload.size(), e.triangles, e.vertices);
+    s.arcPatches[{from, node}].push_back(mtPatch);
+    predecessorError = std::max(predecessorError, s.nodes[from].error);
+    if (from != 0) enclose(sphere, s.spheres[from]);
+    s.producer.erase(e.storeId);
+  }
+  // A real, monotone bound (issue 4 item 2): the floor is within predecessorError of the input,
+  // the new fragment within `deviation` of the floor.
+  rec.error = std::nextafter(float(predecessorError + result.deviation), std::numeric_limits<float>::infinity());
+  for (int a = 0; a < 3; ++a) rec.center[a] = sphere.c[a];
+  rec.radius = std::nextafter(float(sphere.r), std::numeric_limits<float>::infinity());
+  for (int a = 0; a < 3; ++a) rec.coneAxis[a] = result.coneAxis[a];
+  rec.coneCutoff = result.coneCutoff;
+  rec.level = task.level;
+  rec.region = task.region;
+  s.nodes.push_back(rec);
+  s.spheres.push_back(sphere);
+  std::vector<PatchId> created = s.store->writeBack(task.mesh, result.replacement);
+  for (PatchId id : created) s.producer[id] = node;
+  s.lr.maxError = std::max(s.lr.maxError, double(rec.error));
+  const uint64_t in = task.mesh.triangleCount(), out = result.replacement.triangles.size() / 3;
+  s.doneTriangles += in;
+  s.outTriangles += out;
+  s.progress->update(s.doneTriangles);
+  ++s.nextCommit;
+  if (s.taskTimes)
+    std::fprintf(s.taskTimes, "%u,%u,%zu,%" PRIu64 ",%" PRIu64 ",%.6f,%.6f,%.6f,%" PRIu64 ",%" PRIu64 ",%" PRIu64 "\n", task.level,
+                 task.region, task.mesh.patches.size(), in, out, task.loadSeconds, result.seconds, secondsSince(start),
+                 taskBytes(task.mesh), resultBytes(result), moveBytes);
+  // Temporary disk peaks inside a level too (new patches appended before the old ones' space is
+  // reclaimed): sample it now and then.
+  if (s.nextCommit % 32 == 0)
+    s.report.peakTempBytes = std::max(s.report.peakTempBytes, treeBytes(s.work) + treeBytes(s.output + ".tmp"));
+  if (s.killAfterRegions >= 0 && ++s.committedRegions > s.killAfterRegions) std::raise(SIGKILL);  // test hook
+}
+
+void LevelBuilder::endLevel() {
+  State& s = *s_;
+  if (s.nextCommit != s.regionIds.size()) fail(s.output, "level ended before all regions were committed");
+  s.progress->finish(s.doneTriangles);
+  s.lr.trianglesOut = s.outTriangles;
+  s.lr.seconds = secondsSince(s.levelStart);
+  s.report.levels.push_back(s.lr);
+  s.liveTriangles = s.outTriangles;
+  ++s.builtLevels;
+  if (s.root || s.outTriangles <= s.ctx.rootTriangles || s.outTriangles * 10 > s.lr.trianglesIn * 9) s.finished = true;
+  // The level is durable: the checkpoint a resumed build restarts from.
+  s.writeCheckpoint();
+  if (s.taskTimes) std::fflush(s.taskTimes);
+  if (s.killAfterLevel >= 0 && long(s.builtLevels) >= s.killAfterLevel) std::raise(SIGKILL);  // test hook
+}
+
+BuildReport LevelBuilder::finish() {
+  State& s = *s_;
+  const uint32_t level = s.builtLevels;
+  // 4. The sink: every remaining patch is on an arc from its producer to the sink (BMT 3.1: "all
+  // the leaf nodes ... are connected through an arc to a dummy sink node").
+  const uint32_t sink = uint32_t(s.nodes.size());
   {
-    std::vector<PatchId> ids = store->patchIds();
+    std::vector<PatchId> ids = s.store->patchIds();
     std::vector<Patch> top;
-    for (PatchId id : ids) top.push_back(store->patch(id));
-    std::vector<EncodedPatch> encoded = encodePatches(top, grid, codec);
+    for (PatchId id : ids) top.push_back(s.store->patch(id));
+    std::vector<EncodedPatch> encoded = encodePatches(top, s.ctx.grid, s.ctx.codec);
     for (const EncodedPatch& e : encoded) {
-      uint32_t mtPatch = writer.appendPatch(e.payload.data(), e.payload.size(), e.triangles, e.vertices);
-      arcPatches[{producer.at(e.storeId), sink}].push_back(mtPatch);
+      uint32_t mtPatch = s.writer->appendPatch(e.payload.data(), e.payload.size(), e.triangles, e.vertices);
+      s.arcPatches[{s.producer.at(e.storeId), sink}].push_back(mtPatch);
     }
     format::NodeRecord rec{};
     Sphere all;
-    for (int a = 0; a < 3; ++a) all.c[a] = 0.5 * (info.bounds.lo[a] + info.bounds.hi[a]);
-    for (size_t n = 1; n < nodes.size(); ++n) enclose(all, spheres[n]);
+    for (int a = 0; a < 3; ++a) all.c[a] = 0.5 * (s.header.boundsMin[a] + s.header.boundsMax[a]);
+    for (size_t n = 1; n < s.nodes.size(); ++n) enclose(all, s.spheres[n]);
     for (int a = 0; a < 3; ++a) rec.center[a] = all.c[a];
     rec.radius = std::nextafter(float(all.r), std::numeric_limits<float>::infinity());
     rec.error = std::numeric_limits<float>::infinity();
     rec.coneCutoff = -1;
     rec.coneAxis[2] = 1;
     rec.level = level + 1;
-    nodes.push_back(rec);
+    s.nodes.push_back(rec);
   }
   std::vector<DagArc> arcs;
-  for (auto& [key, patches] : arcPatches) arcs.push_back({key.first, key.second, patches});
-  writer.header().levelCount = level + 1;
-  report.nodes = nodes.size();
+  for (auto& [key, patches] : s.arcPatches) arcs.push_back({key.first, key.second, patches});
+  BuildReport& report = s.report;
+  s.writer->header().levelCount = level + 1;
+  report.nodes = s.nodes.size();
   report.arcs = arcs.size();
-  report.patches = writer.patchCount();
-  writer.finish(std::move(nodes), std::move(arcs));
-  report.fileBytes = fs::file_size(output);
-  store.reset();
-  fs::remove_all(work, ec);
-  report.buildSeconds = secondsSince(buildStart);
-  report.totalSeconds = secondsSince(t0);
+  report.patches = s.writer->patchCount();
+  report.peakTempBytes = std::max(report.peakTempBytes, treeBytes(s.work) + treeBytes(s.output + ".tmp"));
+  s.writer->finish(std::move(s.nodes), std::move(arcs));
+  report.fileBytes = fs::file_size(s.output);
+  s.store.reset();
+  std::error_code ec;
+  fs::remove_all(s.work, ec);
+  report.buildSeconds = secondsSince(s.buildStart);
+  report.totalSeconds = secondsSince(s.t0);
   report.peakRssBytes = peakRssBytes();
-  auto reader = MtFileReader::open(output);
+  auto reader = MtFileReader::open(s.output);
   report.storedTriangles = reader->header().storedTriangles;
+  s.completed = true;
   return report;
+}
+
+// ---- mtbuild: the regions on threads ----------------------------------------------------------
+
+BuildReport buildMt(const std::string& input, const std::string& output, const BuildOptions& options) {
+  std::unique_ptr<tbb::global_control> threadLimit;
+  if (options.threads > 0)
+    threadLimit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, options.threads);
+  LevelBuilder builder(input, output, options);
+  const RegionContext& ctx = builder.context();
+  struct Job {
+    size_t index = 0;
+    RegionTask task;
+    RegionResult result;
+  };
+  while (builder.beginLevel()) {
+    const size_t regions = builder.regionCount();
+    std::vector<Job> jobs(regions);
+    size_t next = 0;
+    const size_t tokens = 2 * size_t(options.threads ? options.threads : tbb::this_task_arena::max_concurrency());
+    tbb::parallel_pipeline(
+        tokens,
+        tbb::make_filter<void, Job*>(tbb::filter_mode::serial_in_order,
+                                     [&](tbb::flow_control& fc) -> Job* {
+                                       if (next == regions) {
+                                         fc.stop();
+                                         return nullptr;
+                                       }
+                                       jobs[next].index = next;
+                                       return &jobs[next++];
+                                     }) &
+            tbb::make_filter<Job*, Job*>(tbb::filter_mode::parallel,
+                                         [&](Job* job) {
+                                           job->task = builder.loadRegion(job->index);
+                                           job->result = processRegion(job->task, ctx);
+                                           return job;
+                                         }) &
+            tbb::make_filter<Job*, void>(tbb::filter_mode::serial_in_order, [&](Job* job) {
+              builder.commitRegion(job->index, std::move(job->task), std::move(job->result));
+              *job = Job();  // free the region's memory now
+            }));
+    builder.endLevel();
+  }
+  return builder.finish();
 }
 
 }  // namespace mt

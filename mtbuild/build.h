@@ -9,10 +9,13 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include "mtbuild/mt_format.h"
+#include "mtbuild/patch_codec.h"
+#include "patchstore/patch_store.h"
 #include "vpartition/vpartition.h"
 
 namespace mt {
@@ -24,12 +27,18 @@ struct BuildOptions {
   uint32_t patchTriangles = 0;        // 0: vpartition's default
   format::Codec codec = format::Codec::Meshopt;
   bool normals = false;               // store normals (else the renderer computes them)
-  bool resume = false;                // continue a killed build (not yet: restarts from the input)
+  // Continue a killed build from the checkpoint in its work directory (the last finished level).
+  bool resume = false;
   bool progress = true;
   std::string workDir;                // default: OUT.work
   // Stop adding levels once the top level has at most this many triangles (0: 2 x patch size),
   // or when a level removes less than 10% of the triangles.
   uint64_t rootTriangles = 0;
+  // When set, one CSV line per region (level, region, triangles, seconds of load/process/commit,
+  // bytes a cluster would move) is written here: the input of the scaling model in docs/cluster.md.
+  std::string taskTimesPath;
+  // The tool's name in messages ("mtbuild", "mtcluster").
+  std::string toolName = "mtbuild";
 };
 
 struct LevelReport {
@@ -48,12 +57,97 @@ struct BuildReport {
   double gridStep = 0;
   double ingestSeconds = 0, buildSeconds = 0, totalSeconds = 0;
   uint64_t peakRssBytes = 0;
+  uint32_t resumedAtLevel = 0;        // 0: built from the start; k: continued after level k
+  uint64_t peakTempBytes = 0;         // largest OUT.work + OUT.mt.tmp seen at a level's end
   std::vector<LevelReport> levels;
+  std::string extraJson;              // more members (",\n  \"name\": value" ...), e.g. cluster stats
   std::string toJson() const;
 };
 
 // input: a mesh file (PLY/OBJ/OFF/STL) or a patch store directory made with a V-partition.
 // Writes `output` under a temporary name and renames it when complete. Throws mt::Error.
 BuildReport buildMt(const std::string& input, const std::string& output, const BuildOptions& options);
+
+// ---- The per-region work, as one pure function (BMT section 4, "the i-th simplification step") --
+// mtbuild runs it on threads, mtcluster on MPI ranks; both commit the results in region order with
+// LevelBuilder, so the file is the same bytes either way.
+
+// What every worker needs for a whole build (fixed once the level-0 store exists).
+struct RegionContext {
+  QuantizationGrid grid;
+  PatchCodecOptions codec;
+  const PartitionSequence* sequence = nullptr;
+  uint32_t partitionLevels = 0;       // sequence->levels()
+  uint64_t rootTriangles = 0;
+};
+
+// One region of V(level): its floor (the V*(level-1) patches inside it) assembled into one mesh,
+// with the vertices that patches outside the region hold locked (LoadedMesh::locked).
+struct RegionTask {
+  uint32_t level = 0;                 // the level being built (1 = first simplification)
+  uint32_t region = 0;                // the V(level) cell
+  bool root = false;                  // the last partition level: one region, everything
+  LoadedMesh mesh;
+  double loadSeconds = 0;             // measured by whoever loaded it
+};
+
+// One floor patch, encoded for the MT file.
+struct EncodedPatch {
+  PatchId storeId = 0;
+  std::vector<uint8_t> payload;
+  uint32_t triangles = 0, vertices = 0;
+};
+
+struct RegionResult {
+  std::vector<EncodedPatch> encoded;  // the floor patches, in task.mesh.patches order
+  ReplacementMesh replacement;        // the simplified region, split by V*(level)
+  double deviation = 0;               // measured distance simplified <-> floor
+  double sphere[4] = {0, 0, 0, 0};    // centre, radius of the simplified region
+  float coneAxis[3] = {0, 0, 1};
+  float coneCutoff = -1;
+  double seconds = 0;                 // time spent in processRegion
+};
+
+// Encodes the floor patches (rebuilt exactly from task.mesh via unifiedOf), simplifies the region
+// to about half with its border locked, and keys the result's triangles by V*(level) cell.
+// Deterministic: depends on its arguments only. Thread-safe.
+RegionResult processRegion(const RegionTask& task, const RegionContext& context);
+
+// The level loop's state and its checkpoints: ingest (or resume), then for each level the regions
+// to process, committed in region order, then the sink and the file. Checkpoint (after each level,
+// atomically with the store's level sync; store blob "mtbuild.checkpoint"): the MT writer's length
+// and patch records, the DAG so far, which node produced each live patch, the level reports, and
+// a fingerprint of the input and of every option that changes the bytes.
+class LevelBuilder {
+ public:
+  LevelBuilder(const std::string& input, const std::string& output, const BuildOptions& options);
+  ~LevelBuilder();
+  LevelBuilder(const LevelBuilder&) = delete;
+  LevelBuilder& operator=(const LevelBuilder&) = delete;
+
+  const RegionContext& context() const;
+  const std::string& sequenceBytes() const;  // PartitionSequence::serialize() of the build
+  const BuildOptions& options() const;
+
+  // Plans the next level; false once the build needs no more levels.
+  bool beginLevel();
+  uint32_t level() const;                    // the level being built (1-based)
+  size_t regionCount() const;
+  uint64_t regionTriangles(size_t i) const;  // floor triangles of region i (from the manifest)
+  // Reads region i's floor patches and assembles them. Thread-safe between commits.
+  RegionTask loadRegion(size_t i) const;
+  // Commits region i; must be called for i = 0, 1, ... in order. `moveBytes`: what a cluster
+  // moved for it (0 for threads), logged in the task times.
+  void commitRegion(size_t i, RegionTask task, RegionResult result, uint64_t moveBytes = 0);
+  // Syncs the store and the MT file and writes the checkpoint.
+  void endLevel();
+  // The sink, the DAG, the file; removes the work directory.
+  BuildReport finish();
+
+  struct State;
+
+ private:
+  std::unique_ptr<State> s_;
+};
 
 }  // namespace mt

@@ -64,6 +64,35 @@ void MtFileWriter::abandon() {
   }
 }
 
+MtFileWriter::MtFileWriter(const std::string& path, const FileHeader& header, uint64_t length,
+                           std::vector<PatchRecord> patches)
+    : path_(path), tmp_(path + ".tmp"), offset_(length), header_(header), patches_(std::move(patches)) {
+  fd_ = ::open(tmp_.c_str(), O_WRONLY | O_CLOEXEC);
+  if (fd_ < 0) fail(tmp_, "cannot reopen to resume: " + errnoText());
+  off_t end = ::lseek(fd_, 0, SEEK_END);
+  if (end < 0 || uint64_t(end) < length) {
+    ::close(fd_);
+    fd_ = -1;  // keep the file: it is the killed build's, not ours to remove
+    fail(tmp_, "cannot resume: " + std::to_string(end) + " bytes, the checkpoint recorded " + std::to_string(length));
+  }
+  if (::ftruncate(fd_, off_t(length)) != 0 || ::lseek(fd_, off_t(length), SEEK_SET) != off_t(length)) {
+    std::string why = errnoText();
+    ::close(fd_);
+    fd_ = -1;
+    fail(tmp_, "cannot cut back to the checkpoint at byte offset " + std::to_string(length) + ": " + why);
+  }
+}
+
+void MtFileWriter::syncPayloads() {
+  if (fd_ < 0) fail(tmp_, "sync after finish or failure");
+  if (::fdatasync(fd_) != 0) fail(tmp_, "fdatasync failed: " + errnoText());
+}
+
+void MtFileWriter::detach() {
+  if (fd_ >= 0) ::close(fd_);
+  fd_ = -1;
+}
+
 void MtFileWriter::write(const void* data, size_t size) {
   if (fd_ < 0) fail(tmp_, "write after finish or failure");
   const char* p = static_cast<const char*>(data);

@@ -54,6 +54,19 @@ class MtFileWriter {
   // Stops and removes PATH.tmp (also done by the destructor).
   void abandon();
 
+  // ---- Checkpointing (mtbuild --resume; added by the cluster/resume work) ----
+  // Reopens the PATH.tmp of a killed build to continue it: `length` and `patches` are what
+  // bytesWritten() and patchRecords() returned when the checkpoint was taken (after
+  // syncPayloads()). Bytes past `length` (payloads of an unfinished level) are cut off. Throws
+  // mt::Error when PATH.tmp is missing or shorter than `length`.
+  MtFileWriter(const std::string& path, const format::FileHeader& header, uint64_t length,
+               std::vector<format::PatchRecord> patches);
+  // Makes every payload appended so far durable (fdatasync), so a checkpoint may refer to them.
+  void syncPayloads();
+  const std::vector<format::PatchRecord>& patchRecords() const { return patches_; }
+  // Closes PATH.tmp but keeps it, for a build that stopped after a checkpoint and may resume.
+  void detach();
+
  private:
   void write(const void* data, size_t size);
   std::string path_, tmp_;

@@ -5,6 +5,7 @@
 #include <array>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 
 #include "mtbuild/mt_file.h"
@@ -178,6 +179,111 @@ TEST(Mtbuild, BadInputIsAClearErrorAndLeavesNoFile) {
   EXPECT_FALSE(fs::exists(tmp.file("bad.mt")));
   EXPECT_FALSE(fs::exists(tmp.file("bad.mt.tmp")));
   EXPECT_NE(runTool("mtbuild", "x.ply -o y.mt --codec zip").exitCode, 0);
+}
+
+
+// --resume (issue 4 item 4): a build killed with SIGKILL after a level's checkpoint, or in the
+// middle of a level, continues from its last finished level and writes the same bytes as a build
+// that was never interrupted. The kill points are test hooks in LevelBuilder (env variables).
+int levelRegions(const std::string& statsJson, int level) {
+  // The "regions" member of level `level` (1-based) in --stats-json output.
+  size_t at = statsJson.find("{\"level\": " + std::to_string(level) + ",");
+  if (at == std::string::npos) return -1;
+  at = statsJson.find("\"regions\": ", at);
+  return std::atoi(statsJson.c_str() + at + 11);
+}
+
+// runTool goes through `sh -c`, which reports a child killed by SIGKILL as exit status 137.
+bool killed(const CommandResult& r) { return r.exitCode == -1 || r.exitCode == 128 + 9; }
+
+CommandResult buildKilled(const std::string& in, const std::string& out, const std::string& options, const char* hook,
+                          int value) {
+  setenv(hook, std::to_string(value).c_str(), 1);
+  CommandResult r = runTool("mtbuild", in + " -o " + out + " -q " + options);
+  unsetenv(hook);
+  return r;
+}
+
+TEST(MtbuildResume, KilledBuildsResumeToTheSameBytes) {
+  TempDir tmp;
+  std::string in = makeScan(tmp, "scan.ply", "--triangles 40k --holes 10 --seed 21");
+  const std::string opts = "--patch-triangles 300 --threads 2";
+  build(in, tmp.file("clean.mt"), opts + " --stats-json " + tmp.file("clean.json"));
+  const std::string clean = readFile(tmp.file("clean.mt"));
+  const std::string stats = readFile(tmp.file("clean.json"));
+  const int level1 = levelRegions(stats, 1), level2 = levelRegions(stats, 2);
+  ASSERT_GT(level1, 4) << stats;
+  ASSERT_GT(level2, 2) << stats;
+
+  struct Kill {
+    const char* hook;
+    int value;
+    const char* what;
+  } kills[] = {
+      {"MT_TEST_KILL_AFTER_LEVEL", 2, "after level 2's checkpoint"},
+      {"MT_TEST_KILL_AFTER_REGIONS", level1 + level2 / 2, "in the middle of level 2"},
+      {"MT_TEST_KILL_AFTER_REGIONS", 3, "in the middle of level 1"},
+  };
+  for (const Kill& k : kills) {
+    std::string out = tmp.file("k.mt");
+    CommandResult stopped = buildKilled(in, out, opts, k.hook, k.value);
+    ASSERT_TRUE(killed(stopped)) << k.what << ": the hook did not kill the build\n" << stopped.output;
+    ASSERT_FALSE(fs::exists(out)) << k.what;
+    ASSERT_TRUE(fs::exists(out + ".work")) << k.what;
+    // --threads differs on purpose: it does not change the bytes, so a resume may change it.
+    CommandResult resumed = runTool("mtbuild", in + " -o " + out + " --resume --patch-triangles 300 --threads 1");
+    ASSERT_EQ(resumed.exitCode, 0) << k.what << "\n" << resumed.output;
+    EXPECT_NE(resumed.output.find("continuing after level"), std::string::npos) << resumed.output;
+    EXPECT_TRUE(readFile(out) == clean) << k.what << ": resumed build differs from the uninterrupted one";
+    EXPECT_FALSE(fs::exists(out + ".work"));
+    EXPECT_FALSE(fs::exists(out + ".tmp"));
+    fs::remove(out);
+  }
+}
+
+TEST(MtbuildResume, ResumingWithOtherOptionsOrInputIsRefusedClearly) {
+  TempDir tmp;
+  std::string in = makeScan(tmp, "scan.ply", "--triangles 20k --seed 22");
+  build(in, tmp.file("clean.mt"), "--patch-triangles 300");
+  std::string out = tmp.file("k.mt");
+  ASSERT_TRUE(killed(buildKilled(in, out, "--patch-triangles 300", "MT_TEST_KILL_AFTER_LEVEL", 1)));
+  CommandResult r = runTool("mtbuild", in + " -o " + out + " -q --resume --patch-triangles 300 --codec draco");
+  EXPECT_EQ(r.exitCode, 1) << r.output;
+  EXPECT_NE(r.output.find("cannot --resume"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("codec was meshopt"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(out));
+  // The refused resume kept the checkpoint: the right options still finish it.
+  r = runTool("mtbuild", in + " -o " + out + " -q --resume --patch-triangles 300");
+  ASSERT_EQ(r.exitCode, 0) << r.output;
+  EXPECT_TRUE(readFile(out) == readFile(tmp.file("clean.mt")));
+  // Another input under the same name is refused too.
+  fs::remove(out);
+  ASSERT_TRUE(killed(buildKilled(in, out, "--patch-triangles 300", "MT_TEST_KILL_AFTER_LEVEL", 1)));
+  makeScan(tmp, "scan.ply", "--triangles 20k --seed 23");
+  r = runTool("mtbuild", in + " -o " + out + " -q --resume --patch-triangles 300");
+  EXPECT_EQ(r.exitCode, 1) << r.output;
+  EXPECT_NE(r.output.find("input_"), std::string::npos) << r.output;
+}
+
+TEST(MtbuildResume, AKilledIngestStartsOverAndAPlainRunDiscardsOldWork) {
+  TempDir tmp;
+  std::string in = makeScan(tmp, "scan.ply", "--triangles 20k --holes 4 --seed 24");
+  build(in, tmp.file("clean.mt"), "--patch-triangles 300");
+  std::string out = tmp.file("k.mt");
+  // What a kill during ingest leaves: a work directory without a finished store.
+  fs::create_directories(out + ".work/store.tmp-ingest");
+  writeFile(out + ".work/store.tmp-ingest/garbage", "half an ingest");
+  CommandResult r = runTool("mtbuild", in + " -o " + out + " --resume --patch-triangles 300");
+  ASSERT_EQ(r.exitCode, 0) << r.output;
+  EXPECT_NE(r.output.find("starting from the input"), std::string::npos) << r.output;
+  EXPECT_TRUE(readFile(out) == readFile(tmp.file("clean.mt")));
+  // Without --resume, a killed build's work is thrown away (and the run says so).
+  fs::remove(out);
+  ASSERT_TRUE(killed(buildKilled(in, out, "--patch-triangles 300", "MT_TEST_KILL_AFTER_LEVEL", 1)));
+  r = runTool("mtbuild", in + " -o " + out + " --patch-triangles 300");
+  ASSERT_EQ(r.exitCode, 0) << r.output;
+  EXPECT_NE(r.output.find("starting over"), std::string::npos) << r.output;
+  EXPECT_TRUE(readFile(out) == readFile(tmp.file("clean.mt")));
 }
 
 }  // namespace

@@ -13,7 +13,7 @@ int main(int argc, char** argv) {
       "mtbuild: batch-build a multiresolution MT file (a DAG of simplified, compressed patches) from a\n"
       "scan far larger than RAM, with memory capped. Same input and options give the same bytes,\n"
       "whatever --threads or --memory."};
-  std::string input, output, memory = "1G", partition = "irregular", codec = "meshopt", statsJson, workDir;
+  std::string input, output, memory = "1G", partition = "irregular", codec = "meshopt", statsJson, workDir, taskTimes;
   uint32_t threads = 0, patchTriangles = 0;
   bool normals = false, noNormals = false, resume = false, quiet = false;
   app.add_option("input", input, "Input mesh (PLY, OBJ, OFF, STL) or a patch store made by `mtstore ingest`")->required();
@@ -26,9 +26,14 @@ int main(int argc, char** argv) {
   app.add_flag("--normals", normals, "Store per-vertex normals (2x8 bit) instead of letting the renderer compute them");
   app.add_flag("--no-normals", noNormals, "Store no normals (the default; kept for scripts that say so explicitly)");
   app.add_flag("--resume", resume,
-               "Continue a killed build from its work directory (OUT.work). Not implemented yet: the build "
-               "restarts from the input and says so");
+               "Continue a killed build from the checkpoint in its work directory (OUT.work): the last finished\n"
+               "level; the same bytes as an uninterrupted build. Refused (with the reason) when the input or an\n"
+               "option that changes the output differs (--threads and --memory may change). Without --resume an\n"
+               "existing OUT.work is removed and the build starts over");
   app.add_option("--stats-json", statsJson, "Write build figures (per level, throughput, peak RSS, sizes) as JSON");
+  app.add_option("--task-times", taskTimes,
+                 "Write one CSV line per region (level, region, triangles, load/simplify/commit seconds, bytes a\n"
+                 "cluster would move): the input of the scaling model in docs/cluster.md");
   app.add_option("--work-dir", workDir, "Scratch directory for the patch store (default OUT.work; up to ~3x the input)");
   app.add_flag("-q,--quiet", quiet, "No progress lines on stderr");
   CLI11_PARSE(app, argc, argv);
@@ -46,13 +51,16 @@ int main(int argc, char** argv) {
     o.resume = resume;
     o.progress = !quiet;
     o.workDir = workDir;
+    o.taskTimesPath = taskTimes;
     mt::BuildReport r = mt::buildMt(input, output, o);
     std::fprintf(stderr,
                  "mtbuild: %" PRIu64 " input triangles -> %s: %" PRIu64 " nodes, %" PRIu64 " patches, %" PRIu64
-                 " stored triangles, %.2f bytes/input triangle, %.1f s (%.2f M input triangles/s), peak RSS %.0f MiB\n",
+                 " stored triangles, %.2f bytes/input triangle, %.1f s (%.2f M input triangles/s), peak RSS %.0f MiB, "
+                 "peak temp disk %.0f MiB\n",
                  r.inputTriangles, output.c_str(), r.nodes, r.patches, r.storedTriangles,
                  double(r.fileBytes) / double(r.inputTriangles), r.totalSeconds,
-                 double(r.inputTriangles) / r.totalSeconds / 1e6, double(r.peakRssBytes) / (1 << 20));
+                 double(r.inputTriangles) / r.totalSeconds / 1e6, double(r.peakRssBytes) / (1 << 20),
+                 double(r.peakTempBytes) / (1 << 20));
     if (!statsJson.empty()) {
       std::ofstream f(statsJson);
       f << r.toJson();
