@@ -1,0 +1,93 @@
+// mtcluster (issue 6) under mpirun on this machine (oversubscribed ranks): the same bytes as
+// mtbuild, the work spread over the ranks, and a rank killed mid-build stops the job with an
+// error naming the rank and the level, after which --resume finishes with the same bytes.
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <regex>
+
+#include "tests/test_support.h"
+
+namespace mt::test {
+namespace {
+
+namespace fs = std::filesystem;
+
+bool haveMpirun() { return std::system("command -v mpirun > /dev/null 2>&1") == 0; }
+
+// mpirun as CI runs it: as root, more ranks than cores. `env`: a variable to pass to the ranks.
+CommandResult mpirun(int ranks, const std::string& args, const std::string& env = "") {
+  std::string cmd = "mpirun --allow-run-as-root --oversubscribe -np " + std::to_string(ranks) +
+                    (env.empty() ? "" : " -x " + env) + " " + binDir() + "/mtcluster " + args + " 2>&1";
+  CommandResult result;
+  FILE* pipe = popen(cmd.c_str(), "r");
+  if (!pipe) return result;
+  char buf[4096];
+  size_t n;
+  while ((n = fread(buf, 1, sizeof buf, pipe)) > 0) result.output.append(buf, n);
+  int status = pclose(pipe);
+  result.exitCode = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return result;
+}
+
+std::string scanAndReference(const TempDir& tmp, const std::string& mtgen, const std::string& build) {
+  std::string in = tmp.file("scan.ply");
+  CommandResult g = runTool("mtgen", "-o " + in + " " + mtgen);
+  EXPECT_EQ(g.exitCode, 0) << g.output;
+  CommandResult b = runTool("mtbuild", in + " -o " + tmp.file("ref.mt") + " -q " + build + " --stats-json " + tmp.file("ref.json"));
+  EXPECT_EQ(b.exitCode, 0) << b.output;
+  return in;
+}
+
+uint64_t sumOf(const std::string& json, const std::string& member) {
+  uint64_t sum = 0;
+  std::regex re("\"" + member + "\": ([0-9]+)");
+  for (auto it = std::sregex_iterator(json.begin(), json.end(), re); it != std::sregex_iterator(); ++it)
+    sum += std::stoull((*it)[1]);
+  return sum;
+}
+
+TEST(Mtcluster, ThreeRanksWriteTheSameBytesAsMtbuild) {
+  if (!haveMpirun()) GTEST_SKIP() << "mpirun not installed";
+  TempDir tmp;
+  const std::string opts = "--patch-triangles 300";
+  std::string in = scanAndReference(tmp, "--triangles 30k --holes 6 --seed 31", opts);
+  CommandResult r = mpirun(3, in + " -o " + tmp.file("c.mt") + " -q " + opts + " --stats-json " + tmp.file("c.json"));
+  ASSERT_EQ(r.exitCode, 0) << r.output;
+  std::string ref = readFile(tmp.file("ref.mt"));
+  ASSERT_GT(ref.size(), 1000u);
+  EXPECT_TRUE(readFile(tmp.file("c.mt")) == ref) << "mtcluster -np 3 and mtbuild differ";
+  // Every region was processed exactly once, by some rank, and the ranks say what they did.
+  std::string json = readFile(tmp.file("c.json"));
+  EXPECT_NE(json.find("\"ranks\": 3"), std::string::npos) << json;
+  EXPECT_NE(json.find("\"parallel_efficiency\""), std::string::npos) << json;
+  EXPECT_EQ(sumOf(json, "tasks"), sumOf(readFile(tmp.file("ref.json")), "regions")) << json;
+  EXPECT_GT(sumOf(json, "bytes_sent"), 0u);
+  EXPECT_FALSE(fs::exists(tmp.file("c.mt.work")));
+}
+
+TEST(Mtcluster, ADeadRankStopsTheJobNamingRankAndLevelAndResumeFinishes) {
+  if (!haveMpirun()) GTEST_SKIP() << "mpirun not installed";
+  TempDir tmp;
+  const std::string opts = "--patch-triangles 300";
+  std::string in = scanAndReference(tmp, "--triangles 30k --holes 4 --seed 32", opts);
+  // Rank 2 SIGKILLs itself when its 9th region arrives (past level 1's ~20 regions).
+  setenv("MT_TEST_KILL_RANK", "2:8", 1);
+  CommandResult r = mpirun(3, in + " -o " + tmp.file("c.mt") + " -q " + opts, "MT_TEST_KILL_RANK");
+  unsetenv("MT_TEST_KILL_RANK");
+  EXPECT_NE(r.exitCode, 0) << r.output;
+  EXPECT_TRUE(std::regex_search(r.output, std::regex("rank 2[^0-9]"))) << r.output;
+  EXPECT_TRUE(std::regex_search(r.output, std::regex("during level [0-9]+"))) << r.output;
+  EXPECT_NE(r.output.find("--resume"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(tmp.file("c.mt")));
+  // Resume with another number of ranks: same checkpoint format, same bytes.
+  r = mpirun(2, in + " -o " + tmp.file("c.mt") + " --resume " + opts);
+  ASSERT_EQ(r.exitCode, 0) << r.output;
+  EXPECT_NE(r.output.find("continuing after level"), std::string::npos) << r.output;
+  EXPECT_TRUE(readFile(tmp.file("c.mt")) == readFile(tmp.file("ref.mt"))) << "resumed mtcluster differs from mtbuild";
+}
+
+}  // namespace
+}  // namespace mt::test
