@@ -130,6 +130,18 @@ void runWorker(int rank) {
 
 // ---- Rank 0 ----------------------------------------------------------------------------------
 
+// Sends every worker the stop message and collects its statistics (workers must be idle).
+void stopAll(int size, std::vector<RankStats>& stats) {
+  for (int r = 1; r < size; ++r) send(std::string(), r, kStop, stats[0].bytesSent);
+  for (int r = 1; r < size; ++r) {
+    MPI_Status st;
+    check(MPI_Probe(r, kStats, MPI_COMM_WORLD, &st), "probe", r);
+    std::string bytes = receive(st, stats[0].bytesReceived);
+    ByteReader reader(bytes, "stats message");
+    stats[size_t(r)] = reader.get<RankStats>();
+  }
+}
+
 struct Master {
   LevelBuilder& builder;
   int size;
@@ -247,16 +259,7 @@ struct Master {
     results.emplace(size_t(index), std::move(result));
   }
 
-  void stopWorkers() {
-    for (int r = 1; r < size; ++r) send(std::string(), r, kStop, stats[0].bytesSent);
-    for (int r = 1; r < size; ++r) {
-      MPI_Status st;
-      check(MPI_Probe(r, kStats, MPI_COMM_WORLD, &st), "probe", r);
-      std::string bytes = receive(st, stats[0].bytesReceived);
-      ByteReader reader(bytes, "stats message");
-      stats[size_t(r)] = reader.get<RankStats>();
-    }
-  }
+  void stopWorkers() { stopAll(size, stats); }
 };
 
 }  // namespace
@@ -286,7 +289,14 @@ ClusterReport runCluster(const std::string& input, const std::string& output, co
   std::snprintf(gStopNote, sizeof gStopNote, "during ingest (nothing to resume yet)\n");
   std::snprintf(gWorkNote, sizeof gWorkNote, "mtcluster: work directory: %s\n",
                 (options.workDir.empty() ? output + ".work" : options.workDir).c_str());
-  auto owned = std::make_unique<LevelBuilder>(input, output, options);
+  std::unique_ptr<LevelBuilder> owned;
+  try {
+    owned = std::make_unique<LevelBuilder>(input, output, options);
+  } catch (const std::exception& e) {
+    // Bad input or options: no region is out yet, so the workers can be stopped cleanly.
+    stopAll(size, report.ranks);
+    throw StoppedCleanly(e.what());
+  }
   Master master{*owned, size, report.ranks};
   auto loopStart = Clock::now();
   try {

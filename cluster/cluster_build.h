@@ -7,6 +7,7 @@
 #include <string>
 
 #include "mtbuild/build.h"
+#include "patchstore/error.h"
 
 namespace mt::cluster {
 
@@ -24,6 +25,12 @@ struct ClusterReport {
   double loopSeconds = 0;           // the level loop's wall time (what the ranks share)
   double parallelEfficiency = 0;    // sum of busy time / (ranks x loopSeconds)
   double masterLoadSeconds = 0, masterCommitSeconds = 0;
+};
+
+// Thrown by runCluster on rank 0 when the build failed before any region was handed out: every
+// rank has been stopped, so the caller can finalize MPI instead of aborting the job.
+struct StoppedCleanly : mt::Error {
+  using mt::Error::Error;
 };
 
 // Runs this rank's part; MPI must be initialized. Rank 0 returns the report; other ranks return

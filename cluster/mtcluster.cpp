@@ -86,6 +86,10 @@ int main(int argc, char** argv) {
         if (!f) throw mt::Error(statsJson + ": cannot write");
       }
     }
+  } catch (const mt::cluster::StoppedCleanly& e) {
+    std::fprintf(stderr, "mtcluster: %s\n", e.what());
+    MPI_Finalize();
+    return 1;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "mtcluster: %s\n", e.what());
     std::fflush(stderr);

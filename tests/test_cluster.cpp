@@ -89,5 +89,19 @@ TEST(Mtcluster, ADeadRankStopsTheJobNamingRankAndLevelAndResumeFinishes) {
   EXPECT_TRUE(readFile(tmp.file("c.mt")) == readFile(tmp.file("ref.mt"))) << "resumed mtcluster differs from mtbuild";
 }
 
+TEST(Mtcluster, BadInputIsAOneLineErrorWithoutAbortingTheRanks) {
+  if (!haveMpirun()) GTEST_SKIP() << "mpirun not installed";
+  TempDir tmp;
+  writeFile(tmp.file("bad.ply"), "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+                                 "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
+                                 "0 0 0\n1 0 0\n0 1 0\n3 0 1 9\n");
+  CommandResult r = mpirun(3, tmp.file("bad.ply") + " -o " + tmp.file("bad.mt") + " -q");
+  EXPECT_NE(r.exitCode, 0) << r.output;
+  EXPECT_NE(r.output.find("mtcluster: " + tmp.file("bad.ply")), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("MPI_ABORT"), std::string::npos) << "workers should be stopped, not aborted\n" << r.output;
+  EXPECT_FALSE(fs::exists(tmp.file("bad.mt")));
+  EXPECT_FALSE(fs::exists(tmp.file("bad.mt.work")));
+}
+
 }  // namespace
 }  // namespace mt::test
