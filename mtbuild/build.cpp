@@ -6,10 +6,13 @@
 #include <tbb/parallel_pipeline.h>
 #include <tbb/task_arena.h>
 
+#include <fcntl.h>
+#include <unistd.h>
 #include <xxhash.h>
 
 #include <algorithm>
 #include <chrono>
+#include <cerrno>
 #include <cinttypes>
 #include <csignal>
 #include <cstdlib>
@@ -204,7 +207,7 @@ uint64_t treeBytes(const std::string& path) {
 
 constexpr char kCheckpointBlob[] = "mtbuild.checkpoint";
 constexpr uint64_t kCheckpointMagic = 0x31544b43544d4dull;  // "MMTCKT1"
-constexpr uint32_t kCheckpointVersion = 1;
+constexpr uint32_t kCheckpointVersion = 2;
 
 // "key=value" lines: the input's identity and every option that changes the bytes (not --threads
 // or --memory, which do not). Compared line by line so a refused resume can say what changed.
@@ -306,6 +309,7 @@ std::string BuildReport::toJson() const {
     << ",\n  \"total_seconds\": " << totalSeconds << ",\n  \"input_triangles_per_second\": "
     << (totalSeconds > 0 ? double(inputTriangles) / totalSeconds : 0) << ",\n  \"peak_rss_bytes\": " << peakRssBytes
     << ",\n  \"resumed_at_level\": " << resumedAtLevel << ",\n  \"peak_temp_bytes\": " << peakTempBytes
+    << ",\n  \"checkpoint_bytes\": " << checkpointBytes
     << extraJson << ",\n  \"levels\": [";
   for (size_t i = 0; i < levels.size(); ++i) {
     const LevelReport& l = levels[i];
@@ -398,7 +402,13 @@ struct LevelBuilder::State {
   long killAfterLevel = -1, killAfterRegions = -1, committedRegions = 0;
   FILE* taskTimes = nullptr;
 
+  // Checkpoint side file (see checkpointBytes): its committed length and chained hash, and how
+  // many patch records / nodes it holds.
+  uint64_t sideLength = 0, sideHash = 0;
+  size_t ckPatches = 0, ckNodes = 0;
   std::string checkpointBytes() const;
+  void appendSideChunk();
+  std::vector<format::PatchRecord> readSideFile(uint64_t length, uint64_t hash);
   void restore(const std::string& bytes);
   void writeCheckpoint();
   void startFresh(bool storeInput);
@@ -407,6 +417,12 @@ struct LevelBuilder::State {
   }
 };
 
+// The checkpoint is split in two so that it costs little memory and disk at any scale: what only
+// grows (patch records, DAG nodes and spheres, arcs) is appended level by level to the side file
+// OUT.work/checkpoint.dat, made durable before the store's commit; the store blob (committed with
+// the level's write-backs) holds the small state, the producer map of the live patches, and the
+// side file's length and chained XXH64 at that level. A resume reads the side file up to that
+// length, so a chunk appended by a level that never committed is ignored and cut off.
 std::string LevelBuilder::State::checkpointBytes() const {
   ByteWriter w;
   w.put<uint64_t>(kCheckpointMagic);
@@ -417,15 +433,10 @@ std::string LevelBuilder::State::checkpointBytes() const {
   w.put<uint64_t>(liveTriangles);
   w.put(header);
   w.put<uint64_t>(writer->bytesWritten());
-  putVector(w, writer->patchRecords());
-  putVector(w, nodes);
-  putVector(w, spheres);
-  w.put<uint64_t>(arcPatches.size());
-  for (auto& [key, ids] : arcPatches) {
-    w.put<uint32_t>(key.first);
-    w.put<uint32_t>(key.second);
-    putVector(w, ids);
-  }
+  w.put<uint64_t>(writer->patchCount());
+  w.put<uint64_t>(nodes.size());
+  w.put<uint64_t>(sideLength);
+  w.put<uint64_t>(sideHash);
   std::vector<ProducerEntry> prod;
   for (auto& [id, node] : producer) prod.push_back({id, node});
   std::sort(prod.begin(), prod.end(), [](const ProducerEntry& a, const ProducerEntry& b) { return a.patch < b.patch; });
@@ -437,6 +448,88 @@ std::string LevelBuilder::State::checkpointBytes() const {
   putVector(w, report.levels);
   w.put<uint64_t>(XXH64(w.bytes().data(), w.bytes().size(), 0));
   return w.bytes();
+}
+
+// Appends what grew since the last checkpoint to the side file and makes it durable.
+void LevelBuilder::State::appendSideChunk() {
+  ByteWriter w;
+  const auto& records = writer->patchRecords();
+  std::vector<format::PatchRecord> newRecords(records.begin() + long(ckPatches), records.end());
+  putVector(w, newRecords);
+  putVector(w, std::vector<format::NodeRecord>(nodes.begin() + long(ckNodes), nodes.end()));
+  putVector(w, std::vector<Sphere>(spheres.begin() + long(ckNodes), spheres.end()));
+  uint64_t arcs = 0;
+  for (auto& [key, ids] : arcPatches) arcs += key.second >= ckNodes;
+  w.put<uint64_t>(arcs);
+  for (auto& [key, ids] : arcPatches)
+    if (key.second >= ckNodes) {
+      w.put<uint32_t>(key.first);
+      w.put<uint32_t>(key.second);
+      putVector(w, ids);
+    }
+  ByteWriter chunk;
+  chunk.put<uint64_t>(w.bytes().size());
+  chunk.putRaw(w.bytes().data(), w.bytes().size());
+  const std::string path = work + "/checkpoint.dat";
+  int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_CLOEXEC, 0644);
+  if (fd < 0) fail(path, std::string("cannot open: ") + std::strerror(errno));
+  // Cut off a chunk of a level that was never committed, then append.
+  bool ok = ::ftruncate(fd, off_t(sideLength)) == 0 && ::lseek(fd, off_t(sideLength), SEEK_SET) == off_t(sideLength);
+  const char* p = chunk.bytes().data();
+  size_t left = chunk.bytes().size();
+  while (ok && left > 0) {
+    ssize_t n = ::write(fd, p, left);
+    if (n < 0 && errno == EINTR) continue;
+    ok = n > 0;
+    if (ok) p += n, left -= size_t(n);
+  }
+  ok = ok && ::fdatasync(fd) == 0;
+  std::string why = ok ? "" : std::strerror(errno);
+  ::close(fd);
+  if (!ok) fail(path, "cannot write the checkpoint at byte offset " + std::to_string(sideLength) + ": " + why);
+  sideHash = XXH64(chunk.bytes().data(), chunk.bytes().size(), sideHash);
+  sideLength += chunk.bytes().size();
+  ckPatches = records.size();
+  ckNodes = nodes.size();
+}
+
+// Reads the side file up to `length`, checking the chained hash; fills records, nodes, spheres, arcs.
+std::vector<format::PatchRecord> LevelBuilder::State::readSideFile(uint64_t length, uint64_t hash) {
+  const std::string path = work + "/checkpoint.dat";
+  std::vector<format::PatchRecord> records;
+  FILE* f = std::fopen(path.c_str(), "rb");
+  if (!f) fail(path, "cannot --resume: missing (rerun without --resume to start over)");
+  uint64_t at = 0, h = 0;
+  std::string chunk;
+  while (at < length) {
+    uint64_t size = 0;
+    if (length - at < 8 || std::fread(&size, 8, 1, f) != 1 || size > length - at - 8) {
+      std::fclose(f);
+      fail(path, "cannot --resume: chunk at byte offset " + std::to_string(at) + " is truncated (rerun without --resume to start over)");
+    }
+    chunk.resize(size_t(size) + 8);
+    std::memcpy(chunk.data(), &size, 8);
+    if (size && std::fread(chunk.data() + 8, 1, size_t(size), f) != size) {
+      std::fclose(f);
+      fail(path, "cannot --resume: chunk at byte offset " + std::to_string(at) + " is truncated");
+    }
+    h = XXH64(chunk.data(), chunk.size(), h);
+    ByteReader r(chunk.data() + 8, size_t(size), path, at + 8);
+    for (auto& rec : getVector<format::PatchRecord>(r)) records.push_back(rec);
+    for (auto& n : getVector<format::NodeRecord>(r)) nodes.push_back(n);
+    for (auto& sp : getVector<Sphere>(r)) spheres.push_back(sp);
+    uint64_t arcs = r.get<uint64_t>();
+    for (uint64_t i = 0; i < arcs; ++i) {
+      uint32_t from = r.get<uint32_t>(), to = r.get<uint32_t>();
+      arcPatches[{from, to}] = getVector<uint32_t>(r);
+    }
+    at += chunk.size();
+  }
+  std::fclose(f);
+  if (h != hash) fail(path, "cannot --resume: checksum mismatch before byte offset " + std::to_string(length) + " (rerun without --resume to start over)");
+  sideLength = length;
+  sideHash = hash;
+  return records;
 }
 
 void LevelBuilder::State::restore(const std::string& bytes) {
@@ -460,21 +553,19 @@ void LevelBuilder::State::restore(const std::string& bytes) {
   liveTriangles = r.get<uint64_t>();
   header = r.get<format::FileHeader>();
   uint64_t length = r.get<uint64_t>();
-  auto records = getVector<format::PatchRecord>(r);
-  nodes = getVector<format::NodeRecord>(r);
-  spheres = getVector<Sphere>(r);
-  uint64_t arcs = r.get<uint64_t>();
-  for (uint64_t i = 0; i < arcs; ++i) {
-    uint32_t from = r.get<uint32_t>(), to = r.get<uint32_t>();
-    arcPatches[{from, to}] = getVector<uint32_t>(r);
-  }
+  uint64_t patchCount = r.get<uint64_t>(), nodeCount = r.get<uint64_t>();
+  uint64_t sideLen = r.get<uint64_t>(), sideH = r.get<uint64_t>();
   for (const ProducerEntry& e : getVector<ProducerEntry>(r)) producer[e.patch] = e.node;
   report.inputTriangles = r.get<uint64_t>();
   report.gridStep = r.get<double>();
   report.ingestSeconds = r.get<double>();
   report.peakTempBytes = r.get<uint64_t>();
   report.levels = getVector<LevelReport>(r);
-  if (nodes.size() != spheres.size() || nodes.empty()) fail(where, "checkpoint DAG is inconsistent");
+  std::vector<format::PatchRecord> records = readSideFile(sideLen, sideH);
+  if (records.size() != patchCount || nodes.size() != nodeCount || nodes.size() != spheres.size() || nodes.empty())
+    fail(where, "checkpoint and " + work + "/checkpoint.dat disagree (rerun without --resume to start over)");
+  ckPatches = records.size();
+  ckNodes = nodes.size();
   for (PatchId id : store->patchIds())
     if (!producer.count(id)) fail(where, "checkpoint does not know live patch " + std::to_string(id));
   if (producer.size() != store->patchIds().size()) fail(where, "checkpoint names patches the store does not hold");
@@ -482,11 +573,15 @@ void LevelBuilder::State::restore(const std::string& bytes) {
 }
 
 void LevelBuilder::State::writeCheckpoint() {
-  // Payloads first: the checkpoint may only name bytes that are on disk. The store then commits
-  // the level's write-backs and the checkpoint blob in one manifest edit (store_format.h), so a
-  // kill at any point leaves either the previous level's state or this one's, never a mix.
+  // Payloads and the side file first: the checkpoint may only name bytes that are on disk. The
+  // store then commits the level's write-backs and the checkpoint blob in one manifest edit
+  // (store_format.h), so a kill at any point leaves either the previous level's state or this
+  // one's, never a mix.
   writer->syncPayloads();
-  store->putBlob(kCheckpointBlob, checkpointBytes());
+  appendSideChunk();
+  std::string bytes = checkpointBytes();
+  report.checkpointBytes = std::max<uint64_t>(report.checkpointBytes, bytes.size());
+  store->putBlob(kCheckpointBlob, bytes);
   store->sync();
   report.peakTempBytes = std::max(report.peakTempBytes, treeBytes(work) + treeBytes(output + ".tmp"));
 }

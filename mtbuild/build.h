@@ -58,7 +58,8 @@ struct BuildReport {
   double ingestSeconds = 0, buildSeconds = 0, totalSeconds = 0;
   uint64_t peakRssBytes = 0;
   uint32_t resumedAtLevel = 0;        // 0: built from the start; k: continued after level k
-  uint64_t peakTempBytes = 0;         // largest OUT.work + OUT.mt.tmp seen at a level's end
+  uint64_t peakTempBytes = 0;         // largest OUT.work + OUT.mt.tmp seen (sampled in the level loop)
+  uint64_t checkpointBytes = 0;       // largest checkpoint record kept in the store (RAM while built)
   std::vector<LevelReport> levels;
   std::string extraJson;              // more members (",\n  \"name\": value" ...), e.g. cluster stats
   std::string toJson() const;

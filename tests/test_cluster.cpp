@@ -72,9 +72,10 @@ TEST(Mtcluster, ADeadRankStopsTheJobNamingRankAndLevelAndResumeFinishes) {
   if (!haveMpirun()) GTEST_SKIP() << "mpirun not installed";
   TempDir tmp;
   const std::string opts = "--patch-triangles 300";
-  std::string in = scanAndReference(tmp, "--triangles 30k --holes 4 --seed 32", opts);
-  // Rank 2 SIGKILLs itself when its 9th region arrives (past level 1's ~20 regions).
-  setenv("MT_TEST_KILL_RANK", "2:8", 1);
+  std::string in = scanAndReference(tmp, "--triangles 40k --holes 4 --seed 32", opts);
+  // Rank 2 SIGKILLs itself when its 3rd region arrives (of ~40; workers are served before rank 0
+  // takes a region itself, so each worker gets several).
+  setenv("MT_TEST_KILL_RANK", "2:2", 1);
   CommandResult r = mpirun(3, in + " -o " + tmp.file("c.mt") + " -q " + opts, "MT_TEST_KILL_RANK");
   unsetenv("MT_TEST_KILL_RANK");
   EXPECT_NE(r.exitCode, 0) << r.output;
