@@ -44,6 +44,7 @@ struct SimplifiedRegion {
   // the region's INPUT (the previous level); the builder adds the previous level's bound.
   double error = 0;
   double quadricError = 0;  // meshoptimizer's own estimate (absolute units), for reference
+  uint32_t attempts = 0;    // meshopt_simplify runs (retries after a rule was broken; for profiling)
   uint32_t vertexCount() const { return uint32_t(origin.size()); }
   uint32_t triangleCount() const { return uint32_t(triangles.size() / 3); }
 };
