@@ -280,9 +280,10 @@ std::unique_ptr<MtFileReader> MtFileReader::open(const std::string& path) {
   FileHeader& h = r->header_;
   preadExact(r->fd_, path, 0, sizeof h, &h);
   if (std::memcmp(h.magic, kMagic, 8) != 0) fail(path, "not an MT file: bad magic at byte offset 0");
-  if (h.version != kVersion)
+  // Version 2 only added a payload flag (kPayloadRangePositions): version 1 files still read.
+  if (h.version < kMinReadableVersion || h.version > kVersion)
     fail(path, "unsupported MT version " + std::to_string(h.version) + " (this build reads " +
-                   std::to_string(kVersion) + ") at byte offset 8");
+                   std::to_string(kMinReadableVersion) + ".." + std::to_string(kVersion) + ") at byte offset 8");
   if (h.headerSize != kHeaderSize) fail(path, "bad header size at byte offset 12");
 
   Footer f;
@@ -290,7 +291,7 @@ std::unique_ptr<MtFileReader> MtFileReader::open(const std::string& path) {
   preadExact(r->fd_, path, footerAt, sizeof f, &f);
   if (std::memcmp(f.magic, kFooterMagic, 8) != 0)
     fail(path, "bad footer magic at byte offset " + std::to_string(footerAt + 24) + " (truncated or damaged file)");
-  if (f.version != kVersion) fail(path, "footer version mismatch at byte offset " + std::to_string(footerAt + 16));
+  if (f.version != h.version) fail(path, "footer version mismatch at byte offset " + std::to_string(footerAt + 16));
   if (f.metaOffset != h.metaOffset || h.metaOffset < kHeaderSize || h.metaOffset > footerAt)
     fail(path, "footer index offset " + std::to_string(f.metaOffset) + " out of range (file " + std::to_string(size) +
                    " bytes) at byte offset " + std::to_string(footerAt));

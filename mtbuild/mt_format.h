@@ -45,7 +45,10 @@ namespace mt::format {
 
 constexpr char kMagic[8] = {'B', 'M', 'T', '-', 'M', 'T', '\r', '\n'};
 constexpr char kFooterMagic[8] = {'B', 'M', 'T', '-', 'E', 'N', 'D', '\n'};
-constexpr uint32_t kVersion = 1;
+// Version 2: meshopt payloads may set kPayloadRangePositions (positions range-coded after the
+// zstd frame instead of byte planes inside it). Readers accept kMinReadableVersion..kVersion.
+constexpr uint32_t kVersion = 2;
+constexpr uint32_t kMinReadableVersion = 1;
 constexpr uint32_t kHeaderSize = 256;
 constexpr uint32_t kFooterSize = 32;
 // Payload alignment: 16 keeps the padding cost at ~8 bytes per patch (patches are ~1-4 KB)
@@ -159,10 +162,11 @@ constexpr uint8_t kPayloadNormals = 1u << 0;  // octahedral normals present
 constexpr uint8_t kPayloadColors = 1u << 1;   // RGBA8 colours present
 constexpr uint8_t kPayloadWide = 1u << 2;     // meshopt: position residuals need 32 bits (else 16)
 constexpr uint8_t kPayloadStrip = 1u << 3;    // meshopt: indices are a strip (restart ~0u)
+constexpr uint8_t kPayloadRangePositions = 1u << 4;  // meshopt: positions range-coded after the zstd frame (v2)
 
 // Codec::Meshopt, after the PayloadHeader:
 //   uint32 rawSize, uint32 zstdSize, then zstdSize bytes (one zstd frame) that decompress to
-//   rawSize bytes:
+//   rawSize bytes (then, with kPayloadRangePositions, the position stream up to the payload's end):
 //     uint32 indexBytes, uint32 indexCount, uint32 attributeBytes,
 //     indexBytes: meshopt_encodeIndexBuffer of the triangle list (indexCount = 3 * triangles),
 //         or with kPayloadStrip meshopt_encodeIndexSequence of a strip with restart index ~0u
@@ -170,8 +174,16 @@ constexpr uint8_t kPayloadStrip = 1u << 3;    // meshopt: indices are a strip (r
 //     attributeBytes: meshopt_encodeVertexBuffer of vertexCount records of attributeStride(flags)
 //         bytes: uint8[2] octahedral normal if kPayloadNormals, then uint8[4] RGBA if
 //         kPayloadColors, zero-padded (absent, 0 bytes, when neither flag is set);
-//     positions: 3 axes x P byte planes x vertexCount bytes (P = 4 with kPayloadWide, else 2):
-//         plane b of axis x holds byte b of zigzag(r) for every vertex, r = qRel - prediction.
+//     positions, without kPayloadRangePositions (version 1 files): 3 axes x P byte planes x
+//         vertexCount bytes (P = 4 with kPayloadWide, else 2): plane b of axis x holds byte b of
+//         zigzag(r) for every vertex, r = qRel - prediction.
+//   With kPayloadRangePositions (what version 2 writers emit) the frame holds no positions; after
+//   it comes one range-coded stream (LZMA's binary range coder: 32-bit low/range, probabilities
+//   of 11 bits starting at 1024 and adapted by 1/32, the encoder's always-zero first byte not
+//   stored, so the decoder starts with code = the first 4 bytes) of zigzag(r) for vertex 0..n-1,
+//   axis x, y, z: the bit length k of z (0..32) as a 6-bit binary tree (MSB first, node index m
+//   from 1, probability length[axis][m]), then for k >= 2 the k-1 bits below the leading one, MSB
+//   first, probability mantissa[axis][k][bit]. A decoder reads no byte past the payload.
 //   Prediction (parallelogram rule): walk the decoded triangles in order; at the first use of a
 //   vertex v in triangle (v, a, b) (rotated so v comes first):
 //     a, b known and a visited triangle has directed edge (b, a) or else (a, b) with third vertex
