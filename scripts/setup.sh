@@ -12,6 +12,7 @@ PACKAGES=(
   libopenmpi-dev openmpi-bin libtbb-dev libzstd-dev liblz4-dev libxxhash-dev
   libcli11-dev libgtest-dev libgmock-dev libbenchmark-dev libnanoflann-dev
   xvfb xauth gnuplot-nox time
+  libimgui-dev libpng-dev libopengl-dev
 )
 
 missing=()

@@ -1,0 +1,148 @@
+#include "mtrender/engine.h"
+
+#include <fcntl.h>
+#include <sys/mman.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+
+#include "patchstore/error.h"
+
+namespace mt::render {
+
+uint64_t parseSize(const std::string& text) {
+  size_t pos = 0;
+  double v = 0;
+  try {
+    v = std::stod(text, &pos);
+  } catch (...) {
+    throw Error("mtrender: bad size '" + text + "' (e.g. 256M, 1G)");
+  }
+  std::string unit = text.substr(pos);
+  for (auto& c : unit) c = char(std::toupper(c));
+  double mul = 1;
+  if (unit.empty() || unit == "B") mul = 1;
+  else if (unit == "K" || unit == "KB" || unit == "KIB") mul = 1024.0;
+  else if (unit == "M" || unit == "MB" || unit == "MIB") mul = 1024.0 * 1024;
+  else if (unit == "G" || unit == "GB" || unit == "GIB") mul = 1024.0 * 1024 * 1024;
+  else throw Error("mtrender: bad size unit in '" + text + "' (use K, M or G)");
+  if (v <= 0) throw Error("mtrender: size must be positive: '" + text + "'");
+  return uint64_t(v * mul);
+}
+
+Engine::Engine(EngineOptions options) : options_(std::move(options)) {
+  scene_ = std::make_unique<Scene>(options_.files);
+  double c[3], r;
+  scene_->boundingSphere(c, r);
+  center_ = {c[0], c[1], c[2]};
+  radius_ = r;
+  if (!options_.gpuCacheBytes) options_.gpuCacheBytes = options_.cacheBytes;
+  if (options_.baseline) {
+    for (size_t f = 0; f < scene_->fileCount(); ++f) {
+      const std::string& path = scene_->reader(uint32_t(f)).path();
+      int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+      if (fd < 0) fail(path, "cannot open for mapping");
+      uint64_t size = scene_->reader(uint32_t(f)).fileSize();
+      void* m = ::mmap(nullptr, size, PROT_READ, MAP_SHARED, fd, 0);
+      ::close(fd);
+      if (m == MAP_FAILED) fail(path, "cannot map the file");
+      maps_.push_back(static_cast<const uint8_t*>(m));
+      mapSizes_.push_back(size);
+    }
+    uint64_t largest = 0;
+    for (uint32_t p = 0; p < scene_->patches().size(); ++p) largest = std::max(largest, scene_->decodedBytesBound(p));
+    scratch_.resize(largest);
+    extract_ = std::make_unique<ExtractRender>(*scene_, nullptr, nullptr, options_.extract);
+  } else {
+    std::vector<uint64_t> bounds(scene_->patches().size());
+    for (uint32_t p = 0; p < bounds.size(); ++p) bounds[p] = scene_->decodedBytesBound(p);
+    cache_ = std::make_unique<PatchCache>(options_.cacheBytes, bounds);
+    PatchServer::Options so;
+    so.readDelayMs = options_.readDelayMs;
+    so.quiet = options_.quiet;
+    server_ = std::make_unique<PatchServer>(*scene_, *cache_, so);
+    extract_ = std::make_unique<ExtractRender>(*scene_, cache_.get(), server_.get(), options_.extract);
+  }
+}
+
+Engine::~Engine() {
+  server_.reset();
+  for (size_t f = 0; f < maps_.size(); ++f) ::munmap(const_cast<uint8_t*>(maps_[f]), mapSizes_[f]);
+}
+
+uint64_t Engine::badPatches() const { return server_ ? server_->badPatches() : baselineBad_.size(); }
+
+void Engine::start(double timeoutMs) { extract_->start(timeoutMs); }
+
+PatchView Engine::baselineFetch(uint32_t id) {
+  PatchView v;
+  if (baselineBad_.count(id)) return v;
+  const ScenePatch& sp = scene_->patches()[id];
+  const MtFileReader& reader = scene_->reader(sp.file);
+  const format::PatchRecord& rec = reader.patches()[sp.local];
+  try {
+    DecodedPatch d = decodePatch(maps_[sp.file] + rec.offset, rec.size, reader.codec(), reader.grid());
+    auto counts = decodeInto(*scene_, id, d, scratch_.data(), scratch_.size());
+    v.vertices = reinterpret_cast<const RenderVertex*>(scratch_.data());
+    v.vertexCount = counts.first;
+    v.indices = reinterpret_cast<const uint32_t*>(scratch_.data() + uint64_t(counts.first) * sizeof(RenderVertex));
+    v.indexCount = counts.second;
+    ++baselineLoads_;
+  } catch (const std::exception& e) {
+    baselineBad_.insert(id);
+    if (!options_.quiet)
+      std::fprintf(stderr, "warning: %s: patch %u: %s (patch skipped, rendering continues)\n", reader.path().c_str(),
+                   sp.local, e.what());
+  }
+  return v;
+}
+
+FrameRecord Engine::frame(const CameraPose& pose, const CameraPose& prev, GlRenderer& gl, const DrawSettings& settings,
+                          int width, int height) {
+  using Clock = std::chrono::steady_clock;
+  const auto t0 = Clock::now();
+  ++frame_;
+  View view = makeView(pose, width, height, center_, radius_);
+  View ahead = makeView(extrapolate(prev, pose, 10), width, height, center_, radius_);
+  FrameRecord rec;
+  static_cast<FrameStats&>(rec) = extract_->update(frame_, view, ahead);
+  rec.moving = pose.eye != prev.eye || pose.target != prev.target;
+  gl.beginFrame(view, settings);
+  const auto& arcs = scene_->arcs();
+  const auto& nodes = scene_->nodes();
+  baselineLoads_ = 0;
+  for (uint32_t a : extract_->cutArcs()) {
+    if (!extract_->arcVisible(a, view)) continue;
+    const SceneArc& arc = arcs[a];
+    const uint32_t level = nodes[arc.from].level;
+    for (uint32_t k = 0; k < arc.patchCount; ++k) {
+      const uint32_t id = scene_->arcPatches()[arc.firstPatch + k];
+      uint32_t t = cache_ ? gl.drawPatch(id, level, [&] { return cache_->view(id); })
+                          : gl.drawPatch(id, level, [&] { return baselineFetch(id); });
+      if (t) {
+        ++rec.drawnPatches;
+        rec.drawnTriangles += t;
+      }
+    }
+  }
+  gl.endFrame();
+  gl.finish();
+  rec.frameMs = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+  // The first frame pays for shader compilation and first uploads: not a sample of the model.
+  if (frame_ > 1) extract_->frameDone(rec.drawnTriangles, rec.frameMs);
+  if (server_) {
+    uint64_t l = server_->loads();
+    rec.loads = uint32_t(l - lastLoads_);
+    lastLoads_ = l;
+    rec.cacheBytes = cache_->stats().usedBytes;
+  } else {
+    rec.loads = baselineLoads_;
+    rec.misses = baselineLoads_;  // every patch not on the GPU is a synchronous read
+  }
+  rec.gpuBytes = gl.gpuBytes();
+  return rec;
+}
+
+}  // namespace mt::render

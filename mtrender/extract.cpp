@@ -1,0 +1,497 @@
+#include "mtrender/extract.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <queue>
+
+namespace mt::render {
+
+using Clock = std::chrono::steady_clock;
+
+// ---- TimeModel: recursive least squares on x = (1, triangles in millions), forgetting 0.95 ----
+
+void TimeModel::add(double triangles, double ms) {
+  const double lambda = 0.95;
+  const double x[2] = {1.0, triangles * 1e-6};
+  double px[2] = {p_[0][0] * x[0] + p_[0][1] * x[1], p_[1][0] * x[0] + p_[1][1] * x[1]};
+  double denom = lambda + x[0] * px[0] + x[1] * px[1];
+  double k[2] = {px[0] / denom, px[1] / denom};
+  double bm = b_ * 1e6;  // ms per million triangles
+  double err = ms - (a_ + bm * x[1]);
+  // Robust: a frame stalled by something else on the machine (another process, a page fault
+  // storm) must not wreck the fit; residuals are clipped to half the prediction + 2 ms.
+  const double lim = 0.5 * (a_ + bm * x[1]) + 2.0;
+  err = std::clamp(err, -lim, lim);
+  a_ += k[0] * err;
+  bm += k[1] * err;
+  double np[2][2];
+  for (int i = 0; i < 2; ++i)
+    for (int j = 0; j < 2; ++j) np[i][j] = (p_[i][j] - k[i] * px[j]) / lambda;
+  // Without excitation (a steady triangle count) forgetting lets P grow without bound; clamp it
+  // to the prior so one odd frame cannot throw the fit.
+  const double cap[2] = {100, 1e4};
+  for (int i = 0; i < 2; ++i)
+    if (np[i][i] > cap[i]) {
+      double s = std::sqrt(cap[i] / np[i][i]);
+      for (int j = 0; j < 2; ++j) np[i][j] *= s, np[j][i] *= s;
+    }
+  std::copy(&np[0][0], &np[0][0] + 4, &p_[0][0]);
+  // Physical limits: no negative fixed cost, between 1 and 1e5 ms per million triangles.
+  a_ = std::max(0.0, a_);
+  bm = std::clamp(bm, 1.0, 1e5);
+  b_ = bm * 1e-6;
+  ++samples_;
+}
+
+double TimeModel::trianglesFor(double ms) const { return std::max(0.0, (ms - a_) / b_); }
+
+// ---- ExtractRender ----
+
+ExtractRender::ExtractRender(const Scene& scene, PatchCache* cache, PatchServer* server, ExtractOptions options)
+    : scene_(scene), cache_(cache), server_(server), options_(options) {}
+
+void ExtractRender::collectIn(uint32_t n, std::vector<uint32_t>& out) const {
+  out.clear();
+  const SceneNode& s = scene_.nodes()[n];
+  for (uint32_t k = 0; k < s.inArcCount; ++k) {
+    const SceneArc& a = scene_.arcs()[scene_.inArcs()[s.firstInArc + k]];
+    for (uint32_t p = 0; p < a.patchCount; ++p) out.push_back(scene_.arcPatches()[a.firstPatch + p]);
+  }
+}
+
+void ExtractRender::collectOut(uint32_t n, std::vector<uint32_t>& out) const {
+  out.clear();
+  const SceneNode& s = scene_.nodes()[n];
+  for (uint32_t k = 0; k < s.arcCount; ++k) {
+    const SceneArc& a = scene_.arcs()[s.firstArc + k];
+    for (uint32_t p = 0; p < a.patchCount; ++p) out.push_back(scene_.arcPatches()[a.firstPatch + p]);
+  }
+}
+
+bool ExtractRender::isRefineCandidate(uint32_t n) const {
+  const SceneNode& s = scene_.nodes()[n];
+  return inS_[n] && !s.source && succIn_[n] == 0;
+}
+
+bool ExtractRender::isCoarsenCandidate(uint32_t n) const {
+  const SceneNode& s = scene_.nodes()[n];
+  return !inS_[n] && !s.sink && predOut_[n] == 0;
+}
+
+void ExtractRender::addCutArc(uint32_t a) {
+  cutPos_[a] = uint32_t(cutArcs_.size());
+  cutArcs_.push_back(a);
+}
+
+void ExtractRender::removeCutArc(uint32_t a) {
+  uint32_t pos = cutPos_[a];
+  uint32_t last = cutArcs_.back();
+  cutArcs_[pos] = last;
+  cutPos_[last] = pos;
+  cutArcs_.pop_back();
+  cutPos_[a] = UINT32_MAX;
+}
+
+bool ExtractRender::patchesBad(const std::vector<uint32_t>& ids) const {
+  if (!cache_) return false;
+  for (uint32_t id : ids)
+    if (cache_->isBad(id)) return true;
+  return false;
+}
+
+void ExtractRender::start(double timeoutMs) {
+  const auto& nodes = scene_.nodes();
+  const size_t n = nodes.size();
+  inS_.assign(n, 0);
+  badNode_.assign(n, 0);
+  succIn_.assign(n, 0);
+  predOut_.assign(n, 0);
+  cutPos_.assign(scene_.arcs().size(), UINT32_MAX);
+  cutArcs_.clear();
+  triangles_ = 0;
+  cutPatchCount_ = 0;
+  // The coarsest cut: every node but the sinks.
+  for (size_t i = 0; i < n; ++i) inS_[i] = !nodes[i].sink;
+  for (uint32_t a = 0; a < scene_.arcs().size(); ++a) {
+    const SceneArc& arc = scene_.arcs()[a];
+    if (inS_[arc.to]) ++succIn_[arc.from];
+    if (!inS_[arc.from]) ++predOut_[arc.to];
+    if (inS_[arc.from] && !inS_[arc.to]) {
+      addCutArc(a);
+      triangles_ += arc.triangles;
+      cutPatchCount_ += arc.patchCount;
+    }
+  }
+  if (!cache_) return;
+  std::vector<LoadRequest> req;
+  for (uint32_t a : cutArcs_) {
+    const SceneArc& arc = scene_.arcs()[a];
+    for (uint32_t p = 0; p < arc.patchCount; ++p) req.push_back({scene_.arcPatches()[arc.firstPatch + p], Urgency::UrgentUp});
+  }
+  server_->submit(req, 0);
+  server_->waitIdle(timeoutMs);
+  // Pin what arrived; a damaged patch of the coarsest cut is simply not drawn.
+  for (const auto& r : req) cache_->pinAll(&r.id, 1);
+}
+
+bool ExtractRender::arcVisible(uint32_t arc, const View& view) const {
+  if (!options_.cull) return true;
+  const SceneArc& a = scene_.arcs()[arc];
+  const SceneNode& s = scene_.nodes()[a.cullNode];
+  const glm::dvec3 c(s.center[0], s.center[1], s.center[2]);
+  for (const auto& p : view.planes)
+    if (glm::dot(glm::dvec3(p), c) + p.w < -double(s.radius)) return false;
+  // The cone describes `from`'s own fragment; for a source arc (cullNode = to) it does not bound
+  // these patches, so only the sphere test applies.
+  if (a.cullNode == a.from && s.coneCutoff > 0.0f) {
+    glm::dvec3 v = c - view.eye;
+    double d = glm::length(v);
+    if (d > s.radius) {
+      double ang = std::acos(std::clamp(glm::dot(glm::dvec3(s.coneAxis[0], s.coneAxis[1], s.coneAxis[2]), v / d), -1.0, 1.0));
+      double alpha = std::acos(double(s.coneCutoff)), beta = std::asin(double(s.radius) / d);
+      if (ang + alpha + beta < 1.5707963267948966) return false;  // every triangle faces away
+    }
+  }
+  return true;
+}
+
+double ExtractRender::screenError(uint32_t node, const View& view) const {
+  const SceneNode& s = scene_.nodes()[node];
+  if (s.sink) return std::numeric_limits<double>::infinity();
+  const glm::dvec3 c(s.center[0], s.center[1], s.center[2]);
+  if (options_.cull) {
+    // Frustum: a node entirely outside needs no detail (BMT 5.1 projects through the sphere).
+    for (const auto& p : view.planes)
+      if (glm::dot(glm::dvec3(p), c) + p.w < -double(s.radius)) return 0;
+    // Normal cone (back-face) culling of the node's fragment.
+    if (s.coneCutoff > 0.0f) {
+      glm::dvec3 v = c - view.eye;
+      double d = glm::length(v);
+      if (d > s.radius) {
+        double ang = std::acos(std::clamp(glm::dot(glm::dvec3(s.coneAxis[0], s.coneAxis[1], s.coneAxis[2]), v / d), -1.0, 1.0));
+        double alpha = std::acos(double(s.coneCutoff)), beta = std::asin(double(s.radius) / d);
+        if (ang + alpha + beta < 1.5707963267948966) return 0;
+      }
+    }
+  }
+  // The error projected through the bounding sphere: the closest point of the sphere (BMT 5.1),
+  // so the screen error is monotone along the DAG (spheres nest, errors grow towards the sink).
+  double d = glm::length(c - view.eye) - double(s.radius);
+  d = std::max(d, view.nearPlane);
+  return double(s.error) * view.pixelsPerUnit / d;
+}
+
+bool ExtractRender::tryRefine(uint32_t n) {
+  const SceneNode& s = scene_.nodes()[n];
+  collectIn(n, scratch_);
+  if (cache_ && !cache_->pinAll(scratch_.data(), scratch_.size())) return false;
+  collectOut(n, scratch2_);
+  if (cache_) cache_->unpinAll(scratch2_.data(), scratch2_.size());
+  inS_[n] = 0;
+  for (uint32_t k = 0; k < s.arcCount; ++k) {
+    uint32_t a = s.firstArc + k;
+    removeCutArc(a);
+    ++predOut_[scene_.arcs()[a].to];
+  }
+  for (uint32_t k = 0; k < s.inArcCount; ++k) {
+    uint32_t a = scene_.inArcs()[s.firstInArc + k];
+    --succIn_[scene_.arcs()[a].from];
+    addCutArc(a);
+  }
+  triangles_ = triangles_ + s.inTriangles - s.outTriangles;
+  cutPatchCount_ = cutPatchCount_ + uint32_t(scratch_.size()) - uint32_t(scratch2_.size());
+  return true;
+}
+
+bool ExtractRender::tryCoarsen(uint32_t n) {
+  const SceneNode& s = scene_.nodes()[n];
+  collectOut(n, scratch_);
+  if (cache_ && !cache_->pinAll(scratch_.data(), scratch_.size())) return false;
+  collectIn(n, scratch2_);
+  if (cache_) cache_->unpinAll(scratch2_.data(), scratch2_.size());
+  inS_[n] = 1;
+  for (uint32_t k = 0; k < s.inArcCount; ++k) {
+    uint32_t a = scene_.inArcs()[s.firstInArc + k];
+    ++succIn_[scene_.arcs()[a].from];
+    removeCutArc(a);
+  }
+  for (uint32_t k = 0; k < s.arcCount; ++k) {
+    uint32_t a = s.firstArc + k;
+    --predOut_[scene_.arcs()[a].to];
+    addCutArc(a);
+  }
+  triangles_ = triangles_ + s.outTriangles - s.inTriangles;
+  cutPatchCount_ = cutPatchCount_ + uint32_t(scratch_.size()) - uint32_t(scratch2_.size());
+  return true;
+}
+
+void ExtractRender::want(const std::vector<uint32_t>& ids, Urgency u) {
+  for (uint32_t id : ids) {
+    auto [it, fresh] = wanted_.emplace(id, u);
+    if (!fresh && uint8_t(u) > uint8_t(it->second)) it->second = u;
+  }
+}
+
+void ExtractRender::frameDone(uint64_t drawnTriangles, double frameMs) { time_.add(double(drawnTriangles), frameMs); }
+
+FrameStats ExtractRender::update(uint64_t frame, const View& view, const View& predicted) {
+  const auto t0 = Clock::now();
+  FrameStats st;
+  frame_ = frame;
+  wanted_.clear();
+  const double extractMs = options_.extractMs > 0 ? options_.extractMs : std::min(2.0, options_.budgetMs / 20);
+  const auto deadline = t0 + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double, std::milli>(extractMs));
+  const double tau = options_.pixelTolerance * lodScale_;
+  const auto& nodes = scene_.nodes();
+
+  // CheckBudget's render budget: the triangles the time model says fit in the frame budget, with
+  // a margin for the model's error; it falls at once and rises gradually.
+  double budget;
+  if (options_.fixedTriangles) {
+    budget = double(options_.fixedTriangles);
+  } else {
+    double target = time_.trianglesFor(options_.budgetMs * 0.8 - extractMs);
+    // Falls fast (at most 30% a frame, so one odd frame cannot empty the screen), rises gradually.
+    if (smoothBudget_ == 0) smoothBudget_ = target;
+    else if (target < smoothBudget_) smoothBudget_ = std::max(target, 0.7 * smoothBudget_);
+    else smoothBudget_ += 0.25 * (target - smoothBudget_);
+    budget = std::max(smoothBudget_, 1000.0);
+  }
+  st.budgetTriangles = uint64_t(budget);
+  const uint32_t slots = cache_ ? cache_->stats().slots : UINT32_MAX;
+  const double pinLimit = cache_ ? options_.memoryFraction * slots : 1e18;
+
+  struct Entry {
+    double err;
+    uint32_t node;
+  };
+  auto maxFirst = [](const Entry& a, const Entry& b) { return a.err < b.err; };
+  auto minFirst = [](const Entry& a, const Entry& b) { return a.err > b.err; };
+  std::priority_queue<Entry, std::vector<Entry>, decltype(maxFirst)> refine(maxFirst);
+  std::priority_queue<Entry, std::vector<Entry>, decltype(minFirst)> coarse(minFirst);
+  double maxErr = 0;
+  for (uint32_t n = 0; n < nodes.size(); ++n) {
+    if (isRefineCandidate(n))
+      refine.push({screenError(n, view), n});
+    else if (isCoarsenCandidate(n))
+      coarse.push({screenError(n, view), n});
+    else if (nodes[n].source && succIn_[n] == 0)
+      maxErr = std::max(maxErr, screenError(n, view));
+  }
+  auto pushAround = [&](uint32_t n) {
+    // After a move on n, n and its neighbours may have become feasible moves (BMT 5, figure 8).
+    const SceneNode& s = nodes[n];
+    if (isRefineCandidate(n)) refine.push({screenError(n, view), n});
+    if (isCoarsenCandidate(n)) coarse.push({screenError(n, view), n});
+    for (uint32_t k = 0; k < s.inArcCount; ++k) {
+      uint32_t p = scene_.arcs()[scene_.inArcs()[s.firstInArc + k]].from;
+      if (isRefineCandidate(p)) refine.push({screenError(p, view), p});
+    }
+    for (uint32_t k = 0; k < s.arcCount; ++k) {
+      uint32_t m = scene_.arcs()[s.firstArc + k].to;
+      if (isCoarsenCandidate(m)) coarse.push({screenError(m, view), m});
+    }
+  };
+  uint32_t ops = 0;
+  auto timeUp = [&] {
+    if ((++ops & 7) != 0) return false;
+    if (Clock::now() < deadline) return false;
+    st.interrupted = true;
+    return true;
+  };
+  auto popStaleCoarse = [&] {
+    while (!coarse.empty() && (!isCoarsenCandidate(coarse.top().node) || (badNode_[coarse.top().node] & 2))) coarse.pop();
+  };
+  bool memoryFull = false;
+  uint32_t urgentLeft = 4;  // the first misses at the top of the heap are urgent (3.3.2)
+
+  if (!frozen_) {
+    // 1. Over the render budget: coarsen, the smallest error first (a "switch up", always urgent).
+    while (double(triangles_) > budget && !st.interrupted) {
+      popStaleCoarse();
+      if (coarse.empty() || timeUp()) break;
+      Entry e = coarse.top();
+      coarse.pop();
+      if (tryCoarsen(e.node)) {
+        ++st.coarsenings;
+        pushAround(e.node);
+      } else {
+        collectOut(e.node, scratch_);
+        if (patchesBad(scratch_)) badNode_[e.node] |= 2;
+        else want(scratch_, Urgency::UrgentUp);
+      }
+    }
+    // 2. Refine the largest screen error while CheckBudget allows.
+    while (!refine.empty() && !st.interrupted) {
+      Entry e = refine.top();
+      if (!isRefineCandidate(e.node) || (badNode_[e.node] & 1)) {
+        refine.pop();
+        continue;
+      }
+      if (e.err <= tau || timeUp()) break;
+      const SceneNode& s = nodes[e.node];
+      const double after = double(triangles_) + double(s.inTriangles) - double(s.outTriangles);
+      if (after > budget) {
+        // Trade: drop detail where it matters much less, to spend it where it matters most.
+        popStaleCoarse();
+        if (!coarse.empty() && coarse.top().err * 2 < e.err) {
+          Entry c = coarse.top();
+          coarse.pop();
+          if (tryCoarsen(c.node)) {
+            ++st.coarsenings;
+            pushAround(c.node);
+          } else {
+            collectOut(c.node, scratch_);
+            if (patchesBad(scratch_)) badNode_[c.node] |= 2;
+            else want(scratch_, Urgency::Needed);
+          }
+          continue;
+        }
+        break;  // the budget is spent
+      }
+      collectIn(e.node, scratch_);
+      if (double(cutPatchCount_) + double(scratch_.size()) > pinLimit) {
+        memoryFull = true;  // the cut would crowd the cache: the global LOD scale grows
+        break;
+      }
+      refine.pop();
+      if (tryRefine(e.node)) {
+        ++st.refinements;
+        pushAround(e.node);
+      } else {
+        collectIn(e.node, scratch_);
+        if (patchesBad(scratch_)) {
+          badNode_[e.node] |= 1;  // never refine into a damaged patch
+        } else {
+          want(scratch_, urgentLeft > 0 ? Urgency::UrgentDown : Urgency::Needed);
+          if (urgentLeft > 0) --urgentLeft;
+          maxErr = std::max(maxErr, e.err);
+        }
+      }
+    }
+    // 3. Coarsen detail far below the tolerance (frees triangles and memory; hysteresis 2x).
+    while (!st.interrupted) {
+      popStaleCoarse();
+      if (coarse.empty() || coarse.top().err >= tau * 0.5 || timeUp()) break;
+      Entry c = coarse.top();
+      coarse.pop();
+      if (tryCoarsen(c.node)) {
+        ++st.coarsenings;
+        pushAround(c.node);
+      } else {
+        collectOut(c.node, scratch_);
+        if (patchesBad(scratch_)) badNode_[c.node] |= 2;
+        else want(scratch_, Urgency::Needed);
+      }
+    }
+  }
+  // The cut's largest visible screen error: the worst refinement left undone.
+  while (!refine.empty() && !isRefineCandidate(refine.top().node)) refine.pop();
+  if (!refine.empty()) maxErr = std::max(maxErr, refine.top().err);
+  st.maxScreenError = maxErr;
+
+  // 4. Prefetch (BMT 5: "the operations in the heaps"; Derzapf 4.3: children and the view
+  //    extrapolated 10 frames ahead), at low priority so it only uses spare load capacity.
+  if (cache_ && options_.prefetch && !frozen_ && Clock::now() < deadline + (deadline - t0)) {
+    int k = 0;
+    while (!refine.empty() && k < 24) {
+      Entry e = refine.top();
+      refine.pop();
+      if (!isRefineCandidate(e.node) || badNode_[e.node] || e.err <= tau * 0.5) continue;
+      collectIn(e.node, scratch_);
+      want(scratch_, Urgency::Prefetch);
+      // Children: the next refinements after this one.
+      const SceneNode& s = nodes[e.node];
+      for (uint32_t j = 0; j < s.inArcCount && k < 8; ++j) {
+        uint32_t p = scene_.arcs()[scene_.inArcs()[s.firstInArc + j]].from;
+        if (!nodes[p].source && screenError(p, view) > tau) {
+          collectIn(p, scratch_);
+          want(scratch_, Urgency::Prefetch);
+        }
+      }
+      ++k;
+    }
+    k = 0;
+    while (!coarse.empty() && k < 16) {
+      Entry c = coarse.top();
+      coarse.pop();
+      if (!isCoarsenCandidate(c.node) || badNode_[c.node]) continue;
+      collectOut(c.node, scratch_);
+      want(scratch_, Urgency::Prefetch);
+      ++k;
+    }
+    // The extrapolated view: refinements it will want that the current view does not.
+    std::vector<Entry> ahead;
+    for (uint32_t n = 0; n < nodes.size(); ++n)
+      if (isRefineCandidate(n) && !badNode_[n]) {
+        double e = screenError(n, predicted);
+        if (e > tau) ahead.push_back({e, n});
+      }
+    std::sort(ahead.begin(), ahead.end(), [](const Entry& a, const Entry& b) { return a.err > b.err; });
+    for (size_t i = 0; i < ahead.size() && i < 32; ++i) {
+      collectIn(ahead[i].node, scratch_);
+      want(scratch_, Urgency::Prefetch);
+    }
+  }
+
+  // Requests for the PatchServer: urgent first, then the patches wanted in the most consecutive
+  // frames (Derzapf 4.1: no region starves), within the load budget.
+  if (cache_) {
+    struct Req {
+      uint32_t id;
+      Urgency u;
+      uint32_t consecutive;
+    };
+    std::vector<Req> reqs;
+    std::unordered_map<uint32_t, uint32_t> nextConsecutive;
+    touched_.clear();
+    for (const auto& [id, u] : wanted_) {
+      PatchCache::State s = cache_->state(id);
+      if (s == PatchCache::State::Ready) {
+        touched_.push_back(id);
+        continue;
+      }
+      if (s == PatchCache::State::Bad) continue;
+      if (u != Urgency::Prefetch) ++st.misses;
+      if (s == PatchCache::State::Loading) continue;
+      auto it = consecutive_.find(id);
+      uint32_t c = (it == consecutive_.end() ? 0 : it->second) + 1;
+      nextConsecutive[id] = c;
+      reqs.push_back({id, u, c});
+    }
+    consecutive_.swap(nextConsecutive);
+    cache_->touch(touched_.data(), touched_.size(), frame);
+    std::sort(reqs.begin(), reqs.end(), [](const Req& a, const Req& b) {
+      if (a.u != b.u) return uint8_t(a.u) > uint8_t(b.u);
+      if (a.consecutive != b.consecutive) return a.consecutive > b.consecutive;
+      return a.id < b.id;
+    });
+    uint32_t loadBudget = options_.loadBudget;
+    if (!loadBudget) {
+      double ms = server_->meanLoadMs();
+      loadBudget = uint32_t(std::clamp(ms > 0 ? options_.budgetMs / ms : 64.0, 8.0, 512.0));
+    }
+    std::vector<LoadRequest> out;
+    for (const Req& r : reqs) {
+      if (out.size() >= loadBudget) break;
+      out.push_back({r.id, r.u});
+      if (r.u == Urgency::Prefetch) ++st.prefetches;
+      else ++st.requests;
+    }
+    server_->submit(std::move(out), frame);
+    cache_->endFrame(frame);
+  }
+
+  // Global LOD scale (Derzapf 4.1): coarsen everything while memory is full, relax gradually.
+  if (memoryFull) lodScale_ = std::min(lodScale_ * 1.1, 64.0);
+  else if (lodScale_ > 1 && double(cutPatchCount_) < 0.8 * pinLimit) lodScale_ = std::max(1.0, lodScale_ * 0.97);
+  st.memoryFull = memoryFull;
+  st.lodScale = lodScale_;
+  st.triangles = triangles_;
+  st.patches = cutPatchCount_;
+  st.extractMs = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+  return st;
+}
+
+}  // namespace mt::render

@@ -1,0 +1,140 @@
+// mtrender/extract.h: ExtractRender's cut update (BMT section 5, figure 9).
+//
+// The cut is a node set S (mt_format.h "DAG orientation"): refining removes a node from S, so
+// its fragment (out-arcs) is replaced by the finer patches on its in-arcs; coarsening adds one.
+// Feasible moves on the current cut sit in two heaps keyed by screen-space error (the node's
+// object-space error projected through its bounding sphere, BMT 5.1):
+//   RefinementHeap: nodes of S with no successor in S (their whole fragment is on screen), the
+//                   largest error first;
+//   CoarseningHeap: nodes outside S whose predecessors are all in S, the smallest error first.
+// Each frame: rebuild the heaps for the new view (the DAG has thousands of nodes, so this is cheap),
+// then Extract + Apply (interleaved, so the deadline can stop it anywhere and the cut stays
+// conforming): coarsen while over the render budget, refine the worst node while its error is
+// above the tolerance and CheckBudget allows (trading the cheapest coarsening for it when the
+// budget is spent), coarsen what is far below the tolerance. A move is applied only when all
+// its patches are resident (pinned atomically in the cache): a move waiting for the disk is a
+// miss, requested from the PatchServer, and the cut simply stays where it is.
+// Then Prefetch in the leftover time: patches of the moves at the top of both heaps, their
+// children, and the refinements the view extrapolated 10 frames ahead will want.
+// CheckBudget: render budget = triangles per frame from a time model fitted online to measured
+// frame times; load budget = patches per frame, from the PatchServer's measured load time.
+// A global LOD scale multiplies the tolerance while the cache cannot hold what the cut needs, and
+// relaxes gradually (Derzapf et al. 4.1).
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <unordered_map>
+#include <vector>
+
+#include "mtrender/camera.h"
+#include "mtrender/patch_cache.h"
+#include "mtrender/patch_server.h"
+#include "mtrender/scene.h"
+
+namespace mt::render {
+
+// frame ms ~= a + b * triangles, fitted by recursive least squares with forgetting, so the
+// budget follows the machine (llvmpipe shares the CPU with everything else).
+class TimeModel {
+ public:
+  void add(double triangles, double ms);
+  double predictMs(double triangles) const { return a_ + b_ * triangles; }
+  // Triangles that fit in `ms` (0 when even an empty frame does not).
+  double trianglesFor(double ms) const;
+  double a() const { return a_; }
+  double b() const { return b_; }
+
+ private:
+  double a_ = 2.0, b_ = 1e-4;  // prior: 2 ms fixed, 10 M triangles/s
+  double p_[2][2] = {{100, 0}, {0, 1e4}};  // (ms^2, (ms per million triangles)^2)
+  int samples_ = 0;
+};
+
+struct ExtractOptions {
+  double pixelTolerance = 1.0;   // target screen-space error (pixels)
+  double budgetMs = 50;          // frame-time budget
+  uint64_t fixedTriangles = 0;   // > 0: a fixed render budget instead of the time model
+  double extractMs = 0;          // deadline for the cut update; 0: min(2, budgetMs / 20)
+  uint32_t loadBudget = 0;       // patches requested per frame; 0: from the measured load time
+  bool prefetch = true;
+  bool cull = true;              // frustum + normal-cone culling (per node for errors, per arc for drawing)
+  double memoryFraction = 0.6;   // the cut may pin at most this share of the cache's place holders
+};
+
+struct FrameStats {
+  double extractMs = 0;
+  uint64_t triangles = 0;        // in the cut
+  uint32_t patches = 0;          // in the cut
+  uint32_t drawnPatches = 0;     // after culling
+  uint64_t drawnTriangles = 0;
+  uint32_t misses = 0;           // patches wanted for a move but not resident
+  uint32_t requests = 0, prefetches = 0;
+  uint32_t refinements = 0, coarsenings = 0;
+  double maxScreenError = 0;     // pixels, over the visible part of the cut
+  uint64_t budgetTriangles = 0;
+  double lodScale = 1;
+  bool memoryFull = false;
+  bool interrupted = false;      // the deadline stopped the update
+};
+
+class ExtractRender {
+ public:
+  // cache/server null: everything counts as resident (the baseline mode loads synchronously).
+  ExtractRender(const Scene& scene, PatchCache* cache, PatchServer* server, ExtractOptions options);
+
+  // Coarsest cut; with a cache, loads its patches first (blocking, up to timeoutMs).
+  void start(double timeoutMs);
+
+  // One frame's cut update for `view`; `predicted` is the view extrapolated 10 frames ahead.
+  FrameStats update(uint64_t frame, const View& view, const View& predicted);
+  // Feeds the time model with the last frame's measured time.
+  void frameDone(uint64_t drawnTriangles, double frameMs);
+  void setFrozen(bool f) { frozen_ = f; }
+  bool frozen() const { return frozen_; }
+  ExtractOptions& options() { return options_; }
+  const TimeModel& timeModel() const { return time_; }
+
+  // The arcs of the cut (unordered) and whether the arc is visible in `view` (culling).
+  const std::vector<uint32_t>& cutArcs() const { return cutArcs_; }
+  bool arcVisible(uint32_t arc, const View& view) const;
+  const std::vector<uint8_t>& inSet() const { return inS_; }
+  double screenError(uint32_t node, const View& view) const;
+  uint64_t cutTriangles() const { return triangles_; }
+
+ private:
+  bool isRefineCandidate(uint32_t n) const;
+  bool isCoarsenCandidate(uint32_t n) const;
+  void collectIn(uint32_t n, std::vector<uint32_t>& out) const;   // patches on n's in-arcs
+  void collectOut(uint32_t n, std::vector<uint32_t>& out) const;  // patches on n's out-arcs
+  bool patchesBad(const std::vector<uint32_t>& ids) const;
+  // Applies the move if its patches are resident (pins them); false otherwise.
+  bool tryRefine(uint32_t n);
+  bool tryCoarsen(uint32_t n);
+  void addCutArc(uint32_t a);
+  void removeCutArc(uint32_t a);
+  void want(const std::vector<uint32_t>& ids, Urgency u);
+
+  const Scene& scene_;
+  PatchCache* cache_;
+  PatchServer* server_;
+  ExtractOptions options_;
+  TimeModel time_;
+  std::vector<uint8_t> inS_, badNode_;
+  std::vector<uint32_t> succIn_, predOut_;   // per node: out-arcs into S; in-arcs from outside S
+  std::vector<uint32_t> cutArcs_, cutPos_;   // indexed set of cut arcs
+  uint64_t triangles_ = 0;
+  uint32_t cutPatchCount_ = 0;
+  double lodScale_ = 1;
+  bool frozen_ = false;
+  bool lastMemoryFull_ = false;
+  uint64_t frame_ = 0;
+  std::vector<uint32_t> scratch_, scratch2_;
+  struct Want { Urgency urgency; };
+  std::unordered_map<uint32_t, Urgency> wanted_;        // this frame
+  std::unordered_map<uint32_t, uint32_t> consecutive_;  // frames in a row a patch was requested
+  std::vector<uint32_t> touched_;
+  double smoothBudget_ = 0;
+};
+
+}  // namespace mt::render

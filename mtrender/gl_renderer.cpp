@@ -1,0 +1,245 @@
+#define GL_GLEXT_PROTOTYPES 1
+#include "mtrender/gl_renderer.h"
+
+#include <EGL/egl.h>
+#include <EGL/eglext.h>
+#include <GL/glcorearb.h>
+
+#include <algorithm>
+#include <cstring>
+#include <glm/gtc/type_ptr.hpp>
+#include <string>
+
+#include "patchstore/error.h"
+
+namespace mt::render {
+
+EglContext::EglContext() {
+  auto getPlatformDisplay = reinterpret_cast<PFNEGLGETPLATFORMDISPLAYEXTPROC>(eglGetProcAddress("eglGetPlatformDisplayEXT"));
+  if (!getPlatformDisplay) throw Error("mtrender: EGL has no eglGetPlatformDisplayEXT");
+  EGLDisplay d = getPlatformDisplay(EGL_PLATFORM_SURFACELESS_MESA, EGL_DEFAULT_DISPLAY, nullptr);
+  EGLint major = 0, minor = 0;
+  if (d == EGL_NO_DISPLAY || !eglInitialize(d, &major, &minor))
+    throw Error("mtrender: cannot open a surfaceless EGL display (EGL_MESA_platform_surfaceless)");
+  if (!eglBindAPI(EGL_OPENGL_API)) throw Error("mtrender: EGL cannot bind the OpenGL API");
+  const EGLint attribs[] = {EGL_CONTEXT_MAJOR_VERSION, 4, EGL_CONTEXT_MINOR_VERSION, 5, EGL_CONTEXT_OPENGL_PROFILE_MASK,
+                            EGL_CONTEXT_OPENGL_CORE_PROFILE_BIT, EGL_NONE};
+  EGLContext c = eglCreateContext(d, EGL_NO_CONFIG_KHR, EGL_NO_CONTEXT, attribs);
+  if (c == EGL_NO_CONTEXT) throw Error("mtrender: cannot create an OpenGL 4.5 core context on EGL");
+  if (!eglMakeCurrent(d, EGL_NO_SURFACE, EGL_NO_SURFACE, c)) throw Error("mtrender: eglMakeCurrent failed");
+  display_ = d;
+  context_ = c;
+}
+
+EglContext::~EglContext() {
+  eglMakeCurrent(display_, EGL_NO_SURFACE, EGL_NO_SURFACE, EGL_NO_CONTEXT);
+  eglDestroyContext(display_, context_);
+  eglTerminate(display_);
+}
+
+namespace {
+
+const char* kVertexShader = R"(#version 450 core
+layout(location = 0) in vec3 position;
+layout(location = 1) in vec4 normal;
+layout(location = 2) in vec4 color;
+uniform mat4 mvp;
+uniform mat4 mv;
+out vec3 vNormal;
+out vec3 vPos;
+out vec4 vColor;
+void main() {
+  gl_Position = mvp * vec4(position, 1.0);
+  vNormal = mat3(mv) * normal.xyz;
+  vPos = (mv * vec4(position, 1.0)).xyz;
+  vColor = color;
+}
+)";
+
+// A headlight, lit on both sides (scans are open surfaces: their back shows through holes).
+const char* kFragmentShader = R"(#version 450 core
+in vec3 vNormal;
+in vec3 vPos;
+in vec4 vColor;
+uniform vec3 tint;
+uniform int mode;
+out vec4 fragColor;
+void main() {
+  vec3 n = normalize(vNormal);
+  float d = abs(dot(n, normalize(-vPos)));
+  vec3 base = mode == 0 ? vColor.rgb * vec3(0.85, 0.82, 0.75) : tint;
+  fragColor = vec4(base * (0.2 + 0.8 * d), 1.0);
+}
+)";
+
+uint32_t compile(GLenum type, const char* src) {
+  GLuint s = glCreateShader(type);
+  glShaderSource(s, 1, &src, nullptr);
+  glCompileShader(s);
+  GLint ok = 0;
+  glGetShaderiv(s, GL_COMPILE_STATUS, &ok);
+  if (!ok) {
+    char log[2048];
+    glGetShaderInfoLog(s, sizeof log, nullptr, log);
+    throw Error(std::string("mtrender: shader compile error: ") + log);
+  }
+  return s;
+}
+
+glm::vec3 hashColor(uint32_t id) {
+  uint32_t h = id * 2654435761u;
+  h ^= h >> 15;
+  h *= 2246822519u;
+  h ^= h >> 13;
+  return {0.3f + 0.7f * float(h & 255) / 255.0f, 0.3f + 0.7f * float((h >> 8) & 255) / 255.0f,
+          0.3f + 0.7f * float((h >> 16) & 255) / 255.0f};
+}
+
+glm::vec3 levelColor(uint32_t level) {
+  static const glm::vec3 palette[] = {{0.9f, 0.2f, 0.2f}, {0.95f, 0.55f, 0.1f}, {0.95f, 0.9f, 0.2f}, {0.4f, 0.85f, 0.3f},
+                                      {0.2f, 0.8f, 0.8f},  {0.25f, 0.45f, 0.95f}, {0.6f, 0.3f, 0.9f},  {0.9f, 0.4f, 0.8f}};
+  return palette[level % 8];
+}
+
+}  // namespace
+
+GlRenderer::GlRenderer(uint64_t gpuCapBytes) : cap_(gpuCapBytes) {
+  GLuint vs = compile(GL_VERTEX_SHADER, kVertexShader), fs = compile(GL_FRAGMENT_SHADER, kFragmentShader);
+  program_ = glCreateProgram();
+  glAttachShader(program_, vs);
+  glAttachShader(program_, fs);
+  glLinkProgram(program_);
+  GLint ok = 0;
+  glGetProgramiv(program_, GL_LINK_STATUS, &ok);
+  if (!ok) throw Error("mtrender: shader link error");
+  glDeleteShader(vs);
+  glDeleteShader(fs);
+  locMvp_ = glGetUniformLocation(program_, "mvp");
+  locMv_ = glGetUniformLocation(program_, "mv");
+  locTint_ = glGetUniformLocation(program_, "tint");
+  locMode_ = glGetUniformLocation(program_, "mode");
+  glCreateVertexArrays(1, &vao_);
+  glEnableVertexArrayAttrib(vao_, 0);
+  glEnableVertexArrayAttrib(vao_, 1);
+  glEnableVertexArrayAttrib(vao_, 2);
+  glVertexArrayAttribFormat(vao_, 0, 3, GL_FLOAT, GL_FALSE, 0);
+  glVertexArrayAttribFormat(vao_, 1, 4, GL_INT_2_10_10_10_REV, GL_TRUE, 12);
+  glVertexArrayAttribFormat(vao_, 2, 4, GL_UNSIGNED_BYTE, GL_TRUE, 16);
+  for (int a = 0; a < 3; ++a) glVertexArrayAttribBinding(vao_, a, 0);
+}
+
+GlRenderer::~GlRenderer() {
+  for (auto& [id, b] : buffers_) glDeleteBuffers(1, &b.buffer);
+  if (fbo_) {
+    glDeleteFramebuffers(1, &fbo_);
+    glDeleteRenderbuffers(1, &colorRb_);
+    glDeleteRenderbuffers(1, &depthRb_);
+  }
+  glDeleteVertexArrays(1, &vao_);
+  glDeleteProgram(program_);
+}
+
+void GlRenderer::useOffscreen(int width, int height) {
+  width_ = width;
+  height_ = height;
+  glCreateFramebuffers(1, &fbo_);
+  glCreateRenderbuffers(1, &colorRb_);
+  glCreateRenderbuffers(1, &depthRb_);
+  glNamedRenderbufferStorage(colorRb_, GL_RGBA8, width, height);
+  glNamedRenderbufferStorage(depthRb_, GL_DEPTH_COMPONENT24, width, height);
+  glNamedFramebufferRenderbuffer(fbo_, GL_COLOR_ATTACHMENT0, GL_RENDERBUFFER, colorRb_);
+  glNamedFramebufferRenderbuffer(fbo_, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, depthRb_);
+  if (glCheckNamedFramebufferStatus(fbo_, GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE)
+    throw Error("mtrender: the offscreen framebuffer is incomplete");
+}
+
+void GlRenderer::beginFrame(const View& view, const DrawSettings& s) {
+  ++frame_;
+  width_ = view.width;
+  height_ = view.height;
+  glBindFramebuffer(GL_FRAMEBUFFER, fbo_);
+  glViewport(0, 0, view.width, view.height);
+  glClearColor(s.background.r, s.background.g, s.background.b, 1.0f);
+  glClearDepth(1.0);
+  glEnable(GL_DEPTH_TEST);
+  glDepthFunc(GL_LESS);
+  glDisable(GL_CULL_FACE);
+  glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
+  glPolygonMode(GL_FRONT_AND_BACK, s.wireframe ? GL_LINE : GL_FILL);
+  glUseProgram(program_);
+  glm::mat4 mvp = view.projMatrix * view.viewMatrix;
+  glUniformMatrix4fv(locMvp_, 1, GL_FALSE, glm::value_ptr(mvp));
+  glUniformMatrix4fv(locMv_, 1, GL_FALSE, glm::value_ptr(view.viewMatrix));
+  glUniform1i(locMode_, s.mode == ColorMode::Shaded ? 0 : 1);
+  glUniform3f(locTint_, 1, 1, 1);
+  mode_ = s.mode;
+  glBindVertexArray(vao_);
+}
+
+uint32_t GlRenderer::drawPatch(uint32_t id, uint32_t level, const std::function<PatchView()>& fetch) {
+  auto it = buffers_.find(id);
+  if (it == buffers_.end()) {
+    PatchView v = fetch();
+    if (v.vertexCount == 0 || v.indexCount == 0) return 0;
+    Buffer b;
+    const uint64_t vbytes = uint64_t(v.vertexCount) * sizeof(RenderVertex);
+    b.indexOffset = vbytes;
+    b.indexCount = v.indexCount;
+    b.bytes = vbytes + uint64_t(v.indexCount) * 4;
+    glCreateBuffers(1, &b.buffer);
+    glNamedBufferStorage(b.buffer, GLsizeiptr(b.bytes), nullptr, GL_DYNAMIC_STORAGE_BIT);
+    glNamedBufferSubData(b.buffer, 0, GLsizeiptr(vbytes), v.vertices);
+    glNamedBufferSubData(b.buffer, GLintptr(vbytes), GLsizeiptr(uint64_t(v.indexCount) * 4), v.indices);
+    gpuBytes_ += b.bytes;
+    ++uploads_;
+    it = buffers_.emplace(id, b).first;
+  }
+  Buffer& b = it->second;
+  b.lastFrame = frame_;
+  if (mode_ == ColorMode::Patch) {
+    glm::vec3 c = hashColor(id);
+    glUniform3f(locTint_, c.r, c.g, c.b);
+  } else if (mode_ == ColorMode::Lod) {
+    glm::vec3 c = levelColor(level);
+    glUniform3f(locTint_, c.r, c.g, c.b);
+  }
+  glVertexArrayVertexBuffer(vao_, 0, b.buffer, 0, sizeof(RenderVertex));
+  glVertexArrayElementBuffer(vao_, b.buffer);
+  glDrawElements(GL_TRIANGLES, GLsizei(b.indexCount), GL_UNSIGNED_INT, reinterpret_cast<const void*>(b.indexOffset));
+  return b.indexCount / 3;
+}
+
+void GlRenderer::endFrame() {
+  glPolygonMode(GL_FRONT_AND_BACK, GL_FILL);
+  if (gpuBytes_ <= cap_) return;
+  std::vector<std::pair<uint64_t, uint32_t>> old;
+  for (const auto& [id, b] : buffers_)
+    if (b.lastFrame < frame_) old.push_back({b.lastFrame, id});
+  std::sort(old.begin(), old.end());
+  for (const auto& [f, id] : old) {
+    if (gpuBytes_ <= cap_) break;
+    auto it = buffers_.find(id);
+    gpuBytes_ -= it->second.bytes;
+    glDeleteBuffers(1, &it->second.buffer);
+    buffers_.erase(it);
+  }
+}
+
+void GlRenderer::finish() { glFinish(); }
+
+Image GlRenderer::readPixels() const {
+  Image img;
+  img.width = width_;
+  img.height = height_;
+  img.rgba.resize(size_t(width_) * height_ * 4);
+  glBindFramebuffer(GL_READ_FRAMEBUFFER, fbo_);
+  if (!fbo_) glReadBuffer(GL_BACK);
+  glPixelStorei(GL_PACK_ALIGNMENT, 1);
+  std::vector<uint8_t> tmp(img.rgba.size());
+  glReadPixels(0, 0, width_, height_, GL_RGBA, GL_UNSIGNED_BYTE, tmp.data());
+  const size_t row = size_t(width_) * 4;
+  for (int y = 0; y < height_; ++y) std::memcpy(&img.rgba[size_t(y) * row], &tmp[size_t(height_ - 1 - y) * row], row);
+  return img;
+}
+
+}  // namespace mt::render

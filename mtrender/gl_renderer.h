@@ -1,0 +1,75 @@
+// mtrender/gl_renderer.h: the OpenGL 4.5 core backend that draws the cut, with a GPU buffer
+// cache under its own byte cap, plus an EGL surfaceless context (EGL_MESA_platform_surfaceless)
+// with an FBO for headless runs (no X needed). The viewer uses a GLFW window's context instead.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <glm/glm.hpp>
+#include <memory>
+#include <unordered_map>
+#include <vector>
+
+#include "mtrender/camera.h"
+#include "mtrender/image.h"
+#include "mtrender/patch_cache.h"
+
+namespace mt::render {
+
+// A surfaceless EGL display + OpenGL 4.5 core context, current on the calling thread.
+class EglContext {
+ public:
+  EglContext();  // throws mt::Error when EGL or GL 4.5 core is unavailable
+  ~EglContext();
+  EglContext(const EglContext&) = delete;
+  EglContext& operator=(const EglContext&) = delete;
+
+ private:
+  void* display_ = nullptr;
+  void* context_ = nullptr;
+};
+
+enum class ColorMode { Shaded, Patch, Lod };
+
+struct DrawSettings {
+  ColorMode mode = ColorMode::Shaded;
+  bool wireframe = false;
+  glm::vec3 background{0.08f, 0.09f, 0.11f};
+};
+
+class GlRenderer {
+ public:
+  explicit GlRenderer(uint64_t gpuCapBytes);  // needs a current GL 4.5 context
+  ~GlRenderer();
+
+  // Renders into an offscreen FBO of this size (headless) instead of the default framebuffer.
+  void useOffscreen(int width, int height);
+  void beginFrame(const View& view, const DrawSettings& settings);
+  // Draws patch `id`; uploads it first when it is not on the GPU, taking its data from fetch()
+  // (a PatchView with vertexCount 0 = unavailable: nothing drawn). Returns triangles drawn.
+  uint32_t drawPatch(uint32_t id, uint32_t level, const std::function<PatchView()>& fetch);
+  // Evicts least recently drawn buffers beyond the GPU cap (never one drawn this frame).
+  void endFrame();
+  void finish();
+  Image readPixels() const;
+  uint64_t gpuBytes() const { return gpuBytes_; }
+  uint64_t uploads() const { return uploads_; }
+
+ private:
+  struct Buffer {
+    uint32_t buffer = 0;
+    uint64_t bytes = 0;
+    uint64_t indexOffset = 0;
+    uint32_t indexCount = 0;
+    uint64_t lastFrame = 0;
+  };
+  uint64_t cap_;
+  uint32_t program_ = 0, vao_ = 0, fbo_ = 0, colorRb_ = 0, depthRb_ = 0;
+  int width_ = 0, height_ = 0;
+  int locMvp_ = -1, locMv_ = -1, locTint_ = -1, locMode_ = -1;
+  ColorMode mode_ = ColorMode::Shaded;
+  std::unordered_map<uint32_t, Buffer> buffers_;
+  uint64_t gpuBytes_ = 0, frame_ = 0, uploads_ = 0;
+};
+
+}  // namespace mt::render

@@ -1,0 +1,264 @@
+// mtrender: the budgeted, interruptible out-of-core renderer for MT files (BMT section 5).
+//   mtrender FILE.mt... --headless --camera-path P --frames N --budget-ms MS --cache SIZE
+//            --width W --height H --stats frames.csv [--screenshots DIR] [--plot DIR]
+//   mtrender FILE.mt...            (the interactive viewer: GLFW window, Dear ImGui HUD)
+// docs/mtrender.md describes the options, the camera path format and the CSV columns.
+#include <CLI/CLI.hpp>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <numeric>
+#include <string>
+#include <vector>
+
+#include "mtrender/engine.h"
+#include "mtrender/viewer.h"
+#include "patchstore/error.h"
+
+using namespace mt::render;
+using Clock = std::chrono::steady_clock;
+
+namespace {
+
+struct Summary {
+  std::vector<FrameRecord> frames;
+};
+
+void writeCsv(const std::string& path, const std::vector<FrameRecord>& frames) {
+  const std::string tmp = path + ".tmp";
+  {
+    std::ofstream out(tmp);
+    if (!out) mt::fail(path, "cannot write the stats CSV");
+    out << "frame,frame_ms,extract_ms,triangles,patches,loads,misses,cache_bytes,max_screen_error,"
+           "drawn_triangles,drawn_patches,budget_triangles,gpu_bytes,lod_scale,moving,requests,prefetches,"
+           "refinements,coarsenings\n";
+    char buf[512];
+    for (size_t i = 0; i < frames.size(); ++i) {
+      const FrameRecord& f = frames[i];
+      std::snprintf(buf, sizeof buf, "%zu,%.3f,%.4f,%llu,%u,%u,%u,%llu,%.4f,%llu,%u,%llu,%llu,%.3f,%d,%u,%u,%u,%u\n", i,
+                    f.frameMs, f.extractMs, (unsigned long long)f.triangles, f.patches, f.loads, f.misses,
+                    (unsigned long long)f.cacheBytes, f.maxScreenError, (unsigned long long)f.drawnTriangles,
+                    f.drawnPatches, (unsigned long long)f.budgetTriangles, (unsigned long long)f.gpuBytes, f.lodScale,
+                    f.moving ? 1 : 0, f.requests, f.prefetches, f.refinements, f.coarsenings);
+      out << buf;
+    }
+    if (!out) mt::fail(path, "write failed");
+  }
+  std::filesystem::rename(tmp, path);
+}
+
+void writePlots(const std::string& dir, const std::string& csv, double budgetMs, uint64_t cap) {
+  std::filesystem::create_directories(dir);
+  const std::string script = dir + "/plots.gnuplot";
+  {
+    std::ofstream g(script);
+    g << "set datafile separator ','\nset terminal png size 900,400\nset key autotitle columnhead\n"
+         "set xlabel 'frame'\nset grid\n";
+    auto plot = [&](const std::string& name, const std::string& title, const std::string& cols) {
+      g << "set output '" << dir << "/" << name << ".png'\nset title '" << title << "'\nplot " << cols << "\n";
+    };
+    const std::string f = "'" + csv + "'";
+    plot("frame_ms", "frame time (ms)", f + " using 1:2 with lines, " + f + " using 1:3 with lines, " +
+                                            std::to_string(budgetMs) + " title 'budget' with lines dt 2");
+    plot("triangles", "triangles", f + " using 1:4 with lines, " + f + " using 1:10 with lines, " + f +
+                                       " using 1:12 with lines");
+    plot("loads_misses", "patch loads and misses per frame", f + " using 1:6 with lines, " + f + " using 1:7 with lines");
+    plot("cache_bytes", "RAM cache bytes", f + " using 1:8 with lines, " + std::to_string(cap) + " title 'cap' with lines dt 2");
+    plot("screen_error", "max screen-space error (px)", f + " using 1:9 with lines, 1 title '1 px' with lines dt 2");
+  }
+  std::string cmd = "gnuplot '" + script + "' 2>&1";
+  if (std::system(cmd.c_str()) != 0) throw mt::Error(script + ": gnuplot failed (is gnuplot installed?)");
+}
+
+double median(std::vector<double> v) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  return v[v.size() / 2];
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const auto programStart = Clock::now();
+  CLI::App app{"mtrender: view MT files with a guaranteed frame-time budget, loading patches out of core.\n"
+               "Without --headless it opens the interactive viewer (GLFW window; see docs/mtrender.md for keys)."};
+  std::vector<std::string> files;
+  bool headless = false, baseline = false, noPrefetch = false, noCull = false, quiet = false, wireframe = false;
+  std::string cameraPath, statsPath, screenshotDir, plotDir, cacheText = "256M", gpuCacheText, colorMode = "shaded";
+  std::string screenshotPath, recordPath = "mtrender-path.txt";
+  int frames = 0, width = 1280, height = 720, screenshotEvery = 1, maxFrames = 0;
+  double budgetMs = 50, tolerance = 1, readDelayMs = 0, extractMs = 0;
+  uint64_t fixedTriangles = 0;
+  uint32_t loadBudget = 0;
+  app.add_option("files", files, "MT files to show together (they share one cache and one budget)")->required();
+  app.add_flag("--headless", headless, "render offscreen on EGL surfaceless (no X), for tests and benchmarks");
+  app.add_option("--camera-path", cameraPath,
+                 "camera path: a path file (docs/mtrender.md) or a built-in: orbit, flythrough, fixed "
+                 "(headless default: fixed; in the viewer the path is replayed)");
+  app.add_option("--frames", frames, "frames to render (headless; default: the path's length, or 100)");
+  app.add_option("--budget-ms", budgetMs, "frame-time budget in ms (default 50)");
+  app.add_option("--cache", cacheText, "RAM patch cache cap, e.g. 64M, 1G (default 256M)");
+  app.add_option("--gpu-cache", gpuCacheText, "GPU buffer cache cap (default: same as --cache)");
+  app.add_option("--width", width, "image width (default 1280)");
+  app.add_option("--height", height, "image height (default 720)");
+  app.add_option("--stats", statsPath, "write one CSV row per frame (columns in docs/mtrender.md)");
+  app.add_option("--screenshots", screenshotDir, "headless: write frame_NNNNN.png into this directory");
+  app.add_option("--screenshot-every", screenshotEvery, "headless: a screenshot every K frames (default 1)");
+  app.add_option("--plot", plotDir, "write PNG charts of the per-frame series with gnuplot into this directory");
+  app.add_flag("--baseline-mmap", baseline,
+               "baseline: map the files and render the same kind of cut with no RAM cache, no PatchServer "
+               "thread and no prefetch (patches decoded inside the frame)");
+  app.add_option("--tolerance", tolerance, "target screen-space error in pixels (default 1)");
+  app.add_option("--fixed-triangles", fixedTriangles, "a fixed render budget (triangles per frame) instead of the time model");
+  app.add_option("--extract-ms", extractMs, "deadline of the cut update per frame (default min(2, budget/20))");
+  app.add_option("--load-budget", loadBudget, "patches requested per frame (default: from the measured load time)");
+  app.add_flag("--no-prefetch", noPrefetch, "no prefetching");
+  app.add_flag("--no-cull", noCull, "no frustum / normal-cone culling");
+  app.add_option("--color", colorMode, "shaded, patch or lod colours (default shaded)");
+  app.add_flag("--wireframe", wireframe, "draw edges only");
+  std::vector<int> background;
+  app.add_option("--background", background, "background colour R G B (0-255; default 20 23 28)")->expected(3);
+  app.add_option("--test-read-delay-ms", readDelayMs, "test hook: add this latency to every patch read (a slow disk)");
+  app.add_flag("--quiet", quiet, "no progress or warnings on stderr");
+  app.add_option("--max-frames", maxFrames, "viewer: close after this many frames (for tests)");
+  app.add_option("--screenshot", screenshotPath, "viewer: write the last frame to this PNG when closing");
+  app.add_option("--record", recordPath, "viewer: where key R records the camera path (default mtrender-path.txt)");
+  CLI11_PARSE(app, argc, argv);
+
+  try {
+    EngineOptions eo;
+    eo.files = files;
+    eo.cacheBytes = parseSize(cacheText);
+    eo.gpuCacheBytes = gpuCacheText.empty() ? 0 : parseSize(gpuCacheText);
+    eo.baseline = baseline;
+    eo.readDelayMs = readDelayMs;
+    eo.quiet = quiet;
+    eo.extract.budgetMs = budgetMs;
+    eo.extract.pixelTolerance = tolerance;
+    eo.extract.fixedTriangles = fixedTriangles;
+    eo.extract.extractMs = extractMs;
+    eo.extract.loadBudget = loadBudget;
+    eo.extract.prefetch = !noPrefetch && !baseline;
+    eo.extract.cull = !noCull;
+    DrawSettings ds;
+    ds.wireframe = wireframe;
+    if (colorMode == "shaded") ds.mode = ColorMode::Shaded;
+    else if (colorMode == "patch") ds.mode = ColorMode::Patch;
+    else if (colorMode == "lod") ds.mode = ColorMode::Lod;
+    else throw mt::Error("mtrender: --color must be shaded, patch or lod");
+    if (background.size() == 3)
+      ds.background = glm::vec3(float(background[0]), float(background[1]), float(background[2])) / 255.0f;
+    if (width < 16 || height < 16 || width > 16384 || height > 16384) throw mt::Error("mtrender: bad --width/--height");
+
+    if (!headless) {
+      ViewerOptions vo;
+      vo.engine = eo;
+      vo.width = width;
+      vo.height = height;
+      vo.cameraPath = cameraPath;
+      vo.maxFrames = maxFrames;
+      vo.screenshotPath = screenshotPath;
+      vo.recordPath = recordPath;
+      vo.statsPath = statsPath;
+      vo.draw = ds;
+      return runViewer(vo);
+    }
+
+    EglContext egl;
+    Engine engine(eo);
+    GlRenderer gl(engine.options().gpuCacheBytes);
+    gl.useOffscreen(width, height);
+    CameraPath path;
+    const int pathFrames = frames > 0 ? frames : 100;
+    if (cameraPath.empty()) cameraPath = "fixed";
+    if (!builtinCameraPath(cameraPath, pathFrames, engine.center(), engine.radius(), path))
+      path = loadCameraPath(cameraPath, engine.center(), engine.radius());
+    if (frames <= 0) frames = int(path.poses.size());
+    if (!screenshotDir.empty()) std::filesystem::create_directories(screenshotDir);
+
+    engine.start();
+    std::vector<FrameRecord> recs;
+    recs.reserve(size_t(frames));
+    double firstFrameMs = 0;
+    for (int f = 0; f < frames; ++f) {
+      const CameraPose& pose = path.at(size_t(f));
+      const CameraPose& prev = path.at(size_t(f > 0 ? f - 1 : 0));
+      FrameRecord r = engine.frame(pose, prev, gl, ds, width, height);
+      if (f == 0) firstFrameMs = std::chrono::duration<double, std::milli>(Clock::now() - programStart).count();
+      recs.push_back(r);
+      if (!screenshotDir.empty() && (f % std::max(1, screenshotEvery) == 0 || f + 1 == frames)) {
+        char name[64];
+        std::snprintf(name, sizeof name, "/frame_%05d.png", f);
+        writePng(screenshotDir + name, gl.readPixels());
+      }
+      if (!quiet && (f + 1) % 100 == 0)
+        std::fprintf(stderr, "mtrender: frame %d/%d, %.1f ms, %llu triangles, %.2f px\n", f + 1, frames, r.frameMs,
+                     (unsigned long long)r.triangles, r.maxScreenError);
+    }
+    if (!statsPath.empty()) writeCsv(statsPath, recs);
+    if (!plotDir.empty()) {
+      if (statsPath.empty()) {
+        statsPath = plotDir + "/frames.csv";
+        std::filesystem::create_directories(plotDir);
+        writeCsv(statsPath, recs);
+      }
+      writePlots(plotDir, std::filesystem::absolute(statsPath).string(), budgetMs, eo.cacheBytes);
+    }
+    // Summary (bench/render.sh parses these lines).
+    size_t within = 0;
+    uint64_t maxCache = 0, maxGpu = 0;
+    double missRate = 0, wantedSum = 0, missSum = 0;
+    std::vector<double> extract, frameMs;
+    for (const auto& r : recs) {
+      within += r.frameMs <= budgetMs;
+      maxCache = std::max(maxCache, r.cacheBytes);
+      maxGpu = std::max(maxGpu, r.gpuBytes);
+      extract.push_back(r.extractMs);
+      frameMs.push_back(r.frameMs);
+      missSum += r.misses;
+      wantedSum += r.misses + r.drawnPatches;
+    }
+    missRate = wantedSum > 0 ? missSum / wantedSum : 0;
+    // After the camera stops: from the first frame of the final still stretch to the first frame
+    // whose visible screen error is within the tolerance.
+    int stop = frames;
+    while (stop > 0 && !recs[size_t(stop - 1)].moving) --stop;
+    double settleMs = -1, acc = 0;
+    for (int f = stop; f < frames; ++f) {
+      if (recs[size_t(f)].maxScreenError <= tolerance) {
+        settleMs = acc;
+        break;
+      }
+      acc += recs[size_t(f)].frameMs;
+    }
+    auto cs = engine.cache() ? engine.cache()->stats() : CacheStats{};
+    std::printf("frames %d\n", frames);
+    std::printf("within_budget_pct %.2f\n", 100.0 * double(within) / double(std::max(1, frames)));
+    std::printf("frame_ms_median %.3f\n", median(frameMs));
+    std::printf("frame_ms_max %.3f\n", frameMs.empty() ? 0 : *std::max_element(frameMs.begin(), frameMs.end()));
+    std::printf("extract_ms_median %.4f\n", median(extract));
+    std::printf("first_frame_ms %.1f\n", firstFrameMs);
+    std::printf("cache_cap_bytes %llu\n", (unsigned long long)eo.cacheBytes);
+    std::printf("cache_max_bytes %llu\n", (unsigned long long)maxCache);
+    std::printf("cache_slots %u classes %u largest_slot_bytes %llu arena_bytes %llu\n", cs.slots, cs.classes,
+                (unsigned long long)cs.slotBytes, (unsigned long long)cs.arenaBytes);
+    std::printf("gpu_max_bytes %llu\n", (unsigned long long)maxGpu);
+    std::printf("miss_rate %.4f\n", missRate);
+    std::printf("misses_total %.0f\n", missSum);
+    std::printf("second_chance %llu evictions %llu urgent_evictions %llu given_up %llu\n",
+                (unsigned long long)cs.secondChance, (unsigned long long)cs.evictions,
+                (unsigned long long)cs.urgentEvictions, (unsigned long long)cs.givenUp);
+    std::printf("bad_patches %llu\n", (unsigned long long)engine.badPatches());
+    std::printf("stop_frame %d\n", stop);
+    if (stop >= frames) std::printf("settle_ms none (the camera never stops)\n");
+    else if (settleMs < 0) std::printf("settle_ms not_reached (final error %.2f px)\n", recs.back().maxScreenError);
+    else std::printf("settle_ms %.1f\n", settleMs);
+    return 0;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "%s\n", e.what());
+    return 1;
+  }
+}

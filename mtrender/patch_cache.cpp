@@ -1,0 +1,286 @@
+#include "mtrender/patch_cache.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "patchstore/error.h"
+
+namespace mt::render {
+
+uint32_t packNormal(const float n[3]) {
+  auto q = [](float v) -> uint32_t {
+    int i = int(std::lround(std::clamp(v, -1.0f, 1.0f) * 511.0f));
+    return uint32_t(i) & 0x3ffu;
+  };
+  return q(n[0]) | (q(n[1]) << 10) | (q(n[2]) << 20);
+}
+
+PatchCache::PatchCache(uint64_t capBytes, const std::vector<uint64_t>& patchBytes) : capBytes_(capBytes) {
+  uint64_t largest = 64;
+  for (uint64_t b : patchBytes) largest = std::max(largest, b);
+  // Size classes: largest / 2^k (rounded up to 64 bytes), down to ~4 KiB, at most 6.
+  for (int k = 0; k < 6; ++k) {
+    uint64_t s = ((largest >> k) + 63) & ~uint64_t(63);
+    if (k > 0 && s < 4096) break;
+    classBytes_.push_back(s);
+  }
+  const size_t nc = classBytes_.size();
+  std::vector<uint64_t> count(nc, 0);
+  patchClass_.resize(patchBytes.size());
+  for (size_t i = 0; i < patchBytes.size(); ++i) {
+    size_t k = 0;
+    while (k + 1 < nc && classBytes_[k + 1] >= patchBytes[i]) ++k;
+    patchClass_[i] = uint8_t(k);
+    ++count[k];
+  }
+  // The cap is shared in proportion to each class's demand (all its patches resident); a class
+  // never gets more place holders than it has patches.
+  uint64_t demand = 0;
+  for (size_t k = 0; k < nc; ++k) demand += count[k] * classBytes_[k];
+  std::vector<uint64_t> n(nc, 0);
+  for (size_t k = 0; k < nc; ++k) {
+    if (!count[k]) continue;
+    n[k] = demand <= capBytes_ ? count[k]
+                               : uint64_t(double(capBytes_) * double(count[k] * classBytes_[k]) / double(demand)) / classBytes_[k];
+    n[k] = std::max<uint64_t>(n[k], std::min<uint64_t>(count[k], 3));
+  }
+  for (size_t k = 0; k < nc; ++k) arenaBytes_ += n[k] * classBytes_[k];
+  if (arenaBytes_ > capBytes_ || arenaBytes_ == 0)
+    throw Error("mtrender: a cache of " + std::to_string(capBytes_) + " bytes cannot hold 3 place holders of every size (the largest patch decodes to " +
+                std::to_string(largest) + " bytes); give a larger --cache");
+  // Uninitialized on purpose: pages are committed only when a place holder is first written, so
+  // the resident size grows with use and never passes the cap.
+  arena_.reset(new uint8_t[arenaBytes_]);
+  free_.resize(nc);
+  urgentScan_.assign(nc, 0);
+  classFirst_.assign(nc, 0);
+  classCount_.assign(nc, 0);
+  uint64_t offset = 0;
+  for (size_t k = 0; k < nc; ++k) {
+    classFirst_[k] = uint32_t(slots_.size());
+    classCount_[k] = uint32_t(n[k]);
+    for (uint64_t i = 0; i < n[k]; ++i) {
+      Slot s;
+      s.cls = uint8_t(k);
+      s.offset = offset;
+      offset += classBytes_[k];
+      slots_.push_back(s);
+    }
+  }
+  for (uint32_t i = 0; i < slots_.size(); ++i) putOnFree(i);
+}
+
+PatchCache::~PatchCache() = default;
+
+void PatchCache::takeOffFree(Slot& s) {
+  if (!s.onFree) return;
+  free_[s.cls].erase(s.freeIt);
+  s.onFree = false;
+}
+
+void PatchCache::putOnFree(uint32_t slot) {
+  Slot& s = slots_[slot];
+  if (s.onFree) return;
+  s.freeIt = free_[s.cls].insert(free_[s.cls].end(), slot);
+  s.onFree = true;
+}
+
+void PatchCache::evictContent(uint32_t slot) {
+  Slot& s = slots_[slot];
+  if (s.id == UINT32_MAX) return;
+  hash_.erase(s.id);
+  s.id = UINT32_MAX;
+  s.state = State::Absent;
+  s.usage = 0;
+  --physical_;
+  usedBytes_ -= classBytes_[s.cls];
+  ++evictions_;
+}
+
+PatchCache::State PatchCache::state(uint32_t id) const {
+  std::lock_guard<std::mutex> lock(mu_);
+  if (bad_.count(id)) return State::Bad;
+  auto it = hash_.find(id);
+  return it == hash_.end() ? State::Absent : slots_[it->second].state;
+}
+
+bool PatchCache::isBad(uint32_t id) const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return bad_.count(id) != 0;
+}
+
+bool PatchCache::allReady(const uint32_t* ids, size_t n) const {
+  std::lock_guard<std::mutex> lock(mu_);
+  for (size_t i = 0; i < n; ++i) {
+    auto it = hash_.find(ids[i]);
+    if (it == hash_.end() || slots_[it->second].state != State::Ready) return false;
+  }
+  return true;
+}
+
+bool PatchCache::pinAll(const uint32_t* ids, size_t n) {
+  std::lock_guard<std::mutex> lock(mu_);
+  for (size_t i = 0; i < n; ++i) {
+    auto it = hash_.find(ids[i]);
+    if (it == hash_.end() || slots_[it->second].state != State::Ready) return false;
+  }
+  for (size_t i = 0; i < n; ++i) {
+    Slot& s = slots_[hash_.find(ids[i])->second];
+    if (s.onFree) {
+      takeOffFree(s);
+      ++secondChance_;
+    }
+    if (s.usage++ == 0) ++pinned_;
+  }
+  return true;
+}
+
+void PatchCache::unpinAll(const uint32_t* ids, size_t n) {
+  std::lock_guard<std::mutex> lock(mu_);
+  for (size_t i = 0; i < n; ++i) {
+    auto it = hash_.find(ids[i]);
+    if (it == hash_.end()) continue;
+    Slot& s = slots_[it->second];
+    if (s.usage > 0 && --s.usage == 0) --pinned_;
+  }
+}
+
+void PatchCache::touch(const uint32_t* ids, size_t n, uint64_t frame) {
+  std::lock_guard<std::mutex> lock(mu_);
+  for (size_t i = 0; i < n; ++i) {
+    auto it = hash_.find(ids[i]);
+    if (it == hash_.end()) continue;
+    Slot& s = slots_[it->second];
+    s.touched = std::max(s.touched, frame);
+    if (s.onFree && s.state == State::Ready) {
+      takeOffFree(s);
+      ++secondChance_;
+    }
+  }
+}
+
+void PatchCache::endFrame(uint64_t frame) {
+  std::lock_guard<std::mutex> lock(mu_);
+  for (uint32_t i = 0; i < slots_.size(); ++i) {
+    Slot& s = slots_[i];
+    if (s.state == State::Ready && s.usage == 0 && !s.onFree && s.touched < frame) putOnFree(i);
+  }
+}
+
+PatchView PatchCache::view(uint32_t id) const {
+  std::lock_guard<std::mutex> lock(mu_);
+  PatchView v;
+  auto it = hash_.find(id);
+  if (it == hash_.end() || slots_[it->second].state != State::Ready) return v;
+  const Slot& s = slots_[it->second];
+  const uint8_t* base = arena_.get() + s.offset;
+  v.vertices = reinterpret_cast<const RenderVertex*>(base);
+  v.vertexCount = s.vertexCount;
+  v.indices = reinterpret_cast<const uint32_t*>(base + uint64_t(s.vertexCount) * sizeof(RenderVertex));
+  v.indexCount = s.indexCount;
+  return v;
+}
+
+uint32_t PatchCache::unpinnedSlots() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return uint32_t(slots_.size()) - pinned_;
+}
+
+CacheStats PatchCache::stats() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  CacheStats st;
+  st.capBytes = capBytes_;
+  st.slotBytes = classBytes_[0];
+  st.classes = uint32_t(classBytes_.size());
+  st.slots = uint32_t(slots_.size());
+  st.arenaBytes = arenaBytes_;
+  st.physical = physical_;
+  uint32_t freeWithContent = 0;
+  for (const auto& list : free_)
+    for (uint32_t i : list)
+      if (slots_[i].id != UINT32_MAX) ++freeWithContent;
+  st.real = physical_ - freeWithContent;
+  st.pinned = pinned_;
+  st.usedBytes = usedBytes_;
+  st.secondChance = secondChance_;
+  st.evictions = evictions_;
+  st.urgentEvictions = urgentEvictions_;
+  st.givenUp = givenUp_;
+  return st;
+}
+
+int PatchCache::reserve(uint32_t id, Urgency urgency, uint64_t frame) {
+  std::lock_guard<std::mutex> lock(mu_);
+  if (hash_.count(id) || bad_.count(id) || id >= patchClass_.size()) return -1;
+  const uint8_t k = patchClass_[id];
+  auto& freeList = free_[k];
+  int chosen = -1;
+  if (!freeList.empty()) {
+    chosen = int(freeList.front());
+    takeOffFree(slots_[chosen]);
+    evictContent(uint32_t(chosen));
+  } else if (urgency == Urgency::UrgentUp || urgency == Urgency::UrgentDown) {
+    // 3.3.2: flush the first found place holder that is only prefetched (not used by the cut).
+    // A switch down may do so only while >= 3 of them remain, so memory never fills with
+    // patches that are all in use.
+    uint32_t prefetchedOnly = 0;
+    int first = -1;
+    const uint32_t n = classCount_[k], base = classFirst_[k];
+    for (uint32_t j = 0; j < n; ++j) {
+      uint32_t i = base + (urgentScan_[k] + j) % n;
+      const Slot& s = slots_[i];
+      if (s.state == State::Ready && s.usage == 0) {
+        ++prefetchedOnly;
+        if (first < 0) first = int(i);
+        if (urgency == Urgency::UrgentUp || prefetchedOnly >= 3) break;
+      }
+    }
+    if (first >= 0 && (urgency == Urgency::UrgentUp || prefetchedOnly >= 3)) {
+      chosen = first;
+      urgentScan_[k] = (uint32_t(first) - base + 1) % n;
+      evictContent(uint32_t(chosen));
+      ++urgentEvictions_;
+    }
+  }
+  if (chosen < 0) {
+    ++givenUp_;
+    return -1;
+  }
+  Slot& s = slots_[chosen];
+  s.id = id;
+  s.state = State::Loading;
+  s.usage = 0;
+  s.touched = frame;
+  s.vertexCount = s.indexCount = 0;
+  hash_[id] = uint32_t(chosen);
+  ++physical_;
+  usedBytes_ += classBytes_[s.cls];
+  return chosen;
+}
+
+void PatchCache::commit(int slot, uint32_t vertexCount, uint32_t indexCount) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Slot& s = slots_[slot];
+  s.vertexCount = vertexCount;
+  s.indexCount = indexCount;
+  s.state = State::Ready;
+}
+
+void PatchCache::abort(int slot, bool bad) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Slot& s = slots_[slot];
+  if (bad && s.id != UINT32_MAX) bad_[s.id] = true;
+  if (s.id != UINT32_MAX) {
+    hash_.erase(s.id);
+    --physical_;
+    usedBytes_ -= classBytes_[s.cls];
+  }
+  s.id = UINT32_MAX;
+  s.state = State::Absent;
+  s.usage = 0;
+  // An empty place holder goes to the FRONT: reuse it before flushing any second-chance content.
+  s.freeIt = free_[s.cls].insert(free_[s.cls].begin(), uint32_t(slot));
+  s.onFree = true;
+}
+
+}  // namespace mt::render

@@ -1,0 +1,145 @@
+#include "mtrender/patch_server.h"
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+
+#include "patchstore/error.h"
+
+namespace mt::render {
+
+std::pair<uint32_t, uint32_t> decodeInto(const Scene& scene, uint32_t id, const DecodedPatch& p, uint8_t* out,
+                                         uint64_t capacity) {
+  const uint32_t nv = p.vertexCount(), nt = p.triangleCount();
+  if (renderPatchBytes(nv, nt) > capacity)
+    throw Error("patch " + std::to_string(scene.patches()[id].local) + ": decodes to " +
+                std::to_string(renderPatchBytes(nv, nt)) + " bytes, more than its place holder (" +
+                std::to_string(capacity) + ")");
+  auto* v = reinterpret_cast<RenderVertex*>(out);
+  auto* idx = reinterpret_cast<uint32_t*>(out + uint64_t(nv) * sizeof(RenderVertex));
+  std::memcpy(idx, p.triangles.data(), p.triangles.size() * sizeof(uint32_t));
+  std::vector<float> normals;
+  const float* nsrc = p.normals.empty() ? nullptr : p.normals.data();
+  if (!nsrc) {
+    // The files usually store no normals (patch_codec.h): area-weighted vertex normals of the
+    // patch. Positions are bit-identical across patch borders, so silhouettes never crack; only
+    // the shading may show a faint seam.
+    normals.assign(size_t(nv) * 3, 0.0f);
+    for (uint32_t t = 0; t < nt; ++t) {
+      const uint32_t a = p.triangles[3 * t], b = p.triangles[3 * t + 1], c = p.triangles[3 * t + 2];
+      const float* pa = &p.positions[3 * a];
+      const float* pb = &p.positions[3 * b];
+      const float* pc = &p.positions[3 * c];
+      float e1[3] = {pb[0] - pa[0], pb[1] - pa[1], pb[2] - pa[2]};
+      float e2[3] = {pc[0] - pa[0], pc[1] - pa[1], pc[2] - pa[2]};
+      float n[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]};
+      for (uint32_t k : {a, b, c})
+        for (int i = 0; i < 3; ++i) normals[3 * k + i] += n[i];
+    }
+    nsrc = normals.data();
+  }
+  for (uint32_t i = 0; i < nv; ++i) {
+    RenderVertex& r = v[i];
+    for (int a = 0; a < 3; ++a) r.position[a] = p.positions[3 * i + a];
+    float n[3] = {nsrc[3 * i], nsrc[3 * i + 1], nsrc[3 * i + 2]};
+    float len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    if (len > 0)
+      for (float& c : n) c /= len;
+    r.normal = packNormal(n);
+    if (p.colors.size() >= size_t(nv) * 4)
+      std::memcpy(r.color, &p.colors[4 * i], 4);
+    else
+      r.color[0] = r.color[1] = r.color[2] = r.color[3] = 255;
+  }
+  return {nv, nt * 3};
+}
+
+PatchServer::PatchServer(const Scene& scene, PatchCache& cache, Options options)
+    : scene_(scene), cache_(cache), options_(options), thread_([this] { run(); }) {}
+
+PatchServer::~PatchServer() {
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    stop_ = true;
+  }
+  cv_.notify_all();
+  thread_.join();
+}
+
+void PatchServer::submit(std::vector<LoadRequest> requests, uint64_t frame) {
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    queue_.assign(requests.begin(), requests.end());
+    frame_ = frame;
+  }
+  cv_.notify_one();
+}
+
+bool PatchServer::waitIdle(double timeoutMs) {
+  std::unique_lock<std::mutex> lock(mu_);
+  return idleCv_.wait_for(lock, std::chrono::duration<double, std::milli>(timeoutMs),
+                          [&] { return queue_.empty() && !busy_; });
+}
+
+double PatchServer::meanLoadMs() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  uint64_t n = loads_.load();
+  return n ? loadMsSum_ / double(n) : 0.0;
+}
+
+std::vector<std::string> PatchServer::warnings() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return warnings_;
+}
+
+void PatchServer::run() {
+  for (;;) {
+    LoadRequest req;
+    uint64_t frame;
+    {
+      std::unique_lock<std::mutex> lock(mu_);
+      busy_ = false;
+      if (queue_.empty()) idleCv_.notify_all();
+      cv_.wait(lock, [&] { return stop_ || !queue_.empty(); });
+      if (stop_) return;
+      req = queue_.front();
+      queue_.pop_front();
+      frame = frame_;
+      busy_ = true;
+    }
+    int slot = cache_.reserve(req.id, req.urgency, frame);
+    if (slot < 0) continue;  // present, bad, or no room (3.3.2: give up; asked again next frame)
+    const auto t0 = std::chrono::steady_clock::now();
+    const ScenePatch& sp = scene_.patches()[req.id];
+    const MtFileReader& reader = scene_.reader(sp.file);
+    try {
+      if (options_.readDelayMs > 0)
+        std::this_thread::sleep_for(std::chrono::duration<double, std::milli>(options_.readDelayMs));
+      DecodedPatch decoded = reader.readPatch(sp.local);
+      std::pair<uint32_t, uint32_t> counts;
+      try {
+        counts = decodeInto(scene_, req.id, decoded, cache_.slotData(slot), cache_.slotBytes(slot));
+      } catch (const Error& e) {
+        throw Error(reader.path() + ": " + e.what());
+      }
+      cache_.commit(slot, counts.first, counts.second);
+      bytesRead_ += sp.fileBytes;
+      const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+      {
+        std::lock_guard<std::mutex> lock(mu_);
+        loadMsSum_ += ms;
+      }
+      ++loads_;
+    } catch (const std::exception& e) {
+      cache_.abort(slot, true);
+      ++bad_;
+      std::string msg = std::string("warning: ") + e.what() + " (patch skipped, rendering continues)";
+      if (!options_.quiet) std::fprintf(stderr, "%s\n", msg.c_str());
+      std::lock_guard<std::mutex> lock(mu_);
+      warnings_.push_back(msg);
+    }
+  }
+}
+
+}  // namespace mt::render

@@ -1,0 +1,102 @@
+#include "mtrender/scene.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "patchstore/error.h"
+
+namespace mt::render {
+
+Scene::Scene(const std::vector<std::string>& paths) {
+  if (paths.empty()) throw Error("mtrender: no MT file given");
+  for (int a = 0; a < 3; ++a) {
+    boundsMin[a] = std::numeric_limits<double>::infinity();
+    boundsMax[a] = -std::numeric_limits<double>::infinity();
+  }
+  for (const std::string& path : paths) {
+    auto reader = MtFileReader::open(path);
+    const auto& h = reader->header();
+    const uint32_t file = uint32_t(readers_.size());
+    const uint32_t nodeBase = uint32_t(nodes_.size()), arcBase = uint32_t(arcs_.size());
+    const uint32_t patchBase = uint32_t(patches_.size());
+    if (uint64_t(nodeBase) + h.nodeCount > UINT32_MAX || uint64_t(patchBase) + h.patchCount > UINT32_MAX)
+      fail(path, "the scene has more than 2^32 nodes or patches");
+    patchBase_.push_back(patchBase);
+    if (h.vertexFlags & format::kHasColors) hasColors_ = true;
+    for (int a = 0; a < 3; ++a) {
+      boundsMin[a] = std::min(boundsMin[a], h.boundsMin[a]);
+      boundsMax[a] = std::max(boundsMax[a], h.boundsMax[a]);
+    }
+    const auto& rn = reader->nodes();
+    const auto& ra = reader->arcs();
+    for (size_t i = 0; i < rn.size(); ++i) {
+      const auto& n = rn[i];
+      SceneNode s{};
+      for (int a = 0; a < 3; ++a) s.center[a] = float(n.center[a]), s.coneAxis[a] = n.coneAxis[a];
+      s.radius = n.radius;
+      s.error = n.error;
+      s.coneCutoff = n.coneCutoff;
+      s.level = n.level;
+      s.file = file;
+      s.firstArc = arcBase + n.firstArc;
+      s.arcCount = n.arcCount;
+      s.firstInArc = uint32_t(inArcs_.size()) + n.firstBackArc;
+      s.inArcCount = n.backArcCount;
+      s.source = i == 0;
+      s.sink = i + 1 == rn.size();
+      if (s.sink) s.error = std::numeric_limits<float>::infinity();
+      nodes_.push_back(s);
+    }
+    sources_.push_back(nodeBase);
+    sinks_.push_back(nodeBase + uint32_t(rn.size()) - 1);
+    for (uint32_t b : reader->backArcs()) inArcs_.push_back(arcBase + b);
+    const auto& refs = reader->patchRefs();
+    for (const auto& a : ra) {
+      SceneArc s{};
+      s.from = nodeBase + a.from;
+      s.to = nodeBase + a.to;
+      s.firstPatch = uint32_t(arcPatches_.size());
+      s.patchCount = a.patchCount;
+      for (uint32_t k = 0; k < a.patchCount; ++k) {
+        uint32_t p = refs[a.firstPatchRef + k];
+        arcPatches_.push_back(patchBase + p);
+        s.triangles += reader->patches()[p].triangles;
+      }
+      // The source's sphere has radius 0 (it is never refined past); its patches lie in `to`'s
+      // floor, which `to`'s sphere encloses. Otherwise `from`'s sphere and cone bound its fragment.
+      s.cullNode = a.from == 0 ? s.to : s.from;
+      arcs_.push_back(s);
+    }
+    for (const auto& p : reader->patches())
+      patches_.push_back({file, uint32_t(patches_.size()) - patchBase, arcBase + p.arc, p.triangles, p.vertices, p.size});
+    readers_.push_back(std::move(reader));
+  }
+  for (auto& n : nodes_) {
+    for (uint32_t k = 0; k < n.arcCount; ++k) n.outTriangles += arcs_[n.firstArc + k].triangles;
+    for (uint32_t k = 0; k < n.inArcCount; ++k) n.inTriangles += arcs_[inArcs_[n.firstInArc + k]].triangles;
+  }
+}
+
+void Scene::boundingSphere(double c[3], double& r) const {
+  double d2 = 0;
+  for (int a = 0; a < 3; ++a) {
+    c[a] = 0.5 * (boundsMin[a] + boundsMax[a]);
+    d2 += (boundsMax[a] - c[a]) * (boundsMax[a] - c[a]);
+  }
+  r = std::max(std::sqrt(d2), 1e-9);
+}
+
+}  // namespace mt::render
+
+namespace mt::render {
+
+uint64_t Scene::decodedBytesBound(uint32_t patch) const {
+  const ScenePatch& p = patches_[patch];
+  uint64_t v = p.vertices;
+  // Draco may split non-manifold vertices on decode (mt_format.h); allow a quarter more.
+  if (readers_[p.file]->codec() == format::Codec::Draco) v = std::min<uint64_t>(3ull * p.triangles, v + v / 4 + 64);
+  return uint64_t(v) * 20 + uint64_t(p.triangles) * 12;
+}
+
+}  // namespace mt::render

@@ -1,0 +1,85 @@
+// mtrender/scene.h: one or more MT files flattened into ONE DAG held in RAM (BMT section 5: "the
+// DAG in RAM, patches on demand"). Node, arc and patch ids are global across the files (each file
+// contributes a contiguous range), so every file shares one cut machinery, one patch cache and one
+// budget. Payloads are not read here: PatchServer reads them on demand through the readers.
+//
+// mtrender depends on mtbuild/mt_file.h (the MT file format and its reader, library mt_mtfile)
+// and patchstore/error.h only.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "mtbuild/mt_file.h"
+
+namespace mt::render {
+
+struct SceneNode {
+  float center[3];
+  float radius;
+  float error;        // object-space error (BMT 5.1); +inf for a sink
+  float coneAxis[3];
+  float coneCutoff;   // cos(half angle); -1 = no back-face culling
+  uint32_t level;
+  uint32_t file;
+  uint32_t firstArc, arcCount;      // out-arcs: arcs[firstArc, +arcCount)
+  uint32_t firstInArc, inArcCount;  // in-arcs: inArcs[firstInArc, +inArcCount)
+  uint32_t outTriangles;            // triangles on the out-arcs (the node's fragment)
+  uint32_t inTriangles;             // triangles on the in-arcs (what replaces it when refined)
+  bool source, sink;
+};
+
+struct SceneArc {
+  uint32_t from, to;
+  uint32_t firstPatch, patchCount;  // into Scene::arcPatches
+  uint32_t triangles;
+  uint32_t cullNode;  // node whose sphere/cone bounds the arc's patches (from, or to for a source)
+};
+
+struct ScenePatch {
+  uint32_t file;
+  uint32_t local;      // patch id inside its file
+  uint32_t arc;        // global arc id
+  uint32_t triangles, vertices;
+  uint32_t fileBytes;  // payload size on disk
+};
+
+class Scene {
+ public:
+  // Opens every file (MtFileReader::open validates it); throws mt::Error naming the bad file.
+  explicit Scene(const std::vector<std::string>& paths);
+
+  const std::vector<SceneNode>& nodes() const { return nodes_; }
+  const std::vector<SceneArc>& arcs() const { return arcs_; }
+  const std::vector<uint32_t>& inArcs() const { return inArcs_; }
+  const std::vector<uint32_t>& arcPatches() const { return arcPatches_; }
+  const std::vector<ScenePatch>& patches() const { return patches_; }
+  const std::vector<uint32_t>& sources() const { return sources_; }
+  const std::vector<uint32_t>& sinks() const { return sinks_; }
+  size_t fileCount() const { return readers_.size(); }
+  const MtFileReader& reader(uint32_t file) const { return *readers_[file]; }
+  bool hasColors() const { return hasColors_; }
+
+  // Bounding box of all files (object space; the files share one world space).
+  double boundsMin[3], boundsMax[3];
+  void boundingSphere(double c[3], double& r) const;
+
+  // Decoded size of a patch in the renderer's layout (RenderPatch in patch_cache.h), an upper
+  // bound the cache sizes its place holders with.
+  uint64_t decodedBytesBound(uint32_t patch) const;
+  // A patch's id within the scene from (file, local patch id).
+  uint32_t globalPatch(uint32_t file, uint32_t local) const { return patchBase_[file] + local; }
+
+ private:
+  std::vector<std::unique_ptr<MtFileReader>> readers_;
+  std::vector<SceneNode> nodes_;
+  std::vector<SceneArc> arcs_;
+  std::vector<uint32_t> inArcs_, arcPatches_, patchBase_;
+  std::vector<ScenePatch> patches_;
+  std::vector<uint32_t> sources_, sinks_;
+  bool hasColors_ = false;
+};
+
+}  // namespace mt::render
