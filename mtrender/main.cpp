@@ -12,6 +12,7 @@
 #include <fstream>
 #include <numeric>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "mtrender/engine.h"
@@ -121,6 +122,10 @@ int main(int argc, char** argv) {
   app.add_flag("--wireframe", wireframe, "draw edges only");
   std::vector<int> background;
   app.add_option("--background", background, "background colour R G B (0-255; default 20 23 28)")->expected(3);
+  double frameInterval = 0;
+  app.add_option("--frame-interval-ms", frameInterval,
+                 "headless: start frames at this interval, like a display refresh (0: back to back, the default); "
+                 "frame_ms does not include the wait");
   app.add_option("--test-read-delay-ms", readDelayMs, "test hook: add this latency to every patch read (a slow disk)");
   app.add_flag("--quiet", quiet, "no progress or warnings on stderr");
   app.add_option("--max-frames", maxFrames, "viewer: close after this many frames (for tests)");
@@ -183,7 +188,12 @@ int main(int argc, char** argv) {
     std::vector<FrameRecord> recs;
     recs.reserve(size_t(frames));
     double firstFrameMs = 0;
+    auto nextFrame = Clock::now();
     for (int f = 0; f < frames; ++f) {
+      if (frameInterval > 0) {
+        std::this_thread::sleep_until(nextFrame);
+        nextFrame += std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double, std::milli>(frameInterval));
+      }
       const CameraPose& pose = path.at(size_t(f));
       const CameraPose& prev = path.at(size_t(f > 0 ? f - 1 : 0));
       FrameRecord r = engine.frame(pose, prev, gl, ds, width, height);

@@ -375,15 +375,16 @@ TEST_F(MtRender, NoCracksInAnyCut) {
 }
 
 TEST_F(MtRender, SlowDiskNeverStallsTheFrameAndTheCacheStaysCapped) {
-  // Every read takes 40 ms. Frames must not wait for reads (the PatchServer thread does), the
-  // cache must stay under its cap, and detail must still arrive.
+  // Every read takes 50 ms; frames start every 10 ms (a display's pace). Frames must not wait for
+  // reads (the PatchServer thread does), the cache must stay under its cap, and detail must
+  // still arrive.
   const std::string csv = dir_->file("slow.csv");
   const uint64_t cap = 2ull << 20;
-  auto r = runTool("mtrender", headless(mt(), "--camera-path orbit --frames 200 --budget-ms 200 --test-read-delay-ms 40 "
+  auto r = runTool("mtrender", headless(mt(), "--camera-path orbit --frames 120 --frame-interval-ms 10 --test-read-delay-ms 50 "
                                               "--cache 2M --stats " + csv));
   ASSERT_EQ(r.exitCode, 0) << r.output;
   Csv c = readCsv(csv);
-  ASSERT_EQ(c.rows.size(), 200u);
+  ASSERT_EQ(c.rows.size(), 120u);
   auto frameMs = c.column("frame_ms"), loads = c.column("loads"), misses = c.column("misses");
   auto cacheBytes = c.column("cache_bytes"), tri = c.column("triangles");
   double totalLoads = 0, totalMisses = 0, maxFrame = 0;
@@ -391,15 +392,16 @@ TEST_F(MtRender, SlowDiskNeverStallsTheFrameAndTheCacheStaysCapped) {
   std::sort(sorted.begin(), sorted.end());
   for (size_t i = 0; i < c.rows.size(); ++i) {
     EXPECT_LE(cacheBytes[i], double(cap)) << "frame " << i;
+    EXPECT_LE(tri[i], c.rows[i][c.col("budget_triangles")]) << "frame " << i;
     totalLoads += loads[i];
     totalMisses += misses[i];
     if (i > 0) maxFrame = std::max(maxFrame, frameMs[i]);
   }
   EXPECT_GT(totalLoads, 3);
   EXPECT_GT(totalMisses, 0) << "a slow disk must show as misses, not as stalls";
-  // A frame that waited for its loads would take >= 40 ms per load; the median frame (256x256,
-  // a few thousand triangles) is far below one read.
-  EXPECT_LT(sorted[sorted.size() / 2], 40.0);
+  // A frame that waited for its loads would take >= 50 ms per load; frames of 256x256 with a few
+  // thousand triangles take ~1 ms, so even the 90th percentile stays far below one read.
+  EXPECT_LT(sorted[sorted.size() * 9 / 10], 50.0);
   EXPECT_GT(*std::max_element(tri.begin(), tri.end()), tri[0]) << "no refinement arrived";
 }
 
