@@ -226,6 +226,20 @@ bool ExtractRender::tryCoarsen(uint32_t n) {
   return true;
 }
 
+int64_t ExtractRender::visibleDelta(uint32_t n, bool refine, const View& view) const {
+  const SceneNode& s = scene_.nodes()[n];
+  int64_t in = 0, out = 0;
+  for (uint32_t k = 0; k < s.inArcCount; ++k) {
+    uint32_t a = scene_.inArcs()[s.firstInArc + k];
+    if (arcVisible(a, view)) in += scene_.arcs()[a].triangles;
+  }
+  for (uint32_t k = 0; k < s.arcCount; ++k) {
+    uint32_t a = s.firstArc + k;
+    if (arcVisible(a, view)) out += scene_.arcs()[a].triangles;
+  }
+  return refine ? in - out : out - in;
+}
+
 void ExtractRender::want(const std::vector<uint32_t>& ids, Urgency u) {
   for (uint32_t id : ids) {
     auto [it, fresh] = wanted_.emplace(id, u);
@@ -259,6 +273,9 @@ FrameStats ExtractRender::update(uint64_t frame, const View& view, const View& p
     budget = std::max(smoothBudget_, 1000.0);
   }
   st.budgetTriangles = uint64_t(budget);
+  visibleTriangles_ = 0;
+  for (uint32_t a : cutArcs_)
+    if (arcVisible(a, view)) visibleTriangles_ += scene_.arcs()[a].triangles;
   const uint32_t slots = cache_ ? cache_->stats().slots : UINT32_MAX;
   const double pinLimit = cache_ ? options_.memoryFraction * slots : 1e18;
 
@@ -308,12 +325,14 @@ FrameStats ExtractRender::update(uint64_t frame, const View& view, const View& p
 
   if (!frozen_) {
     // 1. Over the render budget: coarsen, the smallest error first (a "switch up", always urgent).
-    while (double(triangles_) > budget && !st.interrupted) {
+    while (double(visibleTriangles_) > budget && !st.interrupted) {
       popStaleCoarse();
       if (coarse.empty() || timeUp()) break;
       Entry e = coarse.top();
       coarse.pop();
+      const int64_t dv = visibleDelta(e.node, false, view);
       if (tryCoarsen(e.node)) {
+        visibleTriangles_ = uint64_t(int64_t(visibleTriangles_) + dv);
         ++st.coarsenings;
         pushAround(e.node);
       } else {
@@ -330,15 +349,17 @@ FrameStats ExtractRender::update(uint64_t frame, const View& view, const View& p
         continue;
       }
       if (e.err <= tau || timeUp()) break;
-      const SceneNode& s = nodes[e.node];
-      const double after = double(triangles_) + double(s.inTriangles) - double(s.outTriangles);
+      const int64_t dv = visibleDelta(e.node, true, view);
+      const double after = double(visibleTriangles_) + double(dv);
       if (after > budget) {
         // Trade: drop detail where it matters much less, to spend it where it matters most.
         popStaleCoarse();
         if (!coarse.empty() && coarse.top().err * 2 < e.err) {
           Entry c = coarse.top();
           coarse.pop();
+          const int64_t dc = visibleDelta(c.node, false, view);
           if (tryCoarsen(c.node)) {
+            visibleTriangles_ = uint64_t(int64_t(visibleTriangles_) + dc);
             ++st.coarsenings;
             pushAround(c.node);
           } else {
@@ -357,6 +378,7 @@ FrameStats ExtractRender::update(uint64_t frame, const View& view, const View& p
       }
       refine.pop();
       if (tryRefine(e.node)) {
+        visibleTriangles_ = uint64_t(int64_t(visibleTriangles_) + dv);
         ++st.refinements;
         pushAround(e.node);
       } else {
@@ -376,7 +398,9 @@ FrameStats ExtractRender::update(uint64_t frame, const View& view, const View& p
       if (coarse.empty() || coarse.top().err >= tau * 0.5 || timeUp()) break;
       Entry c = coarse.top();
       coarse.pop();
+      const int64_t dc = visibleDelta(c.node, false, view);
       if (tryCoarsen(c.node)) {
+        visibleTriangles_ = uint64_t(int64_t(visibleTriangles_) + dc);
         ++st.coarsenings;
         pushAround(c.node);
       } else {

@@ -101,6 +101,9 @@ class ExtractRender {
   const std::vector<uint8_t>& inSet() const { return inS_; }
   double screenError(uint32_t node, const View& view) const;
   uint64_t cutTriangles() const { return triangles_; }
+  // Triangles of the cut that pass culling for the last update's view: what the render budget
+  // constrains (the time model is fitted to drawn triangles; culled ones cost nothing).
+  uint64_t visibleTriangles() const { return visibleTriangles_; }
 
  private:
   bool isRefineCandidate(uint32_t n) const;
@@ -123,7 +126,9 @@ class ExtractRender {
   std::vector<uint8_t> inS_, badNode_;
   std::vector<uint32_t> succIn_, predOut_;   // per node: out-arcs into S; in-arcs from outside S
   std::vector<uint32_t> cutArcs_, cutPos_;   // indexed set of cut arcs
-  uint64_t triangles_ = 0;
+  uint64_t triangles_ = 0, visibleTriangles_ = 0;
+  // Visible triangles a move adds (refine: in-arcs minus out-arcs; coarsen: the reverse).
+  int64_t visibleDelta(uint32_t n, bool refine, const View& view) const;
   uint32_t cutPatchCount_ = 0;
   double lodScale_ = 1;
   bool frozen_ = false;

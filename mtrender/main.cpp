@@ -4,6 +4,8 @@
 //   mtrender FILE.mt...            (the interactive viewer: GLFW window, Dear ImGui HUD)
 // docs/mtrender.md describes the options, the camera path format and the CSV columns.
 #include <CLI/CLI.hpp>
+#include <fcntl.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
@@ -127,6 +129,9 @@ int main(int argc, char** argv) {
                  "headless: start frames at this interval, like a display refresh (0: back to back, the default); "
                  "frame_ms does not include the wait");
   app.add_option("--test-read-delay-ms", readDelayMs, "test hook: add this latency to every patch read (a slow disk)");
+  bool cold = false;
+  app.add_flag("--cold", cold,
+               "drop the MT files from the OS page cache first (posix_fadvise DONTNEED), for cold-start figures");
   app.add_flag("--quiet", quiet, "no progress or warnings on stderr");
   app.add_option("--max-frames", maxFrames, "viewer: close after this many frames (for tests)");
   app.add_option("--screenshot", screenshotPath, "viewer: write the last frame to this PNG when closing");
@@ -134,6 +139,15 @@ int main(int argc, char** argv) {
   CLI11_PARSE(app, argc, argv);
 
   try {
+    if (cold)
+      for (const auto& f : files) {
+        int fd = ::open(f.c_str(), O_RDONLY | O_CLOEXEC);
+        if (fd >= 0) {
+          ::fdatasync(fd);
+          ::posix_fadvise(fd, 0, 0, POSIX_FADV_DONTNEED);
+          ::close(fd);
+        }
+      }
     EngineOptions eo;
     eo.files = files;
     eo.cacheBytes = parseSize(cacheText);

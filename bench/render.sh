@@ -1,0 +1,84 @@
+#!/usr/bin/env bash
+# bench/render.sh MT_FILE [MT_FILE...]: the mtrender figures of issue 5 on one recorded path.
+#
+#   1. the main run: a built-in path (default flythrough: fast turns and zooms, then the camera
+#      stops for the last 15% of the frames), >= 600 frames at 1280x720, --budget-ms 50, a cold
+#      start (the MT files dropped from the page cache), 256 MiB cache: % frames within budget,
+#      max cache bytes vs cap, extract median, first frame from process start, time to <= 1 px
+#      after the camera stops; PNG charts (gnuplot) of the per-frame series;
+#   2. miss rate and frame time for caches of 32/64/128/256 MiB on the same path (as in El-Sana &
+#      Chiang's Table 2), and the baseline mode (--baseline-mmap: the files mapped, the same kind
+#      of cut, no RAM cache, no PatchServer, no prefetch; its GPU buffer cache has the same cap),
+#      each with its peak RSS (GNU time) since no cgroup memory limit is available here.
+#
+# Environment: FRAMES (600), WIDTH (1280), HEIGHT (720), BUDGET_MS (50), CAMERA (flythrough),
+# CACHES ("32M 64M 128M 256M"), OUT (a fresh directory under /tmp), BIN (build/bin).
+# Miss rate = patches wanted for a cut move but not resident / (those + patches drawn), per run.
+set -euo pipefail
+if [[ $# -lt 1 ]]; then
+  echo "usage: bench/render.sh MT_FILE [MT_FILE...]" >&2
+  exit 2
+fi
+HERE="$(cd "$(dirname "$0")" && pwd)"
+BIN="${BIN:-$HERE/../build/bin}"
+FRAMES="${FRAMES:-600}"
+WIDTH="${WIDTH:-1280}"
+HEIGHT="${HEIGHT:-720}"
+BUDGET_MS="${BUDGET_MS:-50}"
+CAMERA="${CAMERA:-flythrough}"
+CACHES="${CACHES:-32M 64M 128M 256M}"
+OUT="${OUT:-$(mktemp -d /tmp/render-bench-XXXXXX)}"
+mkdir -p "$OUT"
+[[ -x "$BIN/mtrender" ]] || { echo "render.sh: $BIN/mtrender not found (build first, or set BIN)" >&2; exit 1; }
+GNUTIME=/usr/bin/time
+[[ -x $GNUTIME ]] || { echo "render.sh: needs GNU time (/usr/bin/time)" >&2; exit 1; }
+
+run() {  # run NAME ARGS... -> $OUT/NAME.{csv,out}; echoes the summary
+  local name=$1; shift
+  echo "render.sh: $name ..." >&2
+  $GNUTIME -f "peak_rss_kib %M" -o "$OUT/$name.rss" "$BIN/mtrender" "$@" --headless --quiet \
+    --camera-path "$CAMERA" --frames "$FRAMES" --width "$WIDTH" --height "$HEIGHT" --budget-ms "$BUDGET_MS" \
+    --stats "$OUT/$name.csv" > "$OUT/$name.out"
+  cat "$OUT/$name.rss" >> "$OUT/$name.out"
+}
+val() { awk -v k="$2" '$1 == k { print $2 }' "$OUT/$1.out"; }
+rest() { awk -v k="$2" '$1 == k { $1 = ""; sub(/^ /, ""); print }' "$OUT/$1.out"; }
+mib() { awk -v b="${1:-0}" 'BEGIN { printf "%.1f", b / 1048576 }'; }
+p99() {  # 99th percentile of frame_ms
+  tail -n +2 "$OUT/$1.csv" | cut -d, -f2 | sort -g | awk '{ v[NR] = $1 } END { i = int(NR * 0.99); if (i < 1) i = 1; print v[i] }'
+}
+
+run main "$@" --cache 256M --cold --plot "$OUT/plots"
+echo
+echo "== main run: $* ($FRAMES frames, ${WIDTH}x${HEIGHT}, path $CAMERA, budget $BUDGET_MS ms, cache 256 MiB, cold start)"
+printf "frames within budget      %s %%\n" "$(val main within_budget_pct)"
+printf "frame ms median / p99 / max %s / %s / %s\n" "$(val main frame_ms_median)" "$(p99 main)" "$(val main frame_ms_max)"
+printf "max cache bytes vs cap    %s / %s (%s)\n" "$(val main cache_max_bytes)" "$(val main cache_cap_bytes)" \
+  "$(awk '{ if ($1 == "cache_max_bytes") m = $2; if ($1 == "cache_cap_bytes") c = $2 } END { print (m <= c ? "within the cap" : "ABOVE THE CAP") }' "$OUT/main.out")"
+printf "extract median            %s ms\n" "$(val main extract_ms_median)"
+printf "first frame (cold start)  %s ms from process start\n" "$(val main first_frame_ms)"
+printf "<= 1 px after the stop    %s (ms; camera stops at frame %s)\n" "$(rest main settle_ms)" "$(val main stop_frame)"
+printf "peak RSS                  %s KiB\n" "$(val main peak_rss_kib)"
+echo "charts: $OUT/plots/*.png"
+
+for c in $CACHES; do
+  [[ $c == 256M ]] && { cp "$OUT/main.csv" "$OUT/cache-$c.csv"; cp "$OUT/main.out" "$OUT/cache-$c.out"; continue; }
+  run "cache-$c" "$@" --cache "$c"
+done
+run baseline "$@" --cache 256M --baseline-mmap
+
+echo
+echo "== miss rate and frame time by cache size (same path; cf. El-Sana & Chiang Table 2)"
+printf "%-16s %10s %8s %12s %10s %10s %10s %14s %12s\n" mode miss_rate misses frame_med_ms frame_p99 within_% extract_ms cache_max_MiB peak_rss_MiB
+for c in $CACHES; do
+  n="cache-$c"
+  printf "%-16s %10s %8s %12s %10s %10s %10s %14s %12s\n" "cache $c" "$(val $n miss_rate)" "$(val $n misses_total)" \
+    "$(val $n frame_ms_median)" "$(p99 $n)" "$(val $n within_budget_pct)" "$(val $n extract_ms_median)" \
+    "$(mib "$(val $n cache_max_bytes)")" "$(mib "$(( $(val $n peak_rss_kib) * 1024 ))")"
+done
+n=baseline
+printf "%-16s %10s %8s %12s %10s %10s %10s %14s %12s\n" "baseline mmap" "$(val $n miss_rate)" "$(val $n misses_total)" \
+  "$(val $n frame_ms_median)" "$(p99 $n)" "$(val $n within_budget_pct)" "$(val $n extract_ms_median)" "-" \
+  "$(mib "$(( $(val $n peak_rss_kib) * 1024 ))")"
+echo "(baseline: misses = patches decoded synchronously inside frames; its GPU buffer cache is capped at 256 MiB)"
+echo "outputs: $OUT"
