@@ -9,39 +9,28 @@ namespace mt::render {
 
 using Clock = std::chrono::steady_clock;
 
-// ---- TimeModel: recursive least squares on x = (1, triangles in millions), forgetting 0.95 ----
+// ---- TimeModel: windowed least squares on (million triangles, ms) ----
 
 void TimeModel::add(double triangles, double ms) {
-  const double lambda = 0.95;
-  const double x[2] = {1.0, triangles * 1e-6};
-  double px[2] = {p_[0][0] * x[0] + p_[0][1] * x[1], p_[1][0] * x[0] + p_[1][1] * x[1]};
-  double denom = lambda + x[0] * px[0] + x[1] * px[1];
-  double k[2] = {px[0] / denom, px[1] / denom};
+  const double t = triangles * 1e-6;
+  const double predicted = a_ + b_ * 1e6 * t;
+  ms = std::min(ms, 2.0 * predicted + 5.0);  // a stall from elsewhere must not wreck the fit
+  const size_t kWindow = 90;
+  if (window_.size() < kWindow) window_.push_back({t, ms});
+  else window_[next_] = {t, ms};
+  next_ = (next_ + 1) % kWindow;
+  const double n = double(window_.size());
+  double mt = 0, mm = 0;
+  for (const auto& [x, y] : window_) mt += x, mm += y;
+  mt /= n, mm /= n;
+  double vt = 0, cov = 0;
+  for (const auto& [x, y] : window_) vt += (x - mt) * (x - mt), cov += (x - mt) * (y - mm);
+  vt /= n, cov /= n;
   double bm = b_ * 1e6;  // ms per million triangles
-  double err = ms - (a_ + bm * x[1]);
-  // Robust: a frame stalled by something else on the machine (another process, a page fault
-  // storm) must not wreck the fit; residuals are clipped to half the prediction + 2 ms.
-  const double lim = 0.5 * (a_ + bm * x[1]) + 2.0;
-  err = std::clamp(err, -lim, lim);
-  a_ += k[0] * err;
-  bm += k[1] * err;
-  double np[2][2];
-  for (int i = 0; i < 2; ++i)
-    for (int j = 0; j < 2; ++j) np[i][j] = (p_[i][j] - k[i] * px[j]) / lambda;
-  // Without excitation (a steady triangle count) forgetting lets P grow without bound; clamp it
-  // to the prior so one odd frame cannot throw the fit.
-  const double cap[2] = {100, 1e4};
-  for (int i = 0; i < 2; ++i)
-    if (np[i][i] > cap[i]) {
-      double s = std::sqrt(cap[i] / np[i][i]);
-      for (int j = 0; j < 2; ++j) np[i][j] *= s, np[j][i] *= s;
-    }
-  std::copy(&np[0][0], &np[0][0] + 4, &p_[0][0]);
-  // Physical limits: no negative fixed cost, between 1 and 1e5 ms per million triangles.
-  a_ = std::max(0.0, a_);
-  bm = std::clamp(bm, 1.0, 1e5);
+  if (window_.size() >= 8 && std::sqrt(vt) > 0.15 * mt && vt > 0)
+    bm = std::clamp(cov / vt, 1.0, 1e5);  // between 1 G and 10 k triangles/s
   b_ = bm * 1e-6;
-  ++samples_;
+  a_ = std::max(0.0, mm - bm * mt);
 }
 
 double TimeModel::trianglesFor(double ms) const { return std::max(0.0, (ms - a_) / b_); }
@@ -247,7 +236,11 @@ void ExtractRender::want(const std::vector<uint32_t>& ids, Urgency u) {
   }
 }
 
-void ExtractRender::frameDone(uint64_t drawnTriangles, double frameMs) { time_.add(double(drawnTriangles), frameMs); }
+void ExtractRender::frameDone(uint64_t drawnTriangles, double frameMs) {
+  time_.add(double(drawnTriangles), frameMs);
+  frameMsAvg_ = frameMsAvg_ == 0 ? frameMs : 0.9 * frameMsAvg_ + 0.1 * frameMs;
+  ++slackFrames_;
+}
 
 FrameStats ExtractRender::update(uint64_t frame, const View& view, const View& predicted) {
   const auto t0 = Clock::now();
@@ -267,12 +260,15 @@ FrameStats ExtractRender::update(uint64_t frame, const View& view, const View& p
   } else {
     double target = time_.trianglesFor(options_.budgetMs * 0.8 - extractMs);
     // Falls fast (at most 30% a frame, so one odd frame cannot empty the screen), rises gradually.
-    if (smoothBudget_ == 0) smoothBudget_ = target;
+    // Start low (a first guess of the machine is no measurement) and let the fit raise it.
+    if (smoothBudget_ == 0) smoothBudget_ = std::min(target, 20000.0);
     else if (target < smoothBudget_) smoothBudget_ = std::max(target, 0.7 * smoothBudget_);
     else smoothBudget_ += 0.25 * (target - smoothBudget_);
     budget = std::max(smoothBudget_, 1000.0);
   }
   st.budgetTriangles = uint64_t(budget);
+  st.modelA = time_.a();
+  st.modelB = time_.b() * 1e6;
   visibleTriangles_ = 0;
   for (uint32_t a : cutArcs_)
     if (arcVisible(a, view)) visibleTriangles_ += scene_.arcs()[a].triangles;
@@ -351,6 +347,16 @@ FrameStats ExtractRender::update(uint64_t frame, const View& view, const View& p
       if (e.err <= tau || timeUp()) break;
       const int64_t dv = visibleDelta(e.node, true, view);
       const double after = double(visibleTriangles_) + double(dv);
+      // Probe: with a steady cut the time model cannot tell the per-triangle cost from the fixed
+      // cost and may stay pessimistic for ever. When frames have averaged under 60% of the
+      // budget and 30 frames passed since the last probe, take one refinement beyond the
+      // model's budget (if it fits in twice the budget); the measurement corrects the model,
+      // and step 1 undoes it next frame if it was too much.
+      if (after > budget && !options_.fixedTriangles && slackFrames_ >= 30 && frameMsAvg_ < 0.6 * options_.budgetMs &&
+          after <= 2 * budget) {
+        slackFrames_ = 0;
+        budget = after;
+      }
       if (after > budget) {
         // Trade: drop detail where it matters much less, to spend it where it matters most.
         popStaleCoarse();

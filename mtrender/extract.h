@@ -34,8 +34,11 @@
 
 namespace mt::render {
 
-// frame ms ~= a + b * triangles, fitted by recursive least squares with forgetting, so the
-// budget follows the machine (llvmpipe shares the CPU with everything else).
+// frame ms ~= a + b * triangles, fitted online by least squares over the last 90 frames, so the
+// budget follows the machine (llvmpipe shares the CPU with everything else). The slope is only
+// re-estimated when the window's triangle counts vary enough to tell it from the fixed cost
+// (with a steady cut the fit is ill-posed and would trade one for the other); samples far above
+// the current prediction (a stall caused by something else) are clipped.
 class TimeModel {
  public:
   void add(double triangles, double ms);
@@ -47,8 +50,8 @@ class TimeModel {
 
  private:
   double a_ = 2.0, b_ = 1e-4;  // prior: 2 ms fixed, 10 M triangles/s
-  double p_[2][2] = {{100, 0}, {0, 1e4}};  // (ms^2, (ms per million triangles)^2)
-  int samples_ = 0;
+  std::vector<std::pair<double, double>> window_;  // (million triangles, ms), ring buffer
+  size_t next_ = 0;
 };
 
 struct ExtractOptions {
@@ -76,6 +79,7 @@ struct FrameStats {
   double lodScale = 1;
   bool memoryFull = false;
   bool interrupted = false;      // the deadline stopped the update
+  double modelA = 0, modelB = 0; // time model: ms fixed, ms per million triangles
 };
 
 class ExtractRender {
@@ -140,6 +144,8 @@ class ExtractRender {
   std::unordered_map<uint32_t, uint32_t> consecutive_;  // frames in a row a patch was requested
   std::vector<uint32_t> touched_;
   double smoothBudget_ = 0;
+  uint32_t slackFrames_ = 0;  // frames since the last probe
+  double frameMsAvg_ = 0;     // exponential average of measured frame times
 };
 
 }  // namespace mt::render

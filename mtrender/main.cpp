@@ -38,15 +38,15 @@ void writeCsv(const std::string& path, const std::vector<FrameRecord>& frames) {
     if (!out) mt::fail(path, "cannot write the stats CSV");
     out << "frame,frame_ms,extract_ms,triangles,patches,loads,misses,cache_bytes,max_screen_error,"
            "drawn_triangles,drawn_patches,budget_triangles,gpu_bytes,lod_scale,moving,requests,prefetches,"
-           "refinements,coarsenings\n";
+           "refinements,coarsenings,model_fixed_ms,model_ms_per_mtri\n";
     char buf[512];
     for (size_t i = 0; i < frames.size(); ++i) {
       const FrameRecord& f = frames[i];
-      std::snprintf(buf, sizeof buf, "%zu,%.3f,%.4f,%llu,%u,%u,%u,%llu,%.4f,%llu,%u,%llu,%llu,%.3f,%d,%u,%u,%u,%u\n", i,
+      std::snprintf(buf, sizeof buf, "%zu,%.3f,%.4f,%llu,%u,%u,%u,%llu,%.4f,%llu,%u,%llu,%llu,%.3f,%d,%u,%u,%u,%u,%.3f,%.1f\n", i,
                     f.frameMs, f.extractMs, (unsigned long long)f.triangles, f.patches, f.loads, f.misses,
                     (unsigned long long)f.cacheBytes, f.maxScreenError, (unsigned long long)f.drawnTriangles,
                     f.drawnPatches, (unsigned long long)f.budgetTriangles, (unsigned long long)f.gpuBytes, f.lodScale,
-                    f.moving ? 1 : 0, f.requests, f.prefetches, f.refinements, f.coarsenings);
+                    f.moving ? 1 : 0, f.requests, f.prefetches, f.refinements, f.coarsenings, f.modelA, f.modelB);
       out << buf;
     }
     if (!out) mt::fail(path, "write failed");
