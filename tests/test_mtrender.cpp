@@ -232,6 +232,45 @@ TEST_F(MtRender, EveryCutIsValidPinnedAndWithinBudget) {
   EXPECT_GT(coarsenings, 0u);
 }
 
+TEST_F(MtRender, SeveralFilesShareOneCacheAndOneBudget) {
+  // The same file twice: one flattened DAG with two sources and two sinks. Each file's part of
+  // the node set must be a valid cut of that file, the budget holds for the sum, and both files
+  // get refined (neither starves the other).
+  Scene scene({mt(), mt()});
+  auto reader = mt::MtFileReader::open(mt());
+  const size_t n = reader->nodes().size();
+  ASSERT_EQ(scene.nodes().size(), 2 * n);
+  ASSERT_EQ(scene.sources().size(), 2u);
+  std::vector<uint64_t> bounds(scene.patches().size());
+  for (uint32_t p = 0; p < bounds.size(); ++p) bounds[p] = scene.decodedBytesBound(p);
+  PatchCache cache(8ull << 20, bounds);
+  PatchServer server(scene, cache, {});
+  ExtractOptions eo;
+  eo.fixedTriangles = 30000;
+  eo.extractMs = 50;
+  ExtractRender ex(scene, &cache, &server, eo);
+  ex.start(10000);
+  double c[3], r;
+  scene.boundingSphere(c, r);
+  const glm::dvec3 center(c[0], c[1], c[2]);
+  CameraPose pose = defaultPose(center, r);
+  View v = makeView(pose, 256, 256, center, r);
+  for (uint64_t f = 1; f <= 30; ++f) {
+    ex.update(f, v, v);
+    server.waitIdle(2000);
+    for (int file = 0; file < 2; ++file) {
+      std::vector<uint8_t> part(ex.inSet().begin() + file * n, ex.inSet().begin() + (file + 1) * n);
+      std::string why;
+      ASSERT_TRUE(mt::isValidCut(*reader, part, &why)) << "file " << file << ": " << why;
+    }
+  }
+  EXPECT_LE(ex.visibleTriangles(), eo.fixedTriangles);
+  uint64_t perFile[2] = {0, 0};
+  for (uint32_t a : ex.cutArcs()) perFile[scene.nodes()[scene.arcs()[a].from].file] += scene.arcs()[a].triangles;
+  EXPECT_GT(perFile[0], 300u);
+  EXPECT_GT(perFile[1], 300u);
+}
+
 TEST_F(MtRender, TimeModelFitsLinearFrameTimes) {
   TimeModel m;
   std::mt19937_64 rng(1);
