@@ -15,7 +15,7 @@ void TimeModel::add(double triangles, double ms) {
   const double t = triangles * 1e-6;
   const double predicted = a_ + b_ * 1e6 * t;
   ms = std::min(ms, 2.0 * predicted + 5.0);  // a stall from elsewhere must not wreck the fit
-  const size_t kWindow = 90;
+  const size_t kWindow = 45;
   if (window_.size() < kWindow) window_.push_back({t, ms});
   else window_[next_] = {t, ms};
   next_ = (next_ + 1) % kWindow;
@@ -28,7 +28,7 @@ void TimeModel::add(double triangles, double ms) {
   vt /= n, cov /= n;
   double bm = b_ * 1e6;  // ms per million triangles
   if (window_.size() >= 8 && std::sqrt(vt) > 0.15 * mt && vt > 0)
-    bm = std::clamp(cov / vt, 1.0, 1e5);  // between 1 G and 10 k triangles/s
+    bm = std::clamp(cov / vt, 20.0, 1e5);  // between 50 M and 10 k triangles/s (noise can fit ~0)
   b_ = bm * 1e-6;
   a_ = std::max(0.0, mm - bm * mt);
 }
@@ -239,6 +239,8 @@ void ExtractRender::want(const std::vector<uint32_t>& ids, Urgency u) {
 void ExtractRender::frameDone(uint64_t drawnTriangles, double frameMs) {
   time_.add(double(drawnTriangles), frameMs);
   frameMsAvg_ = frameMsAvg_ == 0 ? frameMs : 0.9 * frameMsAvg_ + 0.1 * frameMs;
+  lastFrameMs_ = frameMs;
+  lastDrawn_ = double(drawnTriangles);
   ++slackFrames_;
 }
 
@@ -263,7 +265,12 @@ FrameStats ExtractRender::update(uint64_t frame, const View& view, const View& p
     // Start low (a first guess of the machine is no measurement) and let the fit raise it.
     if (smoothBudget_ == 0) smoothBudget_ = std::min(target, 20000.0);
     else if (target < smoothBudget_) smoothBudget_ = std::max(target, 0.7 * smoothBudget_);
-    else smoothBudget_ += 0.25 * (target - smoothBudget_);
+    else smoothBudget_ = std::min(smoothBudget_ + 0.25 * (target - smoothBudget_), 1.25 * smoothBudget_);
+    // Feedback whatever the model says: a frame over 80% of the budget scales the budget down in
+    // proportion (the machine may have slowed down faster than the fit can follow).
+    const double target80 = 0.8 * options_.budgetMs;
+    if (lastFrameMs_ > target80 && lastDrawn_ > 0)
+      smoothBudget_ = std::min(smoothBudget_, lastDrawn_ * target80 / lastFrameMs_);
     budget = std::max(smoothBudget_, 1000.0);
   }
   st.budgetTriangles = uint64_t(budget);

@@ -34,7 +34,7 @@
 
 namespace mt::render {
 
-// frame ms ~= a + b * triangles, fitted online by least squares over the last 90 frames, so the
+// frame ms ~= a + b * triangles, fitted online by least squares over the last 45 frames, so the
 // budget follows the machine (llvmpipe shares the CPU with everything else). The slope is only
 // re-estimated when the window's triangle counts vary enough to tell it from the fixed cost
 // (with a steady cut the fit is ill-posed and would trade one for the other); samples far above
@@ -146,6 +146,7 @@ class ExtractRender {
   double smoothBudget_ = 0;
   uint32_t slackFrames_ = 0;  // frames since the last probe
   double frameMsAvg_ = 0;     // exponential average of measured frame times
+  double lastFrameMs_ = 0, lastDrawn_ = 0;
 };
 
 }  // namespace mt::render
