@@ -59,7 +59,7 @@ void writePlots(const std::string& dir, const std::string& csv, double budgetMs,
   const std::string script = dir + "/plots.gnuplot";
   {
     std::ofstream g(script);
-    g << "set datafile separator ','\nset terminal png size 900,400\nset key autotitle columnhead\n"
+    g << "set datafile separator ','\nset terminal png size 900,400 noenhanced\nset key autotitle columnhead\n"
          "set xlabel 'frame'\nset grid\n";
     auto plot = [&](const std::string& name, const std::string& title, const std::string& cols) {
       g << "set output '" << dir << "/" << name << ".png'\nset title '" << title << "'\nplot " << cols << "\n";
