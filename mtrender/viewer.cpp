@@ -3,9 +3,11 @@
 
 #include <GL/glcorearb.h>
 #include <GLFW/glfw3.h>
+#if MT_HAVE_IMGUI
 #include <imgui.h>
 #include <backends/imgui_impl_glfw.h>
 #include <backends/imgui_impl_opengl3.h>
+#endif
 
 #include <chrono>
 #include <cmath>
@@ -41,9 +43,25 @@ struct ViewerState {
   double scrollAccum = 0;
 };
 
+bool hudWantsMouse() {
+#if MT_HAVE_IMGUI
+  return ImGui::GetIO().WantCaptureMouse;
+#else
+  return false;
+#endif
+}
+
+bool hudWantsKeyboard() {
+#if MT_HAVE_IMGUI
+  return ImGui::GetIO().WantCaptureKeyboard;
+#else
+  return false;
+#endif
+}
+
 void onScroll(GLFWwindow* w, double, double dy) {
   auto* s = static_cast<ViewerState*>(glfwGetWindowUserPointer(w));
-  if (ImGui::GetIO().WantCaptureMouse) return;
+  if (hudWantsMouse()) return;
   s->scrollAccum += dy;
 }
 
@@ -62,11 +80,13 @@ int runViewer(const ViewerOptions& options) {
   }
   glfwMakeContextCurrent(window);
   glfwSwapInterval(0);  // the frame budget, not the display, paces the loop
+#if MT_HAVE_IMGUI
   IMGUI_CHECKVERSION();
   ImGui::CreateContext();
   ImGui::GetIO().IniFilename = nullptr;
   ImGui_ImplGlfw_InitForOpenGL(window, true);
   ImGui_ImplOpenGL3_Init("#version 450");
+#endif
 
   int exitCode = 0;
   {
@@ -97,7 +117,7 @@ int runViewer(const ViewerOptions& options) {
       bool down = glfwGetKey(window, key) == GLFW_PRESS;
       bool edge = down && !prevKeys[key];
       prevKeys[key] = down;
-      return edge && !ImGui::GetIO().WantCaptureKeyboard;
+      return edge && !hudWantsKeyboard();
     };
     while (!glfwWindowShouldClose(window)) {
       glfwPollEvents();
@@ -117,12 +137,12 @@ int runViewer(const ViewerOptions& options) {
         if (!recorded.poses.empty()) replay = recorded;
         if (!replay.poses.empty()) st.replaying = true, st.replayFrame = 0;
       }
-      const ImGuiIO& io = ImGui::GetIO();
+      const bool mouseFree = !hudWantsMouse(), keysFree = !hudWantsKeyboard();
       double x, y;
       glfwGetCursorPos(window, &x, &y);
       const double dx = x - st.lastX, dy = y - st.lastY;
       st.lastX = x, st.lastY = y;
-      if (!io.WantCaptureMouse) {
+      if (mouseFree) {
         if (glfwGetMouseButton(window, GLFW_MOUSE_BUTTON_LEFT) == GLFW_PRESS) {  // orbit
           st.cam.yaw -= dx * 0.005;
           st.cam.pitch = std::clamp(st.cam.pitch + dy * 0.005, -1.55, 1.55);
@@ -147,7 +167,7 @@ int runViewer(const ViewerOptions& options) {
         glm::dvec3 f = glm::normalize(p.target - p.eye), r = glm::normalize(glm::cross(f, glm::dvec3(0, 0, 1)));
         double step = 0.01 * st.cam.distance;
         glm::dvec3 m(0);
-        if (!io.WantCaptureKeyboard) {
+        if (keysFree) {
           if (glfwGetKey(window, GLFW_KEY_W) == GLFW_PRESS) m += f;
           if (glfwGetKey(window, GLFW_KEY_S) == GLFW_PRESS) m -= f;
           if (glfwGetKey(window, GLFW_KEY_D) == GLFW_PRESS) m += r;
@@ -196,6 +216,7 @@ int runViewer(const ViewerOptions& options) {
       fps = fps == 0 ? 1.0 / std::max(dt, 1e-6) : 0.9 * fps + 0.1 / std::max(dt, 1e-6);
 
       // ---- HUD ----
+#if MT_HAVE_IMGUI
       ImGui_ImplOpenGL3_NewFrame();
       ImGui_ImplGlfw_NewFrame();
       ImGui::NewFrame();
@@ -222,6 +243,15 @@ int runViewer(const ViewerOptions& options) {
       }
       ImGui::Render();
       ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
+#else
+      if (st.hud && frame % 10 == 0) {
+        char title[256];
+        std::snprintf(title, sizeof title, "mtrender  %.1f fps  %.1f ms  %llu tri  %u patches  cache %.1f MiB  misses %u  %.2f px",
+                      fps, last.frameMs, (unsigned long long)last.triangles, last.patches,
+                      double(last.cacheBytes) / 1048576.0, last.misses, last.maxScreenError);
+        glfwSetWindowTitle(window, title);
+      }
+#endif
       glfwSwapBuffers(window);
       if (closing) glfwSetWindowShouldClose(window, 1);
     }
@@ -236,9 +266,11 @@ int runViewer(const ViewerOptions& options) {
     }
     std::printf("frames %d\nbad_patches %llu\n", frame, (unsigned long long)engine.badPatches());
   }
+#if MT_HAVE_IMGUI
   ImGui_ImplOpenGL3_Shutdown();
   ImGui_ImplGlfw_Shutdown();
   ImGui::DestroyContext();
+#endif
   glfwDestroyWindow(window);
   glfwTerminate();
   return exitCode;
