@@ -3,11 +3,13 @@
 // Every pass is sequential over scratch files or an external sort, so memory depends on the cap,
 // not on the input (BMT section 6 needs the store to exist before anything fits in RAM):
 //   1 parse      input -> vert.bin (fixed records) + face.bin (3 x u32); bounding box
-//   2 centroids  face.bin + vert.bin -> cent.bin (centroid xyz + area per face, in face order);
-//                vertex positions are loaded in chunks that fit the cap, faces that need a later
-//                chunk are carried forward, and the per-chunk results are merged by face index
-//   3 assign     the CellAssigner streams cent.bin as often as it likes, then keys every face;
-//                faces are externally sorted by (cell key, face)
+//   2 centroids  face.bin + vert.bin -> centroid xyz + area per face, straight into an external
+//                sort by Morton code (ties: face); vertex positions are loaded in chunks that fit
+//                the cap, faces that need a later chunk are carried forward. The merged stream is
+//                written once: morton.bin = (face, corners, centroid) in Morton order
+//   3 assign     the CellAssigner streams morton.bin as often as it likes (the irregular
+//                V-partition once: a sample), then every face is keyed in Morton order (coherent
+//                lookups); faces are externally sorted by (cell key, face)
 //   4 group      consecutive keys become patches 0..P-1 -> pface.bin; unique (vertex, patch)
 //                pairs are externally sorted by vertex
 //   5 join       pairs merge-joined with vert.bin -> (patch, vertex, data) sorted by patch
@@ -17,6 +19,7 @@
 // Determinism: every sort key is total, so the store does not depend on the cap or thread count.
 #include <malloc.h>
 #include <tbb/parallel_for.h>
+#include <sys/resource.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -134,13 +137,57 @@ Centroid centroidOf(const uint32_t v[3], const float* const p[3]) {
   return {float(c[0]), float(c[1]), float(c[2]), float(0.5 * std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]))};
 }
 
+// 21 bits per axis interleaved: the Morton (Z-order) code of a point in the box.
+uint64_t mortonCode(const float c[3], const Box3& box) {
+  uint64_t code = 0;
+  uint32_t q[3];
+  for (int a = 0; a < 3; ++a) {
+    double extent = box.hi[a] - box.lo[a];
+    double t = extent > 0 ? (double(c[a]) - box.lo[a]) / extent : 0;
+    q[a] = uint32_t(std::clamp(t, 0.0, 1.0) * double((1u << 21) - 1));
+  }
+  // Bit b of axis a goes to bit 3b + 2 - a (axis 0 most significant of each triple), spread with
+  // the usual magic masks instead of a 63-step loop.
+  auto spread = [](uint64_t x) {
+    x &= 0x1fffff;
+    x = (x | x << 32) & 0x1f00000000ffffull;
+    x = (x | x << 16) & 0x1f0000ff0000ffull;
+    x = (x | x << 8) & 0x100f00f00f00f00full;
+    x = (x | x << 4) & 0x10c30c30c30c30c3ull;
+    x = (x | x << 2) & 0x1249249249249249ull;
+    return x;
+  };
+  code = spread(q[0]) << 2 | spread(q[1]) << 1 | spread(q[2]);
+  return code;
+}
+
+// A face with its centroid, keyed by Morton code (ties: face index, so the order is total).
+struct MortonFace {
+  uint64_t code;
+  uint32_t face;
+  uint32_t v[3];
+  Centroid c;
+};
+struct MortonLess {
+  bool operator()(const MortonFace& a, const MortonFace& b) const {
+    return a.code != b.code ? a.code < b.code : a.face < b.face;
+  }
+};
+// The record of morton.bin: what the assign stage needs per face, in Morton order.
+struct FaceCentroid {
+  uint32_t face;
+  uint32_t v[3];
+  Centroid c;
+};
+
 // Stage 2. Chunk c holds the float positions of vertices [c*chunk, (c+1)*chunk). Pass c reads
 // the faces again (12 bytes each) and computes every face whose corners all lie in chunk c; a face
 // spanning chunks (rare: scans list vertices in scan order) is carried from pass to pass with the
-// corners resolved so far, until its last chunk. Each pass writes its completions in face order,
-// and the passes' streams are merged by face index.
+// corners resolved so far, until its last chunk. Every completed face goes straight into the
+// Morton sorter (its order is total, so the chunking does not show).
 void computeCentroids(const std::string& dir, const VertexRecordLayout& layout, uint64_t vertexCount, uint64_t faceCount,
-                      uint64_t budget, bool showProgress) {
+                      uint64_t budget, const Box3& box, ExternalSorter<MortonFace, MortonLess>& sorter,
+                      bool showProgress) {
   const uint64_t chunk = std::max<uint64_t>(1 << 16, budget / 12);
   const uint64_t chunks = (vertexCount + chunk - 1) / chunk;
   Progress progress(showProgress, "ingest: centroids", faceCount);
@@ -151,7 +198,6 @@ void computeCentroids(const std::string& dir, const VertexRecordLayout& layout, 
     float p[9];
     uint32_t resolved;  // bit mask of corners with positions
   };
-  std::vector<std::string> parts;
   uint64_t done = 0;
   TempReader vr(dir + "/vert.bin", 4 << 20);  // chunks are read in order: one sequential pass
   for (uint64_t c = 0; c < chunks; ++c) {
@@ -170,9 +216,6 @@ void computeCentroids(const std::string& dir, const VertexRecordLayout& layout, 
         v += n;
       }
     }
-    const bool single = chunks == 1;
-    std::string outPath = single ? dir + "/cent.bin" : dir + "/cent.part" + std::to_string(c);
-    TempWriter out(outPath, 4 << 20);
     std::unique_ptr<TempReader> carryIn;
     std::unique_ptr<TempWriter> carryOut;
     std::string carryInPath = dir + "/carry" + std::to_string(c - 1);
@@ -190,30 +233,44 @@ void computeCentroids(const std::string& dir, const VertexRecordLayout& layout, 
         return;
       }
       const float* p[3] = {&f.p[0], &f.p[3], &f.p[6]};
-      if (!single) out.put(f.face);
-      out.put(centroidOf(f.v, p));
+      MortonFace m{0, f.face, {f.v[0], f.v[1], f.v[2]}, centroidOf(f.v, p)};
+      m.code = mortonCode(&m.c.x, box);
+      sorter.add(m);
       ++done;
     };
-    // One scan of the faces, in face order: faces wholly in this chunk are computed in parallel;
-    // faces spanning chunks that touch this one are resolved as far as this chunk allows (new
-    // ones start here, earlier ones come from the carry file, which is in face order too).
+    // One scan of the faces, in face order: faces wholly in this chunk are computed in parallel
+    // (centroid and Morton code); faces spanning chunks that touch this one are resolved as far
+    // as this chunk allows (new ones start here, earlier ones come from the carry file, which is
+    // in face order too).
     TempReader fr(dir + "/face.bin", 4 << 20);
     std::vector<uint32_t> batch;
-    std::vector<Centroid> cents;
+    std::vector<MortonFace> recs;
     std::vector<uint8_t> kind;  // 0: not this pass, 1: wholly in this chunk, 2: spanning
     uint32_t face = 0;
     while (fr.getBatch(batch, 3 * 65536)) {
       const size_t n = batch.size() / 3;
-      cents.resize(n);
+      recs.resize(n);
       kind.resize(n);
+      const uint32_t first = face;
       tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096), [&](const tbb::blocked_range<size_t>& r) {
         for (size_t i = r.begin(); i < r.end(); ++i) {
+          // Shuffled faces read the positions at random: ask for a later face's corners now so
+          // that several cache misses are in flight at once.
+          if (i + 16 < r.end())
+            for (int k = 0; k < 3; ++k) {
+              uint32_t u = batch[3 * (i + 16) + k];
+              if (u >= lo && u < hi) __builtin_prefetch(&pos[size_t(u - lo) * 3]);
+            }
           const uint32_t* v = &batch[3 * i];
           uint32_t vmin = std::min({v[0], v[1], v[2]}), vmax = std::max({v[0], v[1], v[2]});
           if (vmin >= lo && vmax < hi) {
             kind[i] = 1;
             const float* p[3] = {&pos[size_t(v[0] - lo) * 3], &pos[size_t(v[1] - lo) * 3], &pos[size_t(v[2] - lo) * 3]};
-            cents[i] = centroidOf(v, p);
+            MortonFace& m = recs[i];
+            m.face = first + uint32_t(i);
+            std::memcpy(m.v, v, 12);
+            m.c = centroidOf(v, p);
+            m.code = mortonCode(&m.c.x, box);
           } else {
             kind[i] = (vmin < hi && vmax >= lo) ? 2 : 0;
           }
@@ -221,8 +278,7 @@ void computeCentroids(const std::string& dir, const VertexRecordLayout& layout, 
       });
       for (size_t i = 0; i < n; ++i, ++face) {
         if (kind[i] == 1) {
-          if (!single) out.put(face);
-          out.put(cents[i]);
+          sorter.add(recs[i]);
           ++done;
         } else if (kind[i] == 2) {
           Pending f;
@@ -236,66 +292,15 @@ void computeCentroids(const std::string& dir, const VertexRecordLayout& layout, 
       }
       progress.update(done);
     }
-    out.close();
     if (carryOut) carryOut->close();
     carryIn.reset();
     if (c > 0) std::remove(carryInPath.c_str());
-    if (!single) parts.push_back(outPath);
   }
-  if (chunks > 1) {
-    // Merge the per-pass outputs (each ascending by face) into face order.
-    struct Tagged {
-      uint32_t face;
-      Centroid c;
-    };
-    const size_t k = parts.size();
-    std::vector<std::unique_ptr<TempReader>> readers;
-    std::vector<Tagged> heads(k);
-    std::vector<bool> live(k);
-    for (size_t i = 0; i < k; ++i) {
-      readers.push_back(std::make_unique<TempReader>(parts[i], 1 << 20));
-      live[i] = readers[i]->get(heads[i].face) && readers[i]->get(heads[i].c);
-    }
-    TempWriter out(dir + "/cent.bin", 4 << 20);
-    for (uint64_t f = 0; f < faceCount; ++f) {
-      size_t i = 0;
-      while (i < k && !(live[i] && heads[i].face == f)) ++i;
-      if (i == k) fail(dir, "internal: centroid of face " + std::to_string(f) + " missing");
-      out.put(heads[i].c);
-      live[i] = readers[i]->get(heads[i].face) && readers[i]->get(heads[i].c);
-    }
-    out.close();
-    readers.clear();
-    for (auto& p : parts) std::remove(p.c_str());
-  }
+  if (done != faceCount) fail(dir, "internal: " + std::to_string(faceCount - done) + " centroids missing");
   progress.finish(faceCount);
 }
 
-// 21 bits per axis interleaved: the Morton (Z-order) code of a point in the box.
-uint64_t mortonCode(const float c[3], const Box3& box) {
-  uint64_t code = 0;
-  uint32_t q[3];
-  for (int a = 0; a < 3; ++a) {
-    double extent = box.hi[a] - box.lo[a];
-    double t = extent > 0 ? (double(c[a]) - box.lo[a]) / extent : 0;
-    q[a] = uint32_t(std::clamp(t, 0.0, 1.0) * double((1u << 21) - 1));
-  }
-  for (int bit = 20; bit >= 0; --bit)
-    for (int a = 0; a < 3; ++a) code = code << 1 | ((q[a] >> bit) & 1u);
-  return code;
-}
-
-struct MortonCentroid {
-  uint64_t code;
-  uint32_t face, pad;
-  Centroid c;
-};
-struct MortonLess {
-  bool operator()(const MortonCentroid& a, const MortonCentroid& b) const {
-    return a.code != b.code ? a.code < b.code : a.face < b.face;
-  }
-};
-
+// morton.bin as the assigner's centroid stream (Morton order: consecutive centroids are close).
 class CentroidFile : public CentroidSource {
  public:
   CentroidFile(std::string path, uint64_t count, Box3 bounds) : path_(std::move(path)), count_(count), bounds_(bounds) {}
@@ -303,8 +308,13 @@ class CentroidFile : public CentroidSource {
   Box3 bounds() const override { return bounds_; }
   void forEach(const std::function<void(const float*, size_t)>& fn) const override {
     TempReader r(path_, 4 << 20);
-    std::vector<Centroid> batch;
-    while (r.getBatch(batch, 65536)) fn(&batch[0].x, batch.size());
+    std::vector<FaceCentroid> batch;
+    std::vector<Centroid> cents;
+    while (r.getBatch(batch, 65536)) {
+      cents.resize(batch.size());
+      for (size_t i = 0; i < batch.size(); ++i) cents[i] = batch[i].c;
+      fn(&cents[0].x, cents.size());
+    }
   }
 
  private:
@@ -437,6 +447,34 @@ uint64_t weldSoup(const std::string& scratch, const VertexRecordLayout& layout, 
   return welded;
 }
 
+// Per-stage wall and CPU seconds (all threads) on stderr with the progress lines, so that the
+// stages can be compared on a busy machine, where wall time says little (bench/ingest.sh).
+class StageClock {
+ public:
+  explicit StageClock(bool enabled) : enabled_(enabled) { reset(); }
+  void mark(const char* stage) {
+    if (!enabled_) return;
+    double wall = now(), cpu = cpuSeconds();
+    std::fprintf(stderr, "ingest: stage %s: %.2f s wall, %.2f s cpu\n", stage, wall - wall_, cpu - cpu_);
+    wall_ = wall;
+    cpu_ = cpu;
+  }
+
+ private:
+  void reset() {
+    wall_ = now();
+    cpu_ = cpuSeconds();
+  }
+  static double now() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
+  static double cpuSeconds() {
+    rusage u{};
+    getrusage(RUSAGE_SELF, &u);
+    return double(u.ru_utime.tv_sec + u.ru_stime.tv_sec) + 1e-6 * double(u.ru_utime.tv_usec + u.ru_stime.tv_usec);
+  }
+  bool enabled_;
+  double wall_ = 0, cpu_ = 0;
+};
+
 std::string encodeReport(const IngestReport& r) {
   std::ostringstream s;
   s << "input=" << r.input << "\nformat=" << r.format << "\ninputVertices=" << r.inputVertices
@@ -462,6 +500,7 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
   // MiB or more in its own mapping, so that what a pass frees leaves the process at once.
   mallopt(M_MMAP_THRESHOLD, 1 << 20);
   auto endOfPass = [] { malloc_trim(0); };
+  StageClock clock(opt.progress);
 
   // 1 parse
   auto reader = openMesh(input);
@@ -488,60 +527,64 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
     progress.finish(nv);
   }
 
-  // 2 centroids
-  computeCentroids(scratch, vlayout, nv, nf, B * 2 / 5, opt.progress);
-  endOfPass();
-
-  // 3 assign. The assigner streams the centroids in Morton order rather than face order: its
-  // streaming passes (the irregular seeding) rely on consecutive triangles being close, which a
-  // scan with shuffled faces does not give. One external sort; deterministic (ties by face).
+  clock.mark("parse");
+  // 2 centroids, straight into an external sort by Morton code. The assigner streams the
+  // centroids in Morton order rather than face order: its passes (the irregular seeding) rely on
+  // consecutive triangles being close, which a scan with shuffled faces does not give, and the
+  // assign stage then looks cells up in spatially coherent order (cache hits instead of random
+  // reads of the seed tables). Deterministic: ties by face.
   {
-    ExternalSorter<MortonCentroid, MortonLess> byCode(scratch + "/s0", B / 4);
-    TempReader cr(scratch + "/cent.bin", 4 << 20);
-    std::vector<Centroid> batch;
-    uint32_t face = 0;
-    while (cr.getBatch(batch, 65536))
-      for (const Centroid& c : batch) byCode.add({mortonCode(&c.x, sink.bounds), face++, 0, c});
+    ExternalSorter<MortonFace, MortonLess> byCode(scratch + "/s0", B / 4);
+    computeCentroids(scratch, vlayout, nv, nf, B * 2 / 5, sink.bounds, byCode, opt.progress);
+    std::remove((scratch + "/face.bin").c_str());
+    endOfPass();
+    clock.mark("centroids");
     byCode.finish();
-    TempWriter out(scratch + "/cent.morton", 4 << 20);
-    MortonCentroid m;
-    while (byCode.next(m)) out.put(m.c);
+    TempWriter out(scratch + "/morton.bin", 4 << 20);
+    MortonFace m;
+    while (byCode.next(m)) out.put(FaceCentroid{m.face, {m.v[0], m.v[1], m.v[2]}, m.c});
     out.close();
   }
   endOfPass();
-  CentroidFile centroids(scratch + "/cent.morton", nf, sink.bounds);
+  clock.mark("morton merge");
+  CentroidFile centroids(scratch + "/morton.bin", nf, sink.bounds);
   {
-    // The assigner streams the centroids as often as it needs (the irregular V-partition: 5-7
-    // passes); report its time, since it is a separate cost from the sorts.
+    // The irregular V-partition reads the stream once (a sample; vpartition/irregular.cpp);
+    // report its time, since it is a separate cost from the sorts.
     Progress progress(opt.progress, "ingest: partition", nf);
     assigner.prepare(centroids, B / 2);
     progress.finish(nf);
   }
   report.assigner = assigner.describe();
+  endOfPass();
+  clock.mark("partition");
+  // 3 assign, in Morton order; faces externally sorted by (cell key, face).
   ExternalSorter<FaceRec, FaceLess> byCell(scratch + "/s1", B / 4);
   {
     Progress progress(opt.progress, "ingest: assign", nf);
-    TempReader cr(scratch + "/cent.bin", 4 << 20), fr(scratch + "/face.bin", 4 << 20);
-    std::vector<Centroid> cent;
-    std::vector<uint32_t> faces;
-    std::vector<uint64_t> keys;
-    uint32_t face = 0;
-    while (cr.getBatch(cent, 65536)) {
-      fr.getBatch(faces, cent.size() * 3);
-      if (faces.size() != cent.size() * 3) fail(scratch, "internal: face and centroid files disagree");
-      keys.resize(cent.size());
-      tbb::parallel_for(tbb::blocked_range<size_t>(0, cent.size(), 4096), [&](const tbb::blocked_range<size_t>& r) {
-        for (size_t i = r.begin(); i < r.end(); ++i) keys[i] = assigner.cellKey(&cent[i].x);
+    TempReader cr(scratch + "/morton.bin", 4 << 20);
+    std::vector<FaceCentroid> batch;
+    std::vector<FaceRec> recs;
+    uint64_t done = 0;
+    while (cr.getBatch(batch, 65536)) {
+      recs.resize(batch.size());
+      tbb::parallel_for(tbb::blocked_range<size_t>(0, batch.size(), 4096), [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t i = r.begin(); i < r.end(); ++i) {
+          const FaceCentroid& f = batch[i];
+          recs[i] = FaceRec{assigner.cellKey(&f.c.x), f.face, {f.v[0], f.v[1], f.v[2]}};
+        }
       });
-      for (size_t i = 0; i < cent.size(); ++i) byCell.add({keys[i], face++, {faces[3 * i], faces[3 * i + 1], faces[3 * i + 2]}});
-      progress.update(face);
+      for (const FaceRec& r : recs) byCell.add(r);
+      done += batch.size();
+      progress.update(done);
     }
-    progress.finish(face);
+    if (done != nf) fail(scratch, "internal: Morton file holds " + std::to_string(done) + " faces");
+    progress.finish(done);
   }
-  std::remove((scratch + "/face.bin").c_str());
-  std::remove((scratch + "/cent.morton").c_str());
+  std::remove((scratch + "/morton.bin").c_str());
   endOfPass();
 
+  clock.mark("assign");
   // 4 group into patches
   byCell.finish();
   std::vector<uint64_t> patchKey;
@@ -550,30 +593,40 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
   {
     TempWriter pface(scratch + "/pface.bin", 4 << 20);
     FaceRec f;
-    std::vector<uint32_t> tris, verts;
+    // Patches are gathered in batches; their distinct vertices are found in parallel and written
+    // in patch order (the result does not depend on the thread count).
+    constexpr size_t kBatch = 64;
+    std::vector<std::vector<uint32_t>> tris(kBatch), verts(kBatch);
+    size_t filled = 0;
     auto flush = [&]() {
-      if (tris.empty()) return;
-      uint32_t k = uint32_t(patchKey.size() - 1);
-      pface.write(tris.data(), tris.size() * 4);
-      patchTris.push_back(uint32_t(tris.size() / 3));
-      verts = tris;
-      std::sort(verts.begin(), verts.end());
-      verts.erase(std::unique(verts.begin(), verts.end()), verts.end());
-      for (uint32_t v : verts) pairs.add(uint64_t(v) << 32 | k);
-      tris.clear();
+      tbb::parallel_for(size_t(0), filled, [&](size_t i) {
+        verts[i] = tris[i];
+        std::sort(verts[i].begin(), verts[i].end());
+        verts[i].erase(std::unique(verts[i].begin(), verts[i].end()), verts[i].end());
+      });
+      for (size_t i = 0; i < filled; ++i) {
+        const uint32_t k = uint32_t(patchKey.size() - filled + i);
+        pface.write(tris[i].data(), tris[i].size() * 4);
+        patchTris.push_back(uint32_t(tris[i].size() / 3));
+        for (uint32_t v : verts[i]) pairs.add(uint64_t(v) << 32 | k);
+        tris[i].clear();
+      }
+      filled = 0;
     };
     while (byCell.next(f)) {
       if (patchKey.empty() || patchKey.back() != f.key) {
-        flush();
+        if (filled == kBatch) flush();
         patchKey.push_back(f.key);
+        ++filled;
       }
-      tris.insert(tris.end(), f.v, f.v + 3);
+      tris[filled - 1].insert(tris[filled - 1].end(), f.v, f.v + 3);
     }
     flush();
     pface.close();
   }
   const uint32_t P = uint32_t(patchKey.size());
 
+  clock.mark("group");
   // 5 join pairs with vertex data
   pairs.finish();
   ExternalSorter<VertexData<Full>, KeyLess<VertexData<Full>>> byPatch(scratch + "/s3", B / 4);
@@ -621,6 +674,7 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
   std::remove((scratch + "/vert.bin").c_str());
   endOfPass();
 
+  clock.mark("vertices");
   // 6 patches
   byPatch.finish();
   auto impl = std::make_unique<PatchStore::Impl>();
@@ -724,6 +778,7 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
   std::remove((scratch + "/pface.bin").c_str());
 
   endOfPass();
+  clock.mark("patches");
   // Edges shared between patches: sum their uses.
   edges.finish();
   {
@@ -740,6 +795,7 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
     }
   }
 
+  clock.mark("edges");
   // 7 boundary lists
   shared.finish();
   ExternalSorter<EntryRec, EntryLess> entries(scratch + "/s6", B / 8);
@@ -776,6 +832,7 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
     }
   }
 
+  clock.mark("boundary");
   // Commit: segment durable, then the first manifest and CURRENT.
   impl->nextPatchId = P;
   for (auto& [id, rec] : impl->patches) impl->addLive(rec, +1);

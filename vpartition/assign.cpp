@@ -232,15 +232,24 @@ PartitionSequence PartitionSequence::deserialize(const std::string& bytes) {
 }
 
 void VPartitionAssigner::prepare(const CentroidSource& centroids, uint64_t memoryBytes) {
-  sequence_ = PartitionSequence::build(centroids, options_);
-  mergeSlivers(centroids);
+  // One pass over the input: a stride sample (vp::sampleCentroids) that the irregular builder
+  // and the patch balancing below run on in memory. Its size depends on the input only.
+  const uint32_t P = options_.patchTriangles ? options_.patchTriangles : kDefaultPatchTriangles;
+  const uint64_t sampleCount = std::min<uint64_t>(centroids.count(), vp::sampleLimit(centroids.count(), P));
+  auto tooBig = [&](uint64_t bytes, const char* what) {
+    if (memoryBytes && bytes > memoryBytes)
+      throw Error(std::string("V-partition: ") + what + " need " + std::to_string(bytes >> 20) +
+                  " MiB, more than the " + std::to_string(memoryBytes >> 20) +
+                  " MiB allowed; raise --memory or --patch-triangles");
+  };
+  tooBig(sampleCount * 16, "the centroid sample would");
+  vp::CentroidSample sample = vp::sampleCentroids(centroids, P);
+  sequence_ = options_.kind == PartitionKind::Irregular ? buildIrregularFromSample(sample, options_)
+                                                        : PartitionSequence::build(centroids, options_);
+  mergeSlivers(sample);
   // The seeds must stay in core (BMT 4.2.2: "about one seed per thousand triangles"); refuse
   // rather than silently exceed the caller's share of --memory.
-  if (memoryBytes && sequence_.stats().seedBytes > memoryBytes)
-    throw Error("V-partition: seeds and grids need " +
-                std::to_string(sequence_.stats().seedBytes >> 20) + " MiB, more than the " +
-                std::to_string(memoryBytes >> 20) + " MiB allowed; raise --memory or " +
-                "--patch-triangles");
+  tooBig(sequence_.stats().seedBytes + sample.bytes(), "seeds, grids and the centroid sample");
 }
 
 // Balancing the patches (the V*0 cells). Crossing V0 with V1 gives uneven pieces: where a V1
@@ -252,13 +261,16 @@ void VPartitionAssigner::prepare(const CentroidSource& centroids, uint64_t memor
 //     tiny as a whole joins the piece of its V1 region with the nearest V0 seed;
 //   * a piece with more than 1.6x the target is cut into k = round(n / target) slabs along the
 //     longest axis of its bounding box, at quantiles (slab index in the key's top 8 bits).
-// Two extra streaming passes (piece counts and boxes; histograms of the pieces to cut); memory
-// is per piece, not per triangle.
+// Two passes over the centroid sample (piece counts and boxes; histograms of the pieces to cut),
+// not over the input; memory is per piece, not per triangle.
 namespace {
 constexpr int kSlabShift = 56;  // V0 cell ids stay below 2^24 (checked); slab index above them
 }
 
-void VPartitionAssigner::mergeSlivers(const CentroidSource& centroids) {
+void VPartitionAssigner::mergeSlivers(const vp::CentroidSample& sample) {
+  const vp::SampleSource centroids(sample);
+  // Counts below are of sampled triangles; thresholds in input triangles are divided by w.
+  const double w = sample.weight();
   remap_.clear();
   slabs_.clear();
   if (sequence_.levels() < 2 || sequence_.cellCount(0) >= (1u << 24)) return;
@@ -278,7 +290,7 @@ void VPartitionAssigner::mergeSlivers(const CentroidSource& centroids) {
     }
   });
   const uint32_t target = options_.patchTriangles ? options_.patchTriangles : kDefaultPatchTriangles;
-  const uint32_t small = std::max<uint32_t>(1, target / 4);
+  const double small = std::max(1.0, target / 4.0 / w);
   std::vector<std::pair<uint64_t, Piece>> sorted(pieces.begin(), pieces.end());
   std::sort(sorted.begin(), sorted.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
   auto join = [&](size_t from, size_t into) {
@@ -331,7 +343,7 @@ void VPartitionAssigner::mergeSlivers(const CentroidSource& centroids) {
   };
   std::unordered_map<uint64_t, Cut> cuts;
   for (auto& [key, p] : sorted) {
-    if (remap_.count(key) || p.count <= target * 8 / 5) continue;
+    if (remap_.count(key) || p.count * w <= target * 8 / 5) continue;
     int axis = 0;
     for (int a = 1; a < 3; ++a)
       if (p.hi[a] - p.lo[a] > p.hi[axis] - p.lo[axis]) axis = a;
@@ -354,7 +366,7 @@ void VPartitionAssigner::mergeSlivers(const CentroidSource& centroids) {
   for (auto& [key, cut] : cuts) {
     uint64_t total = 0;
     for (uint32_t h : cut.histogram) total += h;
-    uint32_t slabs = uint32_t(std::clamp<uint64_t>((total + target / 2) / target, 1, 255));
+    uint32_t slabs = uint32_t(std::clamp<double>(std::floor((double(total) * w + target / 2) / target), 1, 255));
     if (slabs < 2) continue;
     Slabs s;
     s.axis = cut.axis;

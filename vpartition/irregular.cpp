@@ -52,6 +52,12 @@ constexpr double kCalibrationAim = 1.05;   // seed a bit over the target, then t
 constexpr double kTrimTolerance = 0.12;
 constexpr double kSplitFactor = 1.6;       // pass 3 splits cells above this multiple of the mean
 constexpr double kFinalSplitFactor = 1.9;  // pass 4 splits cells above this (then pass 5)
+// The sample the passes run on (BMT 4.2.2 seeds ~1 per 1000 triangles, so a few hundred sampled
+// centroids per V0 cell place and relax them as well as all of them: measured on the 53 M mtgen
+// scan, docs/vpartition.md). Its size depends on the input only, never on --memory or threads.
+constexpr uint64_t kMinSample = 512u << 10;  // inputs up to 512 K triangles are used whole
+constexpr double kSamplePerCell = 128;    // above that, at least this many per V0 cell target
+constexpr double kLevelSamplePerCell = 1024;  // coarser levels thin the stream down to this
 constexpr double kCountTolerance = 0.15;   // a level's final count stays within this of target    // pass 4 trims levels above target * (1 + this)
 
 // Runs fn(level) for every level, levels spread over threads; each level stays on one thread and
@@ -211,7 +217,7 @@ struct CellSums {
 std::vector<CellSums> assignAll(const CentroidSource& src,
                                 const std::vector<std::vector<float>>& seeds,
                                 const std::vector<double>& radii, const Box3& box,
-                                uint32_t threads, uint32_t& passes,
+                                const std::vector<uint64_t>& thin, uint32_t threads, uint32_t& passes,
                                 std::vector<std::vector<uint64_t>>* queryCells = nullptr) {
   uint32_t levels = uint32_t(seeds.size());
   std::vector<vp::SeedIndex> index(levels);
@@ -224,11 +230,12 @@ std::vector<CellSums> assignAll(const CentroidSource& src,
     sums[l].second.assign(6 * size_t(n), 0.0);
   }
   std::vector<std::unordered_set<uint64_t>> cells(queryCells ? levels : 0);
+  uint64_t base = 0;  // stream index of the batch's first centroid
   src.forEach([&](const float* xyza, size_t count) {
     forLevels(threads, levels, [&](uint32_t l) {
       CellSums& s = sums[l];
       uint64_t previous = ~0ull;
-      for (size_t t = 0; t < count; ++t) {
+      for (size_t t = size_t((thin[l] - base % thin[l]) % thin[l]); t < count; t += size_t(thin[l])) {
         const float* c = xyza + 4 * t;
         if (queryCells) {
           uint64_t key = index[l].queryCell(c);
@@ -247,6 +254,7 @@ std::vector<CellSums> assignAll(const CentroidSource& src,
         }
       }
     });
+    base += count;
   });
   ++passes;
   if (queryCells) {
@@ -291,11 +299,51 @@ bool splitCell(const CellSums& s, uint32_t i, const float* seed, float out[6]) {
 
 }  // namespace
 
+namespace vp {
+
+uint64_t sampleLimit(uint64_t triangles, uint32_t patchTriangles) {
+  const double cells = double(triangles) / (double(patchTriangles) * kCrossPerCell);
+  return std::max<uint64_t>(kMinSample, uint64_t(std::ceil(kSamplePerCell * cells)));
+}
+
+CentroidSample sampleCentroids(const CentroidSource& src, uint32_t patchTriangles) {
+  CentroidSample s;
+  s.total = src.count();
+  s.bounds = src.bounds();
+  const uint32_t P = patchTriangles ? patchTriangles : kDefaultPatchTriangles;
+  const uint64_t limit = sampleLimit(s.total, P);
+  s.stride = std::max<uint64_t>(1, (s.total + limit - 1) / limit);
+  s.xyza.reserve(4 * size_t((s.total + s.stride - 1) / s.stride));
+  uint64_t index = 0;
+  src.forEach([&](const float* xyza, size_t count) {
+    // Every stride-th centroid of the stream: the source order is spatially coherent (ingest
+    // streams Morton order), so this is a stratified sample of the surface, in stream order.
+    size_t t = size_t((s.stride - index % s.stride) % s.stride);
+    for (; t < count; t += size_t(s.stride)) s.xyza.insert(s.xyza.end(), xyza + 4 * t, xyza + 4 * t + 4);
+    index += count;
+  });
+  s.xyza.shrink_to_fit();
+  return s;
+}
+
+}  // namespace vp
+
 PartitionSequence buildIrregularSequence(const CentroidSource& src, const VPartitionOptions& o) {
+  return buildIrregularFromSample(
+      vp::sampleCentroids(src, o.patchTriangles ? o.patchTriangles : kDefaultPatchTriangles), o);
+}
+
+PartitionSequence buildIrregularFromSample(const vp::CentroidSample& sample, const VPartitionOptions& o) {
   auto start = std::chrono::steady_clock::now();
   PartitionBuildStats stats;
+  stats.passes = 1;  // the one pass over the input that took the sample
+  stats.sampleStride = sample.stride;
   const uint32_t P = o.patchTriangles ? o.patchTriangles : kDefaultPatchTriangles;
+  // Every pass below runs over the in-memory sample; counts are in sample units, except the
+  // level targets, which come from the whole input.
+  vp::SampleSource src(sample);
   const uint64_t N = src.count();
+  const uint64_t Ntotal = sample.total;
   const Box3 box = src.bounds();
   const uint32_t threads = o.threads;
 
@@ -306,7 +354,7 @@ PartitionSequence buildIrregularSequence(const CentroidSource& src, const VParti
     for (size_t t = 0; t < count; ++t) area += std::max(0.0f, xyza[4 * t + 3]);
     density.add(xyza, count);
   });
-  ++stats.passes;
+  ++stats.samplePasses;
 
   PartitionSequence seq;
   seq.setKind(PartitionKind::Irregular);
@@ -324,24 +372,34 @@ PartitionSequence buildIrregularSequence(const CentroidSource& src, const VParti
     // Degenerate input (all triangles zero-area): use the bounding box faces as the area.
     double e[3];
     for (int a = 0; a < 3; ++a) e[a] = std::max(1e-30, box.hi[a] - box.lo[a]);
-    area = 2 * (e[0] * e[1] + e[1] * e[2] + e[0] * e[2]);
+    area = 2 * (e[0] * e[1] + e[1] * e[2] + e[0] * e[2]) * double(N) / double(Ntotal);
   }
+  // Input triangles per sampled one: the sample's area stands for weight times as much surface.
+  const double weight = double(Ntotal) / double(N);
 
   // Level targets: N / (T0 2^i) cells, down to the first level with <= maxCoarsestCells.
   const double T0 = P * kCrossPerCell;
   std::vector<double> target;
   for (uint32_t l = 0; l < o.maxLevels; ++l) {
-    double t = std::max(1.0, std::round(double(N) / (T0 * std::ldexp(1.0, int(l)))));
+    double t = std::max(1.0, std::round(double(Ntotal) / (T0 * std::ldexp(1.0, int(l)))));
     target.push_back(t);
     if (t <= o.maxCoarsestCells) break;
   }
   const uint32_t levels = uint32_t(target.size());
+  // Coarser levels have fewer, bigger cells: each level looks at every thin[l]-th centroid of
+  // the stream, enough for kLevelSamplePerCell per target cell, so a pass costs about two
+  // finest levels rather than `levels` of them. Nl[l]: the centroids level l sees.
+  std::vector<uint64_t> thin(levels), Nl(levels);
+  for (uint32_t l = 0; l < levels; ++l) {
+    thin[l] = std::max<uint64_t>(1, uint64_t(double(N) / (kLevelSamplePerCell * target[l])));
+    Nl[l] = (N + thin[l] - 1) / thin[l];
+  }
   // Level radius at the mean density; locally r_l(p) = radius[l] * sqrt(meanArea(p) / meanArea).
   const double meanArea = area / double(N);
   density.finish(meanArea);
   stats.seedBytes = density.bytes();
   std::vector<double> radius(levels);
-  for (uint32_t l = 0; l < levels; ++l) radius[l] = std::sqrt(area / (target[l] * kAreaPerSeed));
+  for (uint32_t l = 0; l < levels; ++l) radius[l] = std::sqrt(area * weight / (target[l] * kAreaPerSeed));
   std::vector<double> indexCell(levels);
 
   // Pass 2 (+ calibration repeats): stream seeding of all levels.
@@ -350,16 +408,19 @@ PartitionSequence buildIrregularSequence(const CentroidSource& src, const VParti
     std::vector<StreamSeeder> seeders;
     for (uint32_t l = 0; l < levels; ++l) seeders.emplace_back(2 * radius[l], box);  // cells of 2r: the own cell usually covers
     std::vector<float> local;  // sqrt(meanArea(p) / meanArea) per triangle of the batch
+    uint64_t base = 0;
     src.forEach([&](const float* xyza, size_t count) {
       local.resize(count);
       for (size_t t = 0; t < count; ++t)
         local[t] = float(std::sqrt(density.meanArea(xyza + 4 * t) / meanArea));
       forLevels(threads, levels, [&](uint32_t l) {
         float r = float(radius[l]);
-        for (size_t t = 0; t < count; ++t) seeders[l].offer(xyza + 4 * t, r * local[t]);
+        for (size_t t = size_t((thin[l] - base % thin[l]) % thin[l]); t < count; t += size_t(thin[l]))
+          seeders[l].offer(xyza + 4 * t, r * local[t]);
       });
+      base += count;
     });
-    ++stats.passes;
+    ++stats.samplePasses;
     uint64_t bytes = density.bytes();
     bool off = false;
     for (uint32_t l = 0; l < levels; ++l) {
@@ -367,14 +428,14 @@ PartitionSequence buildIrregularSequence(const CentroidSource& src, const VParti
       // Only levels with room to be off by a cell are worth another pass.
       // A level of n cells cannot be closer than ~1/n, and its count fluctuates by ~1/sqrt(n)
       // from one radius to the next, so small levels get a wider tolerance.
-      double ratio = seeders[l].viable(N) / (target[l] * kCalibrationAim);
+      double ratio = seeders[l].viable(Nl[l]) / (target[l] * kCalibrationAim);
       double tolerance = std::max(kCalibrationTolerance, 1.0 / std::sqrt(target[l]));
       if (target[l] >= 8 && std::fabs(ratio - 1) > tolerance) off = true;
     }
     stats.seedBytes = std::max(stats.seedBytes, bytes);
     if (off && attempt < kMaxCalibrations) {
       for (uint32_t l = 0; l < levels; ++l)
-        radius[l] *= std::sqrt(double(seeders[l].viable(N)) / (target[l] * kCalibrationAim));
+        radius[l] *= std::sqrt(double(seeders[l].viable(Nl[l])) / (target[l] * kCalibrationAim));
       ++stats.calibrationPasses;
       continue;
     }
@@ -391,11 +452,11 @@ PartitionSequence buildIrregularSequence(const CentroidSource& src, const VParti
 
   // Pass 3: remove small cells, split big ones, one Lloyd step.
   {
-    std::vector<CellSums> sums = assignAll(src, seeds, indexCell, box, o.threads, stats.passes);
+    std::vector<CellSums> sums = assignAll(src, seeds, indexCell, box, thin, o.threads, stats.samplePasses);
     for (uint32_t l = 0; l < levels; ++l) {
       const CellSums& s = sums[l];
       uint32_t n = uint32_t(s.count.size());
-      double mean = double(N) / n;
+      double mean = double(Nl[l]) / n;
       std::vector<float> moved;
       moved.reserve(seeds[l].size());
       // Splits are budgeted so the level stays under the trim limit of pass 4 (trimming would
@@ -460,11 +521,11 @@ PartitionSequence buildIrregularSequence(const CentroidSource& src, const VParti
     // The query cells the mesh touches, for the shared candidate table of the final index
     // (same frame: origin box.lo, cell indexCell[l]), so random-order lookups stay fast.
     std::vector<CellSums> sums =
-        assignAll(src, seeds, indexCell, box, o.threads, stats.passes, &queryCells);
+        assignAll(src, seeds, indexCell, box, thin, o.threads, stats.samplePasses, &queryCells);
     for (uint32_t l = 0; l < levels; ++l) {
       const CellSums& s = sums[l];
       uint32_t n = uint32_t(s.count.size());
-      double mean = double(N) / n;
+      double mean = double(Nl[l]) / n;
       std::vector<uint32_t> keep;
       for (uint32_t i = 0; i < n; ++i)
         if (s.count[i] > 0 && (n == 1 || s.count[i] >= kMinCellFraction * mean)) keep.push_back(i);
@@ -511,11 +572,11 @@ PartitionSequence buildIrregularSequence(const CentroidSource& src, const VParti
 
   // Pass 5, only after a late split: drop the cells that became empty or too small.
   if (recount) {
-    std::vector<CellSums> sums = assignAll(src, seeds, indexCell, box, o.threads, stats.passes);
+    std::vector<CellSums> sums = assignAll(src, seeds, indexCell, box, thin, o.threads, stats.samplePasses);
     for (uint32_t l = 0; l < levels; ++l) {
       const CellSums& s = sums[l];
       uint32_t n = uint32_t(s.count.size());
-      double mean = double(N) / n;
+      double mean = double(Nl[l]) / n;
       std::vector<float> kept;
       for (uint32_t i = 0; i < n; ++i) {
         if (s.count[i] == 0 || (n > 1 && s.count[i] < kMinCellFraction * mean)) {
@@ -548,6 +609,7 @@ PartitionSequence buildIrregularSequence(const CentroidSource& src, const VParti
     seq.addLevel(std::move(L));
   }
   stats.seedBytes = std::max(stats.seedBytes, seq.memoryBytes() + density.bytes());
+  stats.sampleBytes = sample.bytes();
   stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   seq.mutableStats() = stats;
   return seq;

@@ -75,9 +75,9 @@ std::string formatMetricsText(const PartitionMetrics& m) {
   s << line;
   if (m.build.passes) {  // known right after a build, not for a sequence read back from a store
     std::snprintf(line, sizeof line,
-                  "; built in %u passes (%u calibration), %.2f s, %" PRIu64
+                  "; built in %u passes over the input + %u over a 1/%" PRIu64 " sample (%u calibration), %.2f s, %" PRIu64
                   " seeds removed, %.1f MiB seeds+grids",
-                  m.build.passes, m.build.calibrationPasses, m.build.seconds,
+                  m.build.passes, m.build.samplePasses, m.build.sampleStride, m.build.calibrationPasses, m.build.seconds,
                   m.build.removedSeeds, m.build.seedBytes / 1048576.0);
     s << line;
   }
@@ -103,7 +103,8 @@ std::string formatMetricsJson(const PartitionMetrics& m) {
   std::ostringstream s;
   s.precision(6);
   s << "{\"kind\":\"" << partitionKindName(m.kind) << "\",\"triangles\":" << m.triangles
-    << ",\"passes\":" << m.build.passes << ",\"calibrationPasses\":" << m.build.calibrationPasses
+    << ",\"passes\":" << m.build.passes << ",\"samplePasses\":" << m.build.samplePasses
+    << ",\"sampleStride\":" << m.build.sampleStride << ",\"calibrationPasses\":" << m.build.calibrationPasses
     << ",\"removedSeeds\":" << m.build.removedSeeds << ",\"seedBytes\":" << m.build.seedBytes
     << ",\"seconds\":" << m.build.seconds << ",\"levels\":[";
   for (size_t i = 0; i < m.levels.size(); ++i) {

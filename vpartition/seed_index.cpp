@@ -251,7 +251,17 @@ uint32_t SeedIndex::nearestCached(const float p[3]) const {
   const uint64_t key = queryCell(p);
   const uint32_t* cand;
   uint32_t count;
-  if (const Slot* s = findShared(key)) {
+  // Spatially coherent streams (Morton-ordered ingest, a region's triangles in mtbuild) ask the
+  // same query cell many times in a row: keep this thread's last candidate list per index (a
+  // copy: cache entries may be refilled by other indexes) and skip the hash probes.
+  struct Last { const SeedIndex* index; uint64_t uid, key; uint32_t count; uint32_t cand[kMaxCandidates]; };
+  // One slot per index (uid mod 8), since crossKey alternates between two levels' indexes.
+  thread_local Last lastSlots[8] = {};
+  Last& last = lastSlots[uid_ & 7];
+  if (last.index == this && last.uid == uid_ && last.key == key) {
+    cand = last.cand;
+    count = last.count;
+  } else if (const Slot* s = findShared(key)) {
     cand = sharedCand_.data() + s->begin;
     count = s->end - s->begin;
   } else {
@@ -269,6 +279,11 @@ uint32_t SeedIndex::nearestCached(const float p[3]) const {
     cand = e.cand;
     count = e.count;
   }
+  last.index = this;
+  last.uid = uid_;
+  last.key = key;
+  last.count = std::min(count, kMaxCandidates);
+  std::copy(cand, cand + last.count, last.cand);
   if (count == 0) return nearest(p);
   // Candidates ascend by index, so strict < keeps the lower index on ties.
   uint32_t best = cand[0];

@@ -54,7 +54,11 @@ struct VPartitionOptions {
 
 // What building cost, for logs and the report.
 struct PartitionBuildStats {
-  uint32_t passes = 0;          // streaming passes over the centroids
+  uint32_t passes = 0;          // streaming passes over the input centroids
+  uint32_t samplePasses = 0;    // irregular: passes over the in-memory sample (area, seeding,
+                                // Lloyd, recounts)
+  uint64_t sampleStride = 1;    // irregular: every sampleStride-th centroid was sampled
+  uint64_t sampleBytes = 0;     // irregular: bytes of that sample (not in seedBytes)
   uint32_t calibrationPasses = 0;  // of which re-seeding passes to hit the cell-count targets
   uint64_t removedSeeds = 0;    // irregular: seeds dropped because their cells were too small
   uint64_t splitSeeds = 0;      // irregular: cells split in two because they were too big
@@ -131,6 +135,10 @@ inline void triangleCentroid(const double* a, const double* b, const double* c, 
 PartitionSequence buildRegularSequence(const CentroidSource& centroids, const VPartitionOptions& o);
 PartitionSequence buildIrregularSequence(const CentroidSource& centroids,
                                          const VPartitionOptions& o);
+namespace vp { struct CentroidSample; }
+// The irregular builder on a sample taken by vp::sampleCentroids (level.h); the level targets
+// come from the sample's input count.
+PartitionSequence buildIrregularFromSample(const vp::CentroidSample& sample, const VPartitionOptions& o);
 
 // The ingest-side CellAssigner: prepare() builds the sequence, cellKey() = crossKey(0, c),
 // serialize() = the sequence bytes (stored as blob "assigner"; mtbuild rebuilds the same sequence
@@ -148,7 +156,7 @@ class VPartitionAssigner : public CellAssigner {
   const PartitionSequence& sequence() const { return sequence_; }
 
  private:
-  void mergeSlivers(const CentroidSource& centroids);
+  void mergeSlivers(const vp::CentroidSample& sample);
   VPartitionOptions options_;
   PartitionSequence sequence_;
   std::unordered_map<uint64_t, uint64_t> remap_;  // sliver V*0 key -> the key it joins
