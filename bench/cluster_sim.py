@@ -4,9 +4,10 @@ by `mtbuild --task-times` (or mtcluster's) on a scan scaled to TARGET triangles,
 
 Model (what cluster/cluster_build.cpp does):
   * ingest + planning run on rank 0 alone (measured seconds per input triangle, scaled linearly);
-  * per level, rank 0 is one serial server: for each region it loads + assembles the floor and
-    sends the task over its NIC, and later receives the result and commits it, in region order,
-    at most `window` = 2N+2 regions ahead of the commit point; the level ends with a sync;
+  * per level, rank 0 has two serial servers: a dispatch thread that loads + assembles a floor
+    and sends it over its NIC, and receives results; a commit thread that commits them in region
+    order (--no-overlap: one thread does both, the first version); at most `window` = 2N+2
+    regions ahead of the commit point; the level ends with a sync;
   * each worker processes one region at a time (process_s measured), regions handed out to
     whichever worker is idle first (a work queue);
   * rank 0 also works when N <= 4 (ignored here: N >= 8);
@@ -33,26 +34,43 @@ def load(path):
     return levels
 
 
-def simulate_level(tasks, workers, bandwidth, window):
-    """Event simulation of one level. Returns (seconds, rank0_busy, worker_busy)."""
+def simulate_level(tasks, workers, bandwidth, window, overlap=True):
+    """Event simulation of one level. Returns (seconds, rank0_busy, worker_busy).
+
+    Rank 0 has a dispatch thread (load + send + receive, one at a time) and, with `overlap`, a
+    commit thread (commits in region order) - cluster_build.cpp's Committer; without it, one
+    thread does both (the first version)."""
     n = len(tasks)
-    t = 0.0                       # rank 0's clock (it is a serial server)
+    t = 0.0                       # the dispatch thread's clock
+    c = 0.0                       # the commit thread's clock (== t without overlap)
     free = [(0.0, w) for w in range(workers)]   # (time the worker is idle, worker)
     heapq.heapify(free)
-    done = {}                     # region index -> time its result is back at rank 0
-    nxt = committed = 0
+    back = {}                     # region -> time its result has been received by rank 0
+    done_at = []                  # commit finish times, in order
+    nxt = 0
     rank0 = 0.0
     busy = 0.0
-    while committed < n:
-        # Commit what has arrived, in order; otherwise dispatch; otherwise wait.
-        if committed in done and done[committed] <= t:
+    pending = []                  # (result arrival, region) not yet received
+    fin = 0                       # commits finished by the dispatch thread's time (done_at is sorted)
+    while len(done_at) < n:
+        committed = len(done_at)
+        # The commit thread: next region in order, once received.
+        if committed in back and (overlap or back[committed] <= t):
             r = tasks[committed]
-            dt = r["commit_s"] + r["result_bytes"] / bandwidth
-            t += dt
+            start = max(c if overlap else t, back[committed])
+            dt = r["commit_s"]
+            if overlap:
+                c = start + dt
+            else:
+                t = start + dt
             rank0 += dt
-            committed += 1
+            done_at.append(c if overlap else t)
             continue
-        if nxt < n and nxt < committed + window and free[0][0] <= t:
+        # Window: how many commits have finished by the dispatch thread's time.
+        while fin < len(done_at) and done_at[fin] <= t:
+            fin += 1
+        finished = fin if overlap else committed
+        if nxt < n and nxt < finished + window and free[0][0] <= t:
             idle_at, w = heapq.heappop(free)
             r = tasks[nxt]
             dt = r["load_s"] + r["task_bytes"] / bandwidth
@@ -60,18 +78,20 @@ def simulate_level(tasks, workers, bandwidth, window):
             rank0 += dt
             finish = t + r["process_s"]
             busy += r["process_s"]
-            done[nxt] = finish
+            heapq.heappush(pending, (finish, nxt))
             heapq.heappush(free, (finish, w))
             nxt += 1
             continue
-        # Nothing to do now: wait for the next event.
-        events = [done[committed]] if committed in done else []
-        if nxt < n and nxt < committed + window:
-            events.append(free[0][0])
-        if not events:  # waiting for a result that is not the next to commit
-            events = [min(v for k, v in done.items() if k >= committed)]
-        t = max(t, min(events))
-    return t, rank0, busy
+        # Receive the earliest result (the dispatch thread's time moves to its arrival).
+        if pending:  # (dispatch was not possible now)
+            arrive, i = heapq.heappop(pending)
+            t = max(t, arrive) + tasks[i]["result_bytes"] / bandwidth
+            rank0 += tasks[i]["result_bytes"] / bandwidth
+            back[i] = t
+            continue
+        # Waiting for a commit to open the window, or for a worker.
+        t = done_at[fin] if fin < len(done_at) else max(t, free[0][0])
+    return max(t, c, done_at[-1]), rank0, busy
 
 
 def main():
@@ -83,6 +103,7 @@ def main():
     ap.add_argument("--bandwidth", type=float, default=117e6, help="rank 0's NIC, bytes/s (117e6: 1 GbE)")
     ap.add_argument("--cores", type=int, default=1, help="worker ranks per machine (the measured times are 1 core)")
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--no-overlap", action="store_true", help="rank 0 loads, sends and commits on one thread")
     ap.add_argument("--ingest-seconds", type=float, default=None,
                     help="ingest seconds of the measured scan (default: from --stats; override with a quieter run)")
     args = ap.parse_args()
@@ -130,7 +151,7 @@ def main():
         total = ingest
         rows = []
         for l, tasks in plan:
-            secs, rank0, busy = simulate_level(tasks, max(1, workers), args.bandwidth, 2 * (workers + 1) + 2)
+            secs, rank0, busy = simulate_level(tasks, max(1, workers), args.bandwidth, 2 * (workers + 1) + 2, not args.no_overlap)
             net = sum(t["task_bytes"] + t["result_bytes"] for t in tasks)
             rows.append((l, len(tasks), rank0, busy, secs, net, max(t["process_s"] for t in tasks)))
             total += secs
@@ -138,7 +159,7 @@ def main():
         levels_time = total - ingest
         print(f"machines {machines:3d}: total {total:7.0f} s = ingest {ingest:.0f} s + levels {levels_time:.0f} s; "
               f"speedup vs 1 core {(ingest + serial_work) / total:5.1f}x, levels alone {serial_work / levels_time:5.1f}x "
-              f"(efficiency {serial_work / levels_time / max(1, workers):.0%})")
+              f"(efficiency {serial_work / levels_time / machines:.0%} of {machines} machines)")
     total, rows = results[max(results)]
     for l, n, rank0, busy, secs, net, longest in rows:
         print(f"  level {l:2d}: {n:7d} regions  rank0 {rank0:7.1f} s  workers {busy:8.1f} s  level {secs:7.1f} s  "

@@ -26,8 +26,12 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <condition_variable>
+#include <exception>
 #include <map>
 #include <memory>
+#include <mutex>
+#include <thread>
 #include <sstream>
 
 #include "cluster/region_messages.h"
@@ -142,6 +146,89 @@ void stopAll(int size, std::vector<RankStats>& stats) {
   }
 }
 
+// Rank 0's commits run on their own thread, so that loading and sending the next regions overlaps
+// committing the previous ones: per region, rank 0's critical path is max(load + messages,
+// commit) instead of their sum (docs/cluster.md). Commits stay in region order; only this thread
+// commits; loadRegion() may run concurrently with commitRegion() (disjoint patch sets, as in
+// mtbuild's pipeline). MPI is called by the main thread only (MPI_THREAD_FUNNELED).
+struct Committer {
+  struct Item {
+    RegionTask task;
+    RegionResult result;
+    uint64_t moved = 0;
+  };
+  LevelBuilder& builder;
+  std::mutex m;
+  std::condition_variable cv;
+  std::map<size_t, Item> ready;
+  size_t committed = 0;
+  bool stop = false;
+  std::exception_ptr error;
+  double seconds = 0;
+  std::thread thread;
+
+  explicit Committer(LevelBuilder& b) : builder(b) { thread = std::thread([this] { loop(); }); }
+  ~Committer() {
+    {
+      std::lock_guard<std::mutex> lock(m);
+      stop = true;
+    }
+    cv.notify_all();
+    thread.join();
+  }
+  void startLevel() {
+    std::lock_guard<std::mutex> lock(m);
+    committed = 0;
+  }
+  void add(size_t index, Item item) {
+    {
+      std::lock_guard<std::mutex> lock(m);
+      ready.emplace(index, std::move(item));
+    }
+    cv.notify_all();
+  }
+  // Regions committed so far in this level; rethrows a commit's error.
+  size_t done() {
+    std::lock_guard<std::mutex> lock(m);
+    if (error) std::rethrow_exception(error);
+    return committed;
+  }
+  // Waits until more than `seen` regions are committed, or `timeout` passes.
+  void waitPast(size_t seen, std::chrono::milliseconds timeout) {
+    std::unique_lock<std::mutex> lock(m);
+    cv.wait_for(lock, timeout, [&] { return committed > seen || error; });
+  }
+  void loop() {
+    for (;;) {
+      Item item;
+      size_t index;
+      {
+        std::unique_lock<std::mutex> lock(m);
+        cv.wait(lock, [&] { return stop || ready.count(committed); });
+        if (stop) return;  // the run ended (all committed) or failed: commit nothing more
+        index = committed;
+        item = std::move(ready.at(index));
+        ready.erase(index);
+      }
+      try {
+        auto t0 = Clock::now();
+        builder.commitRegion(index, std::move(item.task), std::move(item.result), item.moved);
+        seconds += secondsSince(t0);
+      } catch (...) {
+        std::lock_guard<std::mutex> lock(m);
+        error = std::current_exception();
+        cv.notify_all();
+        return;
+      }
+      {
+        std::lock_guard<std::mutex> lock(m);
+        ++committed;
+      }
+      cv.notify_all();
+    }
+  }
+};
+
 struct Master {
   LevelBuilder& builder;
   int size;
@@ -170,30 +257,22 @@ struct Master {
     // simplifying would delay handing out the next ones.
     const bool masterWorks = size <= 4;
     const size_t window = size_t(2 * size + 2);
+    Committer committer(builder);
     while (builder.beginLevel()) {
       const size_t n = builder.regionCount();
       const uint32_t level = builder.level();
-      std::map<size_t, RegionTask> tasks;        // loaded and not yet committed
-      std::map<size_t, RegionResult> results;    // finished, waiting for their turn
+      committer.startLevel();
+      std::map<size_t, RegionTask> tasks;  // handed out, result not back yet
       std::map<size_t, uint64_t> moved;
       std::vector<int64_t> holding(size_t(size), -1);
       std::vector<uint32_t> regionOf(size_t(size), 0);
-      size_t next = 0, committed = 0;
+      size_t next = 0;
       note(level, holding, regionOf);
-      while (committed < n) {
+      for (;;) {
+        const size_t committed = committer.done();
+        if (committed == n) break;
         bool progressed = false;
-        // 1. Commit what is ready, in region order.
-        while (results.count(committed)) {
-          auto t0 = Clock::now();
-          builder.commitRegion(committed, std::move(tasks.at(committed)), std::move(results.at(committed)), moved[committed]);
-          tasks.erase(committed);
-          results.erase(committed);
-          moved.erase(committed);
-          ++committed;
-          commitSeconds += secondsSince(t0);
-          progressed = true;
-        }
-        // 2. Hand regions to idle workers.
+        // 1. Hand regions to idle workers (at most `window` ahead of the commits).
         for (int r = 1; r < size && next < n && next < committed + window; ++r) {
           if (holding[size_t(r)] >= 0) continue;
           auto t0 = Clock::now();
@@ -209,17 +288,18 @@ struct Master {
           ++next;
           progressed = true;
         }
-        // 3. Take in every result that has arrived.
+        // 2. Take in every result that has arrived; the committer takes them in order.
         for (;;) {
           int flag = 0;
           MPI_Status st;
           check(MPI_Iprobe(MPI_ANY_SOURCE, MPI_ANY_TAG, MPI_COMM_WORLD, &flag, &st), "probe", -1);
           if (!flag) break;
-          accept(st, holding, moved, results, level);
+          size_t index = accept(st, holding, moved, level, committer, tasks);
+          (void)index;
           progressed = true;
         }
         if (progressed) continue;
-        // 4. Nothing arrived: work on a region here, or wait for a worker.
+        // 3. Nothing arrived: work on a region here, or wait for a worker or a commit.
         bool anyBusy = std::any_of(holding.begin() + 1, holding.end(), [](int64_t h) { return h >= 0; });
         if ((masterWorks || !anyBusy) && next < n && next < committed + window) {
           auto t0 = Clock::now();
@@ -228,22 +308,21 @@ struct Master {
           RegionResult result = processRegion(task, builder.context());
           stats[0].processSeconds += result.seconds;
           ++stats[0].tasks;
-          results.emplace(next, std::move(result));
-          tasks.emplace(next, std::move(task));
+          committer.add(next, {std::move(task), std::move(result), 0});
           ++next;
           continue;
         }
-        MPI_Status st;
-        check(MPI_Probe(MPI_ANY_SOURCE, MPI_ANY_TAG, MPI_COMM_WORLD, &st), "probe", -1);
-        accept(st, holding, moved, results, level);
+        // A commit may open the window for an idle worker; a result may arrive: poll both.
+        committer.waitPast(committed, std::chrono::milliseconds(anyBusy ? 1 : 50));
       }
       std::snprintf(gStopNote, sizeof gStopNote, "after level %u was checkpointed (rerun with --resume)\n", level);
       builder.endLevel();
     }
+    commitSeconds = committer.seconds;
   }
 
-  void accept(const MPI_Status& st, std::vector<int64_t>& holding, std::map<size_t, uint64_t>& moved,
-              std::map<size_t, RegionResult>& results, uint32_t level) {
+  size_t accept(const MPI_Status& st, std::vector<int64_t>& holding, std::map<size_t, uint64_t>& moved, uint32_t level,
+                Committer& committer, std::map<size_t, RegionTask>& tasks) {
     const int r = st.MPI_SOURCE;
     std::string bytes = receive(st, stats[0].bytesReceived);
     if (st.MPI_TAG == kError) fail("mtcluster", bytes);
@@ -252,11 +331,14 @@ struct Master {
                             std::to_string(level));
     uint64_t index = 0;
     RegionResult result = decodeResult(bytes, index);
-    if (holding[size_t(r)] != int64_t(index))
+    if (holding[size_t(r)] != int64_t(index) || !tasks.count(size_t(index)))
       fail("mtcluster", "rank " + std::to_string(r) + " returned region index " + std::to_string(index) + " it was not given");
     holding[size_t(r)] = -1;
-    moved[index] += bytes.size();
-    results.emplace(size_t(index), std::move(result));
+    uint64_t total = moved[index] + bytes.size();
+    moved.erase(index);
+    committer.add(size_t(index), {std::move(tasks.at(size_t(index))), std::move(result), total});
+    tasks.erase(size_t(index));
+    return size_t(index);
   }
 
   void stopWorkers() { stopAll(size, stats); }

@@ -67,7 +67,9 @@ int main(int argc, char** argv) {
     if (rankZero) std::fprintf(stderr, "mtcluster: %s\n", e.what());
     return 1;
   }
-  MPI_Init(&argc, &argv);
+  // Rank 0 commits on a second thread; only the main thread calls MPI.
+  int provided = 0;
+  MPI_Init_thread(&argc, &argv, MPI_THREAD_FUNNELED, &provided);
   int rank = 0;
   MPI_Comm_rank(MPI_COMM_WORLD, &rank);
   try {
