@@ -2,7 +2,7 @@
 # Ingest benchmark (issue: patch store). Generates an mtgen scan (default 53M triangles, ~1 GB of
 # PLY, with holes and shuffled faces), ingests it with a memory cap, and prints throughput (input
 # triangles/s), peak RSS (/usr/bin/time -v) and store size; then exports and checks the round trip
-# size. Usage: bench/ingest.sh [TRIANGLES=53M] [MEMORY=256M] [WORKDIR=out/bench-ingest]
+# size, with per-stage wall/CPU seconds. Usage: bench/ingest.sh [TRIANGLES=53M] [MEMORY=256M] [WORKDIR=out/bench-ingest]
 set -euo pipefail
 cd "$(dirname "$0")/.."
 triangles="${1:-53M}"; memory="${2:-256M}"; work="${3:-out/bench-ingest}"
@@ -13,6 +13,10 @@ mesh="$work/scan-$triangles.ply"
 rm -rf "$work/store"
 /usr/bin/time -v "$bin/mtstore" ingest "$mesh" -o "$work/store" --memory "$memory" 2> "$work/ingest.log" || { cat "$work/ingest.log"; exit 1; }
 grep -E "^ingest: [a-z]+: [0-9.]+ M" "$work/ingest.log" || true
+# Per-stage wall and CPU seconds (CPU is what to compare on a shared machine).
+grep -E "^ingest: stage " "$work/ingest.log" || true
+cpu=$(awk '/User time|System time/ {s += $NF} END {print s}' "$work/ingest.log")
+echo "ingest: total CPU ${cpu} s (user + system)"
 tris=$(grep -oE "ingested [0-9]+" "$work/ingest.log" | grep -oE "[0-9]+")
 secs=$(grep -E "Elapsed \(wall" "$work/ingest.log" | awk '{print $NF}' | awk -F: '{ if (NF==3) print $1*3600+$2*60+$3; else print $1*60+$2 }')
 rss=$(grep -E "Maximum resident" "$work/ingest.log" | awk '{print $NF}')

@@ -144,6 +144,42 @@ TEST(Irregular, SeedMemoryDoesNotGrowWithTriangles) {
   EXPECT_EQ(b.passes, bs.stats().passes);
 }
 
+TEST(Irregular, SampledInputKeepsShapeAndBalancedPatches) {
+  // Above the whole-input limit (512 K triangles) the builder and the patch balancing run on a
+  // stride sample from one pass; the cells and patches must still meet the same limits.
+  TestMesh mesh = test::closedBlob(230);
+  MemoryCentroids src(mesh);
+  ASSERT_GT(src.count(), 600000u);
+  VPartitionOptions o;
+  o.patchTriangles = 400;
+  VPartitionAssigner assigner(o);
+  assigner.prepare(src, 64ull << 20);
+  const PartitionSequence& seq = assigner.sequence();
+  EXPECT_GT(seq.stats().sampleStride, 1u);
+  EXPECT_EQ(seq.stats().passes, 1u);
+  EXPECT_EQ(src.passes, 1u);  // prepare read the input once
+  PartitionMetrics m = computeMetrics(seq, src);
+  std::printf("%s", formatMetricsText(m).c_str());
+  for (const LevelMetrics& l : m.levels) {
+    SCOPED_TRACE("level " + std::to_string(l.level));
+    EXPECT_EQ(l.cells, seq.cellCount(l.level));
+    if (l.target >= 16) {
+      EXPECT_NEAR(double(l.cells) / l.target, 1.0, 0.15);
+      EXPECT_LE(l.maxTriangles / l.meanTriangles, 2.0);
+    }
+    EXPECT_LE(l.backwardStarMean, 8.0);
+    EXPECT_LE(l.backwardStarMax, 16u);
+  }
+  std::map<uint64_t, uint32_t> patches;
+  for (size_t t = 0; t < src.count(); ++t) ++patches[assigner.cellKey(&src.data()[4 * t])];
+  uint32_t maxPatch = 0, minPatch = UINT32_MAX;
+  for (auto& [key, count] : patches) maxPatch = std::max(maxPatch, count), minPatch = std::min(minPatch, count);
+  double mean = double(src.count()) / double(patches.size());
+  std::printf("sampled: patches %zu, min %u mean %.1f max %u\n", patches.size(), minPatch, mean, maxPatch);
+  EXPECT_LE(maxPatch / mean, 2.0);
+  EXPECT_GE(minPatch, o.patchTriangles / 8);
+}
+
 TEST(Irregular, TinyAndEmptyInputs) {
   MemoryCentroids empty;
   Box3 box;

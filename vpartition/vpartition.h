@@ -165,6 +165,11 @@ class VPartitionAssigner : public CellAssigner {
     std::vector<float> bounds;  // ascending: slab k is [bounds[k-1], bounds[k])
   };
   std::unordered_map<uint64_t, Slabs> slabs_;  // oversized V*0 key -> its cut into slabs
+  // Sampled inputs only: the pieces the sample saw, and per V0 cell the key its largest piece
+  // ends up with. A piece the sample missed holds a few triangles (< ~stride): it joins that.
+  bool sampled_ = false;
+  std::unordered_map<uint64_t, uint64_t> seen_;      // piece key -> final key (itself or joined)
+  std::unordered_map<uint32_t, uint64_t> largest_;   // V0 cell -> final key of its largest piece
 };
 
 std::unique_ptr<CellAssigner> makeVPartitionAssigner(const VPartitionOptions& options);
