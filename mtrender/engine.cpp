@@ -113,8 +113,17 @@ FrameRecord Engine::frame(const CameraPose& pose, const CameraPose& prev, GlRend
   const auto& arcs = scene_->arcs();
   const auto& nodes = scene_->nodes();
   baselineLoads_ = 0;
+  // Front to back (by the distance of the arc's bounding sphere): llvmpipe tests depth before
+  // shading, so near surfaces drawn first spare the shading of what they hide.
+  drawOrder_.clear();
   for (uint32_t a : extract_->cutArcs()) {
     if (!extract_->arcVisible(a, view)) continue;
+    const SceneNode& s = nodes[arcs[a].cullNode];
+    const glm::dvec3 c(s.center[0], s.center[1], s.center[2]);
+    drawOrder_.push_back({glm::length(c - view.eye) - double(s.radius), a});
+  }
+  std::sort(drawOrder_.begin(), drawOrder_.end());
+  for (const auto& [dist, a] : drawOrder_) {
     const SceneArc& arc = arcs[a];
     const uint32_t level = nodes[arc.from].level;
     for (uint32_t k = 0; k < arc.patchCount; ++k) {

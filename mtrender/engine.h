@@ -9,6 +9,7 @@
 #include <memory>
 #include <string>
 #include <unordered_set>
+#include <utility>
 #include <vector>
 
 #include "mtrender/camera.h"
@@ -69,6 +70,7 @@ class Engine {
   glm::dvec3 center_{0};
   double radius_ = 1;
   uint64_t frame_ = 0, lastLoads_ = 0;
+  std::vector<std::pair<double, uint32_t>> drawOrder_;  // (distance, cut arc), reused every frame
   // baseline
   std::vector<const uint8_t*> maps_;
   std::vector<uint64_t> mapSizes_;

@@ -39,37 +39,32 @@ EglContext::~EglContext() {
 
 namespace {
 
+// A headlight, lit on both sides (scans are open surfaces: their back shows through holes).
+// Lit per vertex (Gouraud): at the triangle sizes of a budgeted cut (a few pixels each) it looks
+// the same as per-pixel lighting, and llvmpipe shades ~10x more fragments than vertices.
 const char* kVertexShader = R"(#version 450 core
 layout(location = 0) in vec3 position;
 layout(location = 1) in vec4 normal;
 layout(location = 2) in vec4 color;
 uniform mat4 mvp;
 uniform mat4 mv;
-out vec3 vNormal;
-out vec3 vPos;
+uniform vec3 tint;
+uniform int mode;
 out vec4 vColor;
 void main() {
   gl_Position = mvp * vec4(position, 1.0);
-  vNormal = mat3(mv) * normal.xyz;
-  vPos = (mv * vec4(position, 1.0)).xyz;
-  vColor = color;
+  vec3 n = normalize(mat3(mv) * normal.xyz);
+  vec3 p = (mv * vec4(position, 1.0)).xyz;
+  float d = abs(dot(n, normalize(-p)));
+  vec3 base = mode == 0 ? color.rgb * vec3(0.85, 0.82, 0.75) : tint;
+  vColor = vec4(base * (0.2 + 0.8 * d), 1.0);
 }
 )";
 
-// A headlight, lit on both sides (scans are open surfaces: their back shows through holes).
 const char* kFragmentShader = R"(#version 450 core
-in vec3 vNormal;
-in vec3 vPos;
 in vec4 vColor;
-uniform vec3 tint;
-uniform int mode;
 out vec4 fragColor;
-void main() {
-  vec3 n = normalize(vNormal);
-  float d = abs(dot(n, normalize(-vPos)));
-  vec3 base = mode == 0 ? vColor.rgb * vec3(0.85, 0.82, 0.75) : tint;
-  fragColor = vec4(base * (0.2 + 0.8 * d), 1.0);
-}
+void main() { fragColor = vColor; }
 )";
 
 uint32_t compile(GLenum type, const char* src) {
@@ -174,6 +169,34 @@ void GlRenderer::beginFrame(const View& view, const DrawSettings& s) {
   glUniform3f(locTint_, 1, 1, 1);
   mode_ = s.mode;
   glBindVertexArray(vao_);
+}
+
+void GlRenderer::warmUp(const DrawSettings& settings) {
+  View v;
+  v.width = std::max(width_, 1);
+  v.height = std::max(height_, 1);
+  beginFrame(v, settings);
+  // A small visible triangle (identity matrices: clip space), so the draw reaches rasterization.
+  RenderVertex tri[3] = {};
+  const float xy[3][2] = {{-0.05f, -0.05f}, {0.05f, -0.05f}, {0.0f, 0.05f}};
+  const float up[3] = {0, 0, 1};
+  for (int k = 0; k < 3; ++k) {
+    tri[k].position[0] = xy[k][0];
+    tri[k].position[1] = xy[k][1];
+    tri[k].normal = packNormal(up);
+  }
+  const uint32_t idx[3] = {0, 1, 2};
+  GLuint b = 0;
+  glCreateBuffers(1, &b);
+  glNamedBufferStorage(b, sizeof tri + sizeof idx, nullptr, GL_DYNAMIC_STORAGE_BIT);
+  glNamedBufferSubData(b, 0, sizeof tri, tri);
+  glNamedBufferSubData(b, sizeof tri, sizeof idx, idx);
+  glVertexArrayVertexBuffer(vao_, 0, b, 0, sizeof(RenderVertex));
+  glVertexArrayElementBuffer(vao_, b);
+  glDrawElements(GL_TRIANGLES, 3, GL_UNSIGNED_INT, reinterpret_cast<const void*>(sizeof tri));
+  glFinish();
+  glDeleteBuffers(1, &b);
+  --frame_;  // not a frame of the cut
 }
 
 uint32_t GlRenderer::drawPatch(uint32_t id, uint32_t level, const std::function<PatchView()>& fetch) {

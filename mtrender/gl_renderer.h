@@ -45,6 +45,10 @@ class GlRenderer {
   // Renders into an offscreen FBO of this size (headless) instead of the default framebuffer.
   void useOffscreen(int width, int height);
   void beginFrame(const View& view, const DrawSettings& settings);
+  // Draws one small triangle with the frame's state and waits: llvmpipe compiles its shader
+  // variants (LLVM JIT) at the first draw, so doing it while the files open takes it off the
+  // first frame.
+  void warmUp(const DrawSettings& settings);
   // Draws patch `id`; uploads it first when it is not on the GPU, taking its data from fetch()
   // (a PatchView with vertexCount 0 = unavailable: nothing drawn). Returns triangles drawn.
   uint32_t drawPatch(uint32_t id, uint32_t level, const std::function<PatchView()>& fetch);

@@ -204,6 +204,7 @@ int main(int argc, char** argv) {
     EglContext egl;
     GlRenderer gl(eo.gpuCacheBytes ? eo.gpuCacheBytes : eo.cacheBytes);
     gl.useOffscreen(width, height);
+    gl.warmUp(ds);
     const double eglMs = msSince(t0);
     std::unique_ptr<Engine> enginePtr = pending.get();
     Engine& engine = *enginePtr;
