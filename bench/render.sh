@@ -12,7 +12,8 @@
 #      each with its peak RSS (GNU time) since no cgroup memory limit is available here.
 #
 # Environment: FRAMES (600), WIDTH (1280), HEIGHT (720), BUDGET_MS (50), CAMERA (flythrough),
-# CACHES ("32M 64M 128M 256M"), OUT (a fresh directory under /tmp), BIN (build/bin).
+# CACHES ("32M 64M 128M 256M"), OUT (a fresh directory under /tmp), BIN (build/bin),
+# THROUGHPUT (1: also section 3, raw draw throughput for RAW_TRIANGLES="1000 50000 200000 400000").
 # Miss rate = patches wanted for a cut move but not resident / (those + patches drawn), per run.
 set -euo pipefail
 if [[ $# -lt 1 ]]; then
@@ -81,4 +82,25 @@ printf "%-16s %10s %8s %12s %10s %10s %10s %14s %12s\n" "baseline mmap" "$(val $
   "$(val $n frame_ms_median)" "$(p99 $n)" "$(val $n within_budget_pct)" "$(val $n extract_ms_median)" "-" \
   "$(mib "$(( $(val $n peak_rss_kib) * 1024 ))")"
 echo "(baseline: misses = patches decoded synchronously inside frames; its GPU buffer cache is capped at 256 MiB)"
+
+# 3. Raw llvmpipe throughput on this machine: the path's final (held) view, a fixed cut of N
+#    triangles (--fixed-triangles, the time model off), 60 frames each; ms per frame and the
+#    drawn triangles per second (wall and CPU). Tells the draw cost apart from the budget logic.
+if [[ ${THROUGHPUT:-1} == 1 ]]; then
+  echo
+  echo "== raw draw throughput (final view of the path, fixed cut, ${WIDTH}x${HEIGHT}, 60 frames)"
+  printf "%-12s %10s %10s %12s %12s\n" triangles drawn frame_med_ms Mtri_s_wall Mtri_s_cpu
+  # The flythrough's final pose (camera.cpp), in unit space; CPU time includes start-up (~0.2 s).
+  printf "space unit\nfov 45\n0.3 -1.3 0.7  0.05 0.1 0\n" > "$OUT/final.path"
+  for n in ${RAW_TRIANGLES:-1000 50000 200000 400000}; do
+    $GNUTIME -f "cpu_s %U %S" -o "$OUT/raw-$n.cpu" "$BIN/mtrender" "$@" --headless --quiet \
+      --camera-path "$OUT/final.path" --frames 60 --width "$WIDTH" --height "$HEIGHT" --fixed-triangles "$n" \
+      --stats "$OUT/raw-$n.csv" > "$OUT/raw-$n.out" 2>/dev/null || { echo "raw $n failed"; continue; }
+    drawn=$(tail -1 "$OUT/raw-$n.csv" | cut -d, -f10)
+    med=$(val "raw-$n" frame_ms_median)
+    awk -v n="$n" -v d="$drawn" -v m="$med" -v f="$OUT/raw-$n.cpu" 'BEGIN {
+      getline l < f; split(l, c, " "); cpu = (c[2] + c[3]) / 60 * 1000;
+      printf "%-12s %10s %10s %12.2f %12.2f\n", n, d, m, d / m / 1000, d / cpu / 1000 }'
+  done
+fi
 echo "outputs: $OUT"
