@@ -28,7 +28,7 @@ int main(int argc, char** argv) {
   app.add_option("--memory", memory, "Memory cap of rank 0's ingest and store, e.g. 512M, 4G (default 1G)");
   app.add_option("--threads", threads, "Threads of a one-rank run (default: all cores); the output does not depend on it");
   app.add_option("--partition", partition, "V-partition: irregular (default; BMT 4.2.2) or regular (4.2.1)");
-  app.add_option("--patch-triangles", patchTriangles, "Target triangles per patch (default: mtbuild's, see docs/vpartition.md)");
+  app.add_option("--patch-triangles", patchTriangles, "Target triangles per patch (default 2000, as mtbuild; see docs/mt-format.md)");
   app.add_option("--codec", codec, "Patch coding: meshopt (default, fast decode) or draco (smallest files)");
   app.add_flag("--normals", normals, "Store per-vertex normals (2x8 bit) instead of letting the renderer compute them");
   app.add_flag("--no-normals", noNormals, "Store no normals (the default)");

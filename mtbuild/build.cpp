@@ -600,7 +600,7 @@ void LevelBuilder::State::startFresh(bool storeInput) {
     } else {
       VPartitionOptions vp;
       vp.kind = options.partition;
-      vp.patchTriangles = options.patchTriangles;
+      vp.patchTriangles = options.patchTriangles ? options.patchTriangles : kDefaultMtPatchTriangles;
       VPartitionAssigner assigner(vp);
       IngestOptions io;
       io.memoryBytes = options.memoryBytes;
@@ -704,7 +704,7 @@ LevelBuilder::LevelBuilder(const std::string& input, const std::string& output, 
 
   s.buildStart = Clock::now();
   s.sequenceBytes = s.sequence.serialize();
-  const uint32_t patchTriangles = options.patchTriangles ? options.patchTriangles : kDefaultPatchTriangles;
+  const uint32_t patchTriangles = options.patchTriangles ? options.patchTriangles : kDefaultMtPatchTriangles;
   s.ctx.grid.step = s.header.gridStep;
   s.ctx.grid.bits = s.header.gridBits;
   for (int a = 0; a < 3; ++a) s.ctx.grid.origin[a] = s.header.gridOrigin[a];

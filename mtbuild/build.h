@@ -20,11 +20,18 @@
 
 namespace mt {
 
+// mtbuild's patch size when --patch-triangles is not given. Twice the store's default
+// (kDefaultPatchTriangles, which suits healing): the per-patch overhead of the MT file is ~190 bytes,
+// so 2000 is the smallest size that meets both file-size targets (m10 scan: meshopt 2.53, Draco 1.73
+// bytes per input triangle; 1000 gives 2.92 / 2.12) at no extra build CPU; 4000 costs 40-60% more
+// CPU (docs/mt-format.md has the sweep).
+constexpr uint32_t kDefaultMtPatchTriangles = 2000;
+
 struct BuildOptions {
   uint64_t memoryBytes = 1ull << 30;  // --memory: the cap for the whole build (ingest included)
   uint32_t threads = 0;               // 0: all cores
   PartitionKind partition = PartitionKind::Irregular;
-  uint32_t patchTriangles = 0;        // 0: vpartition's default
+  uint32_t patchTriangles = 0;        // 0: kDefaultMtPatchTriangles (ignored for a store input)
   format::Codec codec = format::Codec::Meshopt;
   bool normals = false;               // store normals (else the renderer computes them)
   // Continue a killed build from the checkpoint in its work directory (the last finished level).

@@ -21,7 +21,7 @@ int main(int argc, char** argv) {
   app.add_option("--memory", memory, "Memory cap for the whole build, e.g. 512M, 4G (default 1G)");
   app.add_option("--threads", threads, "Worker threads (default: all cores); the output does not depend on it");
   app.add_option("--partition", partition, "V-partition: irregular (default; BMT 4.2.2) or regular (4.2.1)");
-  app.add_option("--patch-triangles", patchTriangles, "Target triangles per patch (default 1000, see docs/vpartition.md)");
+  app.add_option("--patch-triangles", patchTriangles, "Target triangles per patch (default 2000: smallest file at no extra build time, see docs/mt-format.md; ignored for a store input, which keeps its own)");
   app.add_option("--codec", codec, "Patch coding: meshopt (default, fast decode) or draco (smallest files)");
   app.add_flag("--normals", normals, "Store per-vertex normals (2x8 bit) instead of letting the renderer compute them");
   app.add_flag("--no-normals", noNormals, "Store no normals (the default; kept for scripts that say so explicitly)");
