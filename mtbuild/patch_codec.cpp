@@ -106,13 +106,16 @@ struct Prepared {
   std::vector<uint32_t> q;       // relative to header.qMin, 3 per vertex, fetch order
   std::vector<uint8_t> oct;      // 2 per vertex or empty
   std::vector<uint8_t> colors;   // 4 per vertex or empty
-  std::vector<uint32_t> indices; // vertex-cache order
+  std::vector<uint32_t> indices; // coded order (see prepare)
+  std::vector<uint8_t> indexCode; // meshopt_encodeIndexBuffer(indices) (Codec::Meshopt)
 };
 
 void appendBytes(std::vector<uint8_t>& out, const void* data, size_t size) {
   const uint8_t* p = static_cast<const uint8_t*>(data);
   out.insert(out.end(), p, p + size);
 }
+
+void setMeshoptVersions();
 
 Prepared prepare(const PatchInput& in, const QuantizationGrid& grid, const PatchCodecOptions& options) {
   if (in.triangleCount > 0 && (!in.triangles || !in.positions))
@@ -124,18 +127,44 @@ Prepared prepare(const PatchInput& in, const QuantizationGrid& grid, const Patch
 
   Prepared out;
   size_t indexCount = in.triangleCount * 3;
-  // Vertex-cache order first, then renumber vertices by first use: both make the index and vertex
-  // deltas small, which is what the codecs exploit. The strip-biased cache order (each next
-  // triangle shares an edge with the last where it can) is what meshopt_encodeIndexBuffer codes
-  // best: measured on level-1 regions of a 1M scan, 0.54 instead of 0.81 bytes per triangle for
-  // the indices after zstd, 0.51 instead of 0.54 for the parallelogram positions (the walk
-  // follows shared edges more often); 1.08 instead of 1.40 payload bytes per triangle in all.
-  std::vector<uint32_t> ordered(indexCount);
-  meshopt_optimizeVertexCacheStrip(ordered.data(), in.triangles, indexCount, in.vertexCount);
+  // Triangle order, then vertices renumbered by first use: both make the index and vertex deltas
+  // small, which is what the codecs exploit. meshopt_encodeIndexBuffer codes a triangle cheaply
+  // when it shares an edge with a recent one and brings its new vertex in fetch order.
+  // The strip-biased cache order (meshopt_optimizeVertexCacheStrip: each next triangle shares an
+  // edge with the last where it can) gets that from any input order: measured on level-1 regions
+  // of a 1M scan, 0.54 instead of 0.81 bytes per triangle for the indices after zstd than the
+  // plain cache order, 1.08 instead of 1.40 payload bytes per triangle in all. But it is the
+  // single largest cost of the level loop (~15% of its CPU, measured with perf on a 10M build),
+  // and patches usually arrive in an order that is already as good: a scan's faces come in scan
+  // order and simplification keeps the survivors' order. So the input order is kept when its
+  // index code is already strip-like (<= kCoherentIndexBytes per triangle before zstd; measured:
+  // strip order 1.04-1.39 on the 10M mtgen scan's patches, its own order 1.04-1.52, a shuffled
+  // scan's 5.3-6.4) and the cache optimizer only runs for the others. Deterministic either way.
+  constexpr double kCoherentIndexBytes = 1.6;
   std::vector<uint32_t> remap(in.vertexCount);
-  size_t used = meshopt_optimizeVertexFetchRemap(remap.data(), ordered.data(), indexCount, in.vertexCount);
-  out.indices.resize(indexCount);
-  meshopt_remapIndexBuffer(out.indices.data(), ordered.data(), indexCount, remap.data());
+  setMeshoptVersions();  // the index codec version is process-wide state: set before the first encode
+  auto orderBy = [&](const uint32_t* tri) {
+    size_t used = meshopt_optimizeVertexFetchRemap(remap.data(), tri, indexCount, in.vertexCount);
+    out.indices.resize(indexCount);
+    meshopt_remapIndexBuffer(out.indices.data(), tri, indexCount, remap.data());
+    out.indexCode.resize(meshopt_encodeIndexBufferBound(indexCount, used));
+    out.indexCode.resize(meshopt_encodeIndexBuffer(out.indexCode.data(), out.indexCode.size(), out.indices.data(), indexCount));
+    return used;
+  };
+  size_t used = 0;
+  if (options.codec == Codec::Draco) {
+    // Edgebreaker chooses its own traversal; only the fetch order matters here.
+    used = meshopt_optimizeVertexFetchRemap(remap.data(), in.triangles, indexCount, in.vertexCount);
+    out.indices.resize(indexCount);
+    meshopt_remapIndexBuffer(out.indices.data(), in.triangles, indexCount, remap.data());
+  } else {
+    used = orderBy(in.triangles);
+    if (double(out.indexCode.size()) > kCoherentIndexBytes * double(in.triangleCount)) {
+      std::vector<uint32_t> ordered(indexCount);
+      meshopt_optimizeVertexCacheStrip(ordered.data(), in.triangles, indexCount, in.vertexCount);
+      used = orderBy(ordered.data());
+    }
+  }
 
   std::vector<uint32_t> qAbs(used * 3);
   uint32_t qMin[3] = {~0u, ~0u, ~0u};
@@ -457,10 +486,8 @@ std::vector<uint8_t> encodeMeshoptWith(const Prepared& p, const std::vector<uint
 std::vector<uint8_t> encodeMeshopt(const Prepared& p, const PatchCodecOptions& options) {
   setMeshoptVersions();
   size_t n = p.header.vertexCount;
-  std::vector<uint8_t> ibuf(meshopt_encodeIndexBufferBound(p.indices.size(), n));
-  ibuf.resize(meshopt_encodeIndexBuffer(ibuf.data(), ibuf.size(), p.indices.data(), p.indices.size()));
   std::vector<uint8_t> best =
-      encodeMeshoptWith(p, p.indices, ibuf, uint32_t(p.indices.size()), false, options);
+      encodeMeshoptWith(p, p.indices, p.indexCode, uint32_t(p.indices.size()), false, options);
   if (options.strips && !p.indices.empty()) {
     // Strips (BMT 6 stores strips): on regular grids (level 0 of a range scan) a strip codes in
     // far fewer bytes than the list; on simplified patches the list wins. Keep the smaller.

@@ -629,38 +629,60 @@ std::vector<PatchId> PatchStore::writeBack(const LoadedMesh& loadedIn, const Rep
       if (r.positions[3 * v + a] != loadedIn.positions[3 * ext.vertex + a]) bad("locked vertex " + std::to_string(ext.vertex) + " was moved");
   }
 
-  // Group triangles by cell key -> new patches, in key order.
-  std::vector<uint32_t> order(nt);
-  for (uint32_t t = 0; t < nt; ++t) order[t] = t;
-  std::stable_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return r.triangleCell[a] < r.triangleCell[b]; });
+  // Group triangles by cell key -> new patches, in key order (a region splits into a handful of
+  // cells: sort the distinct keys, then bucket the triangles in their original order).
+  std::vector<uint64_t> cells(r.triangleCell.begin(), r.triangleCell.end());
+  std::sort(cells.begin(), cells.end());
+  cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
   struct NewPatch {
     uint64_t cell;
     std::vector<uint32_t> tris;      // replacement triangle ids
     std::vector<uint32_t> vertices;  // replacement vertex ids, ascending = local order
     Patch patch;
   };
-  std::vector<NewPatch> out;
-  for (size_t i = 0; i < nt; ++i) {
-    uint32_t t = order[i];
-    if (out.empty() || out.back().cell != r.triangleCell[t]) out.push_back({r.triangleCell[t], {}, {}, {}});
-    out.back().tris.push_back(t);
+  std::vector<NewPatch> out(cells.size());
+  {
+    std::vector<uint32_t> patchOfTriangle(nt);
+    for (size_t k = 0; k < cells.size(); ++k) out[k].cell = cells[k];
+    for (uint32_t t = 0; t < nt; ++t) {
+      const uint32_t k = t > 0 && r.triangleCell[t] == r.triangleCell[t - 1]
+                             ? patchOfTriangle[t - 1]
+                             : uint32_t(std::lower_bound(cells.begin(), cells.end(), r.triangleCell[t]) - cells.begin());
+      patchOfTriangle[t] = k;
+      out[k].tris.push_back(t);
+    }
   }
-  // Vertex -> new patches holding it (most vertices are in one; CSR built from (vertex, patch)).
-  std::vector<std::pair<uint32_t, uint32_t>> holders;
-  for (uint32_t k = 0; k < out.size(); ++k) {
-    auto& np = out[k];
-    for (uint32_t t : np.tris)
-      for (int c = 0; c < 3; ++c) np.vertices.push_back(r.triangles[3 * t + c]);
-    std::sort(np.vertices.begin(), np.vertices.end());
-    np.vertices.erase(std::unique(np.vertices.begin(), np.vertices.end()), np.vertices.end());
-    for (uint32_t v : np.vertices) holders.push_back({v, k});
+  // Vertex -> new patches holding it, as CSR over replacement vertices (most vertices are in one
+  // patch). Holders of a vertex are in ascending patch order, and each patch's vertices come out
+  // ascending with their local index: linear time, no per-corner searches.
+  std::vector<uint32_t> holderStart(nv + 1, 0), mark(nv, ~0u);
+  for (uint32_t k = 0; k < out.size(); ++k)
+    for (uint32_t t : out[k].tris)
+      for (int c = 0; c < 3; ++c) {
+        uint32_t v = r.triangles[3 * t + c];
+        if (mark[v] != k) mark[v] = k, ++holderStart[v + 1];
+      }
+  for (size_t v = 0; v < nv; ++v) holderStart[v + 1] += holderStart[v];
+  std::vector<uint32_t> holderPatch(holderStart[nv]), holderLocal(holderStart[nv]);
+  {
+    std::vector<uint32_t> fill(holderStart.begin(), holderStart.end() - 1);
+    std::fill(mark.begin(), mark.end(), ~0u);
+    for (uint32_t k = 0; k < out.size(); ++k)
+      for (uint32_t t : out[k].tris)
+        for (int c = 0; c < 3; ++c) {
+          uint32_t v = r.triangles[3 * t + c];
+          if (mark[v] != k) mark[v] = k, holderPatch[fill[v]++] = k;
+        }
   }
-  std::sort(holders.begin(), holders.end());
-  for (const auto& ext : loaded.external) {
-    uint32_t v = newOf[ext.vertex];
-    auto it = std::lower_bound(holders.begin(), holders.end(), std::make_pair(v, 0u));
-    if (it == holders.end() || it->first != v) bad("locked vertex " + std::to_string(ext.vertex) + " is used by no triangle");
-  }
+  for (uint32_t v = 0; v < nv; ++v)
+    for (uint32_t h = holderStart[v]; h < holderStart[v + 1]; ++h) {
+      auto& vs = out[holderPatch[h]].vertices;
+      holderLocal[h] = uint32_t(vs.size());
+      vs.push_back(v);
+    }
+  for (const auto& ext : loaded.external)
+    if (holderStart[newOf[ext.vertex]] == holderStart[newOf[ext.vertex] + 1])
+      bad("locked vertex " + std::to_string(ext.vertex) + " is used by no triangle");
 
   std::vector<PatchId> newIds(out.size());
   {
@@ -668,29 +690,23 @@ std::vector<PatchId> PatchStore::writeBack(const LoadedMesh& loadedIn, const Rep
     for (auto& id : newIds) id = impl_->nextPatchId++;
   }
   auto localIndex = [&](uint32_t k, uint32_t v) {
-    const auto& vs = out[k].vertices;
-    return uint32_t(std::lower_bound(vs.begin(), vs.end(), v) - vs.begin());
+    for (uint32_t h = holderStart[v];; ++h)
+      if (holderPatch[h] == k) return holderLocal[h];
   };
   // Boundary entries: between new patches, and from new patches to the outside ones.
   std::map<PatchId, std::vector<std::pair<uint32_t, BoundaryEntry>>> outsideAdds;  // q -> (remote->entry)
-  for (size_t i = 0; i < holders.size();) {
-    size_t j = i;
-    while (j < holders.size() && holders[j].first == holders[i].first) ++j;
-    uint32_t v = holders[i].first;
-    for (size_t a = i; a < j; ++a)
-      for (size_t b = i; b < j; ++b)
-        if (a != b)
-          out[holders[a].second].patch.boundary.push_back(
-              {localIndex(holders[a].second, v), newIds[holders[b].second], localIndex(holders[b].second, v)});
-    i = j;
+  for (uint32_t v = 0; v < nv; ++v) {
+    const uint32_t i = holderStart[v], j = holderStart[v + 1];
+    if (j - i < 2) continue;
+    for (uint32_t a = i; a < j; ++a)
+      for (uint32_t b = i; b < j; ++b)
+        if (a != b) out[holderPatch[a]].patch.boundary.push_back({holderLocal[a], newIds[holderPatch[b]], holderLocal[b]});
   }
   for (const auto& ext : loaded.external) {
     uint32_t v = newOf[ext.vertex];
-    auto lo = std::lower_bound(holders.begin(), holders.end(), std::make_pair(v, 0u));
-    for (auto it = lo; it != holders.end() && it->first == v; ++it) {
-      uint32_t local = localIndex(it->second, v);
-      out[it->second].patch.boundary.push_back({local, ext.patch, ext.remote});
-      outsideAdds[ext.patch].push_back({ext.remote, {ext.remote, newIds[it->second], local}});
+    for (uint32_t h = holderStart[v]; h < holderStart[v + 1]; ++h) {
+      out[holderPatch[h]].patch.boundary.push_back({holderLocal[h], ext.patch, ext.remote});
+      outsideAdds[ext.patch].push_back({ext.remote, {ext.remote, newIds[holderPatch[h]], holderLocal[h]}});
     }
   }
 
