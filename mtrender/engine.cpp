@@ -99,20 +99,9 @@ PatchView Engine::baselineFetch(uint32_t id) {
   return v;
 }
 
-FrameRecord Engine::frame(const CameraPose& pose, const CameraPose& prev, GlRenderer& gl, const DrawSettings& settings,
-                          int width, int height) {
-  using Clock = std::chrono::steady_clock;
-  const auto t0 = Clock::now();
-  ++frame_;
-  View view = makeView(pose, width, height, center_, radius_);
-  View ahead = makeView(extrapolate(prev, pose, 10), width, height, center_, radius_);
-  FrameRecord rec;
-  static_cast<FrameStats&>(rec) = extract_->update(frame_, view, ahead);
-  rec.moving = pose.eye != prev.eye || pose.target != prev.target;
-  gl.beginFrame(view, settings);
+void Engine::orderVisibleArcs(const View& view) {
   const auto& arcs = scene_->arcs();
   const auto& nodes = scene_->nodes();
-  baselineLoads_ = 0;
   // Front to back (by the distance of the arc's bounding sphere): llvmpipe tests depth before
   // shading, so near surfaces drawn first spare the shading of what they hide.
   drawOrder_.clear();
@@ -123,8 +112,13 @@ FrameRecord Engine::frame(const CameraPose& pose, const CameraPose& prev, GlRend
     drawOrder_.push_back({glm::length(c - view.eye) - double(s.radius), a});
   }
   std::sort(drawOrder_.begin(), drawOrder_.end());
-  for (const auto& [dist, a] : drawOrder_) {
-    const SceneArc& arc = arcs[a];
+}
+
+void Engine::drawArcs(size_t from, size_t to, GlRenderer& gl, FrameRecord& rec) {
+  const auto& arcs = scene_->arcs();
+  const auto& nodes = scene_->nodes();
+  for (size_t i = from; i < to; ++i) {
+    const SceneArc& arc = arcs[drawOrder_[i].second];
     const uint32_t level = nodes[arc.from].level;
     for (uint32_t k = 0; k < arc.patchCount; ++k) {
       const uint32_t id = scene_->arcPatches()[arc.firstPatch + k];
@@ -135,6 +129,76 @@ FrameRecord Engine::frame(const CameraPose& pose, const CameraPose& prev, GlRend
         rec.drawnTriangles += t;
       }
     }
+  }
+}
+
+FrameRecord Engine::frame(const CameraPose& pose, const CameraPose& prev, GlRenderer& gl, const DrawSettings& settings,
+                          int width, int height) {
+  using Clock = std::chrono::steady_clock;
+  const auto t0 = Clock::now();
+  ++frame_;
+  View view = makeView(pose, width, height, center_, radius_);
+  View ahead = makeView(extrapolate(prev, pose, 10), width, height, center_, radius_);
+  FrameRecord rec;
+  rec.moving = pose.eye != prev.eye || pose.target != prev.target || pose.up != prev.up || pose.fovDeg != prev.fovDeg;
+  baselineLoads_ = 0;
+  // A new image size or new draw settings (viewer keys) also invalidate the image on screen.
+  const bool sameLook = width == lastWidth_ && height == lastHeight_ && settings.mode == lastSettings_.mode &&
+                        settings.wireframe == lastSettings_.wireframe && settings.background == lastSettings_.background;
+  lastWidth_ = width, lastHeight_ = height, lastSettings_ = settings;
+  const bool progressive = options_.stillFrames > 1 && !rec.moving && sameLook && frame_ > 1 && !extract_->frozen();
+  if (!progressive) {
+    // Moving (or refinement off): the whole cut, within one frame's budget, straight to the output.
+    still_ = Still();
+    extract_->setBudgetScale(1);
+    static_cast<FrameStats&>(rec) = extract_->update(frame_, view, ahead);
+    gl.beginFrame(view, settings);
+    orderVisibleArcs(view);
+    drawArcs(0, drawOrder_.size(), gl, rec);
+    lastScreenError_ = rec.maxScreenError;
+  } else {
+    if (!still_.active) {  // the camera has just stopped: what is on screen stays until a finer image is ready
+      gl.keepOutputAsPresented(width, height);
+      still_.active = true;
+      still_.presentedError = lastScreenError_;
+    }
+    const bool startImage = !still_.drawing;
+    if (startImage) {
+      // Between images: move the cut (it may hold stillFrames frames' worth of triangles) and
+      // start drawing it.
+      extract_->setBudgetScale(double(options_.stillFrames));
+      static_cast<FrameStats&>(rec) = extract_->update(frame_, view, ahead);
+      orderVisibleArcs(view);
+      still_.drawing = true;
+      still_.next = 0;
+      still_.frames = 0;
+      still_.imageError = rec.maxScreenError;
+    } else {
+      // The cut stays as it is while its image is drawn (its patches stay pinned); loads for its
+      // next refinements go on.
+      static_cast<FrameStats&>(rec) = extract_->requestAhead(frame_, view);
+    }
+    gl.beginAccumulation(view, settings, startImage);
+    // One frame's budget of the image (at least one arc, so every image completes).
+    const auto& arcs = scene_->arcs();
+    const double frameBudget = std::max(extract_->frameBudget(), 1000.0);
+    size_t end = still_.next;
+    uint64_t slice = 0;
+    while (end < drawOrder_.size() &&
+           (end == still_.next || double(slice + arcs[drawOrder_[end].second].triangles) <= frameBudget))
+      slice += arcs[drawOrder_[end++].second].triangles;
+    drawArcs(still_.next, end, gl, rec);
+    still_.next = end;
+    ++still_.frames;
+    if (still_.next == drawOrder_.size()) {
+      gl.presentAccumulation();
+      still_.presentedError = still_.imageError;
+      still_.drawing = false;
+      rec.imageFrames = still_.frames;
+    }
+    gl.showPresented();
+    rec.accumulating = true;
+    rec.maxScreenError = still_.presentedError;
   }
   gl.endFrame();
   gl.finish();

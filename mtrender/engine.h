@@ -1,6 +1,18 @@
 // mtrender/engine.h: one frame of the renderer, shared by the headless runner and the viewer:
 // the scene, the RAM patch cache + PatchServer thread, ExtractRender, and drawing the cut with
-// the GL backend. The baseline mode (--baseline-mmap) maps the files and renders the same kind of
+// the GL backend.
+//
+// Progressive refinement of a still view: while the camera moves, every frame draws a cut within
+// one frame's render budget. Once it stops, nothing on screen has to change any more, so the
+// frames that follow are spent on a finer image instead: the cut may grow to `stillFrames` frames'
+// worth of the budget, and it is drawn over that many frames at most (each frame draws at most one
+// frame's budget of it into an accumulation target, so every frame still keeps --budget-ms), then
+// shown; meanwhile the screen keeps the last complete image. Each completed image starts the next
+// (the cut is updated between images: loads that arrived refine it further). The first moving
+// frame drops this at once and coarsens the cut back to one frame's budget. This is what lets the
+// screen error of a still view reach the tolerance on a renderer (llvmpipe) that cannot draw that
+// many triangles in one frame. Time-critical rendering in the sense of BMT section 5: the frame
+// rate is guaranteed, the refinement uses the frames the view does not need. The baseline mode (--baseline-mmap) maps the files and renders the same kind of
 // cut with no RAM cache, no server thread and no prefetch: a patch the cut needs is decoded from
 // the mapping inside the frame (the GPU buffer cache, under the same cap, is all it keeps).
 #pragma once
@@ -29,6 +41,9 @@ struct EngineOptions {
   bool baseline = false;
   double readDelayMs = 0;              // test hook: a slow disk
   bool quiet = false;
+  // Progressive refinement of a still view (above): a still image may take up to this many
+  // frames; 1 turns it off (every frame draws the whole cut).
+  uint32_t stillFrames = 8;
 };
 
 struct FrameRecord : FrameStats {
@@ -37,6 +52,8 @@ struct FrameRecord : FrameStats {
   uint64_t cacheBytes = 0;   // RAM cache in use (place holders holding a patch)
   uint64_t gpuBytes = 0;
   bool moving = false;
+  bool accumulating = false;  // the frame drew part of a still image (maxScreenError: the image shown)
+  uint32_t imageFrames = 0;   // a still image was completed and shown: the frames it took
 };
 
 class Engine {
@@ -71,6 +88,22 @@ class Engine {
   double radius_ = 1;
   uint64_t frame_ = 0, lastLoads_ = 0;
   std::vector<std::pair<double, uint32_t>> drawOrder_;  // (distance, cut arc), reused every frame
+  // Sorts the cut arcs visible in `view` front to back into drawOrder_.
+  void orderVisibleArcs(const View& view);
+  // Draws drawOrder_[from, to) and adds to rec's drawn counts.
+  void drawArcs(size_t from, size_t to, GlRenderer& gl, FrameRecord& rec);
+  // Progressive refinement of a still view.
+  struct Still {
+    bool active = false;       // the camera has stopped; the screen shows `presented`
+    bool drawing = false;      // an image is being accumulated from drawOrder_
+    size_t next = 0;           // next arc of drawOrder_ to draw
+    uint32_t frames = 0;       // frames spent on the image so far
+    double imageError = 0;     // screen error of the cut being accumulated
+    double presentedError = 0; // screen error of the image on screen
+  } still_;
+  double lastScreenError_ = 0;
+  int lastWidth_ = 0, lastHeight_ = 0;
+  DrawSettings lastSettings_;
   // baseline
   std::vector<const uint8_t*> maps_;
   std::vector<uint64_t> mapSizes_;

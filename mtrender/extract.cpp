@@ -244,16 +244,7 @@ void ExtractRender::frameDone(uint64_t drawnTriangles, double frameMs) {
   ++slackFrames_;
 }
 
-FrameStats ExtractRender::update(uint64_t frame, const View& view, const View& predicted) {
-  const auto t0 = Clock::now();
-  FrameStats st;
-  frame_ = frame;
-  wanted_.clear();
-  const double extractMs = options_.extractMs > 0 ? options_.extractMs : std::min(2.0, options_.budgetMs / 20);
-  const auto deadline = t0 + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double, std::milli>(extractMs));
-  const double tau = options_.pixelTolerance * lodScale_;
-  const auto& nodes = scene_.nodes();
-
+double ExtractRender::nextBudget(double extractMs) {
   // CheckBudget's render budget: the triangles the time model says fit in the frame budget, with
   // a margin for the model's error; it falls at once and rises gradually.
   double budget;
@@ -273,6 +264,121 @@ FrameStats ExtractRender::update(uint64_t frame, const View& view, const View& p
       smoothBudget_ = std::min(smoothBudget_, lastDrawn_ * target80 / lastFrameMs_);
     budget = std::max(smoothBudget_, 1000.0);
   }
+  frameBudget_ = budget;
+  return budget * budgetScale_;
+}
+
+void ExtractRender::submitRequests(uint64_t frame, FrameStats& st) {
+  // Requests for the PatchServer: urgent first, then the patches wanted in the most consecutive
+  // frames (Derzapf 4.1: no region starves), within the load budget.
+  if (!cache_) return;
+  {
+    struct Req {
+      uint32_t id;
+      Urgency u;
+      uint32_t consecutive;
+    };
+    std::vector<Req> reqs;
+    std::unordered_map<uint32_t, uint32_t> nextConsecutive;
+    touched_.clear();
+    for (const auto& [id, u] : wanted_) {
+      PatchCache::State s = cache_->state(id);
+      if (s == PatchCache::State::Ready) {
+        touched_.push_back(id);
+        continue;
+      }
+      if (s == PatchCache::State::Bad) continue;
+      if (u != Urgency::Prefetch) ++st.misses;
+      if (s == PatchCache::State::Loading) continue;
+      auto it = consecutive_.find(id);
+      uint32_t c = (it == consecutive_.end() ? 0 : it->second) + 1;
+      nextConsecutive[id] = c;
+      reqs.push_back({id, u, c});
+    }
+    consecutive_.swap(nextConsecutive);
+    cache_->touch(touched_.data(), touched_.size(), frame);
+    std::sort(reqs.begin(), reqs.end(), [](const Req& a, const Req& b) {
+      if (a.u != b.u) return uint8_t(a.u) > uint8_t(b.u);
+      if (a.consecutive != b.consecutive) return a.consecutive > b.consecutive;
+      return a.id < b.id;
+    });
+    uint32_t loadBudget = options_.loadBudget;
+    if (!loadBudget) {
+      double ms = server_->meanLoadMs();
+      loadBudget = uint32_t(std::clamp(ms > 0 ? options_.budgetMs / ms : 64.0, 8.0, 512.0));
+    }
+    std::vector<LoadRequest> out;
+    for (const Req& r : reqs) {
+      if (out.size() >= loadBudget) break;
+      out.push_back({r.id, r.u});
+      if (r.u == Urgency::Prefetch) ++st.prefetches;
+      else ++st.requests;
+    }
+    server_->submit(std::move(out), frame);
+    cache_->endFrame(frame);
+  }
+
+}
+
+FrameStats ExtractRender::requestAhead(uint64_t frame, const View& view) {
+  const auto t0 = Clock::now();
+  FrameStats st;
+  frame_ = frame;
+  wanted_.clear();
+  const double extractMs = options_.extractMs > 0 ? options_.extractMs : std::min(2.0, options_.budgetMs / 20);
+  const double budget = nextBudget(extractMs);
+  const double tau = options_.pixelTolerance * lodScale_;
+  const auto& nodes = scene_.nodes();
+  // The refinements of the cut, the largest error first; a refinement whose patches are resident
+  // is taken as done and its predecessors (the next refinements there) join the heap one level on.
+  struct Entry {
+    double err;
+    uint32_t node, depth;
+    bool operator<(const Entry& o) const { return err < o.err; }
+  };
+  std::priority_queue<Entry> heap;
+  for (uint32_t n = 0; n < nodes.size(); ++n)
+    if (isRefineCandidate(n) && !badNode_[n]) heap.push({screenError(n, view), n, 0});
+  double triangles = double(visibleTriangles_);
+  std::vector<uint8_t> seen(nodes.size(), 0);
+  while (!heap.empty()) {
+    Entry e = heap.top();
+    heap.pop();
+    if (e.err <= tau || seen[e.node]) continue;
+    seen[e.node] = 1;
+    triangles += double(visibleDelta(e.node, true, view));
+    if (triangles > budget) break;
+    collectIn(e.node, scratch_);
+    want(scratch_, e.depth == 0 ? Urgency::Needed : Urgency::Prefetch);
+    if (e.depth >= 1) continue;
+    const SceneNode& s = nodes[e.node];
+    for (uint32_t k = 0; k < s.inArcCount; ++k) {
+      const uint32_t p = scene_.arcs()[scene_.inArcs()[s.firstInArc + k]].from;
+      if (!nodes[p].source && !badNode_[p]) heap.push({screenError(p, view), p, e.depth + 1});
+    }
+  }
+  submitRequests(frame, st);
+  st.budgetTriangles = uint64_t(budget);
+  st.triangles = triangles_;
+  st.patches = cutPatchCount_;
+  st.lodScale = lodScale_;
+  st.modelA = time_.a();
+  st.modelB = time_.b() * 1e6;
+  st.extractMs = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+  return st;
+}
+
+FrameStats ExtractRender::update(uint64_t frame, const View& view, const View& predicted) {
+  const auto t0 = Clock::now();
+  FrameStats st;
+  frame_ = frame;
+  wanted_.clear();
+  const double extractMs = options_.extractMs > 0 ? options_.extractMs : std::min(2.0, options_.budgetMs / 20);
+  const auto deadline = t0 + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double, std::milli>(extractMs));
+  const double tau = options_.pixelTolerance * lodScale_;
+  const auto& nodes = scene_.nodes();
+
+  double budget = nextBudget(extractMs);
   st.budgetTriangles = uint64_t(budget);
   st.modelA = time_.a();
   st.modelB = time_.b() * 1e6;
@@ -359,7 +465,7 @@ FrameStats ExtractRender::update(uint64_t frame, const View& view, const View& p
       // budget and 30 frames passed since the last probe, take one refinement beyond the
       // model's budget (if it fits in twice the budget); the measurement corrects the model,
       // and step 1 undoes it next frame if it was too much.
-      if (after > budget && !options_.fixedTriangles && slackFrames_ >= 30 && frameMsAvg_ < 0.6 * options_.budgetMs &&
+      if (after > budget && !options_.fixedTriangles && budgetScale_ == 1 && slackFrames_ >= 30 && frameMsAvg_ < 0.6 * options_.budgetMs &&
           after <= 2 * budget) {
         slackFrames_ = 0;
         budget = after;
@@ -472,53 +578,7 @@ FrameStats ExtractRender::update(uint64_t frame, const View& view, const View& p
     }
   }
 
-  // Requests for the PatchServer: urgent first, then the patches wanted in the most consecutive
-  // frames (Derzapf 4.1: no region starves), within the load budget.
-  if (cache_) {
-    struct Req {
-      uint32_t id;
-      Urgency u;
-      uint32_t consecutive;
-    };
-    std::vector<Req> reqs;
-    std::unordered_map<uint32_t, uint32_t> nextConsecutive;
-    touched_.clear();
-    for (const auto& [id, u] : wanted_) {
-      PatchCache::State s = cache_->state(id);
-      if (s == PatchCache::State::Ready) {
-        touched_.push_back(id);
-        continue;
-      }
-      if (s == PatchCache::State::Bad) continue;
-      if (u != Urgency::Prefetch) ++st.misses;
-      if (s == PatchCache::State::Loading) continue;
-      auto it = consecutive_.find(id);
-      uint32_t c = (it == consecutive_.end() ? 0 : it->second) + 1;
-      nextConsecutive[id] = c;
-      reqs.push_back({id, u, c});
-    }
-    consecutive_.swap(nextConsecutive);
-    cache_->touch(touched_.data(), touched_.size(), frame);
-    std::sort(reqs.begin(), reqs.end(), [](const Req& a, const Req& b) {
-      if (a.u != b.u) return uint8_t(a.u) > uint8_t(b.u);
-      if (a.consecutive != b.consecutive) return a.consecutive > b.consecutive;
-      return a.id < b.id;
-    });
-    uint32_t loadBudget = options_.loadBudget;
-    if (!loadBudget) {
-      double ms = server_->meanLoadMs();
-      loadBudget = uint32_t(std::clamp(ms > 0 ? options_.budgetMs / ms : 64.0, 8.0, 512.0));
-    }
-    std::vector<LoadRequest> out;
-    for (const Req& r : reqs) {
-      if (out.size() >= loadBudget) break;
-      out.push_back({r.id, r.u});
-      if (r.u == Urgency::Prefetch) ++st.prefetches;
-      else ++st.requests;
-    }
-    server_->submit(std::move(out), frame);
-    cache_->endFrame(frame);
-  }
+  submitRequests(frame, st);
 
   // Global LOD scale (Derzapf 4.1): coarsen everything while memory is full, relax gradually.
   if (memoryFull) lodScale_ = std::min(lodScale_ * 1.1, 64.0);

@@ -92,9 +92,20 @@ class ExtractRender {
 
   // One frame's cut update for `view`; `predicted` is the view extrapolated 10 frames ahead.
   FrameStats update(uint64_t frame, const View& view, const View& predicted);
+  // For a frame that leaves the cut as it is (it draws part of a still image, engine.h): advances
+  // the render budget and asks the PatchServer for what the refinements of the cut beyond it
+  // would need, as if they were applied (the best first, within the scaled budget, two levels
+  // deep), so loads go on while the image is drawn. Returns the requests' figures.
+  FrameStats requestAhead(uint64_t frame, const View& view);
   // Feeds the time model with the last frame's measured time.
   void frameDone(uint64_t drawnTriangles, double frameMs);
   void setFrozen(bool f) { frozen_ = f; }
+  // The cut may hold `scale` frames' worth of the render budget (progressive refinement of a still
+  // view draws it over that many frames, engine.h); 1 = one frame's worth, the default.
+  void setBudgetScale(double scale) { budgetScale_ = scale; }
+  // The render budget of one frame (triangles) at the last update, before the scale above.
+  double frameBudget() const { return frameBudget_; }
+  uint32_t cutPatchCount() const { return cutPatchCount_; }
   bool frozen() const { return frozen_; }
   ExtractOptions& options() { return options_; }
   const TimeModel& timeModel() const { return time_; }
@@ -121,6 +132,10 @@ class ExtractRender {
   void addCutArc(uint32_t a);
   void removeCutArc(uint32_t a);
   void want(const std::vector<uint32_t>& ids, Urgency u);
+  // The render budget for this frame (triangles, scaled by budgetScale_); sets frameBudget_.
+  double nextBudget(double extractMs);
+  // Sends wanted_ to the PatchServer (urgent first, then by consecutive frames), within the load budget.
+  void submitRequests(uint64_t frame, FrameStats& st);
 
   const Scene& scene_;
   PatchCache* cache_;
@@ -135,6 +150,7 @@ class ExtractRender {
   int64_t visibleDelta(uint32_t n, bool refine, const View& view) const;
   uint32_t cutPatchCount_ = 0;
   double lodScale_ = 1;
+  double budgetScale_ = 1, frameBudget_ = 0;
   bool frozen_ = false;
   bool lastMemoryFull_ = false;
   uint64_t frame_ = 0;

@@ -125,6 +125,8 @@ GlRenderer::GlRenderer(uint64_t gpuCapBytes) : cap_(gpuCapBytes) {
 
 GlRenderer::~GlRenderer() {
   for (auto& [id, b] : buffers_) glDeleteBuffers(1, &b.buffer);
+  deleteTarget(accumulation_);
+  deleteTarget(presented_);
   if (fbo_) {
     glDeleteFramebuffers(1, &fbo_);
     glDeleteRenderbuffers(1, &colorRb_);
@@ -148,6 +150,56 @@ void GlRenderer::useOffscreen(int width, int height) {
     throw Error("mtrender: the offscreen framebuffer is incomplete");
 }
 
+void GlRenderer::makeTarget(Target& t, int width, int height) {
+  if (t.fbo && t.width == width && t.height == height) return;
+  deleteTarget(t);
+  glCreateFramebuffers(1, &t.fbo);
+  glCreateRenderbuffers(1, &t.color);
+  glCreateRenderbuffers(1, &t.depth);
+  glNamedRenderbufferStorage(t.color, GL_RGBA8, width, height);
+  glNamedRenderbufferStorage(t.depth, GL_DEPTH_COMPONENT24, width, height);
+  glNamedFramebufferRenderbuffer(t.fbo, GL_COLOR_ATTACHMENT0, GL_RENDERBUFFER, t.color);
+  glNamedFramebufferRenderbuffer(t.fbo, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, t.depth);
+  if (glCheckNamedFramebufferStatus(t.fbo, GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE)
+    throw Error("mtrender: an accumulation framebuffer is incomplete");
+  t.width = width;
+  t.height = height;
+}
+
+void GlRenderer::deleteTarget(Target& t) {
+  if (!t.fbo) return;
+  glDeleteFramebuffers(1, &t.fbo);
+  glDeleteRenderbuffers(1, &t.color);
+  glDeleteRenderbuffers(1, &t.depth);
+  t = Target();
+}
+
+void GlRenderer::keepOutputAsPresented(int width, int height) {
+  makeTarget(presented_, width, height);
+  glBlitNamedFramebuffer(fbo_, presented_.fbo, 0, 0, width, height, 0, 0, width, height, GL_COLOR_BUFFER_BIT, GL_NEAREST);
+}
+
+void GlRenderer::beginAccumulation(const View& view, const DrawSettings& s, bool clear) {
+  ++frame_;
+  width_ = view.width;
+  height_ = view.height;
+  makeTarget(accumulation_, view.width, view.height);
+  glBindFramebuffer(GL_FRAMEBUFFER, accumulation_.fbo);
+  glViewport(0, 0, view.width, view.height);
+  glClearColor(s.background.r, s.background.g, s.background.b, 1.0f);
+  glClearDepth(1.0);
+  if (clear) glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
+  setFrameState(view, s);
+}
+
+void GlRenderer::presentAccumulation() { std::swap(accumulation_, presented_); }
+
+void GlRenderer::showPresented() {
+  if (!presented_.fbo) return;
+  glBlitNamedFramebuffer(presented_.fbo, fbo_, 0, 0, presented_.width, presented_.height, 0, 0, presented_.width,
+                         presented_.height, GL_COLOR_BUFFER_BIT, GL_NEAREST);
+}
+
 void GlRenderer::beginFrame(const View& view, const DrawSettings& s) {
   ++frame_;
   width_ = view.width;
@@ -156,10 +208,14 @@ void GlRenderer::beginFrame(const View& view, const DrawSettings& s) {
   glViewport(0, 0, view.width, view.height);
   glClearColor(s.background.r, s.background.g, s.background.b, 1.0f);
   glClearDepth(1.0);
+  glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
+  setFrameState(view, s);
+}
+
+void GlRenderer::setFrameState(const View& view, const DrawSettings& s) {
   glEnable(GL_DEPTH_TEST);
   glDepthFunc(GL_LESS);
   glDisable(GL_CULL_FACE);
-  glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
   glPolygonMode(GL_FRONT_AND_BACK, s.wireframe ? GL_LINE : GL_FILL);
   glUseProgram(program_);
   glm::mat4 mvp = view.projMatrix * view.viewMatrix;

@@ -44,7 +44,20 @@ class GlRenderer {
 
   // Renders into an offscreen FBO of this size (headless) instead of the default framebuffer.
   void useOffscreen(int width, int height);
+  // Starts a frame drawn straight into the output (the offscreen FBO, or the default framebuffer).
   void beginFrame(const View& view, const DrawSettings& settings);
+
+  // Progressive refinement of a still view (engine.h): an image of a cut too large for one frame
+  // is drawn over several frames into an accumulation target, and shown once it is complete;
+  // until then the output shows the last complete image (the "presented" target).
+  // Keeps what the output shows now as the presented image (entering the still state).
+  void keepOutputAsPresented(int width, int height);
+  // Binds the accumulation target for drawing with the frame's state; `clear` starts a new image.
+  void beginAccumulation(const View& view, const DrawSettings& settings, bool clear);
+  // The accumulated image is complete: it becomes the presented one.
+  void presentAccumulation();
+  // Copies the presented image to the output.
+  void showPresented();
   // Draws one small triangle with the frame's state and waits: llvmpipe compiles its shader
   // variants (LLVM JIT) at the first draw, so doing it while the files open takes it off the
   // first frame.
@@ -67,8 +80,17 @@ class GlRenderer {
     uint32_t indexCount = 0;
     uint64_t lastFrame = 0;
   };
+  // A colour + depth render target.
+  struct Target {
+    uint32_t fbo = 0, color = 0, depth = 0;
+    int width = 0, height = 0;
+  };
+  void makeTarget(Target& t, int width, int height);
+  void deleteTarget(Target& t);
+  void setFrameState(const View& view, const DrawSettings& settings);
   uint64_t cap_;
   uint32_t program_ = 0, vao_ = 0, fbo_ = 0, colorRb_ = 0, depthRb_ = 0;
+  Target accumulation_, presented_;
   int width_ = 0, height_ = 0;
   int locMvp_ = -1, locMv_ = -1, locTint_ = -1, locMode_ = -1;
   ColorMode mode_ = ColorMode::Shaded;

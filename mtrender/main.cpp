@@ -38,15 +38,16 @@ void writeCsv(const std::string& path, const std::vector<FrameRecord>& frames) {
     if (!out) mt::fail(path, "cannot write the stats CSV");
     out << "frame,frame_ms,extract_ms,triangles,patches,loads,misses,cache_bytes,max_screen_error,"
            "drawn_triangles,drawn_patches,budget_triangles,gpu_bytes,lod_scale,moving,requests,prefetches,"
-           "refinements,coarsenings,model_fixed_ms,model_ms_per_mtri\n";
+           "refinements,coarsenings,model_fixed_ms,model_ms_per_mtri,accumulating,image_frames\n";
     char buf[512];
     for (size_t i = 0; i < frames.size(); ++i) {
       const FrameRecord& f = frames[i];
-      std::snprintf(buf, sizeof buf, "%zu,%.3f,%.4f,%llu,%u,%u,%u,%llu,%.4f,%llu,%u,%llu,%llu,%.3f,%d,%u,%u,%u,%u,%.3f,%.1f\n", i,
+      std::snprintf(buf, sizeof buf, "%zu,%.3f,%.4f,%llu,%u,%u,%u,%llu,%.4f,%llu,%u,%llu,%llu,%.3f,%d,%u,%u,%u,%u,%.3f,%.1f,%d,%u\n", i,
                     f.frameMs, f.extractMs, (unsigned long long)f.triangles, f.patches, f.loads, f.misses,
                     (unsigned long long)f.cacheBytes, f.maxScreenError, (unsigned long long)f.drawnTriangles,
                     f.drawnPatches, (unsigned long long)f.budgetTriangles, (unsigned long long)f.gpuBytes, f.lodScale,
-                    f.moving ? 1 : 0, f.requests, f.prefetches, f.refinements, f.coarsenings, f.modelA, f.modelB);
+                    f.moving ? 1 : 0, f.requests, f.prefetches, f.refinements, f.coarsenings, f.modelA, f.modelB,
+                    f.accumulating ? 1 : 0, f.imageFrames);
       out << buf;
     }
     if (!out) mt::fail(path, "write failed");
@@ -119,6 +120,11 @@ int main(int argc, char** argv) {
   app.add_option("--fixed-triangles", fixedTriangles, "a fixed render budget (triangles per frame) instead of the time model");
   app.add_option("--extract-ms", extractMs, "deadline of the cut update per frame (default min(2, budget/20))");
   app.add_option("--load-budget", loadBudget, "patches requested per frame (default: from the measured load time)");
+  uint32_t stillFrames = 8;
+  app.add_option("--still-frames", stillFrames,
+                 "progressive refinement of a still view: once the camera stops, a finer cut is drawn over up to "
+                 "this many frames (each within --budget-ms) and shown when complete; 1 turns it off (default 8)")
+      ->check(CLI::Range(1u, 64u));
   app.add_flag("--no-prefetch", noPrefetch, "no prefetching");
   app.add_flag("--no-cull", noCull, "no frustum / normal-cone culling");
   app.add_option("--color", colorMode, "shaded, patch or lod colours (default shaded)");
@@ -156,6 +162,7 @@ int main(int argc, char** argv) {
     eo.baseline = baseline;
     eo.readDelayMs = readDelayMs;
     eo.quiet = quiet;
+    eo.stillFrames = stillFrames;
     eo.extract.budgetMs = budgetMs;
     eo.extract.pixelTolerance = tolerance;
     eo.extract.fixedTriangles = fixedTriangles;

@@ -384,9 +384,13 @@ TEST_F(MtRender, NoCracksInAnyCut) {
       return std::make_pair(readPng(dir + "/frame_00029.png"), c.rows.back()[c.col("max_screen_error")]);
     };
     const Image finest = render("--fixed-triangles 1000000 --tolerance 0.01", "finest").first;
+    // Budget-bound cuts drawn in one frame (--still-frames 1), and still images accumulated over
+    // several frames from a cut 8x one frame's budget (the default for a still camera).
     for (const std::string tol : {"0.5", "2", "6"}) {
-      for (const std::string budget : {"6000", "15000", "1000000"}) {
-        auto [img, error] = render("--tolerance " + tol + " --fixed-triangles " + budget, tol + "-" + budget);
+      for (const std::string budget : {"6000", "15000", "1000000", "6000 --still-frames 8"}) {
+        const std::string mode = budget.find("still") == std::string::npos ? " --still-frames 1" : "";
+        auto [img, error] = render("--tolerance " + tol + " --fixed-triangles " + budget + mode,
+                                   tol + "-" + budget.substr(0, budget.find(' ')) + (mode.empty() ? "-progressive" : ""));
         // Erosion radius: the coarse silhouette may lie up to the cut's screen error away from
         // the finest one (plus rasterization); a crack is a gap far inside the surface.
         const int erode = 3 + int(std::ceil(std::min(error, 100.0)));
@@ -412,6 +416,61 @@ TEST_F(MtRender, NoCracksInAnyCut) {
     }
     EXPECT_GT(checked, 0u);
   }
+}
+
+TEST_F(MtRender, AStillViewIsRefinedOverSeveralFramesWithinEachFramesBudget) {
+  // The camera moves for 20 frames, then stays. With one frame's budget (4000 triangles) the cut
+  // stops well above the tolerance; progressive refinement draws a cut of up to 8 frames' worth
+  // over several frames, each frame drawing at most 4000 triangles, and shows it when complete:
+  // the same error, and the same image, as a cut of 32000 triangles drawn at once.
+  const std::string path = dir_->file("stop.path");
+  {
+    std::ofstream out(path);
+    out << "# 20 poses turning around the model, then the last one is held\n";
+    for (int i = 0; i < 20; ++i) {
+      const double a = 0.4 + 0.02 * i;
+      out << 1.6 * std::cos(a) << " " << -1.6 * std::sin(a) << " 0.9  0 0 0\n";
+    }
+  }
+  auto render = [&](const std::string& extra, const std::string& name) {
+    const std::string dir = dir_->file("still-" + name), csv = dir + ".csv";
+    std::filesystem::remove_all(dir);
+    auto r = runTool("mtrender", headless(mt(), "--camera-path " + path + " --frames 90 --tolerance 0.25 --cache 16M " +
+                                                    "--screenshots " + dir + " --screenshot-every 1000 --stats " + csv +
+                                                    " " + extra));
+    EXPECT_EQ(r.exitCode, 0) << r.output;
+    return std::make_pair(readCsv(csv), readPng(dir + "/frame_00089.png"));
+  };
+  auto [oneFrame, oneImg] = render("--fixed-triangles 4000 --still-frames 1", "one");
+  auto [progressive, progImg] = render("--fixed-triangles 4000 --still-frames 8", "progressive");
+  auto [wide, wideImg] = render("--fixed-triangles 32000 --still-frames 1", "wide");
+  const double eOne = oneFrame.rows.back()[oneFrame.col("max_screen_error")];
+  const double eProg = progressive.rows.back()[progressive.col("max_screen_error")];
+  const double eWide = wide.rows.back()[wide.col("max_screen_error")];
+  ASSERT_GT(eOne, eWide * 1.5) << "the test needs a view that one frame's budget cannot reach";
+  EXPECT_LT(eProg, eOne);
+  EXPECT_LE(eProg, eWide * 1.05 + 0.01) << "a still image should reach what 8 frames' worth of budget reaches";
+  size_t accumulating = 0, multiFrameImages = 0;
+  for (size_t f = 0; f < progressive.rows.size(); ++f) {
+    const auto& row = progressive.rows[f];
+    EXPECT_LE(row[progressive.col("drawn_triangles")], 4000.0) << "frame " << f << " drew more than one frame's budget";
+    accumulating += row[progressive.col("accumulating")] > 0;
+    multiFrameImages += row[progressive.col("image_frames")] > 1;
+    if (f < 20) {
+      EXPECT_EQ(row[progressive.col("accumulating")], 0.0) << "frame " << f << " is moving";
+    }
+  }
+  EXPECT_GE(accumulating, 60u);
+  EXPECT_GE(multiFrameImages, 1u) << "no still image needed more than one frame";
+  // The image shown is one whole cut: it looks like the wide cut drawn in one frame.
+  size_t differ = 0;
+  for (int y = 0; y < progImg.height; ++y)
+    for (int x = 0; x < progImg.width; ++x) {
+      int d = 0;
+      for (int k = 0; k < 3; ++k) d = std::max(d, std::abs(int(progImg.pixel(x, y)[k]) - int(wideImg.pixel(x, y)[k])));
+      differ += d > 40;
+    }
+  EXPECT_LT(double(differ), 0.01 * progImg.width * progImg.height);
 }
 
 TEST_F(MtRender, SlowDiskNeverStallsTheFrameAndTheCacheStaysCapped) {
