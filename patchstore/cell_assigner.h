@@ -2,9 +2,10 @@
 // A triangle goes to a cell by its centroid (BMT section 4: "the rule that uniquely assigns a
 // triangle to a region of space, e.g. the one where the barycenter of t falls").
 //
-// Ingest first writes every triangle's centroid to a temporary file; an assigner may stream over
-// it as many times as it needs (the irregular V-partition makes two passes) before it is asked for
-// cell keys. Keys need not be compact: the store sorts by key and numbers the non-empty cells.
+// Ingest hands the assigner its centroids in Morton order; an assigner may stream over them as
+// many times as it needs before it is asked for cell keys, or take a stride sample only (the
+// irregular V-partition), which ingest can give without materializing the stream. Keys need not
+// be compact: the store sorts by key and numbers the non-empty cells.
 #pragma once
 
 #include <cstddef>
@@ -12,6 +13,7 @@
 #include <functional>
 #include <memory>
 #include <string>
+#include <vector>
 
 namespace mt {
 
@@ -30,6 +32,20 @@ class CentroidSource {
   virtual uint64_t count() const = 0;
   virtual Box3 bounds() const = 0;  // of the vertices, not only of the centroids
   virtual void forEach(const std::function<void(const float* xyza, size_t count)>& fn) const = 0;
+  // The centroids at positions 0, stride, 2 stride, ... of one pass (4 floats each), in pass
+  // order: what a sampling assigner reads instead of the whole stream. This default runs a whole
+  // pass; a source that can pick them without materializing the stream (ingest) overrides it.
+  virtual std::vector<float> sample(uint64_t stride) const {
+    std::vector<float> out;
+    out.reserve(4 * size_t((count() + stride - 1) / stride));
+    uint64_t index = 0;
+    forEach([&](const float* xyza, size_t n) {
+      size_t t = size_t((stride - index % stride) % stride);
+      for (; t < n; t += size_t(stride)) out.insert(out.end(), xyza + 4 * t, xyza + 4 * t + 4);
+      index += n;
+    });
+    return out;
+  }
 };
 
 class CellAssigner {

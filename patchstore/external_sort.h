@@ -1,11 +1,21 @@
-// External merge sort of plain-old-data records within a memory budget: records are collected in
-// a buffer of at most budget bytes, each full buffer is sorted (in parallel) and written as a run,
-// and the runs are merged with a heap when read back. When everything fits, nothing touches the
-// disk. Used by ingest for the (vertex, patch) and face regrouping passes that the issue asks to
-// stay out of core ("an external sort of (vertex, patch) pairs").
+// External sorts of plain-old-data records within a memory budget, for ingest's out-of-core passes.
+// Records are collected in a buffer of at most the budget, each full buffer is sorted and written
+// as a run, and the runs are merged when read back; when everything fits, nothing touches the disk.
+//
+//   ExternalSorter<R, Less>    any comparator; runs sorted with tbb::parallel_sort. Equal records
+//                              keep no particular order, so callers make keys total.
+//   StableKeySorter<R, KeyFn>  by a 64-bit key, stable: equal keys keep the order they were
+//                              added in. Runs are radix sorted (no comparisons), which is what
+//                              makes the Morton sort of ingest cheap (ties: face order for free).
+//   KeyGroupSorter<R, Less>    records grouped by a 64-bit key, read back one whole group at a
+//                              time (a patch); within a group, in Less order. Runs are counting
+//                              sorted by key, and the merge moves whole groups, not records.
+// Merges go through a loser tree: log2(runs) comparisons per record, no copies inside the tree.
 #pragma once
 
+#include <tbb/parallel_for.h>
 #include <tbb/parallel_sort.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <cstdint>
@@ -18,6 +28,207 @@
 
 namespace mt {
 
+// Sequential stable LSD radix sort on bits [0, bits) of key(record), between a and tmp; returns
+// the one holding the result. Digits of up to 11 bits, as few passes as that allows (the data is
+// meant to be in cache, where a pass costs more than a 2048-entry histogram); one read counts
+// every digit; a digit that is the same for every record is skipped.
+template <class T, class KeyFn>
+T* lsdRadixSort(T* a, T* tmp, size_t n, const KeyFn& key, unsigned bits) {
+  constexpr unsigned kMaxDigit = 11, kMaxPasses = 6;
+  if (n < 2 || bits == 0) return a;
+  bits = std::min(bits, 64u);
+  const unsigned passes = (bits + kMaxDigit - 1) / kMaxDigit;
+  const unsigned digit = (bits + passes - 1) / passes;
+  const size_t buckets = size_t(1) << digit;
+  const uint64_t mask = buckets - 1;
+  uint32_t hist[kMaxPasses][size_t(1) << kMaxDigit];
+  for (unsigned p = 0; p < passes; ++p) std::fill(hist[p], hist[p] + buckets, 0);
+  for (size_t i = 0; i < n; ++i) {
+    const uint64_t k = key(a[i]);
+    for (unsigned p = 0; p < passes; ++p) ++hist[p][(k >> (p * digit)) & mask];
+  }
+  for (unsigned p = 0; p < passes; ++p) {
+    uint32_t* h = hist[p];
+    bool trivial = false;
+    uint32_t run = 0;
+    for (size_t d = 0; d < buckets; ++d) {
+      trivial |= h[d] == n;
+      uint32_t c = h[d];
+      h[d] = run;
+      run += c;
+    }
+    if (trivial) continue;
+    const unsigned shift = p * digit;
+    for (size_t i = 0; i < n; ++i) tmp[h[(key(a[i]) >> shift) & mask]++] = a[i];
+    std::swap(a, tmp);
+  }
+  return a;
+}
+
+// Stable radix sort of n records by key(record) (a uint64_t; only its low keyBits bits are looked
+// at). Sorts between a and tmp (both n records) and returns the one holding the result. Small
+// inputs go through lsdRadixSort. Large ones are split first on the 11 highest bits in which keys
+// differ (most significant digit first, in parallel slices that scatter into their own offsets,
+// which keeps it stable), and each of the 2048 buckets, small enough to stay in cache, is then
+// LSD-sorted on the bits below, in parallel over buckets: every record crosses main memory about
+// twice instead of once per digit.
+template <class T, class KeyFn>
+T* radixSort(T* a, T* tmp, size_t n, const KeyFn& key, unsigned keyBits = 64) {
+  if (n < 2 || keyBits == 0) return a;
+  if (n >= (size_t(1) << 32)) {  // lsdRadixSort counts in 32 bits
+    std::stable_sort(a, a + n, [&](const T& x, const T& y) { return key(x) < key(y); });
+    return a;
+  }
+  const uint64_t keyMask = keyBits >= 64 ? ~uint64_t(0) : (uint64_t(1) << keyBits) - 1;
+  if (n < (size_t(1) << 16)) return lsdRadixSort(a, tmp, n, [&](const T& r) { return key(r) & keyMask; }, keyBits);
+  constexpr unsigned kTop = 11;
+  constexpr size_t kBuckets = size_t(1) << kTop;
+  const size_t slices = size_t(std::clamp(tbb::this_task_arena::max_concurrency(), 1, 16));
+  const size_t per = (n + slices - 1) / slices;
+  auto range = [&](size_t s) { return std::pair<size_t, size_t>(std::min(n, s * per), std::min(n, (s + 1) * per)); };
+  // The highest bit in which any two keys differ.
+  const uint64_t first = key(a[0]) & keyMask;
+  std::vector<uint64_t> diff(slices, 0);
+  tbb::parallel_for(size_t(0), slices, [&](size_t s) {
+    auto [lo, hi] = range(s);
+    uint64_t d = 0;
+    for (size_t i = lo; i < hi; ++i) d |= (key(a[i]) & keyMask) ^ first;
+    diff[s] = d;
+  });
+  uint64_t anyDiff = 0;
+  for (uint64_t d : diff) anyDiff |= d;
+  if (anyDiff == 0) return a;
+  unsigned high = 63;
+  while (!(anyDiff >> high & 1)) --high;
+  const unsigned low = high + 1 > kTop ? high + 1 - kTop : 0;  // the split digit is bits [low, high]
+  std::vector<size_t> hist(slices * kBuckets, 0);
+  tbb::parallel_for(size_t(0), slices, [&](size_t s) {
+    auto [lo, hi] = range(s);
+    size_t* h = &hist[s * kBuckets];
+    for (size_t i = lo; i < hi; ++i) ++h[((key(a[i]) & keyMask) >> low) & (kBuckets - 1)];
+  });
+  std::vector<size_t> start(kBuckets + 1, 0);
+  {
+    size_t run = 0;
+    for (size_t d = 0; d < kBuckets; ++d) {
+      start[d] = run;
+      for (size_t s = 0; s < slices; ++s) {
+        size_t c = hist[s * kBuckets + d];
+        hist[s * kBuckets + d] = run;
+        run += c;
+      }
+    }
+    start[kBuckets] = run;
+  }
+  tbb::parallel_for(size_t(0), slices, [&](size_t s) {
+    auto [lo, hi] = range(s);
+    size_t* off = &hist[s * kBuckets];
+    for (size_t i = lo; i < hi; ++i) tmp[off[((key(a[i]) & keyMask) >> low) & (kBuckets - 1)]++] = a[i];
+  });
+  if (low > 0) {
+    const uint64_t lowMask = (uint64_t(1) << low) - 1;
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, kBuckets, 16), [&](const tbb::blocked_range<size_t>& r) {
+      for (size_t d = r.begin(); d < r.end(); ++d) {
+        const size_t b = start[d], m = start[d + 1] - b;
+        if (m < 2) continue;
+        T* sorted = lsdRadixSort(tmp + b, a + b, m, [&](const T& x) { return key(x) & lowMask; }, low);
+        if (sorted != tmp + b) std::copy(sorted, sorted + m, tmp + b);
+      }
+    });
+  }
+  return tmp;
+}
+
+// A loser tree over k sources: better(i, j) says whether source i's head goes before source j's
+// (a strict total order, exhausted sources last). top() is the winner; after the caller advances
+// it, replay() restores the tree in log2(k) comparisons.
+template <class Better>
+class LoserTree {
+ public:
+  LoserTree() = default;
+  void init(size_t k, Better better) {
+    k_ = k;
+    better_ = better;
+    tree_.assign(std::max<size_t>(1, k), 0);
+    if (k <= 1) return;
+    std::vector<size_t> win(2 * k);
+    for (size_t i = 0; i < k; ++i) win[k + i] = i;
+    for (size_t p = k - 1; p >= 1; --p) {
+      size_t a = win[2 * p], b = win[2 * p + 1];
+      if (better_(a, b)) {
+        win[p] = a;
+        tree_[p] = b;
+      } else {
+        win[p] = b;
+        tree_[p] = a;
+      }
+    }
+    tree_[0] = win[1];
+  }
+  size_t top() const { return tree_[0]; }
+  void replay() {
+    if (k_ <= 1) return;
+    size_t w = tree_[0];
+    for (size_t p = (w + k_) / 2; p >= 1; p /= 2)
+      if (better_(tree_[p], w)) std::swap(tree_[p], w);
+    tree_[0] = w;
+  }
+
+ private:
+  size_t k_ = 0;
+  Better better_{};
+  std::vector<size_t> tree_;
+};
+
+// Heads of k sorted runs on disk, merged in Less order (ties: lower run first, so a sorter whose
+// runs are in input order is stable).
+template <class Record, class Less>
+class RunMerger {
+ public:
+  void open(const std::vector<std::string>& runs, size_t bufferBytes, Less less) {
+    less_ = less;
+    readers_.clear();
+    heads_.assign(runs.size(), Record{});
+    done_.assign(runs.size(), 0);
+    for (size_t i = 0; i < runs.size(); ++i) {
+      readers_.push_back(std::make_unique<TempReader>(runs[i], bufferBytes));
+      done_[i] = !readers_[i]->get(heads_[i]);
+    }
+    tree_.init(runs.size(), Better{this});
+  }
+  bool next(Record& out) {
+    if (readers_.empty()) return false;
+    const size_t w = tree_.top();
+    if (done_[w]) return false;
+    out = heads_[w];
+    done_[w] = !readers_[w]->get(heads_[w]);
+    tree_.replay();
+    return true;
+  }
+  void close() {
+    readers_.clear();
+    heads_.clear();
+    done_.clear();
+  }
+
+ private:
+  struct Better {
+    RunMerger* m = nullptr;
+    bool operator()(size_t i, size_t j) const {
+      if (m->done_[i] != m->done_[j]) return !m->done_[i];
+      if (m->done_[i]) return i < j;
+      if (m->less_(m->heads_[i], m->heads_[j])) return true;
+      if (m->less_(m->heads_[j], m->heads_[i])) return false;
+      return i < j;
+    }
+  };
+  Less less_{};
+  std::vector<std::unique_ptr<TempReader>> readers_;
+  std::vector<Record> heads_;
+  std::vector<uint8_t> done_;
+  LoserTree<Better> tree_;
+};
+
 template <class Record, class Less>
 class ExternalSorter {
  public:
@@ -28,7 +239,7 @@ class ExternalSorter {
   ~ExternalSorter() { release(); }
 
   void release() {
-    readers_.clear();
+    merger_.close();
     for (auto& path : runs_) std::remove(path.c_str());
     runs_.clear();
     std::vector<Record>().swap(buffer_);
@@ -58,11 +269,7 @@ class ExternalSorter {
     std::vector<Record>().swap(buffer_);
     // Each run gets an equal share of the budget as its read buffer.
     size_t perRun = std::max<size_t>(64 << 10, capacity_ * sizeof(Record) / (runs_.size() + 1));
-    for (size_t i = 0; i < runs_.size(); ++i) {
-      readers_.push_back(std::make_unique<TempReader>(runs_[i], perRun));
-      Record r;
-      if (readers_[i]->get(r)) heap_.push({r, i});
-    }
+    merger_.open(runs_, perRun, less_);
   }
 
   // Once it returns false the sorter has released its memory and run files, so the next pass
@@ -76,32 +283,14 @@ class ExternalSorter {
       out = buffer_[memoryPos_++];
       return true;
     }
-    if (heap_.empty()) {
+    if (!merger_.next(out)) {
       release();
       return false;
     }
-    Entry top = heap_.top();
-    heap_.pop();
-    out = top.record;
-    Record r;
-    if (readers_[top.run]->get(r)) heap_.push({r, top.run});
     return true;
   }
 
  private:
-  struct Entry {
-    Record record;
-    size_t run;
-  };
-  struct EntryGreater {
-    Less less;
-    bool operator()(const Entry& a, const Entry& b) const {
-      if (less(b.record, a.record)) return true;
-      if (less(a.record, b.record)) return false;
-      return a.run > b.run;
-    }
-  };
-
   void spill() {
     tbb::parallel_sort(buffer_.begin(), buffer_.end(), less_);
     std::string path = prefix_ + ".run" + std::to_string(runs_.size());
@@ -119,8 +308,321 @@ class ExternalSorter {
   size_t memoryPos_ = 0;
   uint64_t count_ = 0;
   std::vector<std::string> runs_;
+  RunMerger<Record, Less> merger_;
+};
+
+// Stable external sort by a 64-bit key (see the top of the file). The budget holds the buffer
+// and the radix sort's second array.
+template <class Record, class KeyFn>
+class StableKeySorter {
+ public:
+  StableKeySorter(std::string tempPrefix, uint64_t budgetBytes, KeyFn key = KeyFn(), unsigned keyBits = 64)
+      : prefix_(std::move(tempPrefix)), key_(key), keyBits_(keyBits) {
+    capacity_ = std::max<size_t>(1024, size_t(budgetBytes / (2 * sizeof(Record))));
+  }
+  ~StableKeySorter() { release(); }
+
+  void release() {
+    merger_.close();
+    for (auto& path : runs_) std::remove(path.c_str());
+    runs_.clear();
+    std::vector<Record>().swap(buffer_);
+    std::vector<Record>().swap(tmp_);
+    sorted_ = nullptr;
+    memoryPos_ = memoryEnd_ = 0;
+  }
+
+  void add(const Record& r) {
+    if (buffer_.capacity() < capacity_) buffer_.reserve(capacity_);
+    if (buffer_.size() == capacity_) spill();
+    buffer_.push_back(r);
+    ++count_;
+  }
+  void addBatch(const Record* r, size_t n) {
+    if (buffer_.capacity() < capacity_) buffer_.reserve(capacity_);
+    while (n > 0) {
+      if (buffer_.size() == capacity_) spill();
+      size_t take = std::min(n, capacity_ - buffer_.size());
+      buffer_.insert(buffer_.end(), r, r + take);
+      r += take;
+      n -= take;
+      count_ += take;
+    }
+  }
+  uint64_t count() const { return count_; }
+  size_t runCount() const { return runs_.size(); }
+
+  void finish() {
+    if (runs_.empty()) {
+      sorted_ = sortBuffer();
+      memoryPos_ = 0;
+      memoryEnd_ = buffer_.size();
+      return;
+    }
+    if (!buffer_.empty()) spill();
+    std::vector<Record>().swap(buffer_);
+    std::vector<Record>().swap(tmp_);
+    size_t perRun = std::max<size_t>(64 << 10, capacity_ * 2 * sizeof(Record) / (runs_.size() + 1));
+    merger_.open(runs_, std::min<size_t>(perRun, 4 << 20), Less{key_});
+  }
+
+  bool next(Record& out) {
+    if (runs_.empty()) {
+      if (memoryPos_ >= memoryEnd_) {
+        release();
+        return false;
+      }
+      out = sorted_[memoryPos_++];
+      return true;
+    }
+    if (!merger_.next(out)) {
+      release();
+      return false;
+    }
+    return true;
+  }
+
+ private:
+  struct Less {
+    KeyFn key;
+    bool operator()(const Record& a, const Record& b) const { return key(a) < key(b); }
+  };
+  const Record* sortBuffer() {
+    tmp_.resize(buffer_.size());
+    return radixSort(buffer_.data(), tmp_.data(), buffer_.size(), key_, keyBits_);
+  }
+  void spill() {
+    const Record* sorted = sortBuffer();
+    std::string path = prefix_ + ".run" + std::to_string(runs_.size());
+    TempWriter writer(path, 4 << 20);
+    writer.write(sorted, buffer_.size() * sizeof(Record));
+    writer.close();
+    runs_.push_back(path);
+    buffer_.clear();
+  }
+
+  std::string prefix_;
+  KeyFn key_;
+  unsigned keyBits_;
+  size_t capacity_;
+  std::vector<Record> buffer_, tmp_;
+  const Record* sorted_ = nullptr;
+  size_t memoryPos_ = 0, memoryEnd_ = 0;
+  uint64_t count_ = 0;
+  std::vector<std::string> runs_;
+  RunMerger<Record, Less> merger_;
+};
+
+// Records grouped by a 64-bit key (see the top of the file). A run is written as, per key in
+// ascending order, a GroupHeader and the group's records in Less order. nextGroup() gathers a
+// key's records from every run (lower runs first; re-sorted only when the concatenation is not
+// already in Less order, which it is when records were added in Less order). rewind() starts
+// another pass over the same groups. The budget covers the keys, the records and the counting
+// sort's output.
+template <class Record, class Less>
+class KeyGroupSorter {
+ public:
+  KeyGroupSorter(std::string tempPrefix, uint64_t budgetBytes, Less less = Less())
+      : prefix_(std::move(tempPrefix)), less_(less) {
+    capacity_ = std::max<size_t>(1024, size_t(budgetBytes / (8 + 4 + 2 * sizeof(Record))));
+  }
+  ~KeyGroupSorter() { release(); }
+  KeyGroupSorter(const KeyGroupSorter&) = delete;
+  KeyGroupSorter& operator=(const KeyGroupSorter&) = delete;
+
+  void release() {
+    readers_.clear();
+    for (auto& path : runs_) std::remove(path.c_str());
+    runs_.clear();
+    std::vector<uint64_t>().swap(keys_);
+    std::vector<Record>().swap(recs_);
+    std::vector<Record>().swap(grouped_);
+    std::vector<uint32_t>().swap(slot_);
+    groups_.clear();
+  }
+
+  void addBatch(const uint64_t* keys, const Record* recs, size_t n) {
+    if (keys_.capacity() < capacity_) {
+      keys_.reserve(capacity_);
+      recs_.reserve(capacity_);
+    }
+    while (n > 0) {
+      if (keys_.size() == capacity_) spill();
+      size_t take = std::min(n, capacity_ - keys_.size());
+      keys_.insert(keys_.end(), keys, keys + take);
+      recs_.insert(recs_.end(), recs, recs + take);
+      keys += take;
+      recs += take;
+      n -= take;
+      count_ += take;
+    }
+  }
+  uint64_t count() const { return count_; }
+  size_t runCount() const { return runs_.size(); }
+
+  void finish() {
+    if (runs_.empty()) {
+      formGroups();
+      std::vector<uint64_t>().swap(keys_);
+      std::vector<Record>().swap(recs_);
+      std::vector<uint32_t>().swap(slot_);
+    } else {
+      if (!keys_.empty()) spill();
+      std::vector<uint64_t>().swap(keys_);
+      std::vector<Record>().swap(recs_);
+      std::vector<Record>().swap(grouped_);
+      std::vector<uint32_t>().swap(slot_);
+      groups_.clear();
+    }
+    rewind();
+  }
+
+  // Starts a pass over the groups (finish() starts the first).
+  void rewind() {
+    nextGroup_ = 0;
+    if (runs_.empty()) return;
+    if (readers_.empty()) {
+      // Reads are sequential and the file is usually in the page cache: 1 MiB a run is plenty,
+      // and a pass over the groups may be sharing the cap with resident data.
+      size_t perRun = std::clamp<size_t>(capacity_ * (8 + 4 + 2 * sizeof(Record)) / (runs_.size() + 1), 64 << 10, 1 << 20);
+      for (auto& path : runs_) readers_.push_back(std::make_unique<TempReader>(path, perRun));
+    } else {
+      for (auto& r : readers_) r->rewind();
+    }
+    heads_.assign(runs_.size(), Header{});
+    heap_ = {};
+    for (size_t i = 0; i < runs_.size(); ++i)
+      if (readers_[i]->get(heads_[i])) heap_.push({heads_[i].key, i});
+  }
+
+  // The next key and all its records (appended to out after clearing it); false at the end.
+  bool nextGroup(uint64_t& key, std::vector<Record>& out) {
+    out.clear();
+    if (runs_.empty()) {
+      if (nextGroup_ >= groups_.size()) return false;
+      const Group& g = groups_[nextGroup_++];
+      key = g.key;
+      out.assign(grouped_.begin() + g.begin, grouped_.begin() + g.begin + g.count);
+      return true;
+    }
+    if (heap_.empty()) return false;
+    key = heap_.top().key;
+    size_t sources = 0;
+    while (!heap_.empty() && heap_.top().key == key) {
+      size_t run = heap_.top().run;
+      heap_.pop();
+      size_t at = out.size();
+      out.resize(at + heads_[run].count);
+      if (readers_[run]->read(out.data() + at, heads_[run].count * sizeof(Record)) != heads_[run].count * sizeof(Record))
+        fail(runs_[run], "scratch run ends inside a group");
+      if (readers_[run]->get(heads_[run])) heap_.push({heads_[run].key, run});
+      ++sources;
+    }
+    if (sources > 1 && !std::is_sorted(out.begin(), out.end(), less_)) std::sort(out.begin(), out.end(), less_);
+    return true;
+  }
+
+ private:
+  struct Header {
+    uint64_t key;
+    uint64_t count;
+  };
+  struct Group {
+    uint64_t key;
+    size_t begin, count;
+  };
+  struct HeapEntry {
+    uint64_t key;
+    size_t run;
+    bool operator<(const HeapEntry& o) const { return key != o.key ? key > o.key : run > o.run; }  // min-heap
+  };
+
+  // Counting sort of the buffer by key into grouped_ (stable), groups_ in ascending key order.
+  void formGroups() {
+    const size_t n = keys_.size();
+    // Distinct keys through an open-addressing table (first-seen slots); consecutive records
+    // of a coherent stream usually share a key, so the last one is checked first.
+    size_t cap = 1024;
+    std::vector<std::pair<uint64_t, uint32_t>> table(cap, {0, UINT32_MAX});
+    std::vector<uint64_t> distinct;
+    slot_.resize(n);
+    auto hashOf = [](uint64_t k) { return (k * 0x9E3779B97F4A7C15ull) >> 20; };
+    auto insert = [&](uint64_t k) -> uint32_t {
+      size_t h = hashOf(k) & (cap - 1);
+      while (table[h].second != UINT32_MAX) {
+        if (table[h].first == k) return table[h].second;
+        h = (h + 1) & (cap - 1);
+      }
+      table[h] = {k, uint32_t(distinct.size())};
+      distinct.push_back(k);
+      if (distinct.size() * 2 > cap) {
+        cap *= 2;
+        std::vector<std::pair<uint64_t, uint32_t>> grown(cap, {0, UINT32_MAX});
+        for (auto& e : table)
+          if (e.second != UINT32_MAX) {
+            size_t g = hashOf(e.first) & (cap - 1);
+            while (grown[g].second != UINT32_MAX) g = (g + 1) & (cap - 1);
+            grown[g] = e;
+          }
+        table.swap(grown);
+      }
+      return uint32_t(distinct.size() - 1);
+    };
+    uint64_t lastKey = 0;
+    uint32_t lastSlot = UINT32_MAX;
+    for (size_t i = 0; i < n; ++i) {
+      if (lastSlot == UINT32_MAX || keys_[i] != lastKey) {
+        lastKey = keys_[i];
+        lastSlot = insert(lastKey);
+      }
+      slot_[i] = lastSlot;
+    }
+    std::vector<uint32_t> order(distinct.size());
+    for (uint32_t i = 0; i < order.size(); ++i) order[i] = i;
+    std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return distinct[a] < distinct[b]; });
+    std::vector<uint32_t> rank(distinct.size());
+    for (uint32_t r = 0; r < order.size(); ++r) rank[order[r]] = r;
+    std::vector<size_t> start(distinct.size() + 1, 0);
+    for (size_t i = 0; i < n; ++i) ++start[rank[slot_[i]] + 1];
+    for (size_t r = 0; r < distinct.size(); ++r) start[r + 1] += start[r];
+    groups_.clear();
+    for (uint32_t r = 0; r < order.size(); ++r) groups_.push_back({distinct[order[r]], start[r], start[r + 1] - start[r]});
+    grouped_.resize(n);
+    for (size_t i = 0; i < n; ++i) grouped_[start[rank[slot_[i]]]++] = recs_[i];
+    tbb::parallel_for(size_t(0), groups_.size(), [&](size_t g) {
+      auto b = grouped_.begin() + groups_[g].begin, e = b + groups_[g].count;
+      if (!std::is_sorted(b, e, less_)) std::sort(b, e, less_);
+    });
+  }
+
+  void spill() {
+    formGroups();
+    std::string path = prefix_ + ".run" + std::to_string(runs_.size());
+    TempWriter writer(path, 4 << 20);
+    for (const Group& g : groups_) {
+      writer.put(Header{g.key, g.count});
+      writer.write(grouped_.data() + g.begin, g.count * sizeof(Record));
+    }
+    writer.close();
+    runs_.push_back(path);
+    keys_.clear();
+    recs_.clear();
+    groups_.clear();
+  }
+
+  std::string prefix_;
+  Less less_;
+  size_t capacity_;
+  std::vector<uint64_t> keys_;
+  std::vector<Record> recs_, grouped_;
+  std::vector<uint32_t> slot_;
+  std::vector<Group> groups_;
+  size_t nextGroup_ = 0;
+  uint64_t count_ = 0;
+  std::vector<std::string> runs_;
   std::vector<std::unique_ptr<TempReader>> readers_;
-  std::priority_queue<Entry, std::vector<Entry>, EntryGreater> heap_{EntryGreater{less_}};
+  std::vector<Header> heads_;
+  std::priority_queue<HeapEntry> heap_;
 };
 
 }  // namespace mt

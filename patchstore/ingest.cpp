@@ -1,7 +1,22 @@
 // Ingest: a mesh file of any size into a new patch store, within the --memory cap.
 //
-// Every pass is sequential over scratch files or an external sort, so memory depends on the cap,
-// not on the input (BMT section 6 needs the store to exist before anything fits in RAM):
+// Memory depends on the cap, not on the input (BMT section 6 needs the store to exist before
+// anything fits in RAM). Two paths give the same store byte for byte:
+//
+// Resident path, when the vertex records (and one state byte per vertex) fit in the cap with room
+// to spare (a 53 M-triangle scan at 512M): the records stay in RAM, so every pass that needs a
+// position reads it directly instead of joining through an external sort.
+//   1 parse      input -> vertex records in RAM + face.bin (3 x u32); bounding box
+//   2 morton     face.bin -> (Morton code, face) of every face, radix-sorted runs (12 bytes a face)
+//   3 sample     the merge of the runs picks every stride-th face (the irregular V-partition's
+//                sample, CentroidSource::sample); one more read of face.bin gives their centroids.
+//                An assigner that wants the whole stream (grid, regular) gets it materialized.
+//   4 assign     face.bin in face order -> centroid -> cell key; (face, corners) grouped by key
+//                (KeyGroupSorter: counting-sorted runs, whole groups merged; faces stay in face order)
+//   5 shared     one pass over the groups marks the vertices held by two or more patches
+//   6 patches    a second pass builds every patch (local order = ascending input index) with
+//                positions read from RAM; shared vertices -> (vertex, patch, local); edge counts
+// Chunked path, otherwise (bounded by the cap whatever the input size):
 //   1 parse      input -> vert.bin (fixed records) + face.bin (3 x u32); bounding box
 //   2 centroids  face.bin + vert.bin -> centroid xyz + area per face, straight into an external
 //                sort by Morton code (ties: face); vertex positions are loaded in chunks that fit
@@ -15,21 +30,30 @@
 //   5 join       pairs merge-joined with vert.bin -> (patch, vertex, data) sorted by patch
 //   6 patches    one geometry block per patch (local order = ascending input index); shared
 //                vertices -> (vertex, patch, local) sorted by vertex; edge use counts
+// Both paths end with
 //   7 boundary   grouped by vertex -> (p, vp, q, vq) sorted by p -> one boundary block per patch
-// Determinism: every sort key is total, so the store does not depend on the cap or thread count.
+// Determinism: every sort key is total (or the sort is stable over a fixed input order), so the
+// store does not depend on the cap, the path or the thread count.
 #include <malloc.h>
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_pipeline.h>
+#include <tbb/task_arena.h>
+#include <tbb/task_group.h>
 #include <sys/resource.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <chrono>
 #include <cinttypes>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <functional>
 #include <limits>
+#include <mutex>
 #include <sstream>
 
 #include "patchstore/byte_io.h"
@@ -74,10 +98,15 @@ struct VertexRecordLayout {
   }
 };
 
-// Stage 1 sink: writes scratch files, tracks the bounding box.
+
+// Stage 1 sink: vertex records to vert.bin (or to RAM, for the resident path), faces to
+// face.bin; tracks the bounding box.
 class ScratchSink : public MeshSink {
  public:
-  ScratchSink(const std::string& dir, Progress& progress) : vert_(dir + "/vert.bin", 4 << 20), face_(dir + "/face.bin", 4 << 20), progress_(progress) {}
+  // Vertex records are kept in RAM when the header declares a count whose records fit in
+  // residentLimit bytes (0: never).
+  ScratchSink(const std::string& dir, Progress& progress, uint64_t residentLimit)
+      : vert_(dir + "/vert.bin", 4 << 20), face_(dir + "/face.bin", 4 << 20), progress_(progress), residentLimit_(residentLimit) {}
   void begin(const MeshHeader& h) override {
     header = h;
     layout = {h.doublePrecision, h.hasNormals, h.hasColors};
@@ -86,11 +115,36 @@ class ScratchSink : public MeshSink {
       bounds.lo[a] = std::numeric_limits<double>::infinity();
       bounds.hi[a] = -std::numeric_limits<double>::infinity();
     }
+    // STL soups are welded through vert.bin first (weldSoup); they may be loaded afterwards.
+    const bool soup = h.format == MeshFormat::StlAscii || h.format == MeshFormat::StlBinary;
+    if (!soup && h.declaredVertices >= 0 && uint64_t(h.declaredVertices) * layout.size() <= residentLimit_) {
+      ram_.reserve(size_t(h.declaredVertices) * layout.size());
+      inRam_ = true;
+    }
   }
   void vertices(const InputVertex* v, size_t count, uint64_t) override {
+    if (fused_) {
+      // Vertices after faces: the codes computed so far used a bounding box that is not final.
+      tasks_.wait();
+      fused_ = false;
+      chunk_.clear();
+      if (cancelFuse_) cancelFuse_();
+    }
+    if (inRam_ && ram_.size() + count * layout.size() > ram_.capacity()) {
+      // More vertices than declared (the reader reports that as an error, but stay bounded).
+      vert_.write(ram_.data(), ram_.size());
+      std::vector<char>().swap(ram_);
+      inRam_ = false;
+    }
     for (size_t i = 0; i < count; ++i) {
-      layout.encode(v[i], record_.data());
-      vert_.write(record_.data(), record_.size());
+      if (inRam_) {
+        size_t at = ram_.size();
+        ram_.resize(at + layout.size());
+        layout.encode(v[i], ram_.data() + at);
+      } else {
+        layout.encode(v[i], record_.data());
+        vert_.write(record_.data(), record_.size());
+      }
       for (int a = 0; a < 3; ++a) {
         bounds.lo[a] = std::min(bounds.lo[a], v[i].p[a]);
         bounds.hi[a] = std::max(bounds.hi[a], v[i].p[a]);
@@ -100,12 +154,50 @@ class ScratchSink : public MeshSink {
   }
   void triangles(const uint32_t* idx, size_t count) override {
     face_.write(idx, count * 12);
+    if (fuse_ && !fuseDecided_) {
+      // Fused only when every declared vertex came first: then the records and the bounding box
+      // are final, and the faces' Morton codes can be computed while the parse goes on.
+      fuseDecided_ = true;
+      fused_ = inRam_ && header.declaredVertices >= 0 && vertexCount == uint64_t(header.declaredVertices);
+    }
+    if (fused_) {
+      chunk_.insert(chunk_.end(), idx, idx + 3 * count);
+      if (chunk_.size() >= 3 * kChunkFaces) flushChunk();
+    }
     faceCount += count;
     progress_.update(faceCount);
   }
   void close() {
+    if (fused_) {
+      flushChunk();
+      tasks_.wait();
+    }
     vert_.close();
     face_.close();
+  }
+  ~ScratchSink() noexcept override {
+    try {
+      tasks_.wait();
+    } catch (...) {
+    }
+  }
+  // Resident inputs: fn(records, bounds, faces, count, first face) is called on a worker thread
+  // with consecutive batches of faces, in order, while the parse goes on (one batch in flight).
+  using FuseFn = std::function<void(const char*, const Box3&, const uint32_t*, size_t, uint64_t)>;
+  void fuse(FuseFn fn, std::function<void()> cancel) {
+    fuse_ = std::move(fn);
+    cancelFuse_ = std::move(cancel);
+  }
+  bool fused() const { return fused_; }
+  bool inRam() const { return inRam_; }
+  // The vertex records, in RAM (moved out; inRam() must be true or loadVertices() called).
+  std::vector<char> takeVertices() { return std::move(ram_); }
+  // Reads vert.bin into RAM (formats that declare no count, welded soups).
+  void loadVertices(const std::string& dir) {
+    ram_.resize(size_t(vertexCount) * layout.size());
+    TempReader r(dir + "/vert.bin", 4 << 20);
+    if (r.read(ram_.data(), ram_.size()) != ram_.size()) fail(dir, "vertex scratch file is short");
+    inRam_ = true;
   }
   MeshHeader header;
   VertexRecordLayout layout{};
@@ -113,9 +205,27 @@ class ScratchSink : public MeshSink {
   uint64_t vertexCount = 0, faceCount = 0;
 
  private:
+  void flushChunk() {
+    tasks_.wait();  // the previous batch is done: keep the order, reuse its buffer
+    std::swap(chunk_, inFlight_);
+    chunk_.clear();
+    const uint64_t first = flushed_;
+    flushed_ += inFlight_.size() / 3;
+    if (inFlight_.empty()) return;
+    tasks_.run([this, first] { fuse_(ram_.data(), bounds, inFlight_.data(), inFlight_.size() / 3, first); });
+  }
+  static constexpr size_t kChunkFaces = 1 << 18;
   TempWriter vert_, face_;
   Progress& progress_;
-  std::vector<char> record_;
+  uint64_t residentLimit_;
+  std::vector<char> record_, ram_;
+  bool inRam_ = false;
+  FuseFn fuse_;
+  std::function<void()> cancelFuse_;
+  bool fuseDecided_ = false, fused_ = false;
+  std::vector<uint32_t> chunk_, inFlight_;
+  uint64_t flushed_ = 0;
+  tbb::task_group tasks_;
 };
 
 struct Centroid {
@@ -125,8 +235,12 @@ struct Centroid {
 // Centroid and area of a triangle, independent of corner order (corners summed in ascending
 // index order), so that duplicate faces always land in the same cell.
 Centroid centroidOf(const uint32_t v[3], const float* const p[3]) {
+  // Three compare-exchanges (corners with equal indices have equal positions, so their order
+  // does not show in the sums).
   int order[3] = {0, 1, 2};
-  std::sort(order, order + 3, [&](int a, int b) { return v[a] < v[b]; });
+  if (v[order[1]] < v[order[0]]) std::swap(order[0], order[1]);
+  if (v[order[2]] < v[order[1]]) std::swap(order[1], order[2]);
+  if (v[order[1]] < v[order[0]]) std::swap(order[0], order[1]);
   double c[3], e1[3], e2[3];
   for (int a = 0; a < 3; ++a) {
     c[a] = (double(p[order[0]][a]) + double(p[order[1]][a]) + double(p[order[2]][a])) / 3.0;
@@ -135,6 +249,17 @@ Centroid centroidOf(const uint32_t v[3], const float* const p[3]) {
   }
   double n[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]};
   return {float(c[0]), float(c[1]), float(c[2]), float(0.5 * std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]))};
+}
+
+// The centroid alone, computed exactly as centroidOf computes it (the Morton and assign passes
+// need no area).
+void centroidPoint(const uint32_t v[3], const float* const p[3], float out[3]) {
+  int order[3] = {0, 1, 2};
+  if (v[order[1]] < v[order[0]]) std::swap(order[0], order[1]);
+  if (v[order[2]] < v[order[1]]) std::swap(order[1], order[2]);
+  if (v[order[1]] < v[order[0]]) std::swap(order[0], order[1]);
+  for (int a = 0; a < 3; ++a)
+    out[a] = float((double(p[order[0]][a]) + double(p[order[1]][a]) + double(p[order[2]][a])) / 3.0);
 }
 
 // 21 bits per axis interleaved: the Morton (Z-order) code of a point in the box.
@@ -447,15 +572,39 @@ uint64_t weldSoup(const std::string& scratch, const VertexRecordLayout& layout, 
   return welded;
 }
 
+
+// Resident set size now (VmRSS), to size the passes that follow the resident vertex records.
+uint64_t currentRssBytes() {
+  FILE* f = std::fopen("/proc/self/statm", "r");
+  if (!f) return 0;
+  unsigned long long size = 0, resident = 0;
+  int n = std::fscanf(f, "%llu %llu", &size, &resident);
+  std::fclose(f);
+  return n == 2 ? uint64_t(resident) * uint64_t(sysconf(_SC_PAGESIZE)) : 0;
+}
+// The resident set's high-water mark so far (VmHWM).
+uint64_t peakRssSoFar() {
+  FILE* f = std::fopen("/proc/self/status", "r");
+  if (!f) return 0;
+  char line[256];
+  unsigned long long kb = 0;
+  while (std::fgets(line, sizeof line, f))
+    if (std::sscanf(line, "VmHWM: %llu kB", &kb) == 1) break;
+  std::fclose(f);
+  return uint64_t(kb) << 10;
+}
+
 // Per-stage wall and CPU seconds (all threads) on stderr with the progress lines, so that the
-// stages can be compared on a busy machine, where wall time says little (bench/ingest.sh).
+// stages can be compared on a busy machine, where wall time says little (bench/ingest.sh); with
+// the resident set at the end of the stage, to see where the cap goes.
 class StageClock {
  public:
   explicit StageClock(bool enabled) : enabled_(enabled) { reset(); }
   void mark(const char* stage) {
     if (!enabled_) return;
     double wall = now(), cpu = cpuSeconds();
-    std::fprintf(stderr, "ingest: stage %s: %.2f s wall, %.2f s cpu\n", stage, wall - wall_, cpu - cpu_);
+    std::fprintf(stderr, "ingest: stage %s: %.2f s wall, %.2f s cpu, rss %.0f MiB (peak %.0f)\n", stage, wall - wall_,
+                 cpu - cpu_, double(currentRssBytes()) / double(1 << 20), double(peakRssSoFar()) / double(1 << 20));
     wall_ = wall;
     cpu_ = cpu;
   }
@@ -486,6 +635,625 @@ std::string encodeReport(const IngestReport& r) {
   return s.str();
 }
 
+
+// ---- the resident path -------------------------------------------------------------------------
+
+// The vertex records of vert.bin, in RAM (a view: build() owns the bytes).
+struct ResidentVertices {
+  const char* data = nullptr;
+  VertexRecordLayout layout{};
+  size_t size = 0;  // record bytes
+  const char* record(uint32_t v) const { return data + size_t(v) * size; }
+  // The float position every centroid is computed from (as in the chunked path's chunks).
+  void position(uint32_t v, float out[3]) const {
+    const char* r = record(v);
+    if (!layout.doublePrecision) {
+      std::memcpy(out, r, 12);
+    } else {
+      double d[3];
+      std::memcpy(d, r, 24);
+      for (int a = 0; a < 3; ++a) out[a] = float(d[a]);
+    }
+  }
+  void prefetch(uint32_t v) const { __builtin_prefetch(record(v)); }
+  Centroid centroid(const uint32_t v[3]) const {
+    float p[9];
+    for (int k = 0; k < 3; ++k) position(v[k], p + 3 * k);
+    const float* c[3] = {p, p + 3, p + 6};
+    return centroidOf(v, c);
+  }
+  void centroidPoint(const uint32_t v[3], float out[3]) const {
+    float p[9];
+    for (int k = 0; k < 3; ++k) position(v[k], p + 3 * k);
+    const float* c[3] = {p, p + 3, p + 6};
+    mt::centroidPoint(v, c, out);
+  }
+};
+
+// Faces in batches, in face order, through a TBB pipeline: the batch is read on one thread,
+// work(batch) runs on any thread (batches in parallel), consume(batch) runs in face order.
+template <class Out>
+struct FaceBatch {
+  uint64_t first = 0;  // index of the batch's first face
+  std::vector<uint32_t> idx;  // 3 per face
+  Out out;
+  size_t count() const { return idx.size() / 3; }
+};
+template <class Out, class Work, class Consume>
+void pipelineFaces(const std::string& path, size_t batchFaces, const Work& work, const Consume& consume) {
+  TempReader fr(path, 4 << 20);
+  const size_t tokens = size_t(std::max(2, tbb::this_task_arena::max_concurrency())) + 2;
+  std::vector<std::unique_ptr<FaceBatch<Out>>> pool;
+  std::vector<FaceBatch<Out>*> idle;
+  std::mutex idleMutex;
+  for (size_t i = 0; i < tokens; ++i) {
+    pool.push_back(std::make_unique<FaceBatch<Out>>());
+    idle.push_back(pool.back().get());
+  }
+  uint64_t next = 0;
+  tbb::parallel_pipeline(
+      tokens,
+      tbb::make_filter<void, FaceBatch<Out>*>(tbb::filter_mode::serial_in_order,
+                                              [&](tbb::flow_control& fc) -> FaceBatch<Out>* {
+                                                FaceBatch<Out>* b;
+                                                {
+                                                  std::lock_guard<std::mutex> lock(idleMutex);
+                                                  b = idle.back();
+                                                  idle.pop_back();
+                                                }
+                                                if (!fr.getBatch(b->idx, 3 * batchFaces)) {
+                                                  std::lock_guard<std::mutex> lock(idleMutex);
+                                                  idle.push_back(b);
+                                                  fc.stop();
+                                                  return nullptr;
+                                                }
+                                                b->first = next;
+                                                next += b->count();
+                                                return b;
+                                              }) &
+          tbb::make_filter<FaceBatch<Out>*, FaceBatch<Out>*>(tbb::filter_mode::parallel,
+                                                             [&](FaceBatch<Out>* b) {
+                                                               work(*b);
+                                                               return b;
+                                                             }) &
+          tbb::make_filter<FaceBatch<Out>*, void>(tbb::filter_mode::serial_in_order, [&](FaceBatch<Out>* b) {
+            consume(*b);
+            std::lock_guard<std::mutex> lock(idleMutex);
+            idle.push_back(b);
+          }));
+}
+
+// (Morton code, face): the resident path's Morton sort record. Added in face order to a stable
+// sort by code, so ties come out by face, as MortonLess orders them.
+struct MortonKey {
+  uint32_t lo, hi, face;
+  uint64_t code() const { return uint64_t(hi) << 32 | lo; }
+};
+struct MortonKeyOf {
+  uint64_t operator()(const MortonKey& k) const { return k.code(); }
+};
+// A centroid keyed by Morton code, for an assigner that streams every centroid.
+struct MortonCentroid {
+  uint32_t lo, hi;
+  Centroid c;
+};
+struct MortonCentroidOf {
+  uint64_t operator()(const MortonCentroid& k) const { return uint64_t(k.hi) << 32 | k.lo; }
+};
+
+constexpr size_t kFaceBatch = 65536;
+
+// The Morton sort of the resident path: (code, face) of every face, added in face order.
+class MortonSort {
+ public:
+  MortonSort(std::string prefix, uint64_t budget) : prefix_(std::move(prefix)), budget_(budget) { reset(); }
+  void reset() {
+    sorter_ = std::make_unique<StableKeySorter<MortonKey, MortonKeyOf>>(prefix_, budget_, MortonKeyOf{}, 63);
+    added_ = 0;
+  }
+  // Codes of faces [first, first + n) (3 indices each, already computed by the caller or not).
+  void add(const MortonKey* keys, size_t n, uint64_t first) {
+    if (first != added_) fail(prefix_, "internal: Morton codes out of face order");
+    sorter_->addBatch(keys, n);
+    added_ += n;
+  }
+  // Computes the codes of faces [first, first + n) in parallel, then adds them.
+  void compute(const ResidentVertices& rv, const Box3& box, const uint32_t* idx, size_t n, uint64_t first) {
+    keys_.resize(n);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 8192), [&](const tbb::blocked_range<size_t>& r) {
+      for (size_t i = r.begin(); i < r.end(); ++i) keys_[i] = codeOf(rv, box, idx + 3 * i, first + i, i + 16 < r.end() ? idx + 3 * (i + 16) : nullptr);
+    });
+    add(keys_.data(), n, first);
+  }
+  static MortonKey codeOf(const ResidentVertices& rv, const Box3& box, const uint32_t* v, uint64_t face, const uint32_t* later) {
+    // Shuffled vertices read the positions at random: ask for a later face's corners now so
+    // that several cache misses are in flight at once.
+    if (later)
+      for (int k = 0; k < 3; ++k) rv.prefetch(later[k]);
+    float c[3];
+    rv.centroidPoint(v, c);
+    uint64_t code = mortonCode(c, box);
+    return {uint32_t(code), uint32_t(code >> 32), uint32_t(face)};
+  }
+  uint64_t added() const { return added_; }
+  StableKeySorter<MortonKey, MortonKeyOf>& sorter() { return *sorter_; }
+
+ private:
+  std::string prefix_;
+  uint64_t budget_;
+  std::unique_ptr<StableKeySorter<MortonKey, MortonKeyOf>> sorter_;
+  uint64_t added_ = 0;
+  std::vector<MortonKey> keys_;
+};
+
+// The resident path's centroid stream, in Morton order (ties: face) like morton.bin, produced on
+// demand: sample() sorts 12-byte (code, face) records only and computes the few centroids it
+// returns; forEach() (grid and regular assigners) materializes the whole stream once.
+class ResidentCentroids : public CentroidSource {
+ public:
+  ResidentCentroids(const std::string& scratch, const ResidentVertices& vertices, uint64_t faces, Box3 bounds,
+                    MortonSort& morton, uint64_t budget, StageClock& clock, bool progress)
+      : scratch_(scratch), vertices_(vertices), faces_(faces), bounds_(bounds), morton_(morton), budget_(budget),
+        clock_(clock), progress_(progress) {}
+  uint64_t count() const override { return faces_; }
+  Box3 bounds() const override { return bounds_; }
+
+  std::vector<float> sample(uint64_t stride) const override {
+    if (materialized_) return CentroidSource::sample(stride);
+    stride = std::max<uint64_t>(1, stride);
+    // Morton codes of all faces, in face order, into a stable radix sort (runs on disk); done
+    // during the parse already when the input allowed it (ScratchSink).
+    if (morton_.added() != faces_) {
+      morton_.reset();
+      Progress progress(progress_, "ingest: morton", faces_);
+      struct Codes {
+        std::vector<MortonKey> keys;
+      };
+      pipelineFaces<Codes>(
+          scratch_ + "/face.bin", kFaceBatch,
+          [&](FaceBatch<Codes>& b) {
+            const size_t n = b.count();
+            b.out.keys.resize(n);
+            for (size_t i = 0; i < n; ++i)
+              b.out.keys[i] = MortonSort::codeOf(vertices_, bounds_, &b.idx[3 * i], b.first + i, i + 16 < n ? &b.idx[3 * (i + 16)] : nullptr);
+          },
+          [&](FaceBatch<Codes>& b) {
+            morton_.add(b.out.keys.data(), b.out.keys.size(), b.first);
+            progress.update(b.first + b.count());
+          });
+      progress.finish(faces_);
+    }
+    StableKeySorter<MortonKey, MortonKeyOf>& sorter = morton_.sorter();
+    sorter.finish();
+    clock_.mark("morton");
+    // Ranks 0, stride, 2 stride, ... of the merged order; then their centroids, in one more
+    // sequential read of the faces.
+    std::vector<std::pair<uint32_t, uint32_t>> picks;  // (face, rank / stride)
+    picks.reserve(size_t(faces_ / stride + 1));
+    {
+      MortonKey k;
+      uint64_t rank = 0;
+      while (sorter.next(k)) {
+        if (rank % stride == 0) picks.push_back({k.face, uint32_t(picks.size())});
+        ++rank;
+      }
+      if (rank != faces_) fail(scratch_, "internal: Morton sort holds " + std::to_string(rank) + " faces");
+      morton_.reset();  // consumed: another sample() would sort again
+    }
+    std::vector<float> out(4 * picks.size());
+    std::sort(picks.begin(), picks.end());
+    TempReader fr(scratch_ + "/face.bin", 4 << 20);
+    std::vector<uint32_t> batch;
+    uint64_t first = 0;
+    size_t p = 0;
+    while (p < picks.size() && fr.getBatch(batch, 3 * kFaceBatch)) {
+      const uint64_t end = first + batch.size() / 3;
+      for (; p < picks.size() && picks[p].first < end; ++p) {
+        Centroid c = vertices_.centroid(&batch[3 * (picks[p].first - first)]);
+        std::memcpy(&out[4 * size_t(picks[p].second)], &c, 16);
+      }
+      first = end;
+    }
+    if (p != picks.size()) fail(scratch_, "internal: sampled face past the end of the face file");
+    clock_.mark("sample");
+    return out;
+  }
+
+  void forEach(const std::function<void(const float*, size_t)>& fn) const override {
+    if (!materialized_) materialize();
+    TempReader r(scratch_ + "/morton.bin", 4 << 20);
+    std::vector<Centroid> batch;
+    while (r.getBatch(batch, kFaceBatch)) fn(&batch[0].x, batch.size());
+  }
+
+ private:
+  void materialize() const {
+    StableKeySorter<MortonCentroid, MortonCentroidOf> sorter(scratch_ + "/m1", budget_, MortonCentroidOf{}, 63);
+    struct Cents {
+      std::vector<MortonCentroid> recs;
+    };
+    pipelineFaces<Cents>(
+        scratch_ + "/face.bin", kFaceBatch,
+        [&](FaceBatch<Cents>& b) {
+          const size_t n = b.count();
+          b.out.recs.resize(n);
+          for (size_t i = 0; i < n; ++i) {
+            Centroid c = vertices_.centroid(&b.idx[3 * i]);
+            uint64_t code = mortonCode(&c.x, bounds_);
+            b.out.recs[i] = {uint32_t(code), uint32_t(code >> 32), c};
+          }
+        },
+        [&](FaceBatch<Cents>& b) { sorter.addBatch(b.out.recs.data(), b.out.recs.size()); });
+    sorter.finish();
+    TempWriter out(scratch_ + "/morton.bin", 4 << 20);
+    MortonCentroid m;
+    while (sorter.next(m)) out.put(m.c);
+    out.close();
+    materialized_ = true;
+  }
+
+  std::string scratch_;
+  const ResidentVertices& vertices_;
+  uint64_t faces_;
+  Box3 bounds_;
+  MortonSort& morton_;
+  uint64_t budget_;
+  StageClock& clock_;
+  bool progress_;
+  mutable bool materialized_ = false;
+};
+
+// What the patch stage keeps of a face: its corners. Faces are added in face order, and the
+// group sorter keeps the order of addition within a key (runs in order, stable counting sort,
+// runs merged lowest first), so a patch's faces come out in face order with no index stored.
+struct FaceCorners {
+  uint32_t v[3];
+};
+struct AdditionOrder {
+  bool operator()(const FaceCorners&, const FaceCorners&) const { return false; }
+};
+
+// Vertex state for the resident patch stage: bit 0 = held by a patch, bit 1 = by two or more.
+constexpr uint8_t kHeld = 1, kShared = 2;
+
+uint32_t bitsFor(uint64_t maxValue) {
+  uint32_t b = 1;
+  while (b < 64 && (maxValue >> b) != 0) ++b;
+  return b;
+}
+
+// One patch of the resident path, built on a worker thread; the ordered stage appends it.
+struct ResidentPatch {
+  uint32_t id = 0;
+  uint64_t key = 0;
+  std::vector<FaceCorners> faces;
+  std::string payload;
+  Box3 bounds;
+  uint32_t vertices = 0, triangles = 0;
+  std::vector<std::pair<uint32_t, uint32_t>> shared;  // (global vertex, local)
+  std::vector<std::pair<uint64_t, uint32_t>> crossEdges;  // (lower global << 32 | higher, uses)
+  uint64_t duplicates = 0, nonManifold = 0;
+};
+
+// Per-thread scratch of buildResidentPatch, kept across patches.
+struct PatchScratch {
+  std::vector<uint64_t> a, b;
+  std::vector<uint32_t> globals, local;
+  std::vector<uint8_t> shared;  // per local vertex: held by another patch too
+};
+
+// The geometry block of one patch (store_format.h), byte for byte what encodeGeometry writes for
+// the chunked path's Patch: local vertex order is ascending input index; triangles keep their
+// face order and corner order. Also the per-patch defect counts and the boundary inputs.
+void buildResidentPatch(ResidentPatch& w, const ResidentVertices& rv, const uint8_t* state, PatchScratch& s) {
+  const size_t nt = w.faces.size(), nc = 3 * nt;
+  // 1. Corners sorted by vertex (radix, on the patch's index range): the distinct vertices in
+  //    ascending order are the local order, and every corner gets its local index.
+  uint32_t vmin = UINT32_MAX, vmax = 0;
+  for (const FaceCorners& f : w.faces)
+    for (uint32_t v : f.v) {
+      vmin = std::min(vmin, v);
+      vmax = std::max(vmax, v);
+    }
+  s.a.resize(nc);
+  s.b.resize(nc);
+  for (size_t t = 0; t < nt; ++t)
+    for (int k = 0; k < 3; ++k) s.a[3 * t + k] = uint64_t(w.faces[t].v[k] - vmin) << 32 | (3 * t + k);
+  const uint64_t* sorted = radixSort(s.a.data(), s.b.data(), nc, [](uint64_t x) { return x >> 32; }, bitsFor(vmax - vmin));
+  s.globals.clear();
+  s.local.resize(nc);
+  for (size_t i = 0; i < nc; ++i) {
+    uint32_t v = uint32_t(sorted[i] >> 32) + vmin;
+    if (s.globals.empty() || s.globals.back() != v) s.globals.push_back(v);
+    s.local[uint32_t(sorted[i])] = uint32_t(s.globals.size() - 1);
+  }
+  const uint32_t nv = uint32_t(s.globals.size());
+  w.vertices = nv;
+  w.triangles = uint32_t(nt);
+
+  // 2. The payload: header, positions, normals, colours, triangles.
+  const VertexRecordLayout& L = rv.layout;
+  const size_t posBytes = L.doublePrecision ? 24 : 12;
+  const size_t bytes = sizeof(store_format::GeometryHeader) + nv * (posBytes + (L.normals ? 12 : 0) + (L.colors ? 4 : 0)) + nc * 4;
+  w.payload.resize(bytes);
+  char* out = w.payload.data();
+  store_format::GeometryHeader h{nv, uint32_t(nt), (L.doublePrecision ? store_format::kGeomDouble : 0u) |
+                                                       (L.normals ? store_format::kGeomNormals : 0u) |
+                                                       (L.colors ? store_format::kGeomColors : 0u),
+                                 0};
+  std::memcpy(out, &h, sizeof h);
+  out += sizeof h;
+  for (int a = 0; a < 3; ++a) {
+    w.bounds.lo[a] = std::numeric_limits<double>::infinity();
+    w.bounds.hi[a] = -std::numeric_limits<double>::infinity();
+  }
+  s.shared.resize(nv);
+  for (uint32_t l = 0; l < nv; ++l) {
+    // The records are scattered over RAM: ask for a later one now (several misses in flight).
+    if (l + 8 < nv) {
+      rv.prefetch(s.globals[l + 8]);
+      __builtin_prefetch(state + s.globals[l + 8]);
+    }
+    s.shared[l] = state[s.globals[l]] & kShared;
+    const char* r = rv.record(s.globals[l]);
+    std::memcpy(out, r, posBytes);
+    out += posBytes;
+    double p[3];
+    L.position(r, p);
+    for (int a = 0; a < 3; ++a) {
+      w.bounds.lo[a] = std::min(w.bounds.lo[a], p[a]);
+      w.bounds.hi[a] = std::max(w.bounds.hi[a], p[a]);
+    }
+  }
+  if (L.normals)
+    for (uint32_t l = 0; l < nv; ++l) {
+      std::memcpy(out, rv.record(s.globals[l]) + posBytes, 12);
+      out += 12;
+    }
+  if (L.colors)
+    for (uint32_t l = 0; l < nv; ++l) {
+      std::memcpy(out, rv.record(s.globals[l]) + posBytes + (L.normals ? 12 : 0), 4);
+      out += 4;
+    }
+  std::memcpy(out, s.local.data(), nc * 4);
+
+  // 3. Duplicate faces (same vertex set) and edge use counts, on local indices packed into one
+  //    integer each and radix sorted.
+  const uint32_t lb = bitsFor(std::max<uint32_t>(1, nv - 1));
+  const uint32_t* tri = s.local.data();
+  w.duplicates = 0;
+  w.nonManifold = 0;
+  w.crossEdges.clear();
+  if (3 * lb <= 64) {
+    s.a.resize(nt);
+    for (size_t t = 0; t < nt; ++t) {
+      uint32_t x = tri[3 * t], y = tri[3 * t + 1], z = tri[3 * t + 2];
+      if (x > y) std::swap(x, y);
+      if (y > z) std::swap(y, z);
+      if (x > y) std::swap(x, y);
+      s.a[t] = (uint64_t(x) << (2 * lb)) | (uint64_t(y) << lb) | z;
+    }
+    const uint64_t* d = radixSort(s.a.data(), s.b.data(), nt, [](uint64_t x) { return x; }, 3 * lb);
+    for (size_t t = 1; t < nt; ++t) w.duplicates += d[t] == d[t - 1];
+  } else {
+    std::vector<std::array<uint32_t, 3>> sortedTris(nt);
+    for (size_t t = 0; t < nt; ++t) {
+      sortedTris[t] = {tri[3 * t], tri[3 * t + 1], tri[3 * t + 2]};
+      std::sort(sortedTris[t].begin(), sortedTris[t].end());
+    }
+    std::sort(sortedTris.begin(), sortedTris.end());
+    for (size_t t = 1; t < nt; ++t) w.duplicates += sortedTris[t] == sortedTris[t - 1];
+  }
+  s.a.clear();
+  for (size_t t = 0; t < nt; ++t) {
+    const uint32_t* c = tri + 3 * t;
+    if (c[0] == c[1] || c[1] == c[2] || c[0] == c[2]) continue;  // degenerate: no proper edges
+    for (int e = 0; e < 3; ++e) {
+      uint32_t x = c[e], y = c[(e + 1) % 3];
+      s.a.push_back(uint64_t(std::min(x, y)) << 32 | std::max(x, y));
+    }
+  }
+  s.b.resize(s.a.size());
+  const uint64_t* edges = radixSort(s.a.data(), s.b.data(), s.a.size(), [lb](uint64_t x) { return (x >> 32) << lb | (x & 0xFFFFFFFFu); }, 2 * lb);
+  for (size_t i = 0, n = s.a.size(); i < n;) {
+    size_t j = i;
+    while (j < n && edges[j] == edges[i]) ++j;
+    const uint32_t a = uint32_t(edges[i] >> 32), b = uint32_t(edges[i]);
+    if (s.shared[a] && s.shared[b])
+      w.crossEdges.push_back({uint64_t(s.globals[a]) << 32 | s.globals[b], uint32_t(j - i)});
+    else if (j - i > 2)
+      ++w.nonManifold;
+    i = j;
+  }
+  w.shared.clear();
+  for (uint32_t l = 0; l < nv; ++l)
+    if (s.shared[l]) w.shared.push_back({s.globals[l], l});
+}
+
+// What the patch stages of both paths hand to the boundary stage.
+struct PatchStageOutput {
+  std::vector<uint64_t> patchKey;
+};
+
+// Resident path, stages 2-6 (see the top of the file): the patch geometry blocks are appended to
+// impl, shared vertices and cross-patch edges fed to the two sorters of the boundary stage.
+void residentStages(const std::string& scratch, const ResidentVertices& rv, std::vector<char>& records, MortonSort& morton,
+                    const Box3& bounds, uint64_t nv, uint64_t nf,
+                    uint64_t B, CellAssigner& assigner, IngestReport& report, PatchStore::Impl& impl,
+                    ExternalSorter<LocalRec, KeyLess<LocalRec>>& shared, ExternalSorter<EdgeRec, EdgeLess>& edges,
+                    PatchStageOutput& out, uint64_t& distinctReferenced, StageClock& clock, bool showProgress) {
+  // Room left for the passes: the cap minus what is resident now (records, code, the assigner
+  // later), with a margin for what the passes allocate besides their sort buffers.
+  auto room = [&](uint64_t margin) {
+    uint64_t rss = currentRssBytes();
+    uint64_t left = B > rss + margin ? B - rss - margin : 0;
+    return std::max<uint64_t>(8 << 20, left);
+  };
+  {
+    ResidentCentroids centroids(scratch, rv, nf, bounds, morton, room(32 << 20) * 4 / 5, clock, showProgress);
+    Progress progress(showProgress, "ingest: partition", nf);
+    assigner.prepare(centroids, B / 2);
+    progress.finish(nf);
+    std::remove((scratch + "/morton.bin").c_str());
+  }
+  report.assigner = assigner.describe();
+  malloc_trim(0);
+  clock.mark("partition");
+
+  // 4 assign: every face keyed in face order, grouped by key.
+  KeyGroupSorter<FaceCorners, AdditionOrder> groups(scratch + "/g", room(48 << 20) * 4 / 5);
+  {
+    Progress progress(showProgress, "ingest: assign", nf);
+    struct Keyed {
+      std::vector<uint64_t> keys;
+      std::vector<FaceCorners> recs;
+    };
+    pipelineFaces<Keyed>(
+        scratch + "/face.bin", kFaceBatch,
+        [&](FaceBatch<Keyed>& b) {
+          const size_t n = b.count();
+          b.out.keys.resize(n);
+          b.out.recs.resize(n);
+          for (size_t i = 0; i < n; ++i) {
+            if (i + 16 < n)
+              for (int k = 0; k < 3; ++k) rv.prefetch(b.idx[3 * (i + 16) + k]);
+            const uint32_t* v = &b.idx[3 * i];
+            float c[3];
+            rv.centroidPoint(v, c);
+            b.out.keys[i] = assigner.cellKey(c);
+            b.out.recs[i] = {{v[0], v[1], v[2]}};
+          }
+        },
+        [&](FaceBatch<Keyed>& b) {
+          groups.addBatch(b.out.keys.data(), b.out.recs.data(), b.count());
+          progress.update(b.first + b.count());
+        });
+    if (groups.count() != nf) fail(scratch, "internal: face file holds " + std::to_string(groups.count()) + " faces");
+    groups.finish();
+    progress.finish(nf);
+  }
+  std::remove((scratch + "/face.bin").c_str());
+  malloc_trim(0);
+  clock.mark("assign");
+
+  // A pipeline over the groups (patches in key order): gather a batch on one thread, work on
+  // the patches of the batch on any thread, finish the batches in order.
+  struct Batch {
+    uint32_t first = 0;
+    std::vector<ResidentPatch> patches;
+  };
+  auto pipelineGroups = [&](const auto& work, const auto& finish) {
+    constexpr size_t kPatches = 64;
+    const size_t tokens = size_t(std::max(2, tbb::this_task_arena::max_concurrency())) + 2;
+    uint32_t nextId = 0;
+    bool more = true;
+    tbb::parallel_pipeline(
+        tokens,
+        tbb::make_filter<void, Batch*>(tbb::filter_mode::serial_in_order,
+                                       [&](tbb::flow_control& fc) -> Batch* {
+                                         auto b = std::make_unique<Batch>();
+                                         b->first = nextId;
+                                         b->patches.resize(kPatches);
+                                         size_t n = 0;
+                                         while (n < kPatches && more) {
+                                           ResidentPatch& p = b->patches[n];
+                                           more = groups.nextGroup(p.key, p.faces);
+                                           if (more) p.id = nextId++, ++n;
+                                         }
+                                         b->patches.resize(n);
+                                         if (n == 0) {
+                                           fc.stop();
+                                           return nullptr;
+                                         }
+                                         return b.release();
+                                       }) &
+            tbb::make_filter<Batch*, Batch*>(tbb::filter_mode::parallel,
+                                             [&](Batch* b) {
+                                               for (ResidentPatch& p : b->patches) work(p);
+                                               return b;
+                                             }) &
+            tbb::make_filter<Batch*, void>(tbb::filter_mode::serial_in_order, [&](Batch* b) {
+              std::unique_ptr<Batch> owned(b);
+              for (ResidentPatch& p : b->patches) finish(p);
+            }));
+  };
+
+  // 5 shared vertices: one pass over the patches marks every vertex held (bit 0) and held by a
+  // second patch (bit 1). A patch's distinct vertices come from a per-thread bit set of the
+  // vertices it touched, cleared again through the list of them.
+  std::vector<uint8_t> state(nv, 0);
+  {
+    Progress progress(showProgress, "ingest: shared", nf);
+    tbb::enumerable_thread_specific<std::pair<std::vector<uint64_t>, std::vector<uint32_t>>> marks;
+    std::atomic<uint64_t> held{0};
+    uint64_t facesDone = 0;
+    pipelineGroups(
+        [&](ResidentPatch& p) {
+          auto& [bits, touched] = marks.local();
+          if (bits.empty()) bits.assign((nv + 63) / 64, 0);
+          touched.clear();
+          for (const FaceCorners& f : p.faces)
+            for (uint32_t v : f.v) {
+              const uint64_t bit = uint64_t(1) << (v & 63);
+              if (!(bits[v >> 6] & bit)) {
+                bits[v >> 6] |= bit;
+                touched.push_back(v);
+              }
+            }
+          uint64_t first = 0;
+          for (uint32_t v : touched) {
+            bits[v >> 6] &= ~(uint64_t(1) << (v & 63));
+            uint8_t old = __atomic_fetch_or(&state[v], kHeld, __ATOMIC_RELAXED);
+            if (old & kHeld)
+              __atomic_fetch_or(&state[v], kShared, __ATOMIC_RELAXED);
+            else
+              ++first;
+          }
+          held += first;
+          p.triangles = uint32_t(p.faces.size());
+          std::vector<FaceCorners>().swap(p.faces);
+        },
+        [&](ResidentPatch& p) {
+          out.patchKey.push_back(p.key);
+          facesDone += p.triangles;
+          progress.update(facesDone);
+        });
+    distinctReferenced = held.load();
+    progress.finish(nf);
+  }
+  malloc_trim(0);
+  clock.mark("shared");
+
+  // 6 patches: built in parallel, appended in patch order.
+  {
+    Progress progress(showProgress, "ingest: patches", nf);
+    groups.rewind();
+    tbb::enumerable_thread_specific<PatchScratch> scratchSpace;
+    uint64_t facesDone = 0;
+    pipelineGroups([&](ResidentPatch& p) { buildResidentPatch(p, rv, state.data(), scratchSpace.local()); },
+                   [&](ResidentPatch& p) {
+                     if (p.id >= out.patchKey.size() || out.patchKey[p.id] != p.key) fail(scratch, "internal: patch order changed between passes");
+                     report.duplicateTriangles += p.duplicates;
+                     report.nonManifoldEdges += p.nonManifold;
+                     for (auto& [key, uses] : p.crossEdges) edges.add({key, uses, 0});
+                     for (auto& [v, l] : p.shared) shared.add({uint64_t(v) << 32 | p.id, l, 0});
+                     PatchRecord rec;
+                     rec.meta = {p.id, p.key, 0, p.vertices, p.triangles, 0, p.bounds};
+                     rec.geometry = impl.appendBlock(p.payload);
+                     impl.patches[p.id] = rec;
+                     facesDone += p.triangles;
+                     progress.update(facesDone);
+                   });
+    if (facesDone != nf) fail(scratch, "internal: patches hold " + std::to_string(facesDone) + " faces");
+    progress.finish(nf);
+  }
+  groups.release();
+  std::vector<uint8_t>().swap(state);
+  std::vector<char>().swap(records);
+  malloc_trim(0);
+  clock.mark("patches");
+}
+
 // The main ingest body, building the store in `dir` (already created, empty).
 template <bool Full>
 IngestReport build(const std::string& input, const std::string& dir, const std::string& scratch, CellAssigner& assigner,
@@ -502,10 +1270,26 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
   auto endOfPass = [] { malloc_trim(0); };
   StageClock clock(opt.progress);
 
-  // 1 parse
+  // 1 parse. The vertex records stay in RAM when they, a state byte per vertex and a bit per
+  // vertex and thread fit in the cap with a reserve for the passes' buffers and the assigner.
   auto reader = openMesh(input);
+  const VertexRecordLayout expected{reader->header().doublePrecision, reader->header().hasNormals, reader->header().hasColors};
+  const uint64_t reserve = std::max<uint64_t>(96ull << 20, B / 5);
+  const double perVertex = double(expected.size()) + 1 + std::max(2, tbb::this_task_arena::max_concurrency()) / 8.0;
+  const uint64_t residentLimit = B > reserve ? uint64_t(double(B - reserve) * double(expected.size()) / perVertex) : 0;
   Progress parseProgress(opt.progress, "ingest: parse", uint64_t(std::max<int64_t>(0, reader->header().declaredFaces)));
-  ScratchSink sink(scratch, parseProgress);
+  ScratchSink sink(scratch, parseProgress, residentLimit);
+  // The Morton sort of the resident path, filled during the parse when the input allows it; its
+  // budget is what the declared vertex records leave.
+  const uint64_t declaredRecords = uint64_t(std::max<int64_t>(0, reader->header().declaredVertices)) * expected.size();
+  MortonSort morton(scratch + "/m0", std::max<uint64_t>(8 << 20, B > declaredRecords + (64 << 20) ? (B - declaredRecords - (64 << 20)) * 4 / 5 : 0));
+  if (residentLimit > 0)
+    sink.fuse(
+        [&](const char* records, const Box3& box, const uint32_t* idx, size_t n, uint64_t first) {
+          ResidentVertices rv{records, expected, expected.size()};
+          morton.compute(rv, box, idx, n, first);
+        },
+        [&] { morton.reset(); });
   ReadStats stats = reader->read(sink);
   sink.close();
   parseProgress.finish(stats.triangles);
@@ -526,259 +1310,282 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
     report.weldedVertices = weldSoup(scratch, vlayout, nv, B * 6 / 10);
     progress.finish(nv);
   }
-
+  if (!sink.inRam() && nv * vlayout.size() <= residentLimit) sink.loadVertices(scratch);
+  const bool resident = sink.inRam();
   clock.mark("parse");
-  // 2 centroids, straight into an external sort by Morton code. The assigner streams the
-  // centroids in Morton order rather than face order: its passes (the irregular seeding) rely on
-  // consecutive triangles being close, which a scan with shuffled faces does not give, and the
-  // assign stage then looks cells up in spatially coherent order (cache hits instead of random
-  // reads of the seed tables). Deterministic: ties by face.
-  {
-    ExternalSorter<MortonFace, MortonLess> byCode(scratch + "/s0", B / 4);
-    computeCentroids(scratch, vlayout, nv, nf, B * 2 / 5, sink.bounds, byCode, opt.progress);
-    std::remove((scratch + "/face.bin").c_str());
-    endOfPass();
-    clock.mark("centroids");
-    byCode.finish();
-    TempWriter out(scratch + "/morton.bin", 4 << 20);
-    MortonFace m;
-    while (byCode.next(m)) out.put(FaceCentroid{m.face, {m.v[0], m.v[1], m.v[2]}, m.c});
-    out.close();
-  }
-  endOfPass();
-  clock.mark("morton merge");
-  CentroidFile centroids(scratch + "/morton.bin", nf, sink.bounds);
-  {
-    // The irregular V-partition reads the stream once (a sample; vpartition/irregular.cpp);
-    // report its time, since it is a separate cost from the sorts.
-    Progress progress(opt.progress, "ingest: partition", nf);
-    assigner.prepare(centroids, B / 2);
-    progress.finish(nf);
-  }
-  report.assigner = assigner.describe();
-  endOfPass();
-  clock.mark("partition");
-  // 3 assign, in Morton order; faces externally sorted by (cell key, face).
-  ExternalSorter<FaceRec, FaceLess> byCell(scratch + "/s1", B / 4);
-  {
-    Progress progress(opt.progress, "ingest: assign", nf);
-    TempReader cr(scratch + "/morton.bin", 4 << 20);
-    std::vector<FaceCentroid> batch;
-    std::vector<FaceRec> recs;
-    uint64_t done = 0;
-    while (cr.getBatch(batch, 65536)) {
-      recs.resize(batch.size());
-      tbb::parallel_for(tbb::blocked_range<size_t>(0, batch.size(), 4096), [&](const tbb::blocked_range<size_t>& r) {
-        for (size_t i = r.begin(); i < r.end(); ++i) {
-          const FaceCentroid& f = batch[i];
-          recs[i] = FaceRec{assigner.cellKey(&f.c.x), f.face, {f.v[0], f.v[1], f.v[2]}};
-        }
-      });
-      for (const FaceRec& r : recs) byCell.add(r);
-      done += batch.size();
-      progress.update(done);
-    }
-    if (done != nf) fail(scratch, "internal: Morton file holds " + std::to_string(done) + " faces");
-    progress.finish(done);
-  }
-  std::remove((scratch + "/morton.bin").c_str());
-  endOfPass();
 
-  clock.mark("assign");
-  // 4 group into patches
-  byCell.finish();
-  std::vector<uint64_t> patchKey;
-  std::vector<uint32_t> patchTris;
-  ExternalSorter<uint64_t, U64Less> pairs(scratch + "/s2", B / 4);
-  {
-    TempWriter pface(scratch + "/pface.bin", 4 << 20);
-    FaceRec f;
-    // Patches are gathered in batches; their distinct vertices are found in parallel and written
-    // in patch order (the result does not depend on the thread count).
-    constexpr size_t kBatch = 64;
-    std::vector<std::vector<uint32_t>> tris(kBatch), verts(kBatch);
-    size_t filled = 0;
-    auto flush = [&]() {
-      tbb::parallel_for(size_t(0), filled, [&](size_t i) {
-        verts[i] = tris[i];
-        std::sort(verts[i].begin(), verts[i].end());
-        verts[i].erase(std::unique(verts[i].begin(), verts[i].end()), verts[i].end());
-      });
-      for (size_t i = 0; i < filled; ++i) {
-        const uint32_t k = uint32_t(patchKey.size() - filled + i);
-        pface.write(tris[i].data(), tris[i].size() * 4);
-        patchTris.push_back(uint32_t(tris[i].size() / 3));
-        for (uint32_t v : verts[i]) pairs.add(uint64_t(v) << 32 | k);
-        tris[i].clear();
-      }
-      filled = 0;
-    };
-    while (byCell.next(f)) {
-      if (patchKey.empty() || patchKey.back() != f.key) {
-        if (filled == kBatch) flush();
-        patchKey.push_back(f.key);
-        ++filled;
-      }
-      tris[filled - 1].insert(tris[filled - 1].end(), f.v, f.v + 3);
-    }
-    flush();
-    pface.close();
-  }
-  const uint32_t P = uint32_t(patchKey.size());
-
-  clock.mark("group");
-  // 5 join pairs with vertex data
-  pairs.finish();
-  ExternalSorter<VertexData<Full>, KeyLess<VertexData<Full>>> byPatch(scratch + "/s3", B / 4);
-  uint64_t distinctReferenced = 0;
-  {
-    Progress progress(opt.progress, "ingest: vertices", nv, "vert");
-    TempReader vr(scratch + "/vert.bin", 4 << 20);
-    std::vector<char> rec(vlayout.size());
-    uint64_t nextVertex = 0;
-    uint64_t pair;
-    bool have = pairs.next(pair);
-    std::vector<uint32_t> holders;
-    while (have) {
-      uint32_t v = uint32_t(pair >> 32);
-      holders.clear();
-      while (have && uint32_t(pair >> 32) == v) {
-        holders.push_back(uint32_t(pair));
-        have = pairs.next(pair);
-      }
-      ++distinctReferenced;
-      for (; nextVertex <= v; ++nextVertex)
-        if (vr.read(rec.data(), rec.size()) != rec.size()) fail(scratch, "vertex scratch file is short");
-      VertexData<Full> d{};
-      d.holders = uint32_t(holders.size());
-      if constexpr (Full) {
-        const char* r = rec.data();
-        vlayout.position(r, d.p);
-        r += vlayout.doublePrecision ? 24 : 12;
-        if (vlayout.normals) {
-          std::memcpy(d.n, r, 12);
-          r += 12;
-        }
-        if (vlayout.colors) std::memcpy(d.c, r, 4);
-      } else {
-        std::memcpy(d.p, rec.data(), 12);
-      }
-      for (uint32_t k : holders) {
-        d.key = uint64_t(k) << 32 | v;
-        byPatch.add(d);
-      }
-      progress.update(nextVertex);
-    }
-    progress.finish(nv);
-  }
-  std::remove((scratch + "/vert.bin").c_str());
-  endOfPass();
-
-  clock.mark("vertices");
-  // 6 patches
-  byPatch.finish();
   auto impl = std::make_unique<PatchStore::Impl>();
   impl->env = env;
   impl->dir = dir;
   impl->layout = {vlayout.doublePrecision, vlayout.normals, vlayout.colors};
   impl->bounds = sink.bounds;
-  ExternalSorter<LocalRec, KeyLess<LocalRec>> shared(scratch + "/s4", B / 8);
-  ExternalSorter<EdgeRec, EdgeLess> edges(scratch + "/s5", B / 16);
-  {
-    // Patches are gathered from the sorted streams in batches, built in parallel, and written in
-    // patch order, so the store does not depend on the thread count.
-    struct PatchWork {
-      Patch p;
-      std::vector<uint32_t> globalIds, holders;
-      std::string payload;
-      uint64_t duplicates = 0, nonManifold = 0;
-      std::vector<EdgeRec> crossEdges;  // edges between two shared vertices: may continue elsewhere
-    };
-    auto buildPatch = [&](PatchWork& w) {
-      Patch& p = w.p;
-      for (uint32_t& v : p.triangles) {
-        auto it = std::lower_bound(w.globalIds.begin(), w.globalIds.end(), v);
-        if (it == w.globalIds.end() || *it != v) fail(scratch, "internal: patch vertex missing");
-        v = uint32_t(it - w.globalIds.begin());
-      }
-      std::vector<std::array<uint32_t, 3>> sortedTris;
-      std::vector<uint64_t> edgeList;
-      for (size_t t = 0; t < p.triangles.size(); t += 3) {
-        std::array<uint32_t, 3> s3 = {p.triangles[t], p.triangles[t + 1], p.triangles[t + 2]};
-        std::sort(s3.begin(), s3.end());
-        sortedTris.push_back(s3);
-        if (s3[0] == s3[1] || s3[1] == s3[2]) continue;  // degenerate: no proper edges
-        for (int e = 0; e < 3; ++e) {
-          uint32_t a = p.triangles[t + e], b = p.triangles[t + (e + 1) % 3];
-          edgeList.push_back(uint64_t(std::min(a, b)) << 32 | std::max(a, b));
-        }
-      }
-      std::sort(sortedTris.begin(), sortedTris.end());
-      for (size_t i = 1; i < sortedTris.size(); ++i) w.duplicates += sortedTris[i] == sortedTris[i - 1];
-      std::sort(edgeList.begin(), edgeList.end());
-      for (size_t i = 0; i < edgeList.size();) {
-        size_t j = i;
-        while (j < edgeList.size() && edgeList[j] == edgeList[i]) ++j;
-        uint32_t a = uint32_t(edgeList[i] >> 32), b = uint32_t(edgeList[i]);
-        if (w.holders[a] > 1 && w.holders[b] > 1)
-          w.crossEdges.push_back({uint64_t(w.globalIds[a]) << 32 | w.globalIds[b], uint32_t(j - i), 0});
-        else if (j - i > 2)
-          ++w.nonManifold;
-        i = j;
-      }
-      w.payload = encodeGeometry(p, impl->layout);
-    };
-    Progress progress(opt.progress, "ingest: patches", nf);
-    TempReader pface(scratch + "/pface.bin", 4 << 20);
-    VertexData<Full> d;
-    bool have = byPatch.next(d);
-    uint64_t facesDone = 0;
-    constexpr uint32_t kBatch = 64;
-    std::vector<PatchWork> work;
-    for (uint32_t k0 = 0; k0 < P; k0 += kBatch) {
-      const uint32_t k1 = std::min(P, k0 + kBatch);
-      work.assign(k1 - k0, PatchWork());
-      for (uint32_t k = k0; k < k1; ++k) {
-        PatchWork& w = work[k - k0];
-        w.p.id = k;
-        w.p.cell = patchKey[k];
-        while (have && uint32_t(d.key >> 32) == k) {
-          w.globalIds.push_back(uint32_t(d.key));
-          w.holders.push_back(d.holders);
-          for (int a = 0; a < 3; ++a) w.p.positions.push_back(d.p[a]);
-          if constexpr (Full) {
-            if (vlayout.normals) w.p.normals.insert(w.p.normals.end(), d.n, d.n + 3);
-            if (vlayout.colors) w.p.colors.insert(w.p.colors.end(), d.c, d.c + 4);
-          }
-          have = byPatch.next(d);
-        }
-        w.p.triangles.resize(size_t(patchTris[k]) * 3);
-        if (pface.read(w.p.triangles.data(), w.p.triangles.size() * 4) != w.p.triangles.size() * 4)
-          fail(scratch, "patch face scratch file is short");
-      }
-      tbb::parallel_for(size_t(0), work.size(), [&](size_t i) { buildPatch(work[i]); });
-      for (PatchWork& w : work) {
-        const Patch& p = w.p;
-        report.duplicateTriangles += w.duplicates;
-        report.nonManifoldEdges += w.nonManifold;
-        for (const EdgeRec& e : w.crossEdges) edges.add(e);
-        for (uint32_t v = 0; v < w.globalIds.size(); ++v)
-          if (w.holders[v] > 1) shared.add({uint64_t(w.globalIds[v]) << 32 | p.id, v, 0});
-        PatchRecord rec;
-        rec.meta = {p.id, p.cell, 0, p.vertexCount(), p.triangleCount(), 0, boundsOf(p.positions)};
-        rec.geometry = impl->appendBlock(w.payload);
-        impl->patches[p.id] = rec;
-        facesDone += p.triangleCount();
-      }
-      progress.update(facesDone);
+  PatchStageOutput patchStage;
+  uint64_t distinctReferenced = 0;
+  std::unique_ptr<ExternalSorter<LocalRec, KeyLess<LocalRec>>> sharedPtr;
+  std::unique_ptr<ExternalSorter<EdgeRec, EdgeLess>> edgesPtr;
+  if (resident) {
+    std::remove((scratch + "/vert.bin").c_str());
+    std::vector<char> records = sink.takeVertices();
+    ResidentVertices rv{records.data(), vlayout, vlayout.size()};
+    // The boundary stage's sorters fill while the records are resident: their share is what the
+    // records leave (and they spill early, which costs little: a few million records).
+    const uint64_t left = B > nv * (rv.size + 1) + reserve / 2 ? B - nv * (rv.size + 1) - reserve / 2 : 0;
+    sharedPtr = std::make_unique<ExternalSorter<LocalRec, KeyLess<LocalRec>>>(scratch + "/s4", std::max<uint64_t>(1 << 20, left / 4));
+    edgesPtr = std::make_unique<ExternalSorter<EdgeRec, EdgeLess>>(scratch + "/s5", std::max<uint64_t>(1 << 20, left / 8));
+    residentStages(scratch, rv, records, morton, sink.bounds, nv, nf, B, assigner, report, *impl, *sharedPtr, *edgesPtr,
+                   patchStage, distinctReferenced, clock, opt.progress);
+  } else {
+    // 2 centroids, straight into an external sort by Morton code. The assigner streams the
+    // centroids in Morton order rather than face order: its passes (the irregular seeding) rely on
+    // consecutive triangles being close, which a scan with shuffled faces does not give, and the
+    // assign stage then looks cells up in spatially coherent order (cache hits instead of random
+    // reads of the seed tables). Deterministic: ties by face.
+    {
+      ExternalSorter<MortonFace, MortonLess> byCode(scratch + "/s0", B / 4);
+      computeCentroids(scratch, vlayout, nv, nf, B * 2 / 5, sink.bounds, byCode, opt.progress);
+      std::remove((scratch + "/face.bin").c_str());
+      endOfPass();
+      clock.mark("centroids");
+      byCode.finish();
+      TempWriter out(scratch + "/morton.bin", 4 << 20);
+      MortonFace m;
+      while (byCode.next(m)) out.put(FaceCentroid{m.face, {m.v[0], m.v[1], m.v[2]}, m.c});
+      out.close();
     }
-    progress.finish(facesDone);
+    endOfPass();
+    clock.mark("morton merge");
+    CentroidFile centroids(scratch + "/morton.bin", nf, sink.bounds);
+    {
+      // The irregular V-partition reads the stream once (a sample; vpartition/irregular.cpp);
+      // report its time, since it is a separate cost from the sorts.
+      Progress progress(opt.progress, "ingest: partition", nf);
+      assigner.prepare(centroids, B / 2);
+      progress.finish(nf);
+    }
+    report.assigner = assigner.describe();
+    endOfPass();
+    clock.mark("partition");
+    // 3 assign, in Morton order; faces externally sorted by (cell key, face).
+    ExternalSorter<FaceRec, FaceLess> byCell(scratch + "/s1", B / 4);
+    {
+      Progress progress(opt.progress, "ingest: assign", nf);
+      TempReader cr(scratch + "/morton.bin", 4 << 20);
+      std::vector<FaceCentroid> batch;
+      std::vector<FaceRec> recs;
+      uint64_t done = 0;
+      while (cr.getBatch(batch, 65536)) {
+        recs.resize(batch.size());
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, batch.size(), 4096), [&](const tbb::blocked_range<size_t>& r) {
+          for (size_t i = r.begin(); i < r.end(); ++i) {
+            const FaceCentroid& f = batch[i];
+            recs[i] = FaceRec{assigner.cellKey(&f.c.x), f.face, {f.v[0], f.v[1], f.v[2]}};
+          }
+        });
+        for (const FaceRec& r : recs) byCell.add(r);
+        done += batch.size();
+        progress.update(done);
+      }
+      if (done != nf) fail(scratch, "internal: Morton file holds " + std::to_string(done) + " faces");
+      progress.finish(done);
+    }
+    std::remove((scratch + "/morton.bin").c_str());
+    endOfPass();
+
+    clock.mark("assign");
+    // 4 group into patches
+    byCell.finish();
+    std::vector<uint64_t>& patchKey = patchStage.patchKey;
+    std::vector<uint32_t> patchTris;
+    ExternalSorter<uint64_t, U64Less> pairs(scratch + "/s2", B / 4);
+    {
+      TempWriter pface(scratch + "/pface.bin", 4 << 20);
+      FaceRec f;
+      // Patches are gathered in batches; their distinct vertices are found in parallel and written
+      // in patch order (the result does not depend on the thread count).
+      constexpr size_t kBatch = 64;
+      std::vector<std::vector<uint32_t>> tris(kBatch), verts(kBatch);
+      size_t filled = 0;
+      auto flush = [&]() {
+        tbb::parallel_for(size_t(0), filled, [&](size_t i) {
+          verts[i] = tris[i];
+          std::sort(verts[i].begin(), verts[i].end());
+          verts[i].erase(std::unique(verts[i].begin(), verts[i].end()), verts[i].end());
+        });
+        for (size_t i = 0; i < filled; ++i) {
+          const uint32_t k = uint32_t(patchKey.size() - filled + i);
+          pface.write(tris[i].data(), tris[i].size() * 4);
+          patchTris.push_back(uint32_t(tris[i].size() / 3));
+          for (uint32_t v : verts[i]) pairs.add(uint64_t(v) << 32 | k);
+          tris[i].clear();
+        }
+        filled = 0;
+      };
+      while (byCell.next(f)) {
+        if (patchKey.empty() || patchKey.back() != f.key) {
+          if (filled == kBatch) flush();
+          patchKey.push_back(f.key);
+          ++filled;
+        }
+        tris[filled - 1].insert(tris[filled - 1].end(), f.v, f.v + 3);
+      }
+      flush();
+      pface.close();
+    }
+    const uint32_t P = uint32_t(patchKey.size());
+
+    clock.mark("group");
+    // 5 join pairs with vertex data
+    pairs.finish();
+    ExternalSorter<VertexData<Full>, KeyLess<VertexData<Full>>> byPatch(scratch + "/s3", B / 4);
+    {
+      Progress progress(opt.progress, "ingest: vertices", nv, "vert");
+      TempReader vr(scratch + "/vert.bin", 4 << 20);
+      std::vector<char> rec(vlayout.size());
+      uint64_t nextVertex = 0;
+      uint64_t pair;
+      bool have = pairs.next(pair);
+      std::vector<uint32_t> holders;
+      while (have) {
+        uint32_t v = uint32_t(pair >> 32);
+        holders.clear();
+        while (have && uint32_t(pair >> 32) == v) {
+          holders.push_back(uint32_t(pair));
+          have = pairs.next(pair);
+        }
+        ++distinctReferenced;
+        for (; nextVertex <= v; ++nextVertex)
+          if (vr.read(rec.data(), rec.size()) != rec.size()) fail(scratch, "vertex scratch file is short");
+        VertexData<Full> d{};
+        d.holders = uint32_t(holders.size());
+        if constexpr (Full) {
+          const char* r = rec.data();
+          vlayout.position(r, d.p);
+          r += vlayout.doublePrecision ? 24 : 12;
+          if (vlayout.normals) {
+            std::memcpy(d.n, r, 12);
+            r += 12;
+          }
+          if (vlayout.colors) std::memcpy(d.c, r, 4);
+        } else {
+          std::memcpy(d.p, rec.data(), 12);
+        }
+        for (uint32_t k : holders) {
+          d.key = uint64_t(k) << 32 | v;
+          byPatch.add(d);
+        }
+        progress.update(nextVertex);
+      }
+      progress.finish(nv);
+    }
+    std::remove((scratch + "/vert.bin").c_str());
+    endOfPass();
+
+    clock.mark("vertices");
+    // 6 patches
+    byPatch.finish();
+    sharedPtr = std::make_unique<ExternalSorter<LocalRec, KeyLess<LocalRec>>>(scratch + "/s4", B / 8);
+    edgesPtr = std::make_unique<ExternalSorter<EdgeRec, EdgeLess>>(scratch + "/s5", B / 16);
+    auto& shared = *sharedPtr;
+    auto& edges = *edgesPtr;
+    {
+      // Patches are gathered from the sorted streams in batches, built in parallel, and written in
+      // patch order, so the store does not depend on the thread count.
+      struct PatchWork {
+        Patch p;
+        std::vector<uint32_t> globalIds, holders;
+        std::string payload;
+        uint64_t duplicates = 0, nonManifold = 0;
+        std::vector<EdgeRec> crossEdges;  // edges between two shared vertices: may continue elsewhere
+      };
+      auto buildPatch = [&](PatchWork& w) {
+        Patch& p = w.p;
+        for (uint32_t& v : p.triangles) {
+          auto it = std::lower_bound(w.globalIds.begin(), w.globalIds.end(), v);
+          if (it == w.globalIds.end() || *it != v) fail(scratch, "internal: patch vertex missing");
+          v = uint32_t(it - w.globalIds.begin());
+        }
+        std::vector<std::array<uint32_t, 3>> sortedTris;
+        std::vector<uint64_t> edgeList;
+        for (size_t t = 0; t < p.triangles.size(); t += 3) {
+          std::array<uint32_t, 3> s3 = {p.triangles[t], p.triangles[t + 1], p.triangles[t + 2]};
+          std::sort(s3.begin(), s3.end());
+          sortedTris.push_back(s3);
+          if (s3[0] == s3[1] || s3[1] == s3[2]) continue;  // degenerate: no proper edges
+          for (int e = 0; e < 3; ++e) {
+            uint32_t a = p.triangles[t + e], b = p.triangles[t + (e + 1) % 3];
+            edgeList.push_back(uint64_t(std::min(a, b)) << 32 | std::max(a, b));
+          }
+        }
+        std::sort(sortedTris.begin(), sortedTris.end());
+        for (size_t i = 1; i < sortedTris.size(); ++i) w.duplicates += sortedTris[i] == sortedTris[i - 1];
+        std::sort(edgeList.begin(), edgeList.end());
+        for (size_t i = 0; i < edgeList.size();) {
+          size_t j = i;
+          while (j < edgeList.size() && edgeList[j] == edgeList[i]) ++j;
+          uint32_t a = uint32_t(edgeList[i] >> 32), b = uint32_t(edgeList[i]);
+          if (w.holders[a] > 1 && w.holders[b] > 1)
+            w.crossEdges.push_back({uint64_t(w.globalIds[a]) << 32 | w.globalIds[b], uint32_t(j - i), 0});
+          else if (j - i > 2)
+            ++w.nonManifold;
+          i = j;
+        }
+        w.payload = encodeGeometry(p, impl->layout);
+      };
+      Progress progress(opt.progress, "ingest: patches", nf);
+      TempReader pface(scratch + "/pface.bin", 4 << 20);
+      VertexData<Full> d;
+      bool have = byPatch.next(d);
+      uint64_t facesDone = 0;
+      constexpr uint32_t kBatch = 64;
+      std::vector<PatchWork> work;
+      for (uint32_t k0 = 0; k0 < P; k0 += kBatch) {
+        const uint32_t k1 = std::min(P, k0 + kBatch);
+        work.assign(k1 - k0, PatchWork());
+        for (uint32_t k = k0; k < k1; ++k) {
+          PatchWork& w = work[k - k0];
+          w.p.id = k;
+          w.p.cell = patchKey[k];
+          while (have && uint32_t(d.key >> 32) == k) {
+            w.globalIds.push_back(uint32_t(d.key));
+            w.holders.push_back(d.holders);
+            for (int a = 0; a < 3; ++a) w.p.positions.push_back(d.p[a]);
+            if constexpr (Full) {
+              if (vlayout.normals) w.p.normals.insert(w.p.normals.end(), d.n, d.n + 3);
+              if (vlayout.colors) w.p.colors.insert(w.p.colors.end(), d.c, d.c + 4);
+            }
+            have = byPatch.next(d);
+          }
+          w.p.triangles.resize(size_t(patchTris[k]) * 3);
+          if (pface.read(w.p.triangles.data(), w.p.triangles.size() * 4) != w.p.triangles.size() * 4)
+            fail(scratch, "patch face scratch file is short");
+        }
+        tbb::parallel_for(size_t(0), work.size(), [&](size_t i) { buildPatch(work[i]); });
+        for (PatchWork& w : work) {
+          const Patch& p = w.p;
+          report.duplicateTriangles += w.duplicates;
+          report.nonManifoldEdges += w.nonManifold;
+          for (const EdgeRec& e : w.crossEdges) edges.add(e);
+          for (uint32_t v = 0; v < w.globalIds.size(); ++v)
+            if (w.holders[v] > 1) shared.add({uint64_t(w.globalIds[v]) << 32 | p.id, v, 0});
+          PatchRecord rec;
+          rec.meta = {p.id, p.cell, 0, p.vertexCount(), p.triangleCount(), 0, boundsOf(p.positions)};
+          rec.geometry = impl->appendBlock(w.payload);
+          impl->patches[p.id] = rec;
+          facesDone += p.triangleCount();
+        }
+        progress.update(facesDone);
+      }
+      progress.finish(facesDone);
+    }
+    std::remove((scratch + "/pface.bin").c_str());
+
+    endOfPass();
+    clock.mark("patches");
   }
   report.unreferencedVertices = nv - distinctReferenced - report.weldedVertices;
-  std::remove((scratch + "/pface.bin").c_str());
-
-  endOfPass();
-  clock.mark("patches");
+  const uint32_t P = uint32_t(patchStage.patchKey.size());
+  auto& shared = *sharedPtr;
+  auto& edges = *edgesPtr;
   // Edges shared between patches: sum their uses.
   edges.finish();
   {
@@ -849,6 +1656,7 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
 }
 
 }  // namespace
+
 
 IngestReport PatchStore::ingest(const std::string& input, const std::string& dirIn, CellAssigner& assigner,
                                 const IngestOptions& options, Env* env) {

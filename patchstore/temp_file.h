@@ -109,6 +109,11 @@ class TempReader {
     if (n != sizeof(T)) fail(path_, "scratch file ends inside a record");
     return true;
   }
+  // Back to the first byte (a second pass over the same file).
+  void rewind() {
+    if (std::fseek(file_, 0, SEEK_SET) != 0) fail(path_, "cannot rewind scratch file");
+    pos_ = end_ = 0;
+  }
   // Reads up to maxCount records into out (resized); returns false at end.
   template <class T>
   bool getBatch(std::vector<T>& out, size_t maxCount) {

@@ -8,10 +8,12 @@
 #include <map>
 #include <random>
 #include <set>
+#include <sstream>
 
 #include "patchstore/io/ply_writer.h"
 #include "patchstore/patch_store.h"
 #include "tests/test_support.h"
+#include "vpartition/vpartition.h"
 
 namespace mt {
 namespace {
@@ -159,6 +161,111 @@ TEST(PatchStore, TinyMemoryCapGivesTheSameStore) {
       EXPECT_EQ(a.boundary[i].remote, b.boundary[i].remote);
     }
   }
+}
+
+// The segment files of a store, concatenated in name order: what "the same store" means below.
+std::string segmentBytes(const std::string& dir) {
+  std::vector<std::string> names;
+  for (auto& e : fs::directory_iterator(dir))
+    if (e.path().filename().string().rfind("SEG-", 0) == 0) names.push_back(e.path().string());
+  std::sort(names.begin(), names.end());
+  std::string all;
+  for (auto& n : names) all += test::readFile(n);
+  return all;
+}
+
+// A mesh as OBJ (no declared vertex count), and with its vertices renumbered at random.
+void writeObj(const TestMesh& m, const std::string& path) {
+  std::ostringstream o;
+  o.precision(9);
+  for (size_t i = 0; i < m.positions.size(); i += 3) o << "v " << m.positions[i] << ' ' << m.positions[i + 1] << ' ' << m.positions[i + 2] << '\n';
+  for (size_t t = 0; t < m.triangles.size(); t += 3)
+    o << "f " << m.triangles[t] + 1 << ' ' << m.triangles[t + 1] + 1 << ' ' << m.triangles[t + 2] + 1 << '\n';
+  test::writeFile(path, o.str());
+}
+TestMesh shuffleVertices(const TestMesh& m, uint32_t seed) {
+  std::vector<uint32_t> perm(m.positions.size() / 3);
+  for (uint32_t i = 0; i < perm.size(); ++i) perm[i] = i;
+  std::mt19937 rng(seed);
+  std::shuffle(perm.begin(), perm.end(), rng);
+  TestMesh out;
+  out.positions.resize(m.positions.size());
+  for (uint32_t i = 0; i < perm.size(); ++i)
+    for (int a = 0; a < 3; ++a) out.positions[3 * size_t(perm[i]) + a] = m.positions[3 * size_t(i) + a];
+  for (uint32_t v : m.triangles) out.triangles.push_back(perm[v]);
+  return out;
+}
+
+IngestReport ingestIrregular(const std::string& input, const std::string& dir, uint64_t memory) {
+  VPartitionOptions vo;
+  vo.patchTriangles = 300;
+  auto assigner = makeVPartitionAssigner(vo);
+  IngestOptions o;
+  o.memoryBytes = memory;
+  o.progress = false;
+  return PatchStore::ingest(input, dir, *assigner, o);
+}
+
+TEST(PatchStore, SameStoreBytesWhateverTheCapOrThePath) {
+  // Above 512 K triangles the irregular V-partition samples its input (every stride-th face in
+  // Morton order). A 1 GiB cap keeps the vertices in RAM (resident path; PLY: Morton codes during
+  // the parse; OBJ: after it); 24 MiB forces the chunked path with every
+  // sort spilling. Shuffled faces and vertices. All must give the same segment bytes.
+  TempDir tmp;
+  TestMesh m = shuffleVertices(makeTorus(700, 420, 5, true, 3), 11);
+  ASSERT_GT(m.triangles.size() / 3, 520000u);
+  writePly(m, tmp.file("in.ply"));
+  writeObj(m, tmp.file("in.obj"));
+  IngestReport ref = ingestIrregular(tmp.file("in.ply"), tmp.file("resident"), 1ull << 30);
+  const std::string bytes = segmentBytes(tmp.file("resident"));
+  ASSERT_FALSE(bytes.empty());
+  IngestReport chunked = ingestIrregular(tmp.file("in.ply"), tmp.file("chunked"), 24ull << 20);
+  EXPECT_TRUE(bytes == segmentBytes(tmp.file("chunked"))) << "chunked path";
+  EXPECT_EQ(ref.duplicateTriangles, chunked.duplicateTriangles);
+  EXPECT_EQ(ref.nonManifoldEdges, chunked.nonManifoldEdges);
+  EXPECT_EQ(ref.unreferencedVertices, chunked.unreferencedVertices);
+  EXPECT_EQ(ref.assigner, chunked.assigner);
+  ingestIrregular(tmp.file("in.obj"), tmp.file("obj"), 1ull << 30);
+  EXPECT_TRUE(bytes == segmentBytes(tmp.file("obj"))) << "OBJ (no declared vertex count)";
+  auto store = PatchStore::open(tmp.file("resident"));
+  EXPECT_TRUE(store->check().ok);
+  store->exportPly(tmp.file("out.ply"));
+  EXPECT_TRUE(sameTriangles(readTriangles(tmp.file("out.ply")), coordTriangles(m.positions, m.triangles)));
+}
+
+TEST(PatchStore, DefectsCountedAlikeOnBothPaths) {
+  // Degenerate, duplicate and non-manifold faces and unreferenced vertices, counted by the
+  // resident path (large cap) as by the chunked one (tiny cap), with the same patches.
+  TempDir tmp;
+  TestMesh m = makeTorus(200, 100, 2, true, 5);
+  const size_t nt = m.triangles.size();
+  for (size_t t = 0; t < 300; ++t) {  // duplicates (some reversed) and fins on existing edges
+    const size_t f = (t * 7919) % (nt / 3);
+    uint32_t a = m.triangles[3 * f], b = m.triangles[3 * f + 1], c = m.triangles[3 * f + 2];
+    if (t % 3 == 0) m.triangles.insert(m.triangles.end(), {c, b, a});
+    if (t % 3 == 1) m.triangles.insert(m.triangles.end(), {a, b, c});
+    if (t % 3 == 2) m.triangles.insert(m.triangles.end(), {a, b, m.triangles[(3 * f + 300) % nt]});
+  }
+  m.triangles.insert(m.triangles.end(), {m.triangles[0], m.triangles[0], m.triangles[1]});  // degenerate
+  for (int i = 0; i < 5; ++i) m.positions.insert(m.positions.end(), {9.0 + i, 9.0, 9.0});  // unreferenced
+  writePly(m, tmp.file("in.ply"));
+  auto assigner = makeGridAssigner(400);
+  IngestOptions o;
+  o.progress = false;
+  o.memoryBytes = 1ull << 30;
+  IngestReport big = PatchStore::ingest(tmp.file("in.ply"), tmp.file("big"), *assigner, o);
+  o.memoryBytes = 600 << 10;
+  auto assigner2 = makeGridAssigner(400);
+  IngestReport small = PatchStore::ingest(tmp.file("in.ply"), tmp.file("small"), *assigner2, o);
+  EXPECT_GT(big.duplicateTriangles, 150u);
+  EXPECT_GT(big.nonManifoldEdges, 50u);
+  EXPECT_EQ(big.degenerateTriangles, 1u);
+  EXPECT_EQ(big.unreferencedVertices, 5u);
+  EXPECT_EQ(big.duplicateTriangles, small.duplicateTriangles);
+  EXPECT_EQ(big.nonManifoldEdges, small.nonManifoldEdges);
+  EXPECT_EQ(big.unreferencedVertices, small.unreferencedVertices);
+  EXPECT_TRUE(segmentBytes(tmp.file("big")) == segmentBytes(tmp.file("small")));
+  EXPECT_TRUE(PatchStore::open(tmp.file("big"))->check().ok);
 }
 
 // Every vertex position held by several patches (the torus has no duplicate positions) must be

@@ -250,6 +250,44 @@ void VPartitionAssigner::prepare(const CentroidSource& centroids, uint64_t memor
   // The seeds must stay in core (BMT 4.2.2: "about one seed per thousand triangles"); refuse
   // rather than silently exceed the caller's share of --memory.
   tooBig(sequence_.stats().seedBytes + sample.bytes(), "seeds, grids and the centroid sample");
+  buildKeyTable();
+}
+
+namespace {
+inline uint64_t mixKey(uint64_t key) {
+  key ^= key >> 31;
+  key *= 0x9E3779B97F4A7C15ull;
+  return key ^ (key >> 29);
+}
+}  // namespace
+
+void VPartitionAssigner::buildKeyTable() {
+  keyTable_.clear();
+  slabList_.clear();
+  std::unordered_map<uint64_t, int32_t> slabIndex;
+  for (const auto& [key, s] : slabs_) {
+    slabIndex[key] = int32_t(slabList_.size());
+    slabList_.push_back(s);
+  }
+  std::sort(sampleKeys_.begin(), sampleKeys_.end());
+  sampleKeys_.erase(std::unique(sampleKeys_.begin(), sampleKeys_.end()), sampleKeys_.end());
+  if (sampleKeys_.empty()) return;
+  uint64_t cap = 16;
+  while (cap < 2 * sampleKeys_.size()) cap <<= 1;
+  keyTable_.assign(cap, KeyEntry{});
+  keyMask_ = cap - 1;
+  for (uint64_t raw : sampleKeys_) {
+    KeyEntry e;
+    e.raw = raw;
+    e.final = joinedKey(raw);
+    auto it = slabIndex.find(e.final);
+    e.slabs = it == slabIndex.end() ? -1 : it->second;
+    e.used = 1;
+    uint64_t h = mixKey(raw) & keyMask_;
+    while (keyTable_[h].used) h = (h + 1) & keyMask_;
+    keyTable_[h] = e;
+  }
+  std::vector<uint64_t>().swap(sampleKeys_);
 }
 
 // Balancing the patches (the V*0 cells). Crossing V0 with V1 gives uneven pieces: where a V1
@@ -275,6 +313,7 @@ void VPartitionAssigner::mergeSlivers(const vp::CentroidSample& sample) {
   slabs_.clear();
   seen_.clear();
   largest_.clear();
+  sampleKeys_.clear();
   sampled_ = sample.stride > 1;
   if (sequence_.levels() < 2 || sequence_.cellCount(0) >= (1u << 24)) return;
   struct Piece {
@@ -296,6 +335,7 @@ void VPartitionAssigner::mergeSlivers(const vp::CentroidSample& sample) {
   const double small = std::max(1.0, target / 4.0 / w);
   std::vector<std::pair<uint64_t, Piece>> sorted(pieces.begin(), pieces.end());
   std::sort(sorted.begin(), sorted.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  for (const auto& [key, piece] : sorted) sampleKeys_.push_back(key);
   auto join = [&](size_t from, size_t into) {
     remap_[sorted[from].first] = sorted[into].first;
     Piece& big = sorted[into].second;
@@ -396,8 +436,7 @@ void VPartitionAssigner::mergeSlivers(const vp::CentroidSample& sample) {
   }
 }
 
-uint64_t VPartitionAssigner::cellKey(const float c[3]) const {
-  uint64_t key = sequence_.crossKey(0, c);
+uint64_t VPartitionAssigner::joinedKey(uint64_t key) const {
   if (sampled_) {
     auto seen = seen_.find(key);
     if (seen != seen_.end()) {
@@ -408,10 +447,32 @@ uint64_t VPartitionAssigner::cellKey(const float c[3]) const {
   } else if (auto it = remap_.find(key); it != remap_.end()) {
     key = it->second;
   }
-  auto s = slabs_.find(key);
-  if (s == slabs_.end()) return key;
-  const std::vector<float>& bounds = s->second.bounds;
-  uint64_t slab = uint64_t(std::upper_bound(bounds.begin(), bounds.end(), c[s->second.axis]) - bounds.begin());
+  return key;
+}
+
+uint64_t VPartitionAssigner::cellKey(const float c[3]) const {
+  const uint64_t raw = sequence_.crossKey(0, c);
+  uint64_t key = raw;
+  const Slabs* slabs = nullptr;
+  const KeyEntry* entry = nullptr;
+  if (!keyTable_.empty()) {
+    for (uint64_t h = mixKey(raw) & keyMask_; keyTable_[h].used; h = (h + 1) & keyMask_)
+      if (keyTable_[h].raw == raw) {
+        entry = &keyTable_[h];
+        break;
+      }
+  }
+  if (entry) {
+    key = entry->final;
+    if (entry->slabs >= 0) slabs = &slabList_[size_t(entry->slabs)];
+  } else {
+    key = joinedKey(raw);
+    auto s = slabs_.find(key);
+    if (s != slabs_.end()) slabs = &s->second;
+  }
+  if (!slabs) return key;
+  const std::vector<float>& bounds = slabs->bounds;
+  uint64_t slab = uint64_t(std::upper_bound(bounds.begin(), bounds.end(), c[slabs->axis]) - bounds.begin());
   return key | slab << kSlabShift;
 }
 

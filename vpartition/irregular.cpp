@@ -313,15 +313,10 @@ CentroidSample sampleCentroids(const CentroidSource& src, uint32_t patchTriangle
   const uint32_t P = patchTriangles ? patchTriangles : kDefaultPatchTriangles;
   const uint64_t limit = sampleLimit(s.total, P);
   s.stride = std::max<uint64_t>(1, (s.total + limit - 1) / limit);
-  s.xyza.reserve(4 * size_t((s.total + s.stride - 1) / s.stride));
-  uint64_t index = 0;
-  src.forEach([&](const float* xyza, size_t count) {
-    // Every stride-th centroid of the stream: the source order is spatially coherent (ingest
-    // streams Morton order), so this is a stratified sample of the surface, in stream order.
-    size_t t = size_t((s.stride - index % s.stride) % s.stride);
-    for (; t < count; t += size_t(s.stride)) s.xyza.insert(s.xyza.end(), xyza + 4 * t, xyza + 4 * t + 4);
-    index += count;
-  });
+  // Every stride-th centroid of the stream: the source order is spatially coherent (ingest
+  // streams Morton order), so this is a stratified sample of the surface, in stream order.
+  // Ingest picks them straight from its Morton sort (CentroidSource::sample).
+  s.xyza = src.sample(s.stride);
   s.xyza.shrink_to_fit();
   return s;
 }

@@ -240,15 +240,25 @@ const SeedIndex::Slot* SeedIndex::findShared(uint64_t key) const {
   }
 }
 
+// floor() to an integer without the libm call (not inlined at -O2 without SSE4.1): exact for
+// every double in int64 range, which the range checks below keep.
+static inline int64_t floorToInt(double x) {
+  int64_t t = int64_t(x);
+  return t - int64_t(double(t) > x);
+}
+
 uint32_t SeedIndex::nearestCached(const float p[3]) const {
   if (count_ <= 1) return count_ == 0 ? UINT32_MAX : 0;
   // Query cells are half a seed radius: a candidate list then holds ~5-10 seeds on a surface.
   const double qinv = 2.0 * inv_;
+  int64_t q[3];
   for (int a = 0; a < 3; ++a) {
-    int64_t c = int64_t(std::floor((p[a] - origin_[a]) * qinv));
-    if (c < 2 * lo_[a] - 8 || c > 2 * hi_[a] + 8) return nearest(p);  // outside: no cache
+    const double x = (p[a] - origin_[a]) * qinv;
+    // Outside the seeds' range (or beyond int64): no cache. Same test as on floor(x) itself.
+    if (!(x >= double(2 * lo_[a] - 8)) || !(x < double(2 * hi_[a] + 9))) return nearest(p);
+    q[a] = floorToInt(x);
   }
-  const uint64_t key = queryCell(p);
+  const uint64_t key = packCell(q[0], q[1], q[2]);
   const uint32_t* cand;
   uint32_t count;
   // Spatially coherent streams (Morton-ordered ingest, a region's triangles in mtbuild) ask the
@@ -261,29 +271,31 @@ uint32_t SeedIndex::nearestCached(const float p[3]) const {
   if (last.index == this && last.uid == uid_ && last.key == key) {
     cand = last.cand;
     count = last.count;
-  } else if (const Slot* s = findShared(key)) {
-    cand = sharedCand_.data() + s->begin;
-    count = s->end - s->begin;
   } else {
-    CacheEntry& e =
-        threadCache()[hashKey(key ^ (uid_ * 0xD6E8FEB86659FD93ull)) & (kCacheEntries - 1)];
-    if (e.uid != uid_ || e.key != key) {
-      thread_local std::vector<uint32_t> list;
-      list.clear();
-      candidates(key, list);
-      e.uid = uid_;
-      e.key = key;
-      e.count = uint32_t(list.size());
-      std::copy(list.begin(), list.end(), e.cand);
+    if (const Slot* s = findShared(key)) {
+      cand = sharedCand_.data() + s->begin;
+      count = s->end - s->begin;
+    } else {
+      CacheEntry& e =
+          threadCache()[hashKey(key ^ (uid_ * 0xD6E8FEB86659FD93ull)) & (kCacheEntries - 1)];
+      if (e.uid != uid_ || e.key != key) {
+        thread_local std::vector<uint32_t> list;
+        list.clear();
+        candidates(key, list);
+        e.uid = uid_;
+        e.key = key;
+        e.count = uint32_t(list.size());
+        std::copy(list.begin(), list.end(), e.cand);
+      }
+      cand = e.cand;
+      count = e.count;
     }
-    cand = e.cand;
-    count = e.count;
+    last.index = this;
+    last.uid = uid_;
+    last.key = key;
+    last.count = std::min(count, kMaxCandidates);
+    std::copy(cand, cand + last.count, last.cand);
   }
-  last.index = this;
-  last.uid = uid_;
-  last.key = key;
-  last.count = std::min(count, kMaxCandidates);
-  std::copy(cand, cand + last.count, last.cand);
   if (count == 0) return nearest(p);
   // Candidates ascend by index, so strict < keeps the lower index on ties.
   uint32_t best = cand[0];

@@ -157,6 +157,8 @@ class VPartitionAssigner : public CellAssigner {
 
  private:
   void mergeSlivers(const vp::CentroidSample& sample);
+  uint64_t joinedKey(uint64_t key) const;  // the key a piece ends up with, before slab cuts
+  void buildKeyTable();
   VPartitionOptions options_;
   PartitionSequence sequence_;
   std::unordered_map<uint64_t, uint64_t> remap_;  // sliver V*0 key -> the key it joins
@@ -170,6 +172,17 @@ class VPartitionAssigner : public CellAssigner {
   bool sampled_ = false;
   std::unordered_map<uint64_t, uint64_t> seen_;      // piece key -> final key (itself or joined)
   std::unordered_map<uint32_t, uint64_t> largest_;   // V0 cell -> final key of its largest piece
+  // cellKey()'s fast path: every V*0 key the sample saw, with its final key and slab cut, in one
+  // open-addressing table (the maps above answer keys the sample missed).
+  struct KeyEntry {
+    uint64_t raw = 0, final = 0;
+    int32_t slabs = -1;  // index into slabList_, -1: not cut
+    uint32_t used = 0;
+  };
+  std::vector<uint64_t> sampleKeys_;
+  std::vector<KeyEntry> keyTable_;
+  uint64_t keyMask_ = 0;
+  std::vector<Slabs> slabList_;
 };
 
 std::unique_ptr<CellAssigner> makeVPartitionAssigner(const VPartitionOptions& options);
