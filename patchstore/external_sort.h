@@ -185,13 +185,19 @@ class LoserTree {
 template <class Record, class Less>
 class RunMerger {
  public:
-  void open(const std::vector<std::string>& runs, size_t bufferBytes, Less less) {
+  // Merges records [begin[i], end[i]) of each run i (whole runs when begin is empty).
+  void open(const std::vector<std::string>& runs, size_t bufferBytes, Less less, const std::vector<uint64_t>& begin = {},
+            const std::vector<uint64_t>& end = {}) {
     less_ = less;
     readers_.clear();
     heads_.assign(runs.size(), Record{});
     done_.assign(runs.size(), 0);
     for (size_t i = 0; i < runs.size(); ++i) {
-      readers_.push_back(std::make_unique<TempReader>(runs[i], bufferBytes));
+      if (begin.empty())
+        readers_.push_back(std::make_unique<TempReader>(runs[i], bufferBytes));
+      else
+        readers_.push_back(std::make_unique<TempReader>(runs[i], bufferBytes, begin[i] * sizeof(Record),
+                                                        (end[i] - begin[i]) * sizeof(Record)));
       done_[i] = !readers_[i]->get(heads_[i]);
     }
     tree_.init(runs.size(), Better{this});
@@ -326,6 +332,8 @@ class StableKeySorter {
     merger_.close();
     for (auto& path : runs_) std::remove(path.c_str());
     runs_.clear();
+    runLength_.clear();
+    samples_.clear();
     std::vector<Record>().swap(buffer_);
     std::vector<Record>().swap(tmp_);
     sorted_ = nullptr;
@@ -382,6 +390,68 @@ class StableKeySorter {
     return true;
   }
 
+  // Instead of next(): the merged order cut into `parts` consecutive pieces at key boundaries
+  // (quantiles of keys kept from every run), merged on parallel threads. fn(part, firstRank,
+  // nextRecord) is called once per piece; firstRank is the position of the piece's first record
+  // in the whole order and nextRecord(Record&) yields the piece's records. Releases the sorter.
+  template <class Fn>
+  void mergeInParts(size_t parts, const Fn& fn) {
+    parts = std::max<size_t>(1, parts);
+    if (runs_.empty()) {
+      const size_t n = memoryEnd_;
+      tbb::parallel_for(size_t(0), parts, [&](size_t p) {
+        size_t at = n * p / parts, end = n * (p + 1) / parts;
+        fn(p, uint64_t(at), [&](Record& r) {
+          if (at >= end) return false;
+          r = sorted_[at++];
+          return true;
+        });
+      });
+      release();
+      return;
+    }
+    merger_.close();
+    // Splitters: quantiles of the kept keys; a piece holds keys in [split[p-1], split[p]).
+    std::vector<uint64_t> kept;
+    for (auto& s : samples_) kept.insert(kept.end(), s.begin(), s.end());
+    std::sort(kept.begin(), kept.end());
+    std::vector<uint64_t> split;
+    for (size_t p = 1; p < parts && !kept.empty(); ++p) split.push_back(kept[kept.size() * p / parts]);
+    split.erase(std::unique(split.begin(), split.end()), split.end());
+    parts = split.size() + 1;
+    // Per run and splitter, the first record with key >= splitter (binary search on disk).
+    std::vector<std::vector<uint64_t>> cut(runs_.size());
+    for (size_t r = 0; r < runs_.size(); ++r) {
+      cut[r].push_back(0);
+      for (uint64_t s : split) {
+        uint64_t lo = cut[r].back(), hi = runLength_[r];
+        while (lo < hi) {
+          uint64_t mid = lo + (hi - lo) / 2;
+          if (key_(TempReader::recordAt<Record>(runs_[r], mid * sizeof(Record))) < s)
+            lo = mid + 1;
+          else
+            hi = mid;
+        }
+        cut[r].push_back(lo);
+      }
+      cut[r].push_back(runLength_[r]);
+    }
+    size_t perRun = std::clamp<size_t>(capacity_ * 2 * sizeof(Record) / ((runs_.size() + 1) * parts), 64 << 10, 4 << 20);
+    tbb::parallel_for(size_t(0), parts, [&](size_t p) {
+      std::vector<uint64_t> begin(runs_.size()), end(runs_.size());
+      uint64_t first = 0;
+      for (size_t r = 0; r < runs_.size(); ++r) {
+        begin[r] = cut[r][p];
+        end[r] = cut[r][p + 1];
+        first += begin[r];
+      }
+      RunMerger<Record, Less> merger;
+      merger.open(runs_, perRun, Less{key_}, begin, end);
+      fn(p, first, [&](Record& r) { return merger.next(r); });
+    });
+    release();
+  }
+
  private:
   struct Less {
     KeyFn key;
@@ -398,6 +468,9 @@ class StableKeySorter {
     writer.write(sorted, buffer_.size() * sizeof(Record));
     writer.close();
     runs_.push_back(path);
+    runLength_.push_back(buffer_.size());
+    samples_.emplace_back();
+    for (size_t i = 0; i < buffer_.size(); i += 4096) samples_.back().push_back(key_(sorted[i]));
     buffer_.clear();
   }
 
@@ -410,6 +483,8 @@ class StableKeySorter {
   size_t memoryPos_ = 0, memoryEnd_ = 0;
   uint64_t count_ = 0;
   std::vector<std::string> runs_;
+  std::vector<uint64_t> runLength_;            // records per run
+  std::vector<std::vector<uint64_t>> samples_;  // every 4096th key of each run
   RunMerger<Record, Less> merger_;
 };
 

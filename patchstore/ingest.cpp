@@ -828,16 +828,25 @@ class ResidentCentroids : public CentroidSource {
     clock_.mark("morton");
     // Ranks 0, stride, 2 stride, ... of the merged order; then their centroids, in one more
     // sequential read of the faces.
+    // The merge runs in key ranges on parallel threads, each knowing the rank it starts at.
     std::vector<std::pair<uint32_t, uint32_t>> picks;  // (face, rank / stride)
-    picks.reserve(size_t(faces_ / stride + 1));
     {
-      MortonKey k;
-      uint64_t rank = 0;
-      while (sorter.next(k)) {
-        if (rank % stride == 0) picks.push_back({k.face, uint32_t(picks.size())});
-        ++rank;
+      const size_t parts = size_t(std::max(1, tbb::this_task_arena::max_concurrency()));
+      std::vector<std::vector<std::pair<uint32_t, uint32_t>>> partPicks(parts);
+      std::vector<uint64_t> partCount(parts, 0);
+      sorter.mergeInParts(parts, [&](size_t part, uint64_t rank, const auto& next) {
+        MortonKey k;
+        uint64_t n = 0;
+        for (; next(k); ++rank, ++n)
+          if (rank % stride == 0) partPicks[part].push_back({k.face, uint32_t(rank / stride)});
+        partCount[part] = n;
+      });
+      uint64_t total = 0;
+      for (size_t p = 0; p < parts; ++p) {
+        total += partCount[p];
+        picks.insert(picks.end(), partPicks[p].begin(), partPicks[p].end());
       }
-      if (rank != faces_) fail(scratch_, "internal: Morton sort holds " + std::to_string(rank) + " faces");
+      if (total != faces_) fail(scratch_, "internal: Morton sort holds " + std::to_string(total) + " faces");
       morton_.reset();  // consumed: another sample() would sort again
     }
     std::vector<float> out(4 * picks.size());
@@ -937,8 +946,8 @@ struct ResidentPatch {
 
 // Per-thread scratch of buildResidentPatch, kept across patches.
 struct PatchScratch {
-  std::vector<uint64_t> a, b;
-  std::vector<uint32_t> globals, local;
+  std::vector<uint64_t> a, b, set;
+  std::vector<uint32_t> globals, local, firstCorner, nb;
   std::vector<uint8_t> shared;  // per local vertex: held by another patch too
 };
 
@@ -961,13 +970,18 @@ void buildResidentPatch(ResidentPatch& w, const ResidentVertices& rv, const uint
     for (int k = 0; k < 3; ++k) s.a[3 * t + k] = uint64_t(w.faces[t].v[k] - vmin) << 32 | (3 * t + k);
   const uint64_t* sorted = radixSort(s.a.data(), s.b.data(), nc, [](uint64_t x) { return x >> 32; }, bitsFor(vmax - vmin));
   s.globals.clear();
+  s.firstCorner.clear();
   s.local.resize(nc);
   for (size_t i = 0; i < nc; ++i) {
     uint32_t v = uint32_t(sorted[i] >> 32) + vmin;
-    if (s.globals.empty() || s.globals.back() != v) s.globals.push_back(v);
+    if (s.globals.empty() || s.globals.back() != v) {
+      s.globals.push_back(v);
+      s.firstCorner.push_back(uint32_t(i));
+    }
     s.local[uint32_t(sorted[i])] = uint32_t(s.globals.size() - 1);
   }
   const uint32_t nv = uint32_t(s.globals.size());
+  s.firstCorner.push_back(uint32_t(nc));
   w.vertices = nv;
   w.triangles = uint32_t(nt);
 
@@ -1017,24 +1031,30 @@ void buildResidentPatch(ResidentPatch& w, const ResidentVertices& rv, const uint
     }
   std::memcpy(out, s.local.data(), nc * 4);
 
-  // 3. Duplicate faces (same vertex set) and edge use counts, on local indices packed into one
-  //    integer each and radix sorted.
+  // 3. Duplicate faces (same vertex set): sorted local triples packed into one integer, counted
+  //    through an open-addressing set (each repeat of a triple counts once).
   const uint32_t lb = bitsFor(std::max<uint32_t>(1, nv - 1));
   const uint32_t* tri = s.local.data();
   w.duplicates = 0;
   w.nonManifold = 0;
   w.crossEdges.clear();
-  if (3 * lb <= 64) {
-    s.a.resize(nt);
+  if (3 * lb <= 63) {
+    size_t cap = 16;
+    while (cap < 2 * nt) cap <<= 1;
+    s.set.assign(cap, 0);
     for (size_t t = 0; t < nt; ++t) {
       uint32_t x = tri[3 * t], y = tri[3 * t + 1], z = tri[3 * t + 2];
       if (x > y) std::swap(x, y);
       if (y > z) std::swap(y, z);
       if (x > y) std::swap(x, y);
-      s.a[t] = (uint64_t(x) << (2 * lb)) | (uint64_t(y) << lb) | z;
+      const uint64_t key = (uint64_t(1) << 63) | (uint64_t(x) << (2 * lb)) | (uint64_t(y) << lb) | z;
+      size_t h = size_t((key * 0x9E3779B97F4A7C15ull) >> 32) & (cap - 1);
+      while (s.set[h] != 0 && s.set[h] != key) h = (h + 1) & (cap - 1);
+      if (s.set[h] == key)
+        ++w.duplicates;
+      else
+        s.set[h] = key;
     }
-    const uint64_t* d = radixSort(s.a.data(), s.b.data(), nt, [](uint64_t x) { return x; }, 3 * lb);
-    for (size_t t = 1; t < nt; ++t) w.duplicates += d[t] == d[t - 1];
   } else {
     std::vector<std::array<uint32_t, 3>> sortedTris(nt);
     for (size_t t = 0; t < nt; ++t) {
@@ -1044,26 +1064,32 @@ void buildResidentPatch(ResidentPatch& w, const ResidentVertices& rv, const uint
     std::sort(sortedTris.begin(), sortedTris.end());
     for (size_t t = 1; t < nt; ++t) w.duplicates += sortedTris[t] == sortedTris[t - 1];
   }
-  s.a.clear();
-  for (size_t t = 0; t < nt; ++t) {
-    const uint32_t* c = tri + 3 * t;
-    if (c[0] == c[1] || c[1] == c[2] || c[0] == c[2]) continue;  // degenerate: no proper edges
-    for (int e = 0; e < 3; ++e) {
-      uint32_t x = c[e], y = c[(e + 1) % 3];
-      s.a.push_back(uint64_t(std::min(x, y)) << 32 | std::max(x, y));
+  // 4. Edge use counts, from the corners of each vertex a (sorted above): a proper triangle at a
+  //    holds each of its two other corners once, so the uses of edge (a, b), b > a, are how often
+  //    b shows up among them. Degenerate triangles have no proper edges.
+  for (uint32_t a = 0; a < nv; ++a) {
+    s.nb.clear();
+    for (uint32_t i = s.firstCorner[a]; i < s.firstCorner[a + 1]; ++i) {
+      const uint32_t c = uint32_t(sorted[i]), t = c / 3, k = c % 3;
+      const uint32_t* f = tri + 3 * t;
+      if (f[0] == f[1] || f[1] == f[2] || f[0] == f[2]) continue;
+      const uint32_t b1 = f[(k + 1) % 3], b2 = f[(k + 2) % 3];
+      if (b1 > a) s.nb.push_back(b1);
+      if (b2 > a) s.nb.push_back(b2);
     }
-  }
-  s.b.resize(s.a.size());
-  const uint64_t* edges = radixSort(s.a.data(), s.b.data(), s.a.size(), [lb](uint64_t x) { return (x >> 32) << lb | (x & 0xFFFFFFFFu); }, 2 * lb);
-  for (size_t i = 0, n = s.a.size(); i < n;) {
-    size_t j = i;
-    while (j < n && edges[j] == edges[i]) ++j;
-    const uint32_t a = uint32_t(edges[i] >> 32), b = uint32_t(edges[i]);
-    if (s.shared[a] && s.shared[b])
-      w.crossEdges.push_back({uint64_t(s.globals[a]) << 32 | s.globals[b], uint32_t(j - i)});
-    else if (j - i > 2)
-      ++w.nonManifold;
-    i = j;
+    // Insertion sort: a vertex has a handful of neighbours.
+    for (size_t i = 1; i < s.nb.size(); ++i)
+      for (size_t j = i; j > 0 && s.nb[j - 1] > s.nb[j]; --j) std::swap(s.nb[j - 1], s.nb[j]);
+    for (size_t i = 0, n = s.nb.size(); i < n;) {
+      size_t j = i;
+      while (j < n && s.nb[j] == s.nb[i]) ++j;
+      const uint32_t b = s.nb[i];
+      if (s.shared[a] && s.shared[b])
+        w.crossEdges.push_back({uint64_t(s.globals[a]) << 32 | s.globals[b], uint32_t(j - i)});
+      else if (j - i > 2)
+        ++w.nonManifold;
+      i = j;
+    }
   }
   w.shared.clear();
   for (uint32_t l = 0; l < nv; ++l)
@@ -1267,6 +1293,7 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
   // from the heap, where freed memory stays resident behind live blocks: keep every buffer of a
   // MiB or more in its own mapping, so that what a pass frees leaves the process at once.
   mallopt(M_MMAP_THRESHOLD, 1 << 20);
+  mallopt(M_TRIM_THRESHOLD, 64 << 20);
   auto endOfPass = [] { malloc_trim(0); };
   StageClock clock(opt.progress);
 

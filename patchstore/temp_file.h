@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cerrno>
+#include <cstdint>
 #include <cstdio>
 #include <cstring>
 #include <string>
@@ -70,10 +71,25 @@ class TempWriter {
 
 class TempReader {
  public:
-  explicit TempReader(std::string path, size_t bufferBytes = 1 << 20) : path_(std::move(path)) {
+  // Reads the file from byte `offset`, at most `length` bytes (a slice of a sorted run).
+  explicit TempReader(std::string path, size_t bufferBytes = 1 << 20, uint64_t offset = 0, uint64_t length = UINT64_MAX)
+      : path_(std::move(path)), left_(length) {
     file_ = std::fopen(path_.c_str(), "rb");
     if (!file_) fail(path_, std::string("cannot open scratch file: ") + std::strerror(errno));
+    if (offset > 0 && fseeko(file_, off_t(offset), SEEK_SET) != 0) fail(path_, "cannot seek in scratch file");
     buffer_.resize(bufferBytes);
+  }
+  // The record at byte offset `at` of a file, read directly (binary searches over a run).
+  template <class T>
+  static T recordAt(const std::string& path, uint64_t at) {
+    static_assert(std::is_trivially_copyable_v<T>);
+    FILE* f = std::fopen(path.c_str(), "rb");
+    if (!f) fail(path, std::string("cannot open scratch file: ") + std::strerror(errno));
+    T r;
+    bool ok = fseeko(f, off_t(at), SEEK_SET) == 0 && std::fread(&r, sizeof r, 1, f) == 1;
+    std::fclose(f);
+    if (!ok) fail(path, "cannot read scratch file at byte offset " + std::to_string(at));
+    return r;
   }
   ~TempReader() {
     if (file_) std::fclose(file_);
@@ -87,7 +103,8 @@ class TempReader {
     size_t done = 0;
     while (done < size) {
       if (pos_ == end_) {
-        end_ = std::fread(buffer_.data(), 1, buffer_.size(), file_);
+        end_ = left_ == 0 ? 0 : std::fread(buffer_.data(), 1, size_t(std::min<uint64_t>(buffer_.size(), left_)), file_);
+        left_ -= end_;
         pos_ = 0;
         if (end_ == 0) {
           if (std::ferror(file_)) fail(path_, "cannot read scratch file");
@@ -113,6 +130,7 @@ class TempReader {
   void rewind() {
     if (std::fseek(file_, 0, SEEK_SET) != 0) fail(path_, "cannot rewind scratch file");
     pos_ = end_ = 0;
+    left_ = UINT64_MAX;
   }
   // Reads up to maxCount records into out (resized); returns false at end.
   template <class T>
@@ -129,6 +147,7 @@ class TempReader {
   FILE* file_ = nullptr;
   std::vector<char> buffer_;
   size_t pos_ = 0, end_ = 0;
+  uint64_t left_;
 };
 
 }  // namespace mt
