@@ -18,6 +18,7 @@
 #include <draco/core/encoder_buffer.h>
 #include <draco/mesh/mesh.h>
 
+#include "mtbuild/fan_order.h"
 #include "patchstore/error.h"
 
 namespace mt {
@@ -129,18 +130,19 @@ Prepared prepare(const PatchInput& in, const QuantizationGrid& grid, const Patch
   size_t indexCount = in.triangleCount * 3;
   // Triangle order, then vertices renumbered by first use: both make the index and vertex deltas
   // small, which is what the codecs exploit. meshopt_encodeIndexBuffer codes a triangle cheaply
-  // when it shares an edge with a recent one and brings its new vertex in fetch order.
-  // The strip-biased cache order (meshopt_optimizeVertexCacheStrip: each next triangle shares an
-  // edge with the last where it can) gets that from any input order: measured on level-1 regions
-  // of a 1M scan, 0.54 instead of 0.81 bytes per triangle for the indices after zstd than the
-  // plain cache order, 1.08 instead of 1.40 payload bytes per triangle in all. But it is the
-  // single largest cost of the level loop (~15% of its CPU, measured with perf on a 10M build),
-  // and patches usually arrive in an order that is already as good: a scan's faces come in scan
-  // order and simplification keeps the survivors' order. So the input order is kept when its
-  // index code is already strip-like (<= kCoherentIndexBytes per triangle before zstd; measured:
-  // strip order 1.04-1.39 on the 10M mtgen scan's patches, its own order 1.04-1.52, a shuffled
-  // scan's 5.3-6.4) and the cache optimizer only runs for the others. Deterministic either way.
-  constexpr double kCoherentIndexBytes = 1.6;
+  // when it shares an edge with a recent one and brings its new vertex in fetch order. Patches
+  // often arrive in an order that is already good: a scan's faces come in scan order (level 0),
+  // and that order is kept when its index code is strip-like already (<= kCoherentIndexBytes per
+  // triangle before zstd; measured on the 10M mtgen scan's patches: 1.04-1.52, a shuffled scan's
+  // 5.3-6.4). Simplification keeps the survivors' order, which is not coherent any more (1.91 on
+  // the simplified patches of a 2M scan): those are put in fan order (fan_order.h: 1.20;
+  // meshopt_optimizeVertexCacheStrip gets 1.16 but costs 3.4x as much, ~8% of the level loop's
+  // instructions, ~15% of its time before the input order was kept). Whole files on the m10 scan,
+  // bytes per input triangle: cache-strip order for the incoherent patches 2.40, fan order 2.33
+  // (the parallelogram-predicted positions and zstd gain more than the index code loses), and
+  // 2.31 with the threshold at 1.3 instead of 1.6 (flat from 1.15 to 1.4); fan order for every
+  // patch 2.44. Level-loop CPU 18.9 -> 16.6 s. Deterministic either way.
+  constexpr double kCoherentIndexBytes = 1.3;
   std::vector<uint32_t> remap(in.vertexCount);
   setMeshoptVersions();  // the index codec version is process-wide state: set before the first encode
   auto orderBy = [&](const uint32_t* tri) {
@@ -161,7 +163,7 @@ Prepared prepare(const PatchInput& in, const QuantizationGrid& grid, const Patch
     used = orderBy(in.triangles);
     if (double(out.indexCode.size()) > kCoherentIndexBytes * double(in.triangleCount)) {
       std::vector<uint32_t> ordered(indexCount);
-      meshopt_optimizeVertexCacheStrip(ordered.data(), in.triangles, indexCount, in.vertexCount);
+      fanOrderTriangles(ordered.data(), in.triangles, indexCount, in.vertexCount);
       used = orderBy(ordered.data());
     }
   }

@@ -5,7 +5,8 @@
 //   1. positions are quantized on ONE global grid (QuantizationGrid): q = round((p - origin)/step).
 //      A vertex shared by two patches has the same double position in both (the patch store keeps
 //      it bit-identical), hence the same q, hence the same decoded float: no crack can appear;
-//   2. triangles are put in vertex-cache order and vertices in first-use (fetch) order;
+//   2. triangles keep their order when it is coherent, else are put in fan order (fan_order.h),
+//      and vertices in first-use (fetch) order;
 //   3. normals (given, or computed from the quantized geometry) are stored octahedral 2x8 bit,
 //      colours RGBA8;
 //   4. Codec::Meshopt: meshopt_encodeIndexBuffer (or a strip with meshopt_encodeIndexSequence),
