@@ -109,6 +109,7 @@ int runViewer(const ViewerOptions& options) {
     std::vector<FrameRecord> recs;
     CameraPose prev = st.cam.pose();
     FrameRecord last;
+    uint32_t lastImageFrames = 0;  // frames the last still image took (progressive refinement)
     double fps = 0;
     auto lastTime = std::chrono::steady_clock::now();
     int frame = 0;
@@ -199,6 +200,7 @@ int runViewer(const ViewerOptions& options) {
       glfwGetFramebufferSize(window, &fbw, &fbh);
       if (fbw < 1 || fbh < 1) continue;
       last = engine.frame(pose, prev, gl, st.draw, fbw, fbh);
+      if (!last.accumulating) lastImageFrames = 0;
       prev = pose;
       if (!options.statsPath.empty()) recs.push_back(last);
       ++frame;
@@ -232,6 +234,9 @@ int runViewer(const ViewerOptions& options) {
                     double(options.engine.cacheBytes) / 1048576.0, double(last.gpuBytes) / 1048576.0);
         ImGui::Text("loads %u   misses %u", last.loads, last.misses);
         ImGui::Text("screen error %.2f px   LOD scale %.2f", last.maxScreenError, last.lodScale);
+        if (last.imageFrames) lastImageFrames = last.imageFrames;
+        if (last.accumulating)
+          ImGui::Text("still view: refining, images of %u frame(s)", lastImageFrames);
         ImGui::Separator();
         static const char* modes[] = {"shaded", "patch colours", "LOD colours"};
         ImGui::Text("[C] %s  [X] wireframe %s  [F] cut %s", modes[int(st.draw.mode)], st.draw.wireframe ? "on" : "off",
