@@ -162,39 +162,48 @@ FrameRecord Engine::frame(const CameraPose& pose, const CameraPose& prev, GlRend
       still_.active = true;
       still_.presentedError = lastScreenError_;
     }
-    const bool startImage = !still_.drawing;
+    bool startImage = !still_.drawing;
     if (startImage) {
       // Between images: move the cut (it may hold stillFrames frames' worth of triangles) and
-      // start drawing it.
+      // start drawing it, unless the cut did not move and the image on screen is already of it.
       extract_->setBudgetScale(double(options_.stillFrames));
       static_cast<FrameStats&>(rec) = extract_->update(frame_, view, ahead);
-      orderVisibleArcs(view);
-      still_.drawing = true;
-      still_.next = 0;
-      still_.frames = 0;
-      still_.imageError = rec.maxScreenError;
+      if (rec.refinements || rec.coarsenings || !still_.presentedIsCut) {
+        orderVisibleArcs(view);
+        still_.drawing = true;
+        still_.next = 0;
+        still_.frames = 0;
+        still_.imageError = rec.maxScreenError;
+      } else {
+        startImage = false;
+      }
     } else {
       // The cut stays as it is while its image is drawn (its patches stay pinned); loads for its
       // next refinements go on.
       static_cast<FrameStats&>(rec) = extract_->requestAhead(frame_, view);
     }
-    gl.beginAccumulation(view, settings, startImage);
-    // One frame's budget of the image (at least one arc, so every image completes).
-    const auto& arcs = scene_->arcs();
-    const double frameBudget = std::max(extract_->frameBudget(), 1000.0);
-    size_t end = still_.next;
-    uint64_t slice = 0;
-    while (end < drawOrder_.size() &&
-           (end == still_.next || double(slice + arcs[drawOrder_[end].second].triangles) <= frameBudget))
-      slice += arcs[drawOrder_[end++].second].triangles;
-    drawArcs(still_.next, end, gl, rec);
-    still_.next = end;
-    ++still_.frames;
-    if (still_.next == drawOrder_.size()) {
-      gl.presentAccumulation();
-      still_.presentedError = still_.imageError;
-      still_.drawing = false;
-      rec.imageFrames = still_.frames;
+    if (still_.drawing) {
+      gl.beginAccumulation(view, settings, startImage);
+      // One frame's budget of the image (at least one arc, so every image completes). The frame
+      // that moved the cut draws half: it also pays for the update and for uploading the patches
+      // that arrived (and the PatchServer is decoding on the other core).
+      const auto& arcs = scene_->arcs();
+      const double frameBudget = std::max(extract_->frameBudget(), 1000.0) * (startImage ? 0.5 : 1.0);
+      size_t end = still_.next;
+      uint64_t slice = 0;
+      while (end < drawOrder_.size() &&
+             (end == still_.next || double(slice + arcs[drawOrder_[end].second].triangles) <= frameBudget))
+        slice += arcs[drawOrder_[end++].second].triangles;
+      drawArcs(still_.next, end, gl, rec);
+      still_.next = end;
+      ++still_.frames;
+      if (still_.next == drawOrder_.size()) {
+        gl.presentAccumulation();
+        still_.presentedError = still_.imageError;
+        still_.presentedIsCut = true;
+        still_.drawing = false;
+        rec.imageFrames = still_.frames;
+      }
     }
     gl.showPresented();
     rec.accumulating = true;

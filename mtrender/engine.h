@@ -43,7 +43,7 @@ struct EngineOptions {
   bool quiet = false;
   // Progressive refinement of a still view (above): a still image may take up to this many
   // frames; 1 turns it off (every frame draws the whole cut).
-  uint32_t stillFrames = 8;
+  uint32_t stillFrames = 16;
 };
 
 struct FrameRecord : FrameStats {
@@ -100,6 +100,7 @@ class Engine {
     uint32_t frames = 0;       // frames spent on the image so far
     double imageError = 0;     // screen error of the cut being accumulated
     double presentedError = 0; // screen error of the image on screen
+    bool presentedIsCut = false;  // the image on screen shows the current cut (nothing to redraw)
   } still_;
   double lastScreenError_ = 0;
   int lastWidth_ = 0, lastHeight_ = 0;

@@ -256,7 +256,10 @@ double ExtractRender::nextBudget(double extractMs) {
     // Start low (a first guess of the machine is no measurement) and let the fit raise it.
     if (smoothBudget_ == 0) smoothBudget_ = std::min(target, 20000.0);
     else if (target < smoothBudget_) smoothBudget_ = std::max(target, 0.7 * smoothBudget_);
-    else smoothBudget_ = std::min(smoothBudget_ + 0.25 * (target - smoothBudget_), 1.25 * smoothBudget_);
+    else if (budgetScale_ == 1) smoothBudget_ = std::min(smoothBudget_ + 0.25 * (target - smoothBudget_), 1.25 * smoothBudget_);
+    // A still view (progressive refinement, budgetScale_ > 1) has nothing to keep steady on screen:
+    // follow the model twice as fast, so its images grow to what the machine can draw.
+    else smoothBudget_ = std::min(smoothBudget_ + 0.5 * (target - smoothBudget_), 1.5 * smoothBudget_);
     // Feedback whatever the model says: a frame over 80% of the budget scales the budget down in
     // proportion (the machine may have slowed down faster than the fit can follow).
     const double target80 = 0.8 * options_.budgetMs;

@@ -120,10 +120,10 @@ int main(int argc, char** argv) {
   app.add_option("--fixed-triangles", fixedTriangles, "a fixed render budget (triangles per frame) instead of the time model");
   app.add_option("--extract-ms", extractMs, "deadline of the cut update per frame (default min(2, budget/20))");
   app.add_option("--load-budget", loadBudget, "patches requested per frame (default: from the measured load time)");
-  uint32_t stillFrames = 8;
+  uint32_t stillFrames = 16;
   app.add_option("--still-frames", stillFrames,
                  "progressive refinement of a still view: once the camera stops, a finer cut is drawn over up to "
-                 "this many frames (each within --budget-ms) and shown when complete; 1 turns it off (default 8)")
+                 "this many frames (each within --budget-ms) and shown when complete; 1 turns it off (default 16)")
       ->check(CLI::Range(1u, 64u));
   app.add_flag("--no-prefetch", noPrefetch, "no prefetching");
   app.add_flag("--no-cull", noCull, "no frustum / normal-cone culling");
