@@ -16,6 +16,7 @@
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_sort.h>
 #include <tbb/task_arena.h>
+#include <tbb/task_group.h>
 
 #include <algorithm>
 #include <cstdint>
@@ -322,13 +323,24 @@ class ExternalSorter {
 template <class Record, class KeyFn>
 class StableKeySorter {
  public:
-  StableKeySorter(std::string tempPrefix, uint64_t budgetBytes, KeyFn key = KeyFn(), unsigned keyBits = 64)
-      : prefix_(std::move(tempPrefix)), key_(key), keyBits_(keyBits) {
-    capacity_ = std::max<size_t>(1024, size_t(budgetBytes / (2 * sizeof(Record))));
+  // background: a full buffer is sorted and written by a TBB task while the next one fills (the
+  // budget then holds two buffers and the sort's second array), so a producer running in a
+  // pipeline is not held up for the length of a spill.
+  StableKeySorter(std::string tempPrefix, uint64_t budgetBytes, KeyFn key = KeyFn(), unsigned keyBits = 64,
+                  bool background = false)
+      : prefix_(std::move(tempPrefix)), key_(key), keyBits_(keyBits), background_(background) {
+    capacity_ = std::max<size_t>(1024, size_t(budgetBytes / ((background ? 3 : 2) * sizeof(Record))));
   }
   ~StableKeySorter() { release(); }
+  StableKeySorter(const StableKeySorter&) = delete;
+  StableKeySorter& operator=(const StableKeySorter&) = delete;
 
   void release() {
+    try {
+      spillTask_.wait();
+    } catch (...) {  // already reported by finish(), or the sorter is being abandoned
+    }
+    std::vector<Record>().swap(spilling_);
     merger_.close();
     for (auto& path : runs_) std::remove(path.c_str());
     runs_.clear();
@@ -361,6 +373,7 @@ class StableKeySorter {
   size_t runCount() const { return runs_.size(); }
 
   void finish() {
+    spillTask_.wait();
     if (runs_.empty()) {
       sorted_ = sortBuffer();
       memoryPos_ = 0;
@@ -368,7 +381,9 @@ class StableKeySorter {
       return;
     }
     if (!buffer_.empty()) spill();
+    spillTask_.wait();
     std::vector<Record>().swap(buffer_);
+    std::vector<Record>().swap(spilling_);
     std::vector<Record>().swap(tmp_);
     size_t perRun = std::max<size_t>(64 << 10, capacity_ * 2 * sizeof(Record) / (runs_.size() + 1));
     merger_.open(runs_, std::min<size_t>(perRun, 4 << 20), Less{key_});
@@ -462,23 +477,38 @@ class StableKeySorter {
     return radixSort(buffer_.data(), tmp_.data(), buffer_.size(), key_, keyBits_);
   }
   void spill() {
-    const Record* sorted = sortBuffer();
+    if (!background_) {
+      writeRun(buffer_);
+      return;
+    }
+    spillTask_.wait();  // one spill at a time (rethrows its error)
+    std::swap(buffer_, spilling_);
+    buffer_.clear();
+    if (buffer_.capacity() < capacity_) buffer_.reserve(capacity_);
+    spillTask_.run([this] { writeRun(spilling_); });
+  }
+  // Sorts `records` and writes them as the next run (clears it).
+  void writeRun(std::vector<Record>& records) {
+    tmp_.resize(records.size());
+    const Record* sorted = radixSort(records.data(), tmp_.data(), records.size(), key_, keyBits_);
     std::string path = prefix_ + ".run" + std::to_string(runs_.size());
     TempWriter writer(path, 4 << 20);
-    writer.write(sorted, buffer_.size() * sizeof(Record));
+    writer.write(sorted, records.size() * sizeof(Record));
     writer.close();
     runs_.push_back(path);
-    runLength_.push_back(buffer_.size());
+    runLength_.push_back(records.size());
     samples_.emplace_back();
-    for (size_t i = 0; i < buffer_.size(); i += 4096) samples_.back().push_back(key_(sorted[i]));
-    buffer_.clear();
+    for (size_t i = 0; i < records.size(); i += 4096) samples_.back().push_back(key_(sorted[i]));
+    records.clear();
   }
 
   std::string prefix_;
   KeyFn key_;
   unsigned keyBits_;
+  bool background_;
   size_t capacity_;
-  std::vector<Record> buffer_, tmp_;
+  std::vector<Record> buffer_, spilling_, tmp_;
+  tbb::task_group spillTask_;
   const Record* sorted_ = nullptr;
   size_t memoryPos_ = 0, memoryEnd_ = 0;
   uint64_t count_ = 0;
@@ -497,20 +527,27 @@ class StableKeySorter {
 template <class Record, class Less>
 class KeyGroupSorter {
  public:
-  KeyGroupSorter(std::string tempPrefix, uint64_t budgetBytes, Less less = Less())
-      : prefix_(std::move(tempPrefix)), less_(less) {
-    capacity_ = std::max<size_t>(1024, size_t(budgetBytes / (8 + 4 + 2 * sizeof(Record))));
+  // background: as StableKeySorter's (the budget then also holds the buffer being filled).
+  KeyGroupSorter(std::string tempPrefix, uint64_t budgetBytes, Less less = Less(), bool background = false)
+      : prefix_(std::move(tempPrefix)), less_(less), background_(background) {
+    capacity_ = std::max<size_t>(1024, size_t(budgetBytes / (8 + 4 + 2 * sizeof(Record) + (background ? 8 + sizeof(Record) : 0))));
   }
   ~KeyGroupSorter() { release(); }
   KeyGroupSorter(const KeyGroupSorter&) = delete;
   KeyGroupSorter& operator=(const KeyGroupSorter&) = delete;
 
   void release() {
+    try {
+      spillTask_.wait();
+    } catch (...) {  // already reported by finish(), or the sorter is being abandoned
+    }
     readers_.clear();
     for (auto& path : runs_) std::remove(path.c_str());
     runs_.clear();
     std::vector<uint64_t>().swap(keys_);
     std::vector<Record>().swap(recs_);
+    std::vector<uint64_t>().swap(spillKeys_);
+    std::vector<Record>().swap(spillRecs_);
     std::vector<Record>().swap(grouped_);
     std::vector<uint32_t>().swap(slot_);
     groups_.clear();
@@ -536,13 +573,17 @@ class KeyGroupSorter {
   size_t runCount() const { return runs_.size(); }
 
   void finish() {
+    spillTask_.wait();
     if (runs_.empty()) {
-      formGroups();
+      formGroups(keys_, recs_);
       std::vector<uint64_t>().swap(keys_);
       std::vector<Record>().swap(recs_);
       std::vector<uint32_t>().swap(slot_);
     } else {
       if (!keys_.empty()) spill();
+      spillTask_.wait();
+      std::vector<uint64_t>().swap(spillKeys_);
+      std::vector<Record>().swap(spillRecs_);
       std::vector<uint64_t>().swap(keys_);
       std::vector<Record>().swap(recs_);
       std::vector<Record>().swap(grouped_);
@@ -612,9 +653,9 @@ class KeyGroupSorter {
     bool operator<(const HeapEntry& o) const { return key != o.key ? key > o.key : run > o.run; }  // min-heap
   };
 
-  // Counting sort of the buffer by key into grouped_ (stable), groups_ in ascending key order.
-  void formGroups() {
-    const size_t n = keys_.size();
+  // Counting sort of (keys, recs) by key into grouped_ (stable), groups_ in ascending key order.
+  void formGroups(const std::vector<uint64_t>& keys, const std::vector<Record>& recs) {
+    const size_t n = keys.size();
     // Distinct keys through an open-addressing table (first-seen slots); consecutive records
     // of a coherent stream usually share a key, so the last one is checked first.
     size_t cap = 1024;
@@ -646,8 +687,8 @@ class KeyGroupSorter {
     uint64_t lastKey = 0;
     uint32_t lastSlot = UINT32_MAX;
     for (size_t i = 0; i < n; ++i) {
-      if (lastSlot == UINT32_MAX || keys_[i] != lastKey) {
-        lastKey = keys_[i];
+      if (lastSlot == UINT32_MAX || keys[i] != lastKey) {
+        lastKey = keys[i];
         lastSlot = insert(lastKey);
       }
       slot_[i] = lastSlot;
@@ -663,7 +704,7 @@ class KeyGroupSorter {
     groups_.clear();
     for (uint32_t r = 0; r < order.size(); ++r) groups_.push_back({distinct[order[r]], start[r], start[r + 1] - start[r]});
     grouped_.resize(n);
-    for (size_t i = 0; i < n; ++i) grouped_[start[rank[slot_[i]]]++] = recs_[i];
+    for (size_t i = 0; i < n; ++i) grouped_[start[rank[slot_[i]]]++] = recs[i];
     tbb::parallel_for(size_t(0), groups_.size(), [&](size_t g) {
       auto b = grouped_.begin() + groups_[g].begin, e = b + groups_[g].count;
       if (!std::is_sorted(b, e, less_)) std::sort(b, e, less_);
@@ -671,7 +712,24 @@ class KeyGroupSorter {
   }
 
   void spill() {
-    formGroups();
+    if (!background_) {
+      writeRun(keys_, recs_);
+      return;
+    }
+    spillTask_.wait();  // one spill at a time (rethrows its error)
+    std::swap(keys_, spillKeys_);
+    std::swap(recs_, spillRecs_);
+    keys_.clear();
+    recs_.clear();
+    if (keys_.capacity() < capacity_) {
+      keys_.reserve(capacity_);
+      recs_.reserve(capacity_);
+    }
+    spillTask_.run([this] { writeRun(spillKeys_, spillRecs_); });
+  }
+  // Groups (keys, recs) and writes them as the next run (clears them).
+  void writeRun(std::vector<uint64_t>& keys, std::vector<Record>& recs) {
+    formGroups(keys, recs);
     std::string path = prefix_ + ".run" + std::to_string(runs_.size());
     TempWriter writer(path, 4 << 20);
     for (const Group& g : groups_) {
@@ -680,16 +738,18 @@ class KeyGroupSorter {
     }
     writer.close();
     runs_.push_back(path);
-    keys_.clear();
-    recs_.clear();
+    keys.clear();
+    recs.clear();
     groups_.clear();
   }
 
   std::string prefix_;
   Less less_;
+  bool background_;
   size_t capacity_;
-  std::vector<uint64_t> keys_;
-  std::vector<Record> recs_, grouped_;
+  std::vector<uint64_t> keys_, spillKeys_;
+  std::vector<Record> recs_, spillRecs_, grouped_;
+  tbb::task_group spillTask_;
   std::vector<uint32_t> slot_;
   std::vector<Group> groups_;
   size_t nextGroup_ = 0;

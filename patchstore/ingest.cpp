@@ -39,7 +39,6 @@
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_pipeline.h>
 #include <tbb/task_arena.h>
-#include <tbb/task_group.h>
 #include <sys/resource.h>
 #include <unistd.h>
 
@@ -49,11 +48,14 @@
 #include <chrono>
 #include <cinttypes>
 #include <cmath>
+#include <condition_variable>
 #include <cstring>
+#include <deque>
 #include <filesystem>
 #include <functional>
 #include <limits>
 #include <mutex>
+#include <thread>
 #include <sstream>
 
 #include "patchstore/byte_io.h"
@@ -99,6 +101,74 @@ struct VertexRecordLayout {
 };
 
 
+// Face chunks from the reader thread to the Morton pipeline of the resident path: a fixed pool
+// of buffers, handed over in face order. The reader blocks when every buffer is in use, the
+// pipeline when none is ready; cancel() (the pipeline failed) makes the reader stop.
+class ChunkQueue {
+ public:
+  explicit ChunkQueue(size_t depth) : pool_(depth) {
+    for (auto& b : pool_) free_.push_back(&b);
+  }
+  // Producer side.
+  std::vector<uint32_t>* acquire() {
+    std::unique_lock<std::mutex> lock(mutex_);
+    cv_.wait(lock, [&] { return cancelled_ || !free_.empty(); });
+    if (cancelled_) return nullptr;
+    std::vector<uint32_t>* b = free_.back();
+    free_.pop_back();
+    b->clear();
+    return b;
+  }
+  void push(std::vector<uint32_t>* chunk, uint64_t first) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    ready_.push_back({chunk, first});
+    cv_.notify_all();
+  }
+  // No more chunks (idempotent). `records` and `bounds` are what the codes are computed from.
+  void finish() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    done_ = true;
+    cv_.notify_all();
+  }
+  void start(const char* records, const Box3& bounds) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    records_ = records;
+    bounds_ = bounds;
+  }
+  // Consumer side: false once finished and drained.
+  bool pop(std::vector<uint32_t>*& chunk, uint64_t& first) {
+    std::unique_lock<std::mutex> lock(mutex_);
+    cv_.wait(lock, [&] { return done_ || !ready_.empty(); });
+    if (ready_.empty()) return false;
+    chunk = ready_.front().first;
+    first = ready_.front().second;
+    ready_.pop_front();
+    return true;
+  }
+  void release(std::vector<uint32_t>* chunk) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    free_.push_back(chunk);
+    cv_.notify_all();
+  }
+  void cancel() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    cancelled_ = true;
+    cv_.notify_all();
+  }
+  const char* records() const { return records_; }
+  const Box3& bounds() const { return bounds_; }
+
+ private:
+  std::vector<std::vector<uint32_t>> pool_;
+  std::vector<std::vector<uint32_t>*> free_;
+  std::deque<std::pair<std::vector<uint32_t>*, uint64_t>> ready_;
+  std::mutex mutex_;
+  std::condition_variable cv_;
+  bool done_ = false, cancelled_ = false;
+  const char* records_ = nullptr;
+  Box3 bounds_;
+};
+
 // Stage 1 sink: vertex records to vert.bin (or to RAM, for the resident path), faces to
 // face.bin; tracks the bounding box.
 class ScratchSink : public MeshSink {
@@ -125,10 +195,11 @@ class ScratchSink : public MeshSink {
   void vertices(const InputVertex* v, size_t count, uint64_t) override {
     if (fused_) {
       // Vertices after faces: the codes computed so far used a bounding box that is not final.
-      tasks_.wait();
+      // Stop handing over chunks; the Morton sort, left incomplete, is redone after the parse.
       fused_ = false;
-      chunk_.clear();
-      if (cancelFuse_) cancelFuse_();
+      queue_->release(chunk_);
+      chunk_ = nullptr;
+      queue_->finish();
     }
     if (inRam_ && ram_.size() + count * layout.size() > ram_.capacity()) {
       // More vertices than declared (the reader reports that as an error, but stay bounded).
@@ -136,11 +207,17 @@ class ScratchSink : public MeshSink {
       std::vector<char>().swap(ram_);
       inRam_ = false;
     }
+    // The reader thread is the parse's critical path: one resize a batch, not a record.
+    char* out = nullptr;
+    if (inRam_) {
+      const size_t at = ram_.size();
+      ram_.resize(at + count * layout.size());
+      out = ram_.data() + at;
+    }
     for (size_t i = 0; i < count; ++i) {
-      if (inRam_) {
-        size_t at = ram_.size();
-        ram_.resize(at + layout.size());
-        layout.encode(v[i], ram_.data() + at);
+      if (out) {
+        layout.encode(v[i], out);
+        out += layout.size();
       } else {
         layout.encode(v[i], record_.data());
         vert_.write(record_.data(), record_.size());
@@ -154,41 +231,46 @@ class ScratchSink : public MeshSink {
   }
   void triangles(const uint32_t* idx, size_t count) override {
     face_.write(idx, count * 12);
-    if (fuse_ && !fuseDecided_) {
+    if (queue_ && !fuseDecided_) {
       // Fused only when every declared vertex came first: then the records and the bounding box
       // are final, and the faces' Morton codes can be computed while the parse goes on.
       fuseDecided_ = true;
       fused_ = inRam_ && header.declaredVertices >= 0 && vertexCount == uint64_t(header.declaredVertices);
+      if (fused_) {
+        queue_->start(ram_.data(), bounds);
+        chunk_ = acquire();
+      } else {
+        queue_->finish();
+      }
     }
     if (fused_) {
-      chunk_.insert(chunk_.end(), idx, idx + 3 * count);
-      if (chunk_.size() >= 3 * kChunkFaces) flushChunk();
+      for (size_t done = 0; done < count;) {
+        size_t take = std::min(count - done, kChunkFaces - chunk_->size() / 3);
+        chunk_->insert(chunk_->end(), idx + 3 * done, idx + 3 * (done + take));
+        done += take;
+        if (chunk_->size() == 3 * kChunkFaces) {
+          queue_->push(chunk_, pushed_);
+          pushed_ += kChunkFaces;
+          chunk_ = acquire();
+        }
+      }
     }
     faceCount += count;
     progress_.update(faceCount);
   }
   void close() {
-    if (fused_) {
-      flushChunk();
-      tasks_.wait();
+    if (fused_ && chunk_ && !chunk_->empty()) {
+      queue_->push(chunk_, pushed_);
+      pushed_ += chunk_->size() / 3;
+      chunk_ = nullptr;
     }
+    if (queue_) queue_->finish();
     vert_.close();
     face_.close();
   }
-  ~ScratchSink() noexcept override {
-    try {
-      tasks_.wait();
-    } catch (...) {
-    }
-  }
-  // Resident inputs: fn(records, bounds, faces, count, first face) is called on a worker thread
-  // with consecutive batches of faces, in order, while the parse goes on (one batch in flight).
-  using FuseFn = std::function<void(const char*, const Box3&, const uint32_t*, size_t, uint64_t)>;
-  void fuse(FuseFn fn, std::function<void()> cancel) {
-    fuse_ = std::move(fn);
-    cancelFuse_ = std::move(cancel);
-  }
-  bool fused() const { return fused_; }
+  // Resident inputs: consecutive chunks of faces go to `queue` while the parse goes on (the
+  // reader runs on its own thread, the Morton codes are computed on the others).
+  void fuse(ChunkQueue* queue) { queue_ = queue; }
   bool inRam() const { return inRam_; }
   // The vertex records, in RAM (moved out; inRam() must be true or loadVertices() called).
   std::vector<char> takeVertices() { return std::move(ram_); }
@@ -205,27 +287,21 @@ class ScratchSink : public MeshSink {
   uint64_t vertexCount = 0, faceCount = 0;
 
  private:
-  void flushChunk() {
-    tasks_.wait();  // the previous batch is done: keep the order, reuse its buffer
-    std::swap(chunk_, inFlight_);
-    chunk_.clear();
-    const uint64_t first = flushed_;
-    flushed_ += inFlight_.size() / 3;
-    if (inFlight_.empty()) return;
-    tasks_.run([this, first] { fuse_(ram_.data(), bounds, inFlight_.data(), inFlight_.size() / 3, first); });
+  std::vector<uint32_t>* acquire() {
+    std::vector<uint32_t>* b = queue_->acquire();
+    if (!b) throw Error("ingest cancelled");  // the pipeline failed: its error is reported
+    return b;
   }
-  static constexpr size_t kChunkFaces = 1 << 18;
+  static constexpr size_t kChunkFaces = 1 << 17;
   TempWriter vert_, face_;
   Progress& progress_;
   uint64_t residentLimit_;
   std::vector<char> record_, ram_;
   bool inRam_ = false;
-  FuseFn fuse_;
-  std::function<void()> cancelFuse_;
+  ChunkQueue* queue_ = nullptr;
   bool fuseDecided_ = false, fused_ = false;
-  std::vector<uint32_t> chunk_, inFlight_;
-  uint64_t flushed_ = 0;
-  tbb::task_group tasks_;
+  std::vector<uint32_t>* chunk_ = nullptr;
+  uint64_t pushed_ = 0;
 };
 
 struct Centroid {
@@ -262,29 +338,51 @@ void centroidPoint(const uint32_t v[3], const float* const p[3], float out[3]) {
     out[a] = float((double(p[order[0]][a]) + double(p[order[1]][a]) + double(p[order[2]][a])) / 3.0);
 }
 
-// 21 bits per axis interleaved: the Morton (Z-order) code of a point in the box.
-uint64_t mortonCode(const float c[3], const Box3& box) {
-  uint64_t code = 0;
-  uint32_t q[3];
-  for (int a = 0; a < 3; ++a) {
-    double extent = box.hi[a] - box.lo[a];
-    double t = extent > 0 ? (double(c[a]) - box.lo[a]) / extent : 0;
-    q[a] = uint32_t(std::clamp(t, 0.0, 1.0) * double((1u << 21) - 1));
+// 21 bits per axis interleaved: the Morton (Z-order) code of a point in the box. Each axis is
+// quantized as uint32((c - lo) / extent clamped to [0, 1] * (2^21 - 1)); the division is done as
+// a multiplication by the reciprocal (several times cheaper) except when the product lands within
+// 1e-7 of an integer, where the two could round to different sides: then it is redone exactly.
+// (The two quotients differ by a few ulps, ~1e-9 after scaling, so the codes are the same.)
+class MortonBox {
+ public:
+  explicit MortonBox(const Box3& box) : box_(box) {
+    for (int a = 0; a < 3; ++a) {
+      extent_[a] = box.hi[a] - box.lo[a];
+      inverse_[a] = extent_[a] > 0 ? 1.0 / extent_[a] : 0;
+    }
   }
-  // Bit b of axis a goes to bit 3b + 2 - a (axis 0 most significant of each triple), spread with
-  // the usual magic masks instead of a 63-step loop.
-  auto spread = [](uint64_t x) {
-    x &= 0x1fffff;
-    x = (x | x << 32) & 0x1f00000000ffffull;
-    x = (x | x << 16) & 0x1f0000ff0000ffull;
-    x = (x | x << 8) & 0x100f00f00f00f00full;
-    x = (x | x << 4) & 0x10c30c30c30c30c3ull;
-    x = (x | x << 2) & 0x1249249249249249ull;
-    return x;
-  };
-  code = spread(q[0]) << 2 | spread(q[1]) << 1 | spread(q[2]);
-  return code;
-}
+  uint64_t code(const float c[3]) const {
+    constexpr double kScale = double((1u << 21) - 1);
+    uint32_t q[3];
+    for (int a = 0; a < 3; ++a) {
+      if (!(extent_[a] > 0)) {
+        q[a] = 0;
+        continue;
+      }
+      const double d = double(c[a]) - box_.lo[a];
+      const double v = std::clamp(d * inverse_[a], 0.0, 1.0) * kScale;
+      const uint32_t fast = uint32_t(v);
+      const double frac = v - double(fast);
+      q[a] = frac > 1e-7 && frac < 1 - 1e-7 ? fast : uint32_t(std::clamp(d / extent_[a], 0.0, 1.0) * kScale);
+    }
+    // Bit b of axis a goes to bit 3b + 2 - a (axis 0 most significant of each triple), spread
+    // with the usual magic masks instead of a 63-step loop.
+    auto spread = [](uint64_t x) {
+      x &= 0x1fffff;
+      x = (x | x << 32) & 0x1f00000000ffffull;
+      x = (x | x << 16) & 0x1f0000ff0000ffull;
+      x = (x | x << 8) & 0x100f00f00f00f00full;
+      x = (x | x << 4) & 0x10c30c30c30c30c3ull;
+      x = (x | x << 2) & 0x1249249249249249ull;
+      return x;
+    };
+    return spread(q[0]) << 2 | spread(q[1]) << 1 | spread(q[2]);
+  }
+
+ private:
+  Box3 box_;
+  double extent_[3], inverse_[3];
+};
 
 // A face with its centroid, keyed by Morton code (ties: face index, so the order is total).
 struct MortonFace {
@@ -313,6 +411,7 @@ struct FaceCentroid {
 void computeCentroids(const std::string& dir, const VertexRecordLayout& layout, uint64_t vertexCount, uint64_t faceCount,
                       uint64_t budget, const Box3& box, ExternalSorter<MortonFace, MortonLess>& sorter,
                       bool showProgress) {
+  const MortonBox morton(box);
   const uint64_t chunk = std::max<uint64_t>(1 << 16, budget / 12);
   const uint64_t chunks = (vertexCount + chunk - 1) / chunk;
   Progress progress(showProgress, "ingest: centroids", faceCount);
@@ -359,7 +458,7 @@ void computeCentroids(const std::string& dir, const VertexRecordLayout& layout, 
       }
       const float* p[3] = {&f.p[0], &f.p[3], &f.p[6]};
       MortonFace m{0, f.face, {f.v[0], f.v[1], f.v[2]}, centroidOf(f.v, p)};
-      m.code = mortonCode(&m.c.x, box);
+      m.code = morton.code(&m.c.x);
       sorter.add(m);
       ++done;
     };
@@ -395,7 +494,7 @@ void computeCentroids(const std::string& dir, const VertexRecordLayout& layout, 
             m.face = first + uint32_t(i);
             std::memcpy(m.v, v, 12);
             m.c = centroidOf(v, p);
-            m.code = mortonCode(&m.c.x, box);
+            m.code = morton.code(&m.c.x);
           } else {
             kind[i] = (vmin < hi && vmax >= lo) ? 2 : 0;
           }
@@ -490,18 +589,21 @@ struct EntryRec {
   uint64_t key;  // patch << 32 | local
   uint32_t neighbour, remote;
 };
-struct EntryLess {
-  bool operator()(const EntryRec& a, const EntryRec& b) const {
-    return a.key != b.key ? a.key < b.key : a.neighbour != b.neighbour ? a.neighbour < b.neighbour : a.remote < b.remote;
-  }
-};
 struct EdgeRec {
   uint64_t key;  // lower vertex << 32 | higher vertex
   uint32_t count, pad;
 };
-struct EdgeLess {
-  bool operator()(const EdgeRec& a, const EdgeRec& b) const { return a.key != b.key ? a.key < b.key : a.count < b.count; }
+// The boundary stage's sorts are radix sorts by key, stable: (vertex, patch) keys are unique;
+// edge uses are summed per key, in any order; a (patch, local) key's entries are added
+// together, in ascending neighbour order (stage 7), which a stable sort keeps: the lists come
+// out sorted by (local, neighbour, remote).
+template <class T>
+struct KeyOf {
+  uint64_t operator()(const T& r) const { return r.key; }
 };
+using SharedSorter = StableKeySorter<LocalRec, KeyOf<LocalRec>>;
+using EdgeSorter = StableKeySorter<EdgeRec, KeyOf<EdgeRec>>;
+using EntrySorter = StableKeySorter<EntryRec, KeyOf<EntryRec>>;
 
 // STL is a triangle soup: three new vertices per triangle. Vertices with bit-identical positions
 // are welded (out of core: sort by position, then rewrite the corners in vertex order), so the
@@ -748,7 +850,7 @@ class MortonSort {
  public:
   MortonSort(std::string prefix, uint64_t budget) : prefix_(std::move(prefix)), budget_(budget) { reset(); }
   void reset() {
-    sorter_ = std::make_unique<StableKeySorter<MortonKey, MortonKeyOf>>(prefix_, budget_, MortonKeyOf{}, 63);
+    sorter_ = std::make_unique<StableKeySorter<MortonKey, MortonKeyOf>>(prefix_, budget_, MortonKeyOf{}, 63, true);
     added_ = 0;
   }
   // Codes of faces [first, first + n) (3 indices each, already computed by the caller or not).
@@ -757,22 +859,14 @@ class MortonSort {
     sorter_->addBatch(keys, n);
     added_ += n;
   }
-  // Computes the codes of faces [first, first + n) in parallel, then adds them.
-  void compute(const ResidentVertices& rv, const Box3& box, const uint32_t* idx, size_t n, uint64_t first) {
-    keys_.resize(n);
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 8192), [&](const tbb::blocked_range<size_t>& r) {
-      for (size_t i = r.begin(); i < r.end(); ++i) keys_[i] = codeOf(rv, box, idx + 3 * i, first + i, i + 16 < r.end() ? idx + 3 * (i + 16) : nullptr);
-    });
-    add(keys_.data(), n, first);
-  }
-  static MortonKey codeOf(const ResidentVertices& rv, const Box3& box, const uint32_t* v, uint64_t face, const uint32_t* later) {
+  static MortonKey codeOf(const ResidentVertices& rv, const MortonBox& box, const uint32_t* v, uint64_t face, const uint32_t* later) {
     // Shuffled vertices read the positions at random: ask for a later face's corners now so
     // that several cache misses are in flight at once.
     if (later)
       for (int k = 0; k < 3; ++k) rv.prefetch(later[k]);
     float c[3];
     rv.centroidPoint(v, c);
-    uint64_t code = mortonCode(c, box);
+    uint64_t code = box.code(c);
     return {uint32_t(code), uint32_t(code >> 32), uint32_t(face)};
   }
   uint64_t added() const { return added_; }
@@ -805,6 +899,7 @@ class ResidentCentroids : public CentroidSource {
     // during the parse already when the input allowed it (ScratchSink).
     if (morton_.added() != faces_) {
       morton_.reset();
+      const MortonBox box(bounds_);
       Progress progress(progress_, "ingest: morton", faces_);
       struct Codes {
         std::vector<MortonKey> keys;
@@ -815,7 +910,7 @@ class ResidentCentroids : public CentroidSource {
             const size_t n = b.count();
             b.out.keys.resize(n);
             for (size_t i = 0; i < n; ++i)
-              b.out.keys[i] = MortonSort::codeOf(vertices_, bounds_, &b.idx[3 * i], b.first + i, i + 16 < n ? &b.idx[3 * (i + 16)] : nullptr);
+              b.out.keys[i] = MortonSort::codeOf(vertices_, box, &b.idx[3 * i], b.first + i, i + 16 < n ? &b.idx[3 * (i + 16)] : nullptr);
           },
           [&](FaceBatch<Codes>& b) {
             morton_.add(b.out.keys.data(), b.out.keys.size(), b.first);
@@ -877,6 +972,7 @@ class ResidentCentroids : public CentroidSource {
 
  private:
   void materialize() const {
+    const MortonBox box(bounds_);
     StableKeySorter<MortonCentroid, MortonCentroidOf> sorter(scratch_ + "/m1", budget_, MortonCentroidOf{}, 63);
     struct Cents {
       std::vector<MortonCentroid> recs;
@@ -888,7 +984,7 @@ class ResidentCentroids : public CentroidSource {
           b.out.recs.resize(n);
           for (size_t i = 0; i < n; ++i) {
             Centroid c = vertices_.centroid(&b.idx[3 * i]);
-            uint64_t code = mortonCode(&c.x, bounds_);
+            uint64_t code = box.code(&c.x);
             b.out.recs[i] = {uint32_t(code), uint32_t(code >> 32), c};
           }
         },
@@ -1077,9 +1173,15 @@ void buildResidentPatch(ResidentPatch& w, const ResidentVertices& rv, const uint
       if (b1 > a) s.nb.push_back(b1);
       if (b2 > a) s.nb.push_back(b2);
     }
-    // Insertion sort: a vertex has a handful of neighbours.
-    for (size_t i = 1; i < s.nb.size(); ++i)
-      for (size_t j = i; j > 0 && s.nb[j - 1] > s.nb[j]; --j) std::swap(s.nb[j - 1], s.nb[j]);
+    // Insertion sort: a vertex has a handful of neighbours (shift, not swap: a swap's two stores
+    // stall the next step's wider load).
+    uint32_t* nb = s.nb.data();
+    for (size_t i = 1; i < s.nb.size(); ++i) {
+      const uint32_t x = nb[i];
+      size_t j = i;
+      for (; j > 0 && nb[j - 1] > x; --j) nb[j] = nb[j - 1];
+      nb[j] = x;
+    }
     for (size_t i = 0, n = s.nb.size(); i < n;) {
       size_t j = i;
       while (j < n && s.nb[j] == s.nb[i]) ++j;
@@ -1106,7 +1208,7 @@ struct PatchStageOutput {
 void residentStages(const std::string& scratch, const ResidentVertices& rv, std::vector<char>& records, MortonSort& morton,
                     const Box3& bounds, uint64_t nv, uint64_t nf,
                     uint64_t B, CellAssigner& assigner, IngestReport& report, PatchStore::Impl& impl,
-                    ExternalSorter<LocalRec, KeyLess<LocalRec>>& shared, ExternalSorter<EdgeRec, EdgeLess>& edges,
+                    SharedSorter& shared, EdgeSorter& edges,
                     PatchStageOutput& out, uint64_t& distinctReferenced, StageClock& clock, bool showProgress) {
   // Room left for the passes: the cap minus what is resident now (records, code, the assigner
   // later), with a margin for what the passes allocate besides their sort buffers.
@@ -1127,7 +1229,7 @@ void residentStages(const std::string& scratch, const ResidentVertices& rv, std:
   clock.mark("partition");
 
   // 4 assign: every face keyed in face order, grouped by key.
-  KeyGroupSorter<FaceCorners, AdditionOrder> groups(scratch + "/g", room(48 << 20) * 4 / 5);
+  KeyGroupSorter<FaceCorners, AdditionOrder> groups(scratch + "/g", room(48 << 20) * 4 / 5, AdditionOrder{}, true);
   {
     Progress progress(showProgress, "ingest: assign", nf);
     struct Keyed {
@@ -1310,15 +1412,78 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
   // budget is what the declared vertex records leave.
   const uint64_t declaredRecords = uint64_t(std::max<int64_t>(0, reader->header().declaredVertices)) * expected.size();
   MortonSort morton(scratch + "/m0", std::max<uint64_t>(8 << 20, B > declaredRecords + (64 << 20) ? (B - declaredRecords - (64 << 20)) * 4 / 5 : 0));
-  if (residentLimit > 0)
-    sink.fuse(
-        [&](const char* records, const Box3& box, const uint32_t* idx, size_t n, uint64_t first) {
-          ResidentVertices rv{records, expected, expected.size()};
-          morton.compute(rv, box, idx, n, first);
-        },
-        [&] { morton.reset(); });
-  ReadStats stats = reader->read(sink);
-  sink.close();
+  ReadStats stats;
+  if (residentLimit > 0) {
+    // The reader on its own thread; this one runs the Morton pipeline over its chunks (codes in
+    // parallel, added to the sort in face order) until the reader is done.
+    ChunkQueue queue(8);
+    sink.fuse(&queue);
+    std::exception_ptr readError;
+    auto T0 = std::chrono::steady_clock::now();
+    auto el = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - T0).count(); };
+    double tFirst = -1, tReaderEnd = 0, tAddBusy = 0;
+    std::thread readerThread([&] {
+      try {
+        stats = reader->read(sink);
+        tReaderEnd = el();
+        sink.close();
+      } catch (...) {
+        readError = std::current_exception();
+      }
+      queue.finish();
+    });
+    try {
+      struct Token {
+        std::vector<uint32_t>* chunk = nullptr;
+        uint64_t first = 0;
+        std::vector<MortonKey> keys;
+      };
+      const size_t tokens = size_t(std::max(2, tbb::this_task_arena::max_concurrency())) + 1;
+      std::vector<Token> pool(tokens);
+      size_t nextToken = 0;
+      tbb::parallel_pipeline(
+          tokens,
+          tbb::make_filter<void, Token*>(tbb::filter_mode::serial_in_order,
+                                         [&](tbb::flow_control& fc) -> Token* {
+                                           Token* t = &pool[nextToken++ % tokens];
+                                           if (!queue.pop(t->chunk, t->first)) {
+                                             fc.stop();
+                                             return nullptr;
+                                           }
+                                           if (tFirst < 0) tFirst = el();
+                                           return t;
+                                         }) &
+              tbb::make_filter<Token*, Token*>(tbb::filter_mode::parallel,
+                                               [&](Token* t) {
+                                                 const ResidentVertices rv{queue.records(), expected, expected.size()};
+                                                 const MortonBox box(queue.bounds());
+                                                 const uint32_t* idx = t->chunk->data();
+                                                 const size_t n = t->chunk->size() / 3;
+                                                 t->keys.resize(n);
+                                                 for (size_t i = 0; i < n; ++i)
+                                                   t->keys[i] = MortonSort::codeOf(rv, box, idx + 3 * i, t->first + i,
+                                                                                   i + 16 < n ? idx + 3 * (i + 16) : nullptr);
+                                                 return t;
+                                               }) &
+              tbb::make_filter<Token*, void>(tbb::filter_mode::serial_in_order, [&](Token* t) {
+                double a0 = el();
+                morton.add(t->keys.data(), t->keys.size(), t->first);
+                tAddBusy += el() - a0;
+                queue.release(t->chunk);
+              }));
+    } catch (...) {
+      queue.cancel();
+      readerThread.join();
+      throw;
+    }
+    double tPipe = el();
+    readerThread.join();
+    std::fprintf(stderr, "first chunk %.2f reader end %.2f pipeline end %.2f add busy %.2f\n", tFirst, tReaderEnd, tPipe, tAddBusy);
+    if (readError) std::rethrow_exception(readError);
+  } else {
+    stats = reader->read(sink);
+    sink.close();
+  }
   parseProgress.finish(stats.triangles);
   report.format = formatName(reader->header().format);
   report.inputVertices = stats.vertices;
@@ -1348,8 +1513,8 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
   impl->bounds = sink.bounds;
   PatchStageOutput patchStage;
   uint64_t distinctReferenced = 0;
-  std::unique_ptr<ExternalSorter<LocalRec, KeyLess<LocalRec>>> sharedPtr;
-  std::unique_ptr<ExternalSorter<EdgeRec, EdgeLess>> edgesPtr;
+  std::unique_ptr<SharedSorter> sharedPtr;
+  std::unique_ptr<EdgeSorter> edgesPtr;
   if (resident) {
     std::remove((scratch + "/vert.bin").c_str());
     std::vector<char> records = sink.takeVertices();
@@ -1357,8 +1522,8 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
     // The boundary stage's sorters fill while the records are resident: their share is what the
     // records leave (and they spill early, which costs little: a few million records).
     const uint64_t left = B > nv * (rv.size + 1) + reserve / 2 ? B - nv * (rv.size + 1) - reserve / 2 : 0;
-    sharedPtr = std::make_unique<ExternalSorter<LocalRec, KeyLess<LocalRec>>>(scratch + "/s4", std::max<uint64_t>(1 << 20, left / 4));
-    edgesPtr = std::make_unique<ExternalSorter<EdgeRec, EdgeLess>>(scratch + "/s5", std::max<uint64_t>(1 << 20, left / 8));
+    sharedPtr = std::make_unique<SharedSorter>(scratch + "/s4", std::max<uint64_t>(1 << 20, left / 4));
+    edgesPtr = std::make_unique<EdgeSorter>(scratch + "/s5", std::max<uint64_t>(1 << 20, left / 8));
     residentStages(scratch, rv, records, morton, sink.bounds, nv, nf, B, assigner, report, *impl, *sharedPtr, *edgesPtr,
                    patchStage, distinctReferenced, clock, opt.progress);
   } else {
@@ -1510,8 +1675,8 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
     clock.mark("vertices");
     // 6 patches
     byPatch.finish();
-    sharedPtr = std::make_unique<ExternalSorter<LocalRec, KeyLess<LocalRec>>>(scratch + "/s4", B / 8);
-    edgesPtr = std::make_unique<ExternalSorter<EdgeRec, EdgeLess>>(scratch + "/s5", B / 16);
+    sharedPtr = std::make_unique<SharedSorter>(scratch + "/s4", B / 8);
+    edgesPtr = std::make_unique<EdgeSorter>(scratch + "/s5", B / 16);
     auto& shared = *sharedPtr;
     auto& edges = *edgesPtr;
     {
@@ -1632,7 +1797,7 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
   clock.mark("edges");
   // 7 boundary lists
   shared.finish();
-  ExternalSorter<EntryRec, EntryLess> entries(scratch + "/s6", B / 8);
+  EntrySorter entries(scratch + "/s6", B / 8);
   {
     LocalRec r;
     bool have = shared.next(r);
@@ -1644,6 +1809,8 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
         group.push_back({uint32_t(r.key), r.local});
         have = shared.next(r);
       }
+      // The group is in ascending patch order (the key's low half), so each (patch, local)
+      // key gets its entries here, consecutively, by ascending neighbour.
       for (auto& a : group)
         for (auto& b : group)
           if (a.first != b.first) entries.add({uint64_t(a.first) << 32 | a.second, b.first, b.second});

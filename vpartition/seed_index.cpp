@@ -10,6 +10,8 @@
 // go into a shared read-only table (a few per seed), so random-order queries (a shuffled PLY) do
 // not depend on the cache either. The answer is always the exact nearest seed with ties to the lower index,
 // whatever the cache state, so results do not depend on thread count or query order.
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <atomic>
 #include <cstring>
@@ -215,16 +217,21 @@ void SeedIndex::precompute(const std::vector<uint64_t>& queryCells) {
   shared_.assign(cap, Slot{~0ull, 0, 0});
   sharedMask_ = cap - 1;
   sharedCand_.clear();
-  std::vector<uint32_t> list;
-  for (uint64_t key : queryCells) {
+  // The lists are independent (a ring search each): computed in parallel, then put in the table
+  // in the given order, so the table is the same whatever the thread count.
+  std::vector<std::vector<uint32_t>> lists(queryCells.size());
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, queryCells.size(), 256), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t i = r.begin(); i < r.end(); ++i) candidates(queryCells[i], lists[i]);
+  });
+  for (size_t i = 0; i < queryCells.size(); ++i) {
+    const uint64_t key = queryCells[i];
     uint64_t h = hashKey(key) & sharedMask_;
     while (shared_[h].key != ~0ull && shared_[h].key != key) h = (h + 1) & sharedMask_;
     if (shared_[h].key == key) continue;
-    list.clear();
-    candidates(key, list);
     // An empty range means "too many candidates": use the ring search.
-    shared_[h] = Slot{key, uint32_t(sharedCand_.size()), uint32_t(sharedCand_.size() + list.size())};
-    sharedCand_.insert(sharedCand_.end(), list.begin(), list.end());
+    shared_[h] = Slot{key, uint32_t(sharedCand_.size()), uint32_t(sharedCand_.size() + lists[i].size())};
+    sharedCand_.insert(sharedCand_.end(), lists[i].begin(), lists[i].end());
+    std::vector<uint32_t>().swap(lists[i]);
   }
   sharedCand_.shrink_to_fit();
 }
