@@ -598,9 +598,9 @@ class KeyGroupSorter {
     nextGroup_ = 0;
     if (runs_.empty()) return;
     if (readers_.empty()) {
-      // Reads are sequential and the file is usually in the page cache: 1 MiB a run is plenty,
+      // Reads are sequential and the file is usually in the page cache: 512 KiB a run is plenty,
       // and a pass over the groups may be sharing the cap with resident data.
-      size_t perRun = std::clamp<size_t>(capacity_ * (8 + 4 + 2 * sizeof(Record)) / (runs_.size() + 1), 64 << 10, 1 << 20);
+      size_t perRun = std::clamp<size_t>(capacity_ * (8 + 4 + 2 * sizeof(Record)) / (runs_.size() + 1), 64 << 10, 512 << 10);
       for (auto& path : runs_) readers_.push_back(std::make_unique<TempReader>(path, perRun));
     } else {
       for (auto& r : readers_) r->rewind();

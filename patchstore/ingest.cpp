@@ -55,6 +55,7 @@
 #include <functional>
 #include <limits>
 #include <mutex>
+#include <optional>
 #include <thread>
 #include <sstream>
 
@@ -851,11 +852,19 @@ class MortonSort {
   MortonSort(std::string prefix, uint64_t budget) : prefix_(std::move(prefix)), budget_(budget) { reset(); }
   void reset() {
     sorter_ = std::make_unique<StableKeySorter<MortonKey, MortonKeyOf>>(prefix_, budget_, MortonKeyOf{}, 63, true);
-    added_ = 0;
+    added_ = jumps_ = 0;
+    lastTop_ = ~uint64_t(0);
   }
   // Codes of faces [first, first + n) (3 indices each, already computed by the caller or not).
   void add(const MortonKey* keys, size_t n, uint64_t first) {
     if (first != added_) fail(prefix_, "internal: Morton codes out of face order");
+    // How often consecutive faces change octree cell 8 levels down: rarely in a scan's face
+    // order, almost always in a shuffled one (see coherent()).
+    for (size_t i = 0; i < n; ++i) {
+      const uint64_t top = keys[i].code() >> 39;
+      jumps_ += top != lastTop_;
+      lastTop_ = top;
+    }
     sorter_->addBatch(keys, n);
     added_ += n;
   }
@@ -870,13 +879,15 @@ class MortonSort {
     return {uint32_t(code), uint32_t(code >> 32), uint32_t(face)};
   }
   uint64_t added() const { return added_; }
+  // Whether the faces come in spatially coherent order (a jump on fewer than a quarter of them).
+  bool coherent() const { return jumps_ * 4 <= added_; }
   StableKeySorter<MortonKey, MortonKeyOf>& sorter() { return *sorter_; }
 
  private:
   std::string prefix_;
   uint64_t budget_;
   std::unique_ptr<StableKeySorter<MortonKey, MortonKeyOf>> sorter_;
-  uint64_t added_ = 0;
+  uint64_t added_ = 0, jumps_ = 0, lastTop_ = ~uint64_t(0);
   std::vector<MortonKey> keys_;
 };
 
@@ -891,6 +902,9 @@ class ResidentCentroids : public CentroidSource {
         clock_(clock), progress_(progress) {}
   uint64_t count() const override { return faces_; }
   Box3 bounds() const override { return bounds_; }
+  // Whether the input's face order is spatially coherent (MortonSort::coherent), as measured by
+  // the Morton pass (assumed when no pass ran).
+  bool coherent() const { return coherent_ ? *coherent_ : morton_.added() == faces_ ? morton_.coherent() : true; }
 
   std::vector<float> sample(uint64_t stride) const override {
     if (materialized_) return CentroidSource::sample(stride);
@@ -942,6 +956,7 @@ class ResidentCentroids : public CentroidSource {
         picks.insert(picks.end(), partPicks[p].begin(), partPicks[p].end());
       }
       if (total != faces_) fail(scratch_, "internal: Morton sort holds " + std::to_string(total) + " faces");
+      coherent_ = morton_.coherent();
       morton_.reset();  // consumed: another sample() would sort again
     }
     std::vector<float> out(4 * picks.size());
@@ -1006,6 +1021,7 @@ class ResidentCentroids : public CentroidSource {
   StageClock& clock_;
   bool progress_;
   mutable bool materialized_ = false;
+  mutable std::optional<bool> coherent_;
 };
 
 // What the patch stage keeps of a face: its corners. Faces are added in face order, and the
@@ -1208,7 +1224,7 @@ struct PatchStageOutput {
 void residentStages(const std::string& scratch, const ResidentVertices& rv, std::vector<char>& records, MortonSort& morton,
                     const Box3& bounds, uint64_t nv, uint64_t nf,
                     uint64_t B, CellAssigner& assigner, IngestReport& report, PatchStore::Impl& impl,
-                    SharedSorter& shared, EdgeSorter& edges,
+                    std::unique_ptr<SharedSorter>& sharedPtr, std::unique_ptr<EdgeSorter>& edgesPtr,
                     PatchStageOutput& out, uint64_t& distinctReferenced, StageClock& clock, bool showProgress) {
   // Room left for the passes: the cap minus what is resident now (records, code, the assigner
   // later), with a margin for what the passes allocate besides their sort buffers.
@@ -1217,39 +1233,69 @@ void residentStages(const std::string& scratch, const ResidentVertices& rv, std:
     uint64_t left = B > rss + margin ? B - rss - margin : 0;
     return std::max<uint64_t>(8 << 20, left);
   };
+  bool coherent = true;
   {
     ResidentCentroids centroids(scratch, rv, nf, bounds, morton, room(32 << 20) * 4 / 5, clock, showProgress);
     Progress progress(showProgress, "ingest: partition", nf);
     assigner.prepare(centroids, B / 2);
     progress.finish(nf);
+    coherent = centroids.coherent();
     std::remove((scratch + "/morton.bin").c_str());
   }
   report.assigner = assigner.describe();
   malloc_trim(0);
   clock.mark("partition");
 
-  // 4 assign: every face keyed in face order, grouped by key.
-  KeyGroupSorter<FaceCorners, AdditionOrder> groups(scratch + "/g", room(48 << 20) * 4 / 5, AdditionOrder{}, true);
+  // 4 assign: every face keyed in face order, grouped by key. Lookups are cheap in a coherent
+  // order (consecutive faces hit the same seeds, BMT's scans list faces so); a shuffled input's
+  // batches are looked up in Morton order instead, in bigger batches (which makes runs of the
+  // same query cells), and the keys put back in face order.
+  const size_t batchFaces = coherent ? kFaceBatch : 4 * kFaceBatch;
+  const uint64_t batchBytes = coherent ? 0 : (size_t(std::max(2, tbb::this_task_arena::max_concurrency())) + 2) * batchFaces * 56;
+  KeyGroupSorter<FaceCorners, AdditionOrder> groups(scratch + "/g", room((48 << 20) + batchBytes) * 4 / 5, AdditionOrder{}, true);
   {
     Progress progress(showProgress, "ingest: assign", nf);
     struct Keyed {
       std::vector<uint64_t> keys;
       std::vector<FaceCorners> recs;
+      std::vector<float> centroids;
+      std::vector<uint64_t> order, tmp;
     };
+    const MortonBox box(bounds);
     pipelineFaces<Keyed>(
-        scratch + "/face.bin", kFaceBatch,
+        scratch + "/face.bin", batchFaces,
         [&](FaceBatch<Keyed>& b) {
           const size_t n = b.count();
           b.out.keys.resize(n);
           b.out.recs.resize(n);
+          if (coherent) {
+            for (size_t i = 0; i < n; ++i) {
+              if (i + 16 < n)
+                for (int k = 0; k < 3; ++k) rv.prefetch(b.idx[3 * (i + 16) + k]);
+              const uint32_t* v = &b.idx[3 * i];
+              float c[3];
+              rv.centroidPoint(v, c);
+              b.out.keys[i] = assigner.cellKey(c);
+              b.out.recs[i] = {{v[0], v[1], v[2]}};
+            }
+            return;
+          }
+          b.out.centroids.resize(3 * n);
+          b.out.order.resize(n);
+          b.out.tmp.resize(n);
           for (size_t i = 0; i < n; ++i) {
             if (i + 16 < n)
               for (int k = 0; k < 3; ++k) rv.prefetch(b.idx[3 * (i + 16) + k]);
             const uint32_t* v = &b.idx[3 * i];
-            float c[3];
+            float* c = &b.out.centroids[3 * i];
             rv.centroidPoint(v, c);
-            b.out.keys[i] = assigner.cellKey(c);
+            b.out.order[i] = (box.code(c) >> 20) << 20 | i;  // batch index below bit 20
             b.out.recs[i] = {{v[0], v[1], v[2]}};
+          }
+          const uint64_t* order = radixSort(b.out.order.data(), b.out.tmp.data(), n, [](uint64_t x) { return x; }, 63);
+          for (size_t j = 0; j < n; ++j) {
+            const size_t i = size_t(order[j] & ((1u << 20) - 1));
+            b.out.keys[i] = assigner.cellKey(&b.out.centroids[3 * i]);
           }
         },
         [&](FaceBatch<Keyed>& b) {
@@ -1352,7 +1398,16 @@ void residentStages(const std::string& scratch, const ResidentVertices& rv, std:
   malloc_trim(0);
   clock.mark("shared");
 
-  // 6 patches: built in parallel, appended in patch order.
+  // 6 patches: built in parallel, appended in patch order. The boundary stage's sorters fill
+  // while the records are resident: their share is what is left now (they spill early, which
+  // costs little: a few million records; in the background, off the ordered stage).
+  {
+    const uint64_t left = room(48 << 20);
+    sharedPtr = std::make_unique<SharedSorter>(scratch + "/s4", left / 3, KeyOf<LocalRec>{}, 64, true);
+    edgesPtr = std::make_unique<EdgeSorter>(scratch + "/s5", left / 6, KeyOf<EdgeRec>{}, 64, true);
+  }
+  SharedSorter& shared = *sharedPtr;
+  EdgeSorter& edges = *edgesPtr;
   {
     Progress progress(showProgress, "ingest: patches", nf);
     groups.rewind();
@@ -1403,7 +1458,10 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
   // vertex and thread fit in the cap with a reserve for the passes' buffers and the assigner.
   auto reader = openMesh(input);
   const VertexRecordLayout expected{reader->header().doublePrecision, reader->header().hasNormals, reader->header().hasColors};
-  const uint64_t reserve = std::max<uint64_t>(96ull << 20, B / 5);
+  // The reserve covers what the resident passes hold besides the records at their peak (sort
+  // buffers, which shrink to fit, the assigner's seeds and tables, the process itself; measured
+  // at 53M/512M: ~165 MiB above the records, of which ~60 MiB can shrink).
+  const uint64_t reserve = std::max<uint64_t>(128ull << 20, B / 4);
   const double perVertex = double(expected.size()) + 1 + std::max(2, tbb::this_task_arena::max_concurrency()) / 8.0;
   const uint64_t residentLimit = B > reserve ? uint64_t(double(B - reserve) * double(expected.size()) / perVertex) : 0;
   Progress parseProgress(opt.progress, "ingest: parse", uint64_t(std::max<int64_t>(0, reader->header().declaredFaces)));
@@ -1519,12 +1577,7 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
     std::remove((scratch + "/vert.bin").c_str());
     std::vector<char> records = sink.takeVertices();
     ResidentVertices rv{records.data(), vlayout, vlayout.size()};
-    // The boundary stage's sorters fill while the records are resident: their share is what the
-    // records leave (and they spill early, which costs little: a few million records).
-    const uint64_t left = B > nv * (rv.size + 1) + reserve / 2 ? B - nv * (rv.size + 1) - reserve / 2 : 0;
-    sharedPtr = std::make_unique<SharedSorter>(scratch + "/s4", std::max<uint64_t>(1 << 20, left / 4));
-    edgesPtr = std::make_unique<EdgeSorter>(scratch + "/s5", std::max<uint64_t>(1 << 20, left / 8));
-    residentStages(scratch, rv, records, morton, sink.bounds, nv, nf, B, assigner, report, *impl, *sharedPtr, *edgesPtr,
+    residentStages(scratch, rv, records, morton, sink.bounds, nv, nf, B, assigner, report, *impl, sharedPtr, edgesPtr,
                    patchStage, distinctReferenced, clock, opt.progress);
   } else {
     // 2 centroids, straight into an external sort by Morton code. The assigner streams the

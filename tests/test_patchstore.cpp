@@ -1,5 +1,6 @@
 // Patch store: round trips, boundary lists, load/write-back semantics, crash safety.
 #include <gtest/gtest.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <array>
@@ -219,6 +220,13 @@ TEST(PatchStore, SameStoreBytesWhateverTheCapOrThePath) {
   IngestReport ref = ingestIrregular(tmp.file("in.ply"), tmp.file("resident"), 1ull << 30);
   const std::string bytes = segmentBytes(tmp.file("resident"));
   ASSERT_FALSE(bytes.empty());
+  {
+    // One thread: the resident path's pipelines, parallel merges (cut into as many pieces as
+    // the arena has threads) and sorts give the same bytes.
+    tbb::task_arena one(1);
+    one.execute([&] { ingestIrregular(tmp.file("in.ply"), tmp.file("one-thread"), 1ull << 30); });
+  }
+  EXPECT_TRUE(bytes == segmentBytes(tmp.file("one-thread"))) << "one thread";
   IngestReport chunked = ingestIrregular(tmp.file("in.ply"), tmp.file("chunked"), 24ull << 20);
   EXPECT_TRUE(bytes == segmentBytes(tmp.file("chunked"))) << "chunked path";
   EXPECT_EQ(ref.duplicateTriangles, chunked.duplicateTriangles);
