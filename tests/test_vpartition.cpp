@@ -239,6 +239,32 @@ PartitionSequence sequenceWithSeeds(const std::vector<float>& seeds, double cell
   return PartitionSequence::deserialize(b);
 }
 
+TEST(Assign, CoherentStreamsStayExactAcrossCellBorders) {
+  // nearestCached answers points close to its last one from an anchor (a ball in which the
+  // nearest seed cannot change): walks in small steps, across many Voronoi borders and query
+  // cells, and every centroid in stream order, against the brute force.
+  TestMesh mesh = test::warpedDensity(200, 120);
+  MemoryCentroids src(mesh);
+  VPartitionOptions o;
+  o.patchTriangles = 60;
+  PartitionSequence seq = PartitionSequence::build(src, o);
+  test::Lcg rng(11);
+  for (uint32_t l = 0; l < std::min(seq.levels(), 3u); ++l) {
+    const std::vector<float>& seeds = seq.seeds(l);
+    for (size_t t = 0; t < src.count(); ++t) {
+      const float* c = &src.data()[4 * t];
+      ASSERT_EQ(seq.cellOf(l, c), bruteNearest(seeds, c)) << "level " << l << " tri " << t;
+    }
+    const double step = seq.levelScale(l) * 0.01;
+    float p[3] = {src.data()[0], src.data()[1], src.data()[2]};
+    for (int k = 0; k < 100000; ++k) {
+      // Jitter plus a drift along x: about 50 seed spacings over the walk.
+      for (int a = 0; a < 3; ++a) p[a] = float(p[a] + step * ((rng.next() - 0.5) + (a == 0 ? 0.05 : 0)));
+      ASSERT_EQ(seq.cellOf(l, p), bruteNearest(seeds, p)) << "level " << l << " step " << k;
+    }
+  }
+}
+
 TEST(Assign, TiesGoToTheLowerSeedIndex) {
   // Seeds 0..3 on a square around the origin, listed in a scrambled order, plus a duplicate.
   std::vector<float> seeds = {1, 0, 0, 0, 1, 0, -1, 0, 0, 0, -1, 0, 1, 0, 0, 5, 5, 5};

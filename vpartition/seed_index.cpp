@@ -256,6 +256,29 @@ static inline int64_t floorToInt(double x) {
 
 uint32_t SeedIndex::nearestCached(const float p[3]) const {
   if (count_ <= 1) return count_ == 0 ? UINT32_MAX : 0;
+  // Spatially coherent streams (a scan's faces, Morton-ordered samples, a region's triangles in
+  // mtbuild) ask about nearby points many times in a row. Per thread and index (uid mod 8, since
+  // crossKey alternates between two levels' indexes) we keep the last query cell's candidate list
+  // (a copy: cache entries may be refilled by other indexes) and an anchor: a point a whose nearest
+  // seed s beats every other seed by a known gap. By the triangle inequality any p with
+  // |p - a| < (d2 - d1) / 2 has the same nearest seed, with the rest of the gap (slack below) to
+  // spare for float rounding, so the answer is still exactly nearest()'s.
+  struct Last {
+    const SeedIndex* index;
+    uint64_t uid, key;
+    uint32_t count;
+    uint32_t cand[kMaxCandidates];
+    bool anchored;
+    uint32_t anchorSeed;
+    double anchor[3], reach2;
+  };
+  thread_local Last lastSlots[8] = {};
+  Last& last = lastSlots[uid_ & 7];
+  const bool mine = last.index == this && last.uid == uid_;
+  if (mine && last.anchored) {
+    const double dx = double(p[0]) - last.anchor[0], dy = double(p[1]) - last.anchor[1], dz = double(p[2]) - last.anchor[2];
+    if (dx * dx + dy * dy + dz * dz < last.reach2) return last.anchorSeed;
+  }
   // Query cells are half a seed radius: a candidate list then holds ~5-10 seeds on a surface.
   const double qinv = 2.0 * inv_;
   int64_t q[3];
@@ -268,14 +291,7 @@ uint32_t SeedIndex::nearestCached(const float p[3]) const {
   const uint64_t key = packCell(q[0], q[1], q[2]);
   const uint32_t* cand;
   uint32_t count;
-  // Spatially coherent streams (Morton-ordered ingest, a region's triangles in mtbuild) ask the
-  // same query cell many times in a row: keep this thread's last candidate list per index (a
-  // copy: cache entries may be refilled by other indexes) and skip the hash probes.
-  struct Last { const SeedIndex* index; uint64_t uid, key; uint32_t count; uint32_t cand[kMaxCandidates]; };
-  // One slot per index (uid mod 8), since crossKey alternates between two levels' indexes.
-  thread_local Last lastSlots[8] = {};
-  Last& last = lastSlots[uid_ & 7];
-  if (last.index == this && last.uid == uid_ && last.key == key) {
+  if (mine && last.key == key) {
     cand = last.cand;
     count = last.count;
   } else {
@@ -297,6 +313,7 @@ uint32_t SeedIndex::nearestCached(const float p[3]) const {
       cand = e.cand;
       count = e.count;
     }
+    if (!mine) last.anchored = false;
     last.index = this;
     last.uid = uid_;
     last.key = key;
@@ -307,9 +324,34 @@ uint32_t SeedIndex::nearestCached(const float p[3]) const {
   // Candidates ascend by index, so strict < keeps the lower index on ties.
   uint32_t best = cand[0];
   float bestD = dist2(p, seeds_ + 3 * size_t(best));
+  float secondD = std::numeric_limits<float>::infinity();
   for (uint32_t k = 1; k < count; ++k) {
     float d = dist2(p, seeds_ + 3 * size_t(cand[k]));
-    if (d < bestD) { bestD = d; best = cand[k]; }
+    if (d < bestD) {
+      secondD = bestD;
+      bestD = d;
+      best = cand[k];
+    } else if (d < secondD) {
+      secondD = d;
+    }
+  }
+  // The new anchor. A seed that is not a candidate of the cell lies farther than
+  // d0 + q sqrt(3) from the cell centre m (candidates()), where d0 >= d1 - |p - m|, hence farther
+  // than d1 + q sqrt(3) - 2 |p - m| from p: that bounds the second distance too.
+  const double cellEdge = 0.5 * size_;
+  double pm2 = 0;
+  for (int a = 0; a < 3; ++a) {
+    const double m = origin_[a] + (double(q[a]) + 0.5) * cellEdge;
+    pm2 += (double(p[a]) - m) * (double(p[a]) - m);
+  }
+  const double d1 = std::sqrt(double(bestD));
+  const double d2 = std::min(std::sqrt(double(secondD)), d1 + cellEdge * std::sqrt(3.0) - 2 * std::sqrt(pm2));
+  const double reach = 0.5 * (d2 - d1) - (1e-3 * d2 + 1e-6 * size_);
+  last.anchored = reach > 0;
+  if (last.anchored) {
+    for (int a = 0; a < 3; ++a) last.anchor[a] = p[a];
+    last.reach2 = reach * reach;
+    last.anchorSeed = best;
   }
   return best;
 }
