@@ -7,6 +7,8 @@
 //   level: u8 type | f64 scale | u64 target | f64 origin[3] | u32 n[3] | u8 axis0 | u8 axis1 |
 //          u32 seedCount | f32 seeds[3*seedCount]
 // The seeds are stored bit-exactly, so a deserialized sequence assigns exactly like the original.
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <unordered_map>
 #include <cerrno>
@@ -306,7 +308,6 @@ constexpr int kSlabShift = 56;  // V0 cell ids stay below 2^24 (checked); slab i
 }
 
 void VPartitionAssigner::mergeSlivers(const vp::CentroidSample& sample) {
-  const vp::SampleSource centroids(sample);
   // Counts below are of sampled triangles; thresholds in input triangles are divided by w.
   const double w = sample.weight();
   remap_.clear();
@@ -320,17 +321,23 @@ void VPartitionAssigner::mergeSlivers(const vp::CentroidSample& sample) {
     uint32_t count = 0;
     float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
   };
-  std::unordered_map<uint64_t, Piece> pieces;
-  centroids.forEach([&](const float* c, size_t n) {
-    for (size_t i = 0; i < n; ++i) {
-      Piece& p = pieces[sequence_.crossKey(0, c + 4 * i)];
-      ++p.count;
-      for (int a = 0; a < 3; ++a) {
-        p.lo[a] = std::min(p.lo[a], c[4 * i + a]);
-        p.hi[a] = std::max(p.hi[a], c[4 * i + a]);
-      }
-    }
+  // The V*0 key of every sampled centroid, once (the lookups are independent: in parallel); both
+  // passes below read them in sample order.
+  const size_t ns = size_t(sample.count());
+  std::vector<uint64_t> crossKeys(ns);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, ns, 4096), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t i = r.begin(); i < r.end(); ++i) crossKeys[i] = sequence_.crossKey(0, &sample.xyza[4 * i]);
   });
+  std::unordered_map<uint64_t, Piece> pieces;
+  for (size_t i = 0; i < ns; ++i) {
+    const float* c = &sample.xyza[4 * i];
+    Piece& p = pieces[crossKeys[i]];
+    ++p.count;
+    for (int a = 0; a < 3; ++a) {
+      p.lo[a] = std::min(p.lo[a], c[a]);
+      p.hi[a] = std::max(p.hi[a], c[a]);
+    }
+  }
   const uint32_t target = options_.patchTriangles ? options_.patchTriangles : kDefaultPatchTriangles;
   const double small = std::max(1.0, target / 4.0 / w);
   std::vector<std::pair<uint64_t, Piece>> sorted(pieces.begin(), pieces.end());
@@ -407,18 +414,17 @@ void VPartitionAssigner::mergeSlivers(const vp::CentroidSample& sample) {
     cuts[key] = {axis, p.lo[axis], (p.hi[axis] - p.lo[axis]) / kBins, std::vector<uint32_t>(kBins, 0)};
   }
   if (cuts.empty()) return;
-  centroids.forEach([&](const float* c, size_t n) {
-    for (size_t i = 0; i < n; ++i) {
-      uint64_t key = sequence_.crossKey(0, c + 4 * i);
-      auto r = remap_.find(key);
-      if (r != remap_.end()) key = r->second;
-      auto it = cuts.find(key);
-      if (it == cuts.end()) continue;
-      Cut& cut = it->second;
-      int bin = int(std::clamp((c[4 * i + cut.axis] - cut.lo) / cut.width, 0.0f, float(kBins - 1)));
-      ++cut.histogram[bin];
-    }
-  });
+  for (size_t i = 0; i < ns; ++i) {
+    const float* c = &sample.xyza[4 * i];
+    uint64_t key = crossKeys[i];
+    auto r = remap_.find(key);
+    if (r != remap_.end()) key = r->second;
+    auto it = cuts.find(key);
+    if (it == cuts.end()) continue;
+    Cut& cut = it->second;
+    int bin = int(std::clamp((c[cut.axis] - cut.lo) / cut.width, 0.0f, float(kBins - 1)));
+    ++cut.histogram[bin];
+  }
   for (auto& [key, cut] : cuts) {
     uint64_t total = 0;
     for (uint32_t h : cut.histogram) total += h;
