@@ -231,7 +231,14 @@ class ScratchSink : public MeshSink {
     vertexCount += count;
   }
   void triangles(const uint32_t* idx, size_t count) override {
-    face_.write(idx, count * 12);
+    if (writeFaces_) face_.write(idx, count * 12);
+    // The first and last faces, to check a face block read in place against (FaceFile).
+    for (size_t i = 0; i < count && firstFaces_.size() < 3 * kCheckedFaces; ++i)
+      firstFaces_.insert(firstFaces_.end(), idx + 3 * i, idx + 3 * i + 3);
+    for (size_t i = count > kCheckedFaces ? count - kCheckedFaces : 0; i < count; ++i) {
+      std::memcpy(&lastFaces_[3 * (lastCount_ % kCheckedFaces)], idx + 3 * i, 12);
+      ++lastCount_;
+    }
     if (queue_ && !fuseDecided_) {
       // Fused only when every declared vertex came first: then the records and the bounding box
       // are final, and the faces' Morton codes can be computed while the parse goes on.
@@ -272,6 +279,18 @@ class ScratchSink : public MeshSink {
   // Resident inputs: consecutive chunks of faces go to `queue` while the parse goes on (the
   // reader runs on its own thread, the Morton codes are computed on the others).
   void fuse(ChunkQueue* queue) { queue_ = queue; }
+  // No face.bin: the faces will be read from the input (FaceFile), if it checks out.
+  void skipFaceFile() { writeFaces_ = false; }
+  bool wroteFaceFile() const { return writeFaces_; }
+  const std::vector<uint32_t>& firstFaces() const { return firstFaces_; }
+  // The last faces delivered, oldest first.
+  std::vector<uint32_t> lastFaces() const {
+    std::vector<uint32_t> out;
+    const uint64_t n = std::min<uint64_t>(lastCount_, kCheckedFaces);
+    for (uint64_t i = lastCount_ - n; i < lastCount_; ++i)
+      out.insert(out.end(), &lastFaces_[3 * (i % kCheckedFaces)], &lastFaces_[3 * (i % kCheckedFaces)] + 3);
+    return out;
+  }
   bool inRam() const { return inRam_; }
   // The vertex records, in RAM (moved out; inRam() must be true or loadVertices() called).
   std::vector<char> takeVertices() { return std::move(ram_); }
@@ -294,6 +313,10 @@ class ScratchSink : public MeshSink {
     return b;
   }
   static constexpr size_t kChunkFaces = 1 << 17;
+  static constexpr size_t kCheckedFaces = 64;
+  bool writeFaces_ = true;
+  std::vector<uint32_t> firstFaces_, lastFaces_ = std::vector<uint32_t>(3 * kCheckedFaces);
+  uint64_t lastCount_ = 0;
   TempWriter vert_, face_;
   Progress& progress_;
   uint64_t residentLimit_;
@@ -773,6 +796,128 @@ struct ResidentVertices {
   }
 };
 
+// Where the resident passes read the faces from: face.bin (3 x u32 a face), or, for a binary
+// little-endian PLY of triangles, the input file itself (13-byte records: a count byte of 3 and
+// three 32-bit indices), which spares the parse a 12-bytes-a-face copy into fresh page cache (on
+// this VM the most expensive part of writing a scratch file). The reader has checked every index
+// during the parse; the records are checked again for their count byte.
+struct FaceFile {
+  std::string path;
+  uint64_t offset = 0, count = 0;
+  bool ply = false;
+};
+
+// The face records of a PLY whose layout allows reading them in place: binary little endian,
+// fixed-size records in every element before the faces, and the face element's only property a
+// list of uchar (or char) count and int (or uint) indices. {} otherwise.
+std::optional<FaceFile> plyTriangleBlock(const std::string& path) {
+  FILE* f = std::fopen(path.c_str(), "rb");
+  if (!f) return std::nullopt;
+  std::string head(1 << 16, '\0');
+  head.resize(std::fread(head.data(), 1, head.size(), f));
+  std::fclose(f);
+  auto typeSize = [](const std::string& t) -> int {
+    if (t == "char" || t == "int8" || t == "uchar" || t == "uint8") return 1;
+    if (t == "short" || t == "int16" || t == "ushort" || t == "uint16") return 2;
+    if (t == "int" || t == "int32" || t == "uint" || t == "uint32" || t == "float" || t == "float32") return 4;
+    if (t == "double" || t == "float64") return 8;
+    return -1;
+  };
+  struct Element {
+    std::string name;
+    uint64_t count = 0, size = 0;
+    bool fixed = true, triangleList = false;
+    int properties = 0;
+  };
+  std::vector<Element> elements;
+  std::istringstream in(head);
+  std::string line;
+  size_t consumed = 0, lineNo = 0;
+  bool binaryLE = false, ended = false;
+  while (std::getline(in, line)) {
+    consumed += line.size() + 1;
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    std::istringstream words(line);
+    std::string w;
+    words >> w;
+    if (lineNo++ == 0) {
+      if (w != "ply") return std::nullopt;
+    } else if (w == "format") {
+      std::string kind, version;
+      words >> kind >> version;
+      binaryLE = kind == "binary_little_endian";
+    } else if (w == "element") {
+      Element e;
+      if (!(words >> e.name >> e.count)) return std::nullopt;
+      elements.push_back(e);
+    } else if (w == "property") {
+      if (elements.empty()) return std::nullopt;
+      Element& e = elements.back();
+      std::string type, countType, itemType, name;
+      words >> type;
+      ++e.properties;
+      if (type == "list") {
+        words >> countType >> itemType >> name;
+        e.fixed = false;
+        e.triangleList = typeSize(countType) == 1 &&
+                         (itemType == "int" || itemType == "int32" || itemType == "uint" || itemType == "uint32") &&
+                         (name == "vertex_indices" || name == "vertex_index");
+      } else {
+        int size = typeSize(type);
+        if (size < 0) return std::nullopt;
+        e.size += uint64_t(size);
+      }
+    } else if (w == "end_header") {
+      ended = true;
+      break;
+    } else if (w != "comment" && w != "obj_info" && !w.empty()) {
+      return std::nullopt;
+    }
+  }
+  if (!binaryLE || !ended || consumed > head.size()) return std::nullopt;
+  uint64_t offset = consumed;
+  for (const Element& e : elements) {
+    if (e.name == "face") {
+      if (e.properties != 1 || !e.triangleList) return std::nullopt;
+      return FaceFile{path, offset, e.count, true};
+    }
+    if (!e.fixed) return std::nullopt;
+    offset += e.count * e.size;
+  }
+  return std::nullopt;
+}
+
+// Sequential batches of faces (3 indices each) from a FaceFile.
+class FaceReader {
+ public:
+  explicit FaceReader(const FaceFile& file)
+      : file_(file), reader_(file.path, 4 << 20, file.offset, file.ply ? file.count * 13 : UINT64_MAX) {}
+  bool getBatch(std::vector<uint32_t>& out, size_t maxFaces) {
+    if (!file_.ply) return reader_.getBatch(out, 3 * maxFaces);
+    raw_.resize(maxFaces * 13);
+    const size_t bytes = reader_.read(raw_.data(), raw_.size());
+    if (bytes % 13 != 0)
+      fail(file_.path, "input ends inside a face record at byte offset " + std::to_string(file_.offset + (done_ + bytes / 13) * 13));
+    const size_t n = bytes / 13;
+    out.resize(3 * n);
+    for (size_t i = 0; i < n; ++i) {
+      const char* r = raw_.data() + 13 * i;
+      if (uint8_t(r[0]) != 3)
+        fail(file_.path, "internal: face " + std::to_string(done_ + i) + " is not a triangle at byte offset " +
+                             std::to_string(file_.offset + (done_ + i) * 13));
+      std::memcpy(&out[3 * i], r + 1, 12);
+    }
+    done_ += n;
+    return n > 0;
+  }
+
+ private:
+  FaceFile file_;
+  TempReader reader_;
+  std::vector<char> raw_;
+  uint64_t done_ = 0;
+};
+
 // Faces in batches, in face order, through a TBB pipeline: the batch is read on one thread,
 // work(batch) runs on any thread (batches in parallel), consume(batch) runs in face order.
 template <class Out>
@@ -783,8 +928,8 @@ struct FaceBatch {
   size_t count() const { return idx.size() / 3; }
 };
 template <class Out, class Work, class Consume>
-void pipelineFaces(const std::string& path, size_t batchFaces, const Work& work, const Consume& consume) {
-  TempReader fr(path, 4 << 20);
+void pipelineFaces(const FaceFile& faces, size_t batchFaces, const Work& work, const Consume& consume) {
+  FaceReader fr(faces);
   const size_t tokens = size_t(std::max(2, tbb::this_task_arena::max_concurrency())) + 2;
   std::vector<std::unique_ptr<FaceBatch<Out>>> pool;
   std::vector<FaceBatch<Out>*> idle;
@@ -804,7 +949,7 @@ void pipelineFaces(const std::string& path, size_t batchFaces, const Work& work,
                                                   b = idle.back();
                                                   idle.pop_back();
                                                 }
-                                                if (!fr.getBatch(b->idx, 3 * batchFaces)) {
+                                                if (!fr.getBatch(b->idx, batchFaces)) {
                                                   std::lock_guard<std::mutex> lock(idleMutex);
                                                   idle.push_back(b);
                                                   fc.stop();
@@ -896,10 +1041,10 @@ class MortonSort {
 // returns; forEach() (grid and regular assigners) materializes the whole stream once.
 class ResidentCentroids : public CentroidSource {
  public:
-  ResidentCentroids(const std::string& scratch, const ResidentVertices& vertices, uint64_t faces, Box3 bounds,
-                    MortonSort& morton, uint64_t budget, StageClock& clock, bool progress)
-      : scratch_(scratch), vertices_(vertices), faces_(faces), bounds_(bounds), morton_(morton), budget_(budget),
-        clock_(clock), progress_(progress) {}
+  ResidentCentroids(const std::string& scratch, const FaceFile& faceFile, const ResidentVertices& vertices, uint64_t faces,
+                    Box3 bounds, MortonSort& morton, uint64_t budget, StageClock& clock, bool progress)
+      : scratch_(scratch), faceFile_(faceFile), vertices_(vertices), faces_(faces), bounds_(bounds), morton_(morton),
+        budget_(budget), clock_(clock), progress_(progress) {}
   uint64_t count() const override { return faces_; }
   Box3 bounds() const override { return bounds_; }
   // Whether the input's face order is spatially coherent (MortonSort::coherent), as measured by
@@ -919,7 +1064,7 @@ class ResidentCentroids : public CentroidSource {
         std::vector<MortonKey> keys;
       };
       pipelineFaces<Codes>(
-          scratch_ + "/face.bin", kFaceBatch,
+          faceFile_, kFaceBatch,
           [&](FaceBatch<Codes>& b) {
             const size_t n = b.count();
             b.out.keys.resize(n);
@@ -961,11 +1106,11 @@ class ResidentCentroids : public CentroidSource {
     }
     std::vector<float> out(4 * picks.size());
     std::sort(picks.begin(), picks.end());
-    TempReader fr(scratch_ + "/face.bin", 4 << 20);
+    FaceReader fr(faceFile_);
     std::vector<uint32_t> batch;
     uint64_t first = 0;
     size_t p = 0;
-    while (p < picks.size() && fr.getBatch(batch, 3 * kFaceBatch)) {
+    while (p < picks.size() && fr.getBatch(batch, kFaceBatch)) {
       const uint64_t end = first + batch.size() / 3;
       for (; p < picks.size() && picks[p].first < end; ++p) {
         Centroid c = vertices_.centroid(&batch[3 * (picks[p].first - first)]);
@@ -993,7 +1138,7 @@ class ResidentCentroids : public CentroidSource {
       std::vector<MortonCentroid> recs;
     };
     pipelineFaces<Cents>(
-        scratch_ + "/face.bin", kFaceBatch,
+        faceFile_, kFaceBatch,
         [&](FaceBatch<Cents>& b) {
           const size_t n = b.count();
           b.out.recs.resize(n);
@@ -1013,6 +1158,7 @@ class ResidentCentroids : public CentroidSource {
   }
 
   std::string scratch_;
+  FaceFile faceFile_;
   const ResidentVertices& vertices_;
   uint64_t faces_;
   Box3 bounds_;
@@ -1221,7 +1367,7 @@ struct PatchStageOutput {
 
 // Resident path, stages 2-6 (see the top of the file): the patch geometry blocks are appended to
 // impl, shared vertices and cross-patch edges fed to the two sorters of the boundary stage.
-void residentStages(const std::string& scratch, const ResidentVertices& rv, std::vector<char>& records, MortonSort& morton,
+void residentStages(const std::string& scratch, const FaceFile& faceFile, const ResidentVertices& rv, std::vector<char>& records, MortonSort& morton,
                     const Box3& bounds, uint64_t nv, uint64_t nf,
                     uint64_t B, CellAssigner& assigner, IngestReport& report, PatchStore::Impl& impl,
                     std::unique_ptr<SharedSorter>& sharedPtr, std::unique_ptr<EdgeSorter>& edgesPtr,
@@ -1235,7 +1381,7 @@ void residentStages(const std::string& scratch, const ResidentVertices& rv, std:
   };
   bool coherent = true;
   {
-    ResidentCentroids centroids(scratch, rv, nf, bounds, morton, room(32 << 20) * 4 / 5, clock, showProgress);
+    ResidentCentroids centroids(scratch, faceFile, rv, nf, bounds, morton, room(32 << 20) * 4 / 5, clock, showProgress);
     Progress progress(showProgress, "ingest: partition", nf);
     assigner.prepare(centroids, B / 2);
     progress.finish(nf);
@@ -1263,7 +1409,7 @@ void residentStages(const std::string& scratch, const ResidentVertices& rv, std:
     };
     const MortonBox box(bounds);
     pipelineFaces<Keyed>(
-        scratch + "/face.bin", batchFaces,
+        faceFile, batchFaces,
         [&](FaceBatch<Keyed>& b) {
           const size_t n = b.count();
           b.out.keys.resize(n);
@@ -1466,6 +1612,14 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
   const uint64_t residentLimit = B > reserve ? uint64_t(double(B - reserve) * double(expected.size()) / perVertex) : 0;
   Progress parseProgress(opt.progress, "ingest: parse", uint64_t(std::max<int64_t>(0, reader->header().declaredFaces)));
   ScratchSink sink(scratch, parseProgress, residentLimit);
+  // A resident binary PLY of triangles: its faces are read in place later, not copied.
+  std::optional<FaceFile> inPlace;
+  if (reader->header().format == MeshFormat::PlyBinaryLE && reader->header().declaredVertices >= 0 &&
+      uint64_t(reader->header().declaredVertices) * expected.size() <= residentLimit) {
+    inPlace = plyTriangleBlock(input);
+    if (inPlace && int64_t(inPlace->count) != reader->header().declaredFaces) inPlace.reset();
+    if (inPlace) sink.skipFaceFile();
+  }
   // The Morton sort of the resident path, filled during the parse when the input allows it; its
   // budget is what the declared vertex records leave.
   const uint64_t declaredRecords = uint64_t(std::max<int64_t>(0, reader->header().declaredVertices)) * expected.size();
@@ -1562,6 +1716,38 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
   }
   if (!sink.inRam() && nv * vlayout.size() <= residentLimit) sink.loadVertices(scratch);
   const bool resident = sink.inRam();
+  if (!sink.wroteFaceFile()) {
+    // The face block read in place must be exactly the faces the reader delivered: triangles
+    // only (no polygon was fanned), the declared count, the same first and last faces.
+    bool same = stats.polygons == 0 && stats.triangles == inPlace->count && resident;
+    auto facesAt = [&](uint64_t first, uint64_t n) {
+      FaceFile part = *inPlace;
+      part.offset += first * 13;
+      part.count = n;
+      FaceReader r(part);
+      std::vector<uint32_t> out, batch;
+      while (out.size() < 3 * n && r.getBatch(batch, size_t(n))) out.insert(out.end(), batch.begin(), batch.end());
+      return out;
+    };
+    if (same) {
+      const std::vector<uint32_t> last = sink.lastFaces();
+      same = facesAt(0, sink.firstFaces().size() / 3) == sink.firstFaces() &&
+             facesAt(inPlace->count - last.size() / 3, last.size() / 3) == last;
+    }
+    if (!same) {
+      // Polygons (or anything unexpected): the faces as the reader gives them, in a second read.
+      struct FacesOnly : MeshSink {
+        TempWriter out;
+        explicit FacesOnly(const std::string& path) : out(path, 4 << 20) {}
+        void vertices(const InputVertex*, size_t, uint64_t) override {}
+        void triangles(const uint32_t* idx, size_t count) override { out.write(idx, count * 12); }
+      } facesOnly(scratch + "/face.bin");
+      openMesh(input)->read(facesOnly);
+      facesOnly.out.close();
+      inPlace.reset();
+    }
+  }
+  const FaceFile faceFile = inPlace ? *inPlace : FaceFile{scratch + "/face.bin", 0, nf, false};
   clock.mark("parse");
 
   auto impl = std::make_unique<PatchStore::Impl>();
@@ -1577,7 +1763,7 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
     std::remove((scratch + "/vert.bin").c_str());
     std::vector<char> records = sink.takeVertices();
     ResidentVertices rv{records.data(), vlayout, vlayout.size()};
-    residentStages(scratch, rv, records, morton, sink.bounds, nv, nf, B, assigner, report, *impl, sharedPtr, edgesPtr,
+    residentStages(scratch, faceFile, rv, records, morton, sink.bounds, nv, nf, B, assigner, report, *impl, sharedPtr, edgesPtr,
                    patchStage, distinctReferenced, clock, opt.progress);
   } else {
     // 2 centroids, straight into an external sort by Morton code. The assigner streams the

@@ -241,6 +241,66 @@ TEST(PatchStore, SameStoreBytesWhateverTheCapOrThePath) {
   EXPECT_TRUE(sameTriangles(readTriangles(tmp.file("out.ply")), coordTriangles(m.positions, m.triangles)));
 }
 
+// A binary little-endian PLY written by hand: optional extra vertex byte (a record size the
+// in-place face reading must skip correctly), and quads where two consecutive triangles fan from
+// one (the reader splits them back into the same two triangles).
+void writeBinaryPly(const TestMesh& m, const std::string& path, bool extraVertexByte, bool quads) {
+  std::vector<std::vector<uint32_t>> faces;
+  for (size_t t = 0; t < m.triangles.size(); t += 3) {
+    const uint32_t* a = &m.triangles[t];
+    if (quads && t + 3 < m.triangles.size()) {
+      const uint32_t* b = a + 3;
+      if (a[0] == b[0] && a[2] == b[1]) {
+        faces.push_back({a[0], a[1], a[2], b[2]});
+        t += 3;
+        continue;
+      }
+    }
+    faces.push_back({a[0], a[1], a[2]});
+  }
+  std::string out = "ply\nformat binary_little_endian 1.0\nelement vertex " + std::to_string(m.positions.size() / 3) +
+                    "\nproperty float x\nproperty float y\nproperty float z\n" +
+                    (extraVertexByte ? "property uchar flags\n" : "") + "element face " + std::to_string(faces.size()) +
+                    "\nproperty list uchar int vertex_indices\nend_header\n";
+  for (size_t i = 0; i < m.positions.size(); i += 3) {
+    float f[3] = {float(m.positions[i]), float(m.positions[i + 1]), float(m.positions[i + 2])};
+    out.append(reinterpret_cast<const char*>(f), 12);
+    if (extraVertexByte) out.push_back(char(7));
+  }
+  for (auto& f : faces) {
+    out.push_back(char(f.size()));
+    for (uint32_t v : f) out.append(reinterpret_cast<const char*>(&v), 4);
+  }
+  test::writeFile(path, out);
+}
+
+TEST(PatchStore, FacesReadInPlaceFromBinaryPlyOrNot) {
+  // A binary PLY of triangles has its faces read in place by the resident path (no face copy);
+  // an extra vertex property moves the face block, and quads force the copy (the reader fans
+  // them). The same triangles give the same store in every case.
+  TempDir tmp;
+  TestMesh m = makeTorus(300, 200, 3, false, 9);
+  writeBinaryPly(m, tmp.file("plain.ply"), false, false);
+  writeBinaryPly(m, tmp.file("extra.ply"), true, false);
+  writeBinaryPly(m, tmp.file("quads.ply"), false, true);
+  auto ingestGrid = [&](const std::string& in, const std::string& out, uint64_t memory) {
+    auto assigner = makeGridAssigner(500);
+    IngestOptions o;
+    o.memoryBytes = memory;
+    o.progress = false;
+    return PatchStore::ingest(tmp.file(in), tmp.file(out), *assigner, o);
+  };
+  ingestGrid("plain.ply", "plain", 1ull << 30);
+  const std::string bytes = segmentBytes(tmp.file("plain"));
+  ingestGrid("extra.ply", "extra", 1ull << 30);
+  EXPECT_TRUE(bytes == segmentBytes(tmp.file("extra"))) << "extra vertex property";
+  IngestReport q = ingestGrid("quads.ply", "quads", 1ull << 30);
+  EXPECT_GT(q.polygons, 1000u);
+  EXPECT_TRUE(bytes == segmentBytes(tmp.file("quads"))) << "quads";
+  ingestGrid("plain.ply", "chunked", 600 << 10);
+  EXPECT_TRUE(bytes == segmentBytes(tmp.file("chunked"))) << "chunked path";
+}
+
 TEST(PatchStore, DefectsCountedAlikeOnBothPaths) {
   // Degenerate, duplicate and non-manifold faces and unreferenced vertices, counted by the
   // resident path (large cap) as by the chunked one (tiny cap), with the same patches.
