@@ -329,7 +329,10 @@ RegionResult processRegion(const RegionTask& task, const RegionContext& ctx) {
   const LoadedMesh& lm = task.mesh;
   const uint32_t L = ctx.partitionLevels;
   // The floor patches become the payloads of the arcs into this region's node.
-  out.encoded = encodePatches(floorPatches(lm), ctx.grid, ctx.codec);
+  // Above level 1 the floor patches are the previous level's simplified output.
+  PatchCodecOptions codec = ctx.codec;
+  codec.simplified = task.level >= 2;
+  out.encoded = encodePatches(floorPatches(lm), ctx.grid, codec);
   // Simplify to about half with the region's border locked (BMT 4), split by V*(level).
   SimplifyRegionOptions so;
   so.targetTriangles = task.root ? std::min<size_t>(lm.triangleCount() / 2, ctx.rootTriangles / 2) : lm.triangleCount() / 2;
@@ -871,7 +874,9 @@ BuildReport LevelBuilder::finish() {
     std::vector<PatchId> ids = s.store->patchIds();
     std::vector<Patch> top;
     for (PatchId id : ids) top.push_back(s.store->patch(id));
-    std::vector<EncodedPatch> encoded = encodePatches(top, s.ctx.grid, s.ctx.codec);
+    PatchCodecOptions codec = s.ctx.codec;
+    codec.simplified = level >= 1;  // the last level's output
+    std::vector<EncodedPatch> encoded = encodePatches(top, s.ctx.grid, codec);
     for (const EncodedPatch& e : encoded) {
       uint32_t mtPatch = s.writer->appendPatch(e.payload.data(), e.payload.size(), e.triangles, e.vertices);
       s.arcPatches[{s.producer.at(e.storeId), sink}].push_back(mtPatch);

@@ -160,8 +160,8 @@ Prepared prepare(const PatchInput& in, const QuantizationGrid& grid, const Patch
     out.indices.resize(indexCount);
     meshopt_remapIndexBuffer(out.indices.data(), in.triangles, indexCount, remap.data());
   } else {
-    used = orderBy(in.triangles);
-    if (double(out.indexCode.size()) > kCoherentIndexBytes * double(in.triangleCount)) {
+    if (!options.simplified) used = orderBy(in.triangles);
+    if (options.simplified || double(out.indexCode.size()) > kCoherentIndexBytes * double(in.triangleCount)) {
       std::vector<uint32_t> ordered(indexCount);
       fanOrderTriangles(ordered.data(), in.triangles, indexCount, in.vertexCount);
       used = orderBy(ordered.data());
