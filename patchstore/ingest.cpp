@@ -3,19 +3,25 @@
 // Memory depends on the cap, not on the input (BMT section 6 needs the store to exist before
 // anything fits in RAM). Two paths give the same store byte for byte:
 //
-// Resident path, when the vertex records (and one state byte per vertex) fit in the cap with room
-// to spare (a 53 M-triangle scan at 512M): the records stay in RAM, so every pass that needs a
-// position reads it directly instead of joining through an external sort.
-//   1 parse      input -> vertex records in RAM + face.bin (3 x u32); bounding box
-//   2 morton     face.bin -> (Morton code, face) of every face, radix-sorted runs (12 bytes a face)
-//   3 sample     the merge of the runs picks every stride-th face (the irregular V-partition's
-//                sample, CentroidSource::sample); one more read of face.bin gives their centroids.
-//                An assigner that wants the whole stream (grid, regular) gets it materialized.
-//   4 assign     face.bin in face order -> centroid -> cell key; (face, corners) grouped by key
-//                (KeyGroupSorter: counting-sorted runs, whole groups merged; faces stay in face order)
-//   5 shared     one pass over the groups marks the vertices held by two or more patches
-//   6 patches    a second pass builds every patch (local order = ascending input index) with
-//                positions read from RAM; shared vertices -> (vertex, patch, local); edge counts
+// Resident path, when the vertex records (one state byte and a bit per thread per vertex, and a
+// reserve of max(128 MiB, cap/4)) fit in the cap (a 53 M-triangle scan at 512M): the records stay
+// in RAM, so every pass that needs a position reads it directly instead of joining through an
+// external sort. Faces are read from face.bin, or in place from a binary PLY of triangles.
+//   1 parse      the reader on its own thread: vertex records in RAM, faces to a chunk queue (and
+//                face.bin unless read in place); the main thread's pipeline computes the
+//                (Morton code, face) of every chunk in parallel into a stable radix sort (12 bytes
+//                a face, runs spilled by a background task)
+//   2 sample     the merge of the runs, in key ranges on parallel threads, picks every stride-th
+//                face (the irregular V-partition's sample, CentroidSource::sample); one more read
+//                of the faces gives their centroids. An assigner that wants the whole stream (grid,
+//                regular) gets it materialized.
+//   3 assign     faces in face order -> centroid -> cell key (a shuffled order: looked up in
+//                batch-local Morton order); corners grouped by key (KeyGroupSorter: counting-sorted
+//                runs, whole groups merged, faces staying in face order)
+//   4 shared     one pass over the groups marks the vertices held by two or more patches
+//   5 patches    a second pass builds every patch (local order = ascending input index) with
+//                positions read from RAM, in parallel, appended in order; shared vertices ->
+//                (vertex, patch, local); edge use counts
 // Chunked path, otherwise (bounded by the cap whatever the input size):
 //   1 parse      input -> vert.bin (fixed records) + face.bin (3 x u32); bounding box
 //   2 centroids  face.bin + vert.bin -> centroid xyz + area per face, straight into an external
@@ -805,6 +811,8 @@ struct FaceFile {
   std::string path;
   uint64_t offset = 0, count = 0;
   bool ply = false;
+  uint64_t vertices = UINT64_MAX;  // in place: indices are checked again against it (the input
+                                   // could have changed since the parse)
 };
 
 // The face records of a PLY whose layout allows reading them in place: binary little endian,
@@ -902,10 +910,10 @@ class FaceReader {
     out.resize(3 * n);
     for (size_t i = 0; i < n; ++i) {
       const char* r = raw_.data() + 13 * i;
-      if (uint8_t(r[0]) != 3)
-        fail(file_.path, "internal: face " + std::to_string(done_ + i) + " is not a triangle at byte offset " +
-                             std::to_string(file_.offset + (done_ + i) * 13));
       std::memcpy(&out[3 * i], r + 1, 12);
+      if (uint8_t(r[0]) != 3 || out[3 * i] >= file_.vertices || out[3 * i + 1] >= file_.vertices || out[3 * i + 2] >= file_.vertices)
+        fail(file_.path, "face " + std::to_string(done_ + i) + " at byte offset " + std::to_string(file_.offset + (done_ + i) * 13) +
+                             " differs from the parse (the file changed during the ingest?)");
     }
     done_ += n;
     return n > 0;
@@ -1365,10 +1373,10 @@ struct PatchStageOutput {
   std::vector<uint64_t> patchKey;
 };
 
-// Resident path, stages 2-6 (see the top of the file): the patch geometry blocks are appended to
+// Resident path, stages 2-5 (see the top of the file): the patch geometry blocks are appended to
 // impl, shared vertices and cross-patch edges fed to the two sorters of the boundary stage.
-void residentStages(const std::string& scratch, const FaceFile& faceFile, const ResidentVertices& rv, std::vector<char>& records, MortonSort& morton,
-                    const Box3& bounds, uint64_t nv, uint64_t nf,
+void residentStages(const std::string& scratch, const FaceFile& faceFile, const ResidentVertices& rv,
+                    std::vector<char>& records, MortonSort& morton, const Box3& bounds, uint64_t nv, uint64_t nf,
                     uint64_t B, CellAssigner& assigner, IngestReport& report, PatchStore::Impl& impl,
                     std::unique_ptr<SharedSorter>& sharedPtr, std::unique_ptr<EdgeSorter>& edgesPtr,
                     PatchStageOutput& out, uint64_t& distinctReferenced, StageClock& clock, bool showProgress) {
@@ -1392,7 +1400,7 @@ void residentStages(const std::string& scratch, const FaceFile& faceFile, const 
   malloc_trim(0);
   clock.mark("partition");
 
-  // 4 assign: every face keyed in face order, grouped by key. Lookups are cheap in a coherent
+  // 3 assign: every face keyed in face order, grouped by key. Lookups are cheap in a coherent
   // order (consecutive faces hit the same seeds, BMT's scans list faces so); a shuffled input's
   // batches are looked up in Morton order instead, in bigger batches (which makes runs of the
   // same query cells), and the keys put back in face order.
@@ -1498,7 +1506,7 @@ void residentStages(const std::string& scratch, const FaceFile& faceFile, const 
             }));
   };
 
-  // 5 shared vertices: one pass over the patches marks every vertex held (bit 0) and held by a
+  // 4 shared vertices: one pass over the patches marks every vertex held (bit 0) and held by a
   // second patch (bit 1). A patch's distinct vertices come from a per-thread bit set of the
   // vertices it touched, cleared again through the list of them.
   std::vector<uint8_t> state(nv, 0);
@@ -1544,7 +1552,7 @@ void residentStages(const std::string& scratch, const FaceFile& faceFile, const 
   malloc_trim(0);
   clock.mark("shared");
 
-  // 6 patches: built in parallel, appended in patch order. The boundary stage's sorters fill
+  // 5 patches: built in parallel, appended in patch order. The boundary stage's sorters fill
   // while the records are resident: their share is what is left now (they spill early, which
   // costs little: a few million records; in the background, off the ordered stage).
   {
@@ -1731,8 +1739,12 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
     };
     if (same) {
       const std::vector<uint32_t> last = sink.lastFaces();
-      same = facesAt(0, sink.firstFaces().size() / 3) == sink.firstFaces() &&
-             facesAt(inPlace->count - last.size() / 3, last.size() / 3) == last;
+      try {
+        same = facesAt(0, sink.firstFaces().size() / 3) == sink.firstFaces() &&
+               facesAt(inPlace->count - last.size() / 3, last.size() / 3) == last;
+      } catch (const Error&) {  // not where the header said: copy them instead
+        same = false;
+      }
     }
     if (!same) {
       // Polygons (or anything unexpected): the faces as the reader gives them, in a second read.
@@ -1747,6 +1759,7 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
       inPlace.reset();
     }
   }
+  if (inPlace) inPlace->vertices = nv;
   const FaceFile faceFile = inPlace ? *inPlace : FaceFile{scratch + "/face.bin", 0, nf, false};
   clock.mark("parse");
 
