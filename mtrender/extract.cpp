@@ -350,9 +350,11 @@ FrameStats ExtractRender::requestAhead(uint64_t frame, const View& view) {
     if (e.err <= tau || seen[e.node]) continue;
     seen[e.node] = 1;
     triangles += double(visibleDelta(e.node, true, view));
-    if (triangles > budget) break;
+    // Beyond the budget the next update trades coarsenings for the best refinements: ask for
+    // those too, at prefetch priority, up to twice the budget.
+    if (triangles > 2 * budget) break;
     collectIn(e.node, scratch_);
-    want(scratch_, e.depth == 0 ? Urgency::Needed : Urgency::Prefetch);
+    want(scratch_, e.depth == 0 && triangles <= budget ? Urgency::Needed : Urgency::Prefetch);
     if (e.depth >= 1) continue;
     const SceneNode& s = nodes[e.node];
     for (uint32_t k = 0; k < s.inArcCount; ++k) {

@@ -94,8 +94,9 @@ class ExtractRender {
   FrameStats update(uint64_t frame, const View& view, const View& predicted);
   // For a frame that leaves the cut as it is (it draws part of a still image, engine.h): advances
   // the render budget and asks the PatchServer for what the refinements of the cut beyond it
-  // would need, as if they were applied (the best first, within the scaled budget, two levels
-  // deep), so loads go on while the image is drawn. Returns the requests' figures.
+  // would need, as if they were applied (the best first, two levels deep, within the scaled
+  // budget; up to twice it at prefetch priority, for the trades the next update makes), so loads
+  // go on while the image is drawn. Returns the requests' figures.
   FrameStats requestAhead(uint64_t frame, const View& view);
   // Feeds the time model with the last frame's measured time.
   void frameDone(uint64_t drawnTriangles, double frameMs);
