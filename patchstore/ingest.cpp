@@ -1471,7 +1471,7 @@ void residentStages(const std::string& scratch, const FaceFile& faceFile, const 
     std::vector<ResidentPatch> patches;
   };
   auto pipelineGroups = [&](const auto& work, const auto& finish) {
-    constexpr size_t kPatches = 64;
+    constexpr size_t kPatches = 32;
     const size_t tokens = size_t(std::max(2, tbb::this_task_arena::max_concurrency())) + 2;
     uint32_t nextId = 0;
     bool more = true;
@@ -1604,7 +1604,10 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
   // from the heap, where freed memory stays resident behind live blocks: keep every buffer of a
   // MiB or more in its own mapping, so that what a pass frees leaves the process at once.
   mallopt(M_MMAP_THRESHOLD, 1 << 20);
-  mallopt(M_TRIM_THRESHOLD, 64 << 20);
+  // Per-patch buffers (tens of KiB) are freed and allocated again all the time: keep up to 8 MiB
+  // free at the top of a heap rather than returning and re-faulting it (malloc_trim at the end of
+  // each pass returns the rest).
+  mallopt(M_TRIM_THRESHOLD, 8 << 20);
   auto endOfPass = [] { malloc_trim(0); };
   StageClock clock(opt.progress);
 
