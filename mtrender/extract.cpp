@@ -469,11 +469,13 @@ FrameStats ExtractRender::update(uint64_t frame, const View& view, const View& p
       // cost and may stay pessimistic for ever. When frames have averaged under 60% of the
       // budget and 30 frames passed since the last probe, take one refinement beyond the
       // model's budget (if it fits in twice the budget); the measurement corrects the model,
-      // and step 1 undoes it next frame if it was too much.
-      if (after > budget && !options_.fixedTriangles && budgetScale_ == 1 && slackFrames_ >= 30 && frameMsAvg_ < 0.6 * options_.budgetMs &&
-          after <= 2 * budget) {
+      // and step 1 undoes it next frame if it was too much. Not right after a slow frame (the
+      // budget has just been cut for a reason), and the frame's budget is the probe's.
+      if (after > budget && !options_.fixedTriangles && budgetScale_ == 1 && slackFrames_ >= 30 &&
+          frameMsAvg_ < 0.6 * options_.budgetMs && lastFrameMs_ < 0.6 * options_.budgetMs && after <= 2 * budget) {
         slackFrames_ = 0;
         budget = after;
+        st.budgetTriangles = uint64_t(budget);
       }
       if (after > budget) {
         // Trade: drop detail where it matters much less, to spend it where it matters most.

@@ -1642,13 +1642,9 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
     ChunkQueue queue(8);
     sink.fuse(&queue);
     std::exception_ptr readError;
-    auto T0 = std::chrono::steady_clock::now();
-    auto el = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - T0).count(); };
-    double tFirst = -1, tReaderEnd = 0, tAddBusy = 0;
     std::thread readerThread([&] {
       try {
         stats = reader->read(sink);
-        tReaderEnd = el();
         sink.close();
       } catch (...) {
         readError = std::current_exception();
@@ -1673,7 +1669,6 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
                                              fc.stop();
                                              return nullptr;
                                            }
-                                           if (tFirst < 0) tFirst = el();
                                            return t;
                                          }) &
               tbb::make_filter<Token*, Token*>(tbb::filter_mode::parallel,
@@ -1689,9 +1684,7 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
                                                  return t;
                                                }) &
               tbb::make_filter<Token*, void>(tbb::filter_mode::serial_in_order, [&](Token* t) {
-                double a0 = el();
                 morton.add(t->keys.data(), t->keys.size(), t->first);
-                tAddBusy += el() - a0;
                 queue.release(t->chunk);
               }));
     } catch (...) {
@@ -1699,9 +1692,7 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
       readerThread.join();
       throw;
     }
-    double tPipe = el();
     readerThread.join();
-    std::fprintf(stderr, "first chunk %.2f reader end %.2f pipeline end %.2f add busy %.2f\n", tFirst, tReaderEnd, tPipe, tAddBusy);
     if (readError) std::rethrow_exception(readError);
   } else {
     stats = reader->read(sink);
