@@ -94,7 +94,7 @@ if [[ ${THROUGHPUT:-1} == 1 ]]; then
   printf "space unit\nfov 45\n0.3 -1.3 0.7  0.05 0.1 0\n" > "$OUT/final.path"
   for n in ${RAW_TRIANGLES:-1000 50000 200000 400000}; do
     $GNUTIME -f "cpu_s %U %S" -o "$OUT/raw-$n.cpu" "$BIN/mtrender" "$@" --headless --quiet \
-      --camera-path "$OUT/final.path" --frames 60 --width "$WIDTH" --height "$HEIGHT" --fixed-triangles "$n" \
+      --camera-path "$OUT/final.path" --frames 60 --width "$WIDTH" --height "$HEIGHT" --fixed-triangles "$n" --still-frames 1 \
       --stats "$OUT/raw-$n.csv" > "$OUT/raw-$n.out" 2>/dev/null || { echo "raw $n failed"; continue; }
     drawn=$(tail -1 "$OUT/raw-$n.csv" | cut -d, -f10)
     med=$(val "raw-$n" frame_ms_median)
