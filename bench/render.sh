@@ -13,7 +13,7 @@
 #
 # Environment: FRAMES (600), WIDTH (1280), HEIGHT (720), BUDGET_MS (50), CAMERA (flythrough),
 # CACHES ("32M 64M 128M 256M"), OUT (a fresh directory under /tmp), BIN (build/bin),
-# THROUGHPUT (1: also section 3, raw draw throughput for RAW_TRIANGLES="1000 50000 200000 400000").
+# THROUGHPUT (1: also section 3, raw draw throughput for RAW_TRIANGLES="60000 100000 200000 400000").
 # Miss rate = patches wanted for a cut move but not resident / (those + patches drawn), per run.
 set -euo pipefail
 if [[ $# -lt 1 ]]; then
@@ -92,7 +92,7 @@ if [[ ${THROUGHPUT:-1} == 1 ]]; then
   printf "%-12s %10s %10s %12s %12s\n" triangles drawn frame_med_ms Mtri_s_wall Mtri_s_cpu
   # The flythrough's final pose (camera.cpp), in unit space; CPU time includes start-up (~0.2 s).
   printf "space unit\nfov 45\n0.3 -1.3 0.7  0.05 0.1 0\n" > "$OUT/final.path"
-  for n in ${RAW_TRIANGLES:-1000 50000 200000 400000}; do
+  for n in ${RAW_TRIANGLES:-60000 100000 200000 400000}; do
     $GNUTIME -f "cpu_s %U %S" -o "$OUT/raw-$n.cpu" "$BIN/mtrender" "$@" --headless --quiet \
       --camera-path "$OUT/final.path" --frames 60 --width "$WIDTH" --height "$HEIGHT" --fixed-triangles "$n" --still-frames 1 \
       --stats "$OUT/raw-$n.csv" > "$OUT/raw-$n.out" 2>/dev/null || { echo "raw $n failed"; continue; }
