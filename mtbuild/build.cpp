@@ -670,6 +670,10 @@ LevelBuilder::LevelBuilder(const std::string& input, const std::string& output, 
   s.output = output;
   s.work = options.workDir.empty() ? output + ".work" : options.workDir;
   s.storeDir = s.work + "/store";
+  // The level loop frees and allocates region buffers all the time; from a patch store (no
+  // ingest, which sets the same) glibc's defaults returned and re-faulted them: 10M store, level
+  // loop 12.5-14.2 s -> 11.4-12.4 s, sys 1.8 -> 0.7 s.
+  useStreamingAllocator();
   if (const char* k = std::getenv("MT_TEST_KILL_AFTER_LEVEL")) s.killAfterLevel = std::atol(k);
   if (const char* k = std::getenv("MT_TEST_KILL_AFTER_REGIONS")) s.killAfterRegions = std::atol(k);
   const bool storeInput = isStoreDir(input);

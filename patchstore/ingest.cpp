@@ -1600,14 +1600,9 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
   IngestReport report;
   report.input = input;
   const uint64_t B = opt.memoryBytes;
-  // The cap is about RSS, and glibc's dynamic mmap threshold would serve later multi-MiB buffers
-  // from the heap, where freed memory stays resident behind live blocks: keep every buffer of a
-  // MiB or more in its own mapping, so that what a pass frees leaves the process at once.
-  mallopt(M_MMAP_THRESHOLD, 1 << 20);
-  // Per-patch buffers (tens of KiB) are freed and allocated again all the time: keep up to 8 MiB
-  // free at the top of a heap rather than returning and re-faulting it (malloc_trim at the end of
-  // each pass returns the rest).
-  mallopt(M_TRIM_THRESHOLD, 8 << 20);
+  // The cap is about RSS: multi-MiB buffers in their own mappings, small ones kept for reuse
+  // (patch_store.h); malloc_trim at the end of each pass returns the rest.
+  useStreamingAllocator();
   auto endOfPass = [] { malloc_trim(0); };
   StageClock clock(opt.progress);
 

@@ -1,5 +1,6 @@
 // The patch store: manifest log, segment blocks, load, write-back, export and check.
 // Format and crash-safety rules: store_format.h.
+#include <malloc.h>
 #include <xxhash.h>
 
 #include <algorithm>
@@ -966,6 +967,11 @@ uint64_t peakRssBytes() {
   while (std::getline(status, line))
     if (line.rfind("VmHWM:", 0) == 0) return std::stoull(line.substr(6)) * 1024;
   return 0;
+}
+
+void useStreamingAllocator() {
+  mallopt(M_MMAP_THRESHOLD, 1 << 20);
+  mallopt(M_TRIM_THRESHOLD, 8 << 20);
 }
 
 }  // namespace mt
