@@ -265,16 +265,14 @@ double ExtractRender::nextBudget(double extractMs) {
     // A still view (progressive refinement, budgetScale_ > 1) has nothing to keep steady on screen:
     // follow the model twice as fast, so its images grow to what the machine can draw.
     else smoothBudget_ = std::min(smoothBudget_ + 0.5 * (target - smoothBudget_), 1.5 * smoothBudget_);
-    // Feedback whatever the model says: a frame over the aim scales the budget down in
-    // proportion (the machine may have slowed down faster than the fit can follow).
-    if (lastFrameMs_ > aimMs && lastDrawn_ > 0)
-      smoothBudget_ = std::min(smoothBudget_, lastDrawn_ * aimMs / lastFrameMs_);
-    // And a frame that drew most of its budget caps the next one in proportion to its own time:
-    // the secant from the origin overestimates the per-triangle cost (it counts the fixed cost
-    // in), so this rises only as far as the last frame has shown there is room. The fitted model
-    // alone lets the budget rise into views that cost more per triangle (fill, overdraw) than
-    // the ones it was fitted on: those frames were the flythrough's over-budget ones.
-    else if (lastFrameMs_ > 0 && lastDrawn_ >= 0.5 * frameBudget_)
+    // Feedback whatever the model says: the last frame's triangles scaled by the aim over its
+    // time cap the budget (the secant from the origin, which overestimates the per-triangle cost:
+    // it counts the fixed cost in). Applied when the frame was over the aim (the machine may have
+    // slowed down faster than the fit can follow), and when it drew half its budget or more, so
+    // the budget rises only as far as a real frame has shown there is room: the fitted model
+    // alone let it rise into views dearer per triangle (fill, overdraw) than those it was fitted
+    // on, the flythrough's over-budget frames.
+    if (lastDrawn_ > 0 && lastFrameMs_ > 0 && (lastFrameMs_ > aimMs || lastDrawn_ >= 0.5 * frameBudget_))
       smoothBudget_ = std::min(smoothBudget_, lastDrawn_ * aimMs / lastFrameMs_);
     budget = std::max(smoothBudget_, 1000.0);
   }

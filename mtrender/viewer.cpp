@@ -201,6 +201,7 @@ int runViewer(const ViewerOptions& options) {
       if (fbw < 1 || fbh < 1) continue;
       last = engine.frame(pose, prev, gl, st.draw, fbw, fbh);
       if (!last.accumulating) lastImageFrames = 0;
+      else if (last.imageFrames) lastImageFrames = last.imageFrames;
       prev = pose;
       if (!options.statsPath.empty()) recs.push_back(last);
       ++frame;
@@ -234,7 +235,6 @@ int runViewer(const ViewerOptions& options) {
                     double(options.engine.cacheBytes) / 1048576.0, double(last.gpuBytes) / 1048576.0);
         ImGui::Text("loads %u   misses %u", last.loads, last.misses);
         ImGui::Text("screen error %.2f px   LOD scale %.2f", last.maxScreenError, last.lodScale);
-        if (last.imageFrames) lastImageFrames = last.imageFrames;
         if (last.accumulating)
           ImGui::Text("still view: refining, images of %u frame(s)", lastImageFrames);
         ImGui::Separator();
