@@ -73,7 +73,7 @@ class TempReader {
  public:
   // Reads the file from byte `offset`, at most `length` bytes (a slice of a sorted run).
   explicit TempReader(std::string path, size_t bufferBytes = 1 << 20, uint64_t offset = 0, uint64_t length = UINT64_MAX)
-      : path_(std::move(path)), left_(length) {
+      : path_(std::move(path)), offset_(offset), length_(length), left_(length) {
     file_ = std::fopen(path_.c_str(), "rb");
     if (!file_) fail(path_, std::string("cannot open scratch file: ") + std::strerror(errno));
     if (offset > 0 && fseeko(file_, off_t(offset), SEEK_SET) != 0) fail(path_, "cannot seek in scratch file");
@@ -127,10 +127,11 @@ class TempReader {
     return true;
   }
   // Back to the first byte (a second pass over the same file).
+  // Back to the start of the slice.
   void rewind() {
-    if (std::fseek(file_, 0, SEEK_SET) != 0) fail(path_, "cannot rewind scratch file");
+    if (fseeko(file_, off_t(offset_), SEEK_SET) != 0) fail(path_, "cannot rewind scratch file");
     pos_ = end_ = 0;
-    left_ = UINT64_MAX;
+    left_ = length_;
   }
   // Reads up to maxCount records into out (resized); returns false at end.
   template <class T>
@@ -147,7 +148,7 @@ class TempReader {
   FILE* file_ = nullptr;
   std::vector<char> buffer_;
   size_t pos_ = 0, end_ = 0;
-  uint64_t left_;
+  uint64_t offset_, length_, left_;  // the slice, and what of it is not read yet
 };
 
 }  // namespace mt
