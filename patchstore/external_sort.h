@@ -239,13 +239,23 @@ class RunMerger {
 template <class Record, class Less>
 class ExternalSorter {
  public:
-  ExternalSorter(std::string tempPrefix, uint64_t budgetBytes, Less less = Less())
-      : prefix_(std::move(tempPrefix)), less_(less) {
-    capacity_ = std::max<size_t>(1024, size_t(budgetBytes / sizeof(Record)));
+  // background: a full buffer is sorted and written by a TBB task while the next one fills (the
+  // budget then holds two buffers of half the size), so the producer is not held up for the
+  // length of a spill (StableKeySorter's option; measured on the chunked ingest path in ingest.cpp).
+  ExternalSorter(std::string tempPrefix, uint64_t budgetBytes, Less less = Less(), bool background = false)
+      : prefix_(std::move(tempPrefix)), less_(less), background_(background) {
+    capacity_ = std::max<size_t>(1024, size_t(budgetBytes / ((background ? 2 : 1) * sizeof(Record))));
   }
   ~ExternalSorter() { release(); }
+  ExternalSorter(const ExternalSorter&) = delete;
+  ExternalSorter& operator=(const ExternalSorter&) = delete;
 
   void release() {
+    try {
+      spillTask_.wait();
+    } catch (...) {  // already reported by finish(), or the sorter is being abandoned
+    }
+    std::vector<Record>().swap(spilling_);
     merger_.close();
     for (auto& path : runs_) std::remove(path.c_str());
     runs_.clear();
@@ -262,20 +272,22 @@ class ExternalSorter {
     ++count_;
   }
   uint64_t count() const { return count_; }
-  size_t runCount() const { return runs_.size(); }
 
   // Ends input; afterwards next() yields records in order. Equal records keep no particular
   // order, so callers make keys total when the result must be deterministic.
   void finish() {
+    spillTask_.wait();
     if (runs_.empty()) {
       tbb::parallel_sort(buffer_.begin(), buffer_.end(), less_);
       memoryPos_ = 0;
       return;
     }
     if (!buffer_.empty()) spill();
+    spillTask_.wait();
     std::vector<Record>().swap(buffer_);
+    std::vector<Record>().swap(spilling_);
     // Each run gets an equal share of the budget as its read buffer.
-    size_t perRun = std::max<size_t>(64 << 10, capacity_ * sizeof(Record) / (runs_.size() + 1));
+    size_t perRun = std::max<size_t>(64 << 10, capacity_ * (background_ ? 2 : 1) * sizeof(Record) / (runs_.size() + 1));
     merger_.open(runs_, perRun, less_);
   }
 
@@ -299,19 +311,33 @@ class ExternalSorter {
 
  private:
   void spill() {
-    tbb::parallel_sort(buffer_.begin(), buffer_.end(), less_);
+    if (!background_) {
+      writeRun(buffer_);
+      return;
+    }
+    spillTask_.wait();  // one spill at a time (rethrows its error)
+    std::swap(buffer_, spilling_);
+    buffer_.clear();
+    if (buffer_.capacity() < capacity_) buffer_.reserve(capacity_);
+    spillTask_.run([this] { writeRun(spilling_); });
+  }
+  // Sorts `records` and writes them as the next run (clears it).
+  void writeRun(std::vector<Record>& records) {
+    tbb::parallel_sort(records.begin(), records.end(), less_);
     std::string path = prefix_ + ".run" + std::to_string(runs_.size());
     TempWriter writer(path, 4 << 20);
-    writer.write(buffer_.data(), buffer_.size() * sizeof(Record));
+    writer.write(records.data(), records.size() * sizeof(Record));
     writer.close();
     runs_.push_back(path);
-    buffer_.clear();
+    records.clear();
   }
 
   std::string prefix_;
   Less less_;
+  bool background_;
   size_t capacity_;
-  std::vector<Record> buffer_;
+  std::vector<Record> buffer_, spilling_;
+  tbb::task_group spillTask_;
   size_t memoryPos_ = 0;
   uint64_t count_ = 0;
   std::vector<std::string> runs_;

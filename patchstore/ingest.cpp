@@ -657,7 +657,7 @@ uint64_t weldSoup(const std::string& scratch, const VertexRecordLayout& layout, 
   struct MapLess {
     bool operator()(const MapRec& a, const MapRec& b) const { return a.vertex < b.vertex; }
   };
-  ExternalSorter<PosRec, PosLess> byPosition(scratch + "/w1", budget / 2);
+  ExternalSorter<PosRec, PosLess> byPosition(scratch + "/w1", budget / 2, {}, true);
   {
     TempReader vr(scratch + "/vert.bin", 4 << 20);
     std::vector<char> rec(layout.size());
@@ -671,7 +671,7 @@ uint64_t weldSoup(const std::string& scratch, const VertexRecordLayout& layout, 
     }
   }
   byPosition.finish();
-  ExternalSorter<MapRec, MapLess> byVertex(scratch + "/w2", budget / 2);
+  ExternalSorter<MapRec, MapLess> byVertex(scratch + "/w2", budget / 2, {}, true);
   uint64_t welded = 0;
   {
     PosRec r, first{};
@@ -1774,7 +1774,7 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
     // assign stage then looks cells up in spatially coherent order (cache hits instead of random
     // reads of the seed tables). Deterministic: ties by face.
     {
-      ExternalSorter<MortonFace, MortonLess> byCode(scratch + "/s0", B / 4);
+      ExternalSorter<MortonFace, MortonLess> byCode(scratch + "/s0", B / 4, {}, true);
       computeCentroids(scratch, vlayout, nv, nf, B * 2 / 5, sink.bounds, byCode, opt.progress);
       std::remove((scratch + "/face.bin").c_str());
       endOfPass();
@@ -1799,7 +1799,7 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
     endOfPass();
     clock.mark("partition");
     // 3 assign, in Morton order; faces externally sorted by (cell key, face).
-    ExternalSorter<FaceRec, FaceLess> byCell(scratch + "/s1", B / 4);
+    ExternalSorter<FaceRec, FaceLess> byCell(scratch + "/s1", B / 4, {}, true);
     {
       Progress progress(opt.progress, "ingest: assign", nf);
       TempReader cr(scratch + "/morton.bin", 4 << 20);
@@ -1829,7 +1829,7 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
     byCell.finish();
     std::vector<uint64_t>& patchKey = patchStage.patchKey;
     std::vector<uint32_t> patchTris;
-    ExternalSorter<uint64_t, U64Less> pairs(scratch + "/s2", B / 4);
+    ExternalSorter<uint64_t, U64Less> pairs(scratch + "/s2", B / 4, {}, true);
     {
       TempWriter pface(scratch + "/pface.bin", 4 << 20);
       FaceRec f;
@@ -1869,7 +1869,7 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
     clock.mark("group");
     // 5 join pairs with vertex data
     pairs.finish();
-    ExternalSorter<VertexData<Full>, KeyLess<VertexData<Full>>> byPatch(scratch + "/s3", B / 4);
+    ExternalSorter<VertexData<Full>, KeyLess<VertexData<Full>>> byPatch(scratch + "/s3", B / 4, {}, true);
     {
       Progress progress(opt.progress, "ingest: vertices", nv, "vert");
       TempReader vr(scratch + "/vert.bin", 4 << 20);
