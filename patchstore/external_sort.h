@@ -20,6 +20,7 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <queue>
 #include <string>
@@ -236,149 +237,24 @@ class RunMerger {
   LoserTree<Better> tree_;
 };
 
-template <class Record, class Less>
-class ExternalSorter {
+// The input side of a sorter that writes every full buffer as a run (ExternalSorter,
+// StableKeySorter): records are buffered up to `capacity`; a full buffer goes to the sorter's
+// writeRun (which must clear it) in the caller's thread or, with `background`, in a TBB task
+// while the next buffer fills, one spill at a time (the budget then holds two buffers), so a
+// producer running in a pipeline is not held up for the length of a spill.
+template <class Record>
+class RunBuffer {
  public:
-  // background: a full buffer is sorted and written by a TBB task while the next one fills (the
-  // budget then holds two buffers of half the size), so the producer is not held up for the
-  // length of a spill (StableKeySorter's option; measured on the chunked ingest path in ingest.cpp).
-  ExternalSorter(std::string tempPrefix, uint64_t budgetBytes, Less less = Less(), bool background = false)
-      : prefix_(std::move(tempPrefix)), less_(less), background_(background) {
-    capacity_ = std::max<size_t>(1024, size_t(budgetBytes / ((background ? 2 : 1) * sizeof(Record))));
-  }
-  ~ExternalSorter() { release(); }
-  ExternalSorter(const ExternalSorter&) = delete;
-  ExternalSorter& operator=(const ExternalSorter&) = delete;
-
-  void release() {
-    try {
-      spillTask_.wait();
-    } catch (...) {  // already reported by finish(), or the sorter is being abandoned
-    }
-    std::vector<Record>().swap(spilling_);
-    merger_.close();
-    for (auto& path : runs_) std::remove(path.c_str());
-    runs_.clear();
-    std::vector<Record>().swap(buffer_);
-    memoryPos_ = 0;
-  }
+  using WriteRun = std::function<void(std::vector<Record>&)>;
+  RunBuffer(size_t capacity, bool background, WriteRun writeRun)
+      : capacity_(capacity), background_(background), writeRun_(std::move(writeRun)) {}
+  ~RunBuffer() { release(); }
+  RunBuffer(const RunBuffer&) = delete;
+  RunBuffer& operator=(const RunBuffer&) = delete;
 
   void add(const Record& r) {
-    // Reserve the whole budget at once: untouched pages cost no RSS, while growth by doubling
+    // Reserve the whole buffer at once: untouched pages cost no RSS, while growth by doubling
     // would briefly hold 1.5x the budget.
-    if (buffer_.capacity() < capacity_) buffer_.reserve(capacity_);
-    if (buffer_.size() == capacity_) spill();
-    buffer_.push_back(r);
-    ++count_;
-  }
-  uint64_t count() const { return count_; }
-
-  // Ends input; afterwards next() yields records in order. Equal records keep no particular
-  // order, so callers make keys total when the result must be deterministic.
-  void finish() {
-    spillTask_.wait();
-    if (runs_.empty()) {
-      tbb::parallel_sort(buffer_.begin(), buffer_.end(), less_);
-      memoryPos_ = 0;
-      return;
-    }
-    if (!buffer_.empty()) spill();
-    spillTask_.wait();
-    std::vector<Record>().swap(buffer_);
-    std::vector<Record>().swap(spilling_);
-    // Each run gets an equal share of the budget as its read buffer.
-    size_t perRun = std::max<size_t>(64 << 10, capacity_ * (background_ ? 2 : 1) * sizeof(Record) / (runs_.size() + 1));
-    merger_.open(runs_, perRun, less_);
-  }
-
-  // Once it returns false the sorter has released its memory and run files, so the next pass
-  // gets the budget (and the disk) back before the sorter object goes out of scope.
-  bool next(Record& out) {
-    if (runs_.empty()) {
-      if (memoryPos_ >= buffer_.size()) {
-        release();
-        return false;
-      }
-      out = buffer_[memoryPos_++];
-      return true;
-    }
-    if (!merger_.next(out)) {
-      release();
-      return false;
-    }
-    return true;
-  }
-
- private:
-  void spill() {
-    if (!background_) {
-      writeRun(buffer_);
-      return;
-    }
-    spillTask_.wait();  // one spill at a time (rethrows its error)
-    std::swap(buffer_, spilling_);
-    buffer_.clear();
-    if (buffer_.capacity() < capacity_) buffer_.reserve(capacity_);
-    spillTask_.run([this] { writeRun(spilling_); });
-  }
-  // Sorts `records` and writes them as the next run (clears it).
-  void writeRun(std::vector<Record>& records) {
-    tbb::parallel_sort(records.begin(), records.end(), less_);
-    std::string path = prefix_ + ".run" + std::to_string(runs_.size());
-    TempWriter writer(path, 4 << 20);
-    writer.write(records.data(), records.size() * sizeof(Record));
-    writer.close();
-    runs_.push_back(path);
-    records.clear();
-  }
-
-  std::string prefix_;
-  Less less_;
-  bool background_;
-  size_t capacity_;
-  std::vector<Record> buffer_, spilling_;
-  tbb::task_group spillTask_;
-  size_t memoryPos_ = 0;
-  uint64_t count_ = 0;
-  std::vector<std::string> runs_;
-  RunMerger<Record, Less> merger_;
-};
-
-// Stable external sort by a 64-bit key (see the top of the file). The budget holds the buffer
-// and the radix sort's second array.
-template <class Record, class KeyFn>
-class StableKeySorter {
- public:
-  // background: a full buffer is sorted and written by a TBB task while the next one fills (the
-  // budget then holds two buffers and the sort's second array), so a producer running in a
-  // pipeline is not held up for the length of a spill.
-  StableKeySorter(std::string tempPrefix, uint64_t budgetBytes, KeyFn key = KeyFn(), unsigned keyBits = 64,
-                  bool background = false)
-      : prefix_(std::move(tempPrefix)), key_(key), keyBits_(keyBits), background_(background) {
-    capacity_ = std::max<size_t>(1024, size_t(budgetBytes / ((background ? 3 : 2) * sizeof(Record))));
-  }
-  ~StableKeySorter() { release(); }
-  StableKeySorter(const StableKeySorter&) = delete;
-  StableKeySorter& operator=(const StableKeySorter&) = delete;
-
-  void release() {
-    try {
-      spillTask_.wait();
-    } catch (...) {  // already reported by finish(), or the sorter is being abandoned
-    }
-    std::vector<Record>().swap(spilling_);
-    merger_.close();
-    for (auto& path : runs_) std::remove(path.c_str());
-    runs_.clear();
-    runLength_.clear();
-    samples_.clear();
-    std::vector<Record>().swap(buffer_);
-    std::vector<Record>().swap(tmp_);
-    sorted_ = nullptr;
-    memoryPos_ = memoryEnd_ = 0;
-  }
-
-  void add(const Record& r) {
     if (buffer_.capacity() < capacity_) buffer_.reserve(capacity_);
     if (buffer_.size() == capacity_) spill();
     buffer_.push_back(r);
@@ -396,20 +272,166 @@ class StableKeySorter {
     }
   }
   uint64_t count() const { return count_; }
-  size_t runCount() const { return runs_.size(); }
+  size_t capacity() const { return capacity_; }
+  // The records not spilled: all of them when spilled() is false (call wait() first).
+  std::vector<Record>& records() { return buffer_; }
+  // Waits for the spill in flight; rethrows its error.
+  void wait() { task_.wait(); }
+  // Ends input of a sorter that has spilled: the rest becomes the last run; buffers freed.
+  void spillRest() {
+    if (!buffer_.empty()) spill();
+    task_.wait();
+    std::vector<Record>().swap(buffer_);
+    std::vector<Record>().swap(spilling_);
+  }
+  void release() {
+    try {
+      task_.wait();
+    } catch (...) {  // already reported by wait() or spillRest(), or the sorter is being abandoned
+    }
+    std::vector<Record>().swap(buffer_);
+    std::vector<Record>().swap(spilling_);
+  }
+
+ private:
+  void spill() {
+    if (!background_) {
+      writeRun_(buffer_);
+      return;
+    }
+    task_.wait();  // one spill at a time (rethrows its error)
+    std::swap(buffer_, spilling_);
+    buffer_.clear();
+    if (buffer_.capacity() < capacity_) buffer_.reserve(capacity_);
+    task_.run([this] { writeRun_(spilling_); });
+  }
+
+  size_t capacity_;
+  bool background_;
+  WriteRun writeRun_;
+  std::vector<Record> buffer_, spilling_;
+  uint64_t count_ = 0;
+  tbb::task_group task_;
+};
+
+template <class Record, class Less>
+class ExternalSorter {
+ public:
+  // background: see RunBuffer (measured on the chunked ingest path, ingest.cpp).
+  ExternalSorter(std::string tempPrefix, uint64_t budgetBytes, Less less = Less(), bool background = false)
+      : prefix_(std::move(tempPrefix)), less_(less),
+        budgetBytes_(budgetBytes),
+        input_(std::max<size_t>(1024, size_t(budgetBytes / ((background ? 2 : 1) * sizeof(Record)))), background,
+               [this](std::vector<Record>& records) { writeRun(records); }) {}
+  ~ExternalSorter() { release(); }
+  ExternalSorter(const ExternalSorter&) = delete;
+  ExternalSorter& operator=(const ExternalSorter&) = delete;
+
+  void release() {
+    input_.release();
+    merger_.close();
+    for (auto& path : runs_) std::remove(path.c_str());
+    runs_.clear();
+    memoryPos_ = 0;
+  }
+
+  void add(const Record& r) { input_.add(r); }
+  uint64_t count() const { return input_.count(); }
+
+  // Ends input; afterwards next() yields records in order. Equal records keep no particular
+  // order, so callers make keys total when the result must be deterministic.
+  void finish() {
+    input_.wait();
+    if (runs_.empty()) {
+      tbb::parallel_sort(input_.records().begin(), input_.records().end(), less_);
+      memoryPos_ = 0;
+      return;
+    }
+    input_.spillRest();
+    // Each run gets an equal share of the budget as its read buffer.
+    size_t perRun = std::max<size_t>(64 << 10, budgetBytes_ / (runs_.size() + 1));
+    merger_.open(runs_, perRun, less_);
+  }
+
+  // Once it returns false the sorter has released its memory and run files, so the next pass
+  // gets the budget (and the disk) back before the sorter object goes out of scope.
+  bool next(Record& out) {
+    if (runs_.empty()) {
+      if (memoryPos_ >= input_.records().size()) {
+        release();
+        return false;
+      }
+      out = input_.records()[memoryPos_++];
+      return true;
+    }
+    if (!merger_.next(out)) {
+      release();
+      return false;
+    }
+    return true;
+  }
+
+ private:
+  // Sorts `records` and writes them as the next run (clears it).
+  void writeRun(std::vector<Record>& records) {
+    tbb::parallel_sort(records.begin(), records.end(), less_);
+    std::string path = prefix_ + ".run" + std::to_string(runs_.size());
+    TempWriter writer(path, 4 << 20);
+    writer.write(records.data(), records.size() * sizeof(Record));
+    writer.close();
+    runs_.push_back(path);
+    records.clear();
+  }
+
+  std::string prefix_;
+  Less less_;
+  uint64_t budgetBytes_;
+  std::vector<std::string> runs_;
+  size_t memoryPos_ = 0;
+  RunMerger<Record, Less> merger_;
+  RunBuffer<Record> input_;  // last: its spill task uses the members above
+};
+
+// Stable external sort by a 64-bit key (see the top of the file). The budget holds the buffer
+// and the radix sort's second array.
+template <class Record, class KeyFn>
+class StableKeySorter {
+ public:
+  // background: see RunBuffer (the budget then holds two buffers and the sort's second array).
+  StableKeySorter(std::string tempPrefix, uint64_t budgetBytes, KeyFn key = KeyFn(), unsigned keyBits = 64,
+                  bool background = false)
+      : prefix_(std::move(tempPrefix)), key_(key), keyBits_(keyBits),
+        capacity_(std::max<size_t>(1024, size_t(budgetBytes / ((background ? 3 : 2) * sizeof(Record))))),
+        input_(capacity_, background, [this](std::vector<Record>& records) { writeRun(records); }) {}
+  ~StableKeySorter() { release(); }
+  StableKeySorter(const StableKeySorter&) = delete;
+  StableKeySorter& operator=(const StableKeySorter&) = delete;
+
+  void release() {
+    input_.release();
+    merger_.close();
+    for (auto& path : runs_) std::remove(path.c_str());
+    runs_.clear();
+    runLength_.clear();
+    samples_.clear();
+    std::vector<Record>().swap(tmp_);
+    sorted_ = nullptr;
+    memoryPos_ = memoryEnd_ = 0;
+  }
+
+  void add(const Record& r) { input_.add(r); }
+  void addBatch(const Record* r, size_t n) { input_.addBatch(r, n); }
+  uint64_t count() const { return input_.count(); }
 
   void finish() {
-    spillTask_.wait();
+    input_.wait();
     if (runs_.empty()) {
       sorted_ = sortBuffer();
       memoryPos_ = 0;
-      memoryEnd_ = buffer_.size();
+      memoryEnd_ = input_.records().size();
       return;
     }
-    if (!buffer_.empty()) spill();
-    spillTask_.wait();
-    std::vector<Record>().swap(buffer_);
-    std::vector<Record>().swap(spilling_);
+    input_.spillRest();
     std::vector<Record>().swap(tmp_);
     size_t perRun = std::max<size_t>(64 << 10, capacity_ * 2 * sizeof(Record) / (runs_.size() + 1));
     merger_.open(runs_, std::min<size_t>(perRun, 4 << 20), Less{key_});
@@ -499,19 +521,9 @@ class StableKeySorter {
     bool operator()(const Record& a, const Record& b) const { return key(a) < key(b); }
   };
   const Record* sortBuffer() {
-    tmp_.resize(buffer_.size());
-    return radixSort(buffer_.data(), tmp_.data(), buffer_.size(), key_, keyBits_);
-  }
-  void spill() {
-    if (!background_) {
-      writeRun(buffer_);
-      return;
-    }
-    spillTask_.wait();  // one spill at a time (rethrows its error)
-    std::swap(buffer_, spilling_);
-    buffer_.clear();
-    if (buffer_.capacity() < capacity_) buffer_.reserve(capacity_);
-    spillTask_.run([this] { writeRun(spilling_); });
+    std::vector<Record>& records = input_.records();
+    tmp_.resize(records.size());
+    return radixSort(records.data(), tmp_.data(), records.size(), key_, keyBits_);
   }
   // Sorts `records` and writes them as the next run (clears it).
   void writeRun(std::vector<Record>& records) {
@@ -531,17 +543,15 @@ class StableKeySorter {
   std::string prefix_;
   KeyFn key_;
   unsigned keyBits_;
-  bool background_;
   size_t capacity_;
-  std::vector<Record> buffer_, spilling_, tmp_;
-  tbb::task_group spillTask_;
+  std::vector<Record> tmp_;
   const Record* sorted_ = nullptr;
   size_t memoryPos_ = 0, memoryEnd_ = 0;
-  uint64_t count_ = 0;
   std::vector<std::string> runs_;
   std::vector<uint64_t> runLength_;            // records per run
   std::vector<std::vector<uint64_t>> samples_;  // every 4096th key of each run
   RunMerger<Record, Less> merger_;
+  RunBuffer<Record> input_;  // last: its spill task uses the members above
 };
 
 // Records grouped by a 64-bit key (see the top of the file). A run is written as, per key in
@@ -596,7 +606,6 @@ class KeyGroupSorter {
     }
   }
   uint64_t count() const { return count_; }
-  size_t runCount() const { return runs_.size(); }
 
   void finish() {
     spillTask_.wait();
