@@ -323,15 +323,19 @@ std::string BuildReport::toJson() const {
 
 // ---- The per-region work ----------------------------------------------------------------------
 
+// Whether the live patches after `level` levels came out of simplification (level 0: the
+// ingest's patches, in the scan's own order), which decides their triangle order in the file
+// (PatchCodecOptions::simplified).
+static bool isSimplifiedOutput(uint32_t level) { return level >= 1; }
+
 RegionResult processRegion(const RegionTask& task, const RegionContext& ctx) {
   auto start = Clock::now();
   RegionResult out;
   const LoadedMesh& lm = task.mesh;
   const uint32_t L = ctx.partitionLevels;
   // The floor patches become the payloads of the arcs into this region's node.
-  // Above level 1 the floor patches are the previous level's simplified output.
   PatchCodecOptions codec = ctx.codec;
-  codec.simplified = task.level >= 2;
+  codec.simplified = isSimplifiedOutput(task.level - 1);
   out.encoded = encodePatches(floorPatches(lm), ctx.grid, codec);
   // Simplify to about half with the region's border locked (BMT 4), split by V*(level).
   SimplifyRegionOptions so;
@@ -879,7 +883,7 @@ BuildReport LevelBuilder::finish() {
     std::vector<Patch> top;
     for (PatchId id : ids) top.push_back(s.store->patch(id));
     PatchCodecOptions codec = s.ctx.codec;
-    codec.simplified = level >= 1;  // the last level's output
+    codec.simplified = isSimplifiedOutput(level);
     std::vector<EncodedPatch> encoded = encodePatches(top, s.ctx.grid, codec);
     for (const EncodedPatch& e : encoded) {
       uint32_t mtPatch = s.writer->appendPatch(e.payload.data(), e.payload.size(), e.triangles, e.vertices);
