@@ -95,7 +95,10 @@ int main(int argc, char** argv) {
   std::string cameraPath, statsPath, screenshotDir, plotDir, cacheText = "256M", gpuCacheText, colorMode = "shaded";
   std::string screenshotPath, recordPath = "mtrender-path.txt";
   int frames = 0, width = 1280, height = 720, screenshotEvery = 1, maxFrames = 0;
-  double budgetMs = 50, tolerance = 1, readDelayMs = 0, extractMs = 0;
+  // The engine's own defaults, shown by --help (capture_default_str).
+  const EngineOptions engineDefaults;
+  double budgetMs = engineDefaults.extract.budgetMs, tolerance = engineDefaults.extract.pixelTolerance;
+  double readDelayMs = 0, extractMs = 0;
   uint64_t fixedTriangles = 0;
   uint32_t loadBudget = 0;
   app.add_option("files", files, "MT files to show together (they share one cache and one budget)")->required();
@@ -104,27 +107,28 @@ int main(int argc, char** argv) {
                  "camera path: a path file (docs/mtrender.md) or a built-in: orbit, flythrough, fixed "
                  "(headless default: fixed; in the viewer the path is replayed)");
   app.add_option("--frames", frames, "frames to render (headless; default: the path's length, or 100)");
-  app.add_option("--budget-ms", budgetMs, "frame-time budget in ms (default 50)");
+  app.add_option("--budget-ms", budgetMs, "frame-time budget in ms")->capture_default_str();
   app.add_option("--cache", cacheText, "RAM patch cache cap, e.g. 64M, 1G (default 256M)");
   app.add_option("--gpu-cache", gpuCacheText, "GPU buffer cache cap (default: same as --cache)");
-  app.add_option("--width", width, "image width (default 1280)");
-  app.add_option("--height", height, "image height (default 720)");
+  app.add_option("--width", width, "image width")->capture_default_str();
+  app.add_option("--height", height, "image height")->capture_default_str();
   app.add_option("--stats", statsPath, "write one CSV row per frame (columns in docs/mtrender.md)");
   app.add_option("--screenshots", screenshotDir, "headless: write frame_NNNNN.png into this directory");
-  app.add_option("--screenshot-every", screenshotEvery, "headless: a screenshot every K frames (default 1)");
+  app.add_option("--screenshot-every", screenshotEvery, "headless: a screenshot every K frames")->capture_default_str();
   app.add_option("--plot", plotDir, "write PNG charts of the per-frame series with gnuplot into this directory");
   app.add_flag("--baseline-mmap", baseline,
                "baseline: map the files and render the same kind of cut with no RAM cache, no PatchServer "
                "thread and no prefetch (patches decoded inside the frame)");
-  app.add_option("--tolerance", tolerance, "target screen-space error in pixels (default 1)");
+  app.add_option("--tolerance", tolerance, "target screen-space error in pixels")->capture_default_str();
   app.add_option("--fixed-triangles", fixedTriangles, "a fixed render budget (triangles per frame) instead of the time model");
   app.add_option("--extract-ms", extractMs, "deadline of the cut update per frame (default min(2, budget/20))");
   app.add_option("--load-budget", loadBudget, "patches requested per frame (default: from the measured load time)");
-  uint32_t stillFrames = 16;
+  uint32_t stillFrames = engineDefaults.stillFrames;
   app.add_option("--still-frames", stillFrames,
                  "progressive refinement of a still view: once the camera stops, a finer cut is drawn over up to "
-                 "this many frames (each within --budget-ms) and shown when complete; 1 turns it off (default 16)")
-      ->check(CLI::Range(1u, 64u));
+                 "this many frames (each within --budget-ms) and shown when complete; 1 turns it off")
+      ->check(CLI::Range(1u, 64u))
+      ->capture_default_str();
   app.add_flag("--no-prefetch", noPrefetch, "no prefetching");
   app.add_flag("--no-cull", noCull, "no frustum / normal-cone culling");
   app.add_option("--color", colorMode, "shaded, patch or lod colours (default shaded)");
