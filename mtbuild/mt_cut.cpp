@@ -617,10 +617,10 @@ struct PlanItem {
   uint32_t position;
 };
 
-// Splits `box` (holding the items' centres) at weighted medians along the longest side of the
-// centres' extent until each part's estimated distinct edges fit `planEdges`; parts in k-d order.
-void planSpatialParts(const GridBox& box, PlanItem* begin, PlanItem* end, double edgesPerTriangle, double planEdges,
-                      std::vector<EdgePart>& parts) {
+// Splits `box` (holding the items' centres) into `leaves` parts along the longest side of the
+// centres' extent, each cut at the weight (triangles) that gives both sides their share of the
+// leaves, so the parts come out about equal and no more than needed; parts in k-d order.
+void planSpatialParts(const GridBox& box, PlanItem* begin, PlanItem* end, uint64_t leaves, std::vector<EdgePart>& parts) {
   uint64_t weight = 0;
   GridBox extent;
   for (PlanItem* p = begin; p != end; ++p) {
@@ -631,23 +631,25 @@ void planSpatialParts(const GridBox& box, PlanItem* begin, PlanItem* end, double
   int axis = 0;
   for (int k = 1; k < 3; ++k)
     if (uint64_t(extent.hi[k]) - extent.lo[k] > uint64_t(extent.hi[axis]) - extent.lo[axis]) axis = k;
-  if (end - begin <= 1 || double(weight) * edgesPerTriangle <= planEdges || extent.hi[axis] == extent.lo[axis]) {
-    parts.push_back({box});  // small enough, or one point: an overflow will split it by hash
+  if (leaves <= 1 || end - begin <= 1 || extent.hi[axis] == extent.lo[axis]) {
+    parts.push_back({box});  // one part, or all centres at one point: an overflow will split it
     return;
   }
   std::sort(begin, end, [&](const PlanItem& a, const PlanItem& b) {
     return a.centre[axis] != b.centre[axis] ? a.centre[axis] < b.centre[axis] : a.position < b.position;
   });
-  PlanItem* median = begin;
-  for (uint64_t before = 0; median + 1 < end && 2 * (before + median->triangles) < weight; ++median) before += median->triangles;
+  const uint64_t leftLeaves = leaves / 2;
+  const double leftWeight = double(weight) * double(leftLeaves) / double(leaves);
+  PlanItem* at = begin;
+  for (uint64_t before = 0; at + 1 < end && double(before + at->triangles) < leftWeight; ++at) before += at->triangles;
   // Centres below `splitAt` go left. At least the smallest centre goes left and the largest right.
-  const uint32_t splitAt = std::max(median->centre[axis], begin->centre[axis] + 1);
+  const uint32_t splitAt = std::max(at->centre[axis], begin->centre[axis] + 1);
   PlanItem* split = std::partition_point(begin, end, [&](const PlanItem& p) { return p.centre[axis] < splitAt; });
   GridBox left = box, right = box;
   left.hi[axis] = splitAt - 1;
   right.lo[axis] = splitAt;
-  planSpatialParts(left, begin, split, edgesPerTriangle, planEdges, parts);
-  planSpatialParts(right, split, end, edgesPerTriangle, planEdges, parts);
+  planSpatialParts(left, begin, split, leftLeaves, parts);
+  planSpatialParts(right, split, end, leaves - leftLeaves, parts);
 }
 
 // Counts the cut's edges part by part in one table of at most tableBytes; after each part has
@@ -700,7 +702,8 @@ EdgeCountStats countCutEdges(const MtFileReader& r, const std::vector<uint32_t>&
       for (int k = 0; k < 3; ++k) p.centre[k] = uint32_t(b.lo[k] + (uint64_t(b.hi[k]) - b.lo[k]) / 2);
       items.push_back(p);
     }
-    planSpatialParts(GridBox::everything(), items.data(), items.data() + items.size(), o.edgesPerTriangle, planEdges, parts);
+    planSpatialParts(GridBox::everything(), items.data(), items.data() + items.size(),
+                     uint64_t(std::ceil(estimate / planEdges)), parts);
   } else {
     const uint64_t n = uint64_t(std::ceil(estimate / planEdges));
     const uint64_t width = UINT64_MAX / n;

@@ -185,8 +185,9 @@ ConformityReport checkConforming(const WeldedMesh& cut, const ConformityReferenc
 // patch order; an edge is the unordered pair of its endpoints' q) are counted in one in-memory
 // hash table per PART, a part being the edges whose smaller endpoint (lexicographic q) lies in a
 // box of the grid and whose hash lies in a range. The parts are planned so that each fits the
-// table: a k-d split of the grid at weighted medians of the patches' box centres (patch triangle
-// counts from the index, edgesPerTriangle distinct edges each). A part's pass decodes, in parallel,
+// table: a k-d split of the grid at weighted quantiles of the patches' box centres into as many
+// parts as the estimate needs (patch triangle counts from the index, edgesPerTriangle distinct
+// edges each). A part's pass decodes, in parallel,
 // only the patches whose grid box meets the part's box, so a cut costs about one decode of its
 // patches however many parts it has. A part that holds more distinct edges than the table allows
 // (the estimate was low: many non-manifold edges, a triangle soup) is split in two (its box at
