@@ -30,8 +30,12 @@
 // non-manifold edges (2). It stays true for any simplifier that keeps the input's boundary on the
 // input's boundary vertices (half-edge collapse, as simplify_region.h does), and it does not
 // depend on how many edges simplification left along a hole. Edge counts are reported too
-// (EdgeReport) for information. Cost: the finest cut is the whole input, so building the
-// reference holds it in memory (about 60 bytes per input triangle while it is welded).
+// (EdgeReport) for information.
+//
+// Cost: the finest cut is the whole input. checkConforming(WeldedMesh) and
+// makeConformityReference(WeldedMesh) need the cut assembled (about 60 bytes per triangle); the
+// overloads taking a reader and the cut's arcs (section "Conformity in bounded memory") decide
+// exactly the same from the patches, in parts that fit a memory budget, for any file size.
 #pragma once
 
 #include <array>
@@ -172,6 +176,79 @@ struct ConformityReport {
 // `reader` (optional) only adds node ids to firstProblem.
 ConformityReport checkConforming(const WeldedMesh& cut, const ConformityReference& reference,
                                  const MtFileReader* reader = nullptr);
+
+// ---- Conformity in bounded memory -----------------------------------------------------------
+//
+// The same reference and the same report as above (equal EdgeReport and violation counts; the
+// firstProblem may name another violating edge), computed from the cut's arcs without assembling
+// it. The cut's edge uses (per non-degenerate triangle of every patch on the arcs, in assembleCut's
+// patch order; an edge is the unordered pair of its endpoints' q) are counted in one in-memory
+// hash table per PART, a part being the edges whose smaller endpoint (lexicographic q) lies in a
+// box of the grid and whose hash lies in a range. The parts are planned so that each fits the
+// table: a k-d split of the grid at weighted quantiles of the patches' box centres into as many
+// parts as the estimate needs (patch triangle counts from the index, edgesPerTriangle distinct
+// edges each). A part's pass decodes, in parallel,
+// only the patches whose grid box meets the part's box, so a cut costs about one decode of its
+// patches however many parts it has. A part that holds more distinct edges than the table allows
+// (the estimate was low: many non-manifold edges, a triangle soup) is split in two (its box at
+// the middle of the longest side of its patches' extent inside it, or its hash range when that
+// extent is one grid point) and counted again. Everything depends only on the file, the arcs and the options, never on thread timing:
+// the counts are sums, the problem reported is the violating edge with the smallest key (its
+// lowest patch id).
+//
+// Memory: the table takes at most EdgeCountOptions::memoryBytes minus the reference's vertex
+// lists (while the reference is being built, a quarter of the budget is kept for the lists; the
+// lists must fit in it, else mt::Error says so). Slots are 32 bytes, filled to at most 3/4, at
+// least 4096 of them; a cut that fits one part gets a table for its estimate only. Besides the budget: up to ~60 bytes
+// per patch of the cut (ids, grid boxes, the plan), one decoded patch per thread, and the file's
+// own arrays. Time: about one decode of the cut's patches plus one hash-table access per distinct
+// edge of each patch (a patch's uses of an edge are added up before the table sees them).
+
+// A box of the grid, inclusive; empty (lo > hi) for a patch without vertices.
+struct GridBox {
+  std::array<uint32_t, 3> lo = {UINT32_MAX, UINT32_MAX, UINT32_MAX};
+  std::array<uint32_t, 3> hi = {0, 0, 0};
+  bool empty() const { return lo[0] > hi[0]; }
+  // What a damaged patch should be given: it then meets every part and is read (and throws), as
+  // assembleCut would.
+  static GridBox everything() { return {{0, 0, 0}, {UINT32_MAX, UINT32_MAX, UINT32_MAX}}; }
+};
+GridBox patchBox(const DecodedPatch& patch);
+
+struct EdgeCountOptions {
+  uint64_t memoryBytes = uint64_t(1) << 30;  // table + reference lists (mtverify --memory)
+  // Optional grid boxes of the file's patches, indexed by patch id (mtverify gathers them while
+  // checkAllPatches decodes everything anyway). Without them a cut that needs more than one part
+  // costs one extra decode pass to compute them.
+  const std::vector<GridBox>* patchBoxes = nullptr;
+  // Distinct edges per triangle assumed when planning (a closed manifold mesh has 1.5). Lower
+  // values only cost passes (parts overflow and are split); tests lower it to exercise splitting.
+  double edgesPerTriangle = 1.5;
+  // false: parts are hash ranges only (every pass decodes every patch of the cut); for tests.
+  bool spatialParts = true;
+};
+
+struct EdgeCountStats {
+  uint64_t triangles = 0;      // triangles of the cut's patches, from the index
+  uint32_t parts = 0;          // parts counted
+  uint32_t splitParts = 0;     // parts that overflowed the table and were split (a pass wasted)
+  uint64_t patchReads = 0;     // patch decodes over all passes (the cut has stats.patches)
+  uint64_t patches = 0;        // patches on the cut's arcs
+  uint64_t tableBytes = 0;     // the hash table's size
+  double seconds = 0;
+};
+
+// The reference from the finest cut's arcs (any arcs, in fact): equal to
+// makeConformityReference(assembleCut(reader, arcs)). A damaged patch throws its readPatch error.
+ConformityReference makeConformityReference(const MtFileReader& reader, const std::vector<uint32_t>& arcs,
+                                            const EdgeCountOptions& options = {}, EdgeCountStats* stats = nullptr);
+// Equal to checkConforming(assembleCut(reader, arcs), reference, &reader) up to which violating
+// edge firstProblem names. A damaged patch throws its readPatch error.
+ConformityReport checkConforming(const MtFileReader& reader, const std::vector<uint32_t>& arcs,
+                                 const ConformityReference& reference, const EdgeCountOptions& options = {},
+                                 EdgeCountStats* stats = nullptr);
+// The bytes the reference's vertex lists hold (what the table cannot have).
+uint64_t referenceBytes(const ConformityReference& reference);
 
 // ---- Payload check --------------------------------------------------------------------------
 

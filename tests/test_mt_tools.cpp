@@ -484,6 +484,45 @@ TEST(MtCut, CrackTestDetectsAMovedBorderVertexAndAMissingPatch) {
   EXPECT_NE(rep.firstProblem.find("non-manifold"), std::string::npos) << rep.firstProblem;
 }
 
+// The bounded-memory check (mt_cut.h "Conformity in bounded memory") on a broken file, with a
+// budget that splits the 8192-triangle finest cut into several parts: on each of the 17 valid
+// node sets, the same reference and counts as the in-memory check; the moved vertex is found.
+TEST(MtCut, BoundedCheckFindsTheMovedBorderVertexLikeTheInMemoryOne) {
+  TempDir dir;
+  writeTestMt(dir.file("moved.mt"), {0, false, false, true});
+  auto r = MtFileReader::open(dir.file("moved.mt"));
+  const std::vector<uint32_t> finest = cutArcs(*r, finestCut(*r).inSet);
+  const ConformityReference ref = makeConformityReference(assembleCut(*r, finest));
+  EdgeCountOptions o;
+  o.memoryBytes = 256 << 10;
+  EdgeCountStats st;
+  const ConformityReference bounded = makeConformityReference(*r, finest, o, &st);
+  EXPECT_GT(st.parts, 1u);
+  EXPECT_TRUE(bounded.boundaryVertices == ref.boundaryVertices);
+  EXPECT_TRUE(bounded.nonManifoldVertices == ref.nonManifoldVertices);
+  EXPECT_EQ(bounded.edges.edges, ref.edges.edges);
+  uint32_t cracked = 0;
+  for (uint32_t mask = 0; mask <= 16; ++mask) {
+    std::vector<uint8_t> in(7, 0);
+    in[0] = 1;
+    for (int k = 0; k < 4; ++k) in[1 + k] = mask == 16 || (mask >> k & 1);
+    in[5] = mask == 16;
+    const ConformityReport a = checkConforming(assembleCut(*r, cutArcs(*r, in)), ref, r.get());
+    const ConformityReport b = checkConforming(*r, cutArcs(*r, in), bounded, o);
+    EXPECT_EQ(b.edges.edges, a.edges.edges) << mask;
+    EXPECT_EQ(b.edges.boundaryEdges, a.edges.boundaryEdges) << mask;
+    EXPECT_EQ(b.edges.nonManifoldEdges, a.edges.nonManifoldEdges) << mask;
+    EXPECT_EQ(b.newBoundaryEdges, a.newBoundaryEdges) << mask;
+    EXPECT_EQ(b.newNonManifoldEdges, a.newNonManifoldEdges) << mask;
+    if (!b.conforming()) {
+      ++cracked;
+      EXPECT_NE(b.firstProblem.find("is not on the input's boundary"), std::string::npos) << b.firstProblem;
+      EXPECT_NE(b.firstProblem.find(" (node "), std::string::npos) << b.firstProblem;
+    }
+  }
+  EXPECT_GT(cracked, 0u) << "group 0 coarse next to group 1 at full resolution opens the moved vertex";
+}
+
 TEST(MtCut, ViewDependentRefinesNearTheEye) {
   TempDir dir;
   writeTestMt(dir.file("a.mt"), {});
@@ -641,10 +680,30 @@ TEST(MtVerify, MovedBorderVertexIsACrack) {
   EXPECT_NE(res.output.find("nested spheres   ok"), std::string::npos) << res.output;
 }
 
+// --memory changes how the crack check splits its work, never what it reports: a budget small
+// enough for several parts per cut gives the very same output, on a good and on a broken file.
+TEST(MtVerify, MemoryBudgetDoesNotChangeTheOutput) {
+  TempDir dir;
+  const std::string good = dir.file("good.mt"), moved = dir.file("moved.mt");
+  writeTestMt(good, {3, false});
+  writeTestMt(moved, {0, false, false, true});
+  for (const std::string& mt : {good, moved}) {
+    auto big = runTool("mtverify", mt + " --cuts 40 --seed 3");
+    auto small = runTool("mtverify", mt + " --cuts 40 --seed 3 --memory 256K");
+    EXPECT_EQ(big.exitCode, mt == good ? 0 : 1) << big.output;
+    EXPECT_EQ(small.exitCode, big.exitCode) << small.output;
+    EXPECT_EQ(small.output, big.output);
+  }
+  auto bad = runTool("mtverify", good + " --memory 12Q");
+  EXPECT_EQ(bad.exitCode, 1);
+  EXPECT_NE(bad.output.find("invalid size unit in '12Q'"), std::string::npos) << bad.output;
+}
+
 TEST(MtVerify, HelpAndBadArguments) {
   auto help = runTool("mtverify", "--help");
   EXPECT_EQ(help.exitCode, 0);
-  for (const char* s : {"--cuts", "--seed", "crack"}) EXPECT_NE(help.output.find(s), std::string::npos) << s;
+  for (const char* s : {"--cuts", "--seed", "--memory", "crack"}) EXPECT_NE(help.output.find(s), std::string::npos) << s;
+  EXPECT_EQ(help.output.find("60 bytes"), std::string::npos) << "cuts are no longer held whole";
   EXPECT_EQ(runTool("mtverify", "").exitCode, 1);
   EXPECT_EQ(runTool("mtverify", "/nonexistent.mt").exitCode, 1);
   auto info = runTool("mtinfo", "--help");

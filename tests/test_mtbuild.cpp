@@ -99,44 +99,6 @@ struct VerifyCase {
   const char* build;
 };
 
-std::string nonManifoldMesh(const TempDir& tmp) {
-  // Two wavy grids crossing along a shared row of vertices: the edges of that row are used by
-  // four triangles (non-manifold in the input, which cuts must keep, not crack).
-  std::string ply;
-  const int n = 60;
-  std::vector<std::array<double, 3>> v;
-  std::vector<std::array<int, 3>> f;
-  for (int sheet = 0; sheet < 2; ++sheet)
-    for (int i = 0; i <= n; ++i)
-      for (int j = 0; j <= n; ++j) {
-        double x = double(i) / n - 0.5, t = double(j) / n - 0.5, w = 0.02 * std::sin(9 * x) * std::cos(7 * t);
-        if (j == n / 2) w = 0;
-        v.push_back(sheet == 0 ? std::array<double, 3>{x, t, w} : std::array<double, 3>{x, w, t});
-      }
-  auto id = [&](int sheet, int i, int j) {
-    if (sheet == 1 && j == n / 2) return i * (n + 1) + n / 2;  // the shared row: sheet 0's vertices
-    return sheet * (n + 1) * (n + 1) + i * (n + 1) + j;
-  };
-  for (int sheet = 0; sheet < 2; ++sheet)
-    for (int i = 0; i < n; ++i)
-      for (int j = 0; j < n; ++j) {
-        f.push_back({id(sheet, i, j), id(sheet, i + 1, j), id(sheet, i + 1, j + 1)});
-        f.push_back({id(sheet, i, j), id(sheet, i + 1, j + 1), id(sheet, i, j + 1)});
-      }
-  ply = "ply\nformat ascii 1.0\nelement vertex " + std::to_string(v.size()) +
-        "\nproperty double x\nproperty double y\nproperty double z\nelement face " + std::to_string(f.size()) +
-        "\nproperty list uchar int vertex_indices\nend_header\n";
-  char buf[128];
-  for (auto& p : v) {
-    std::snprintf(buf, sizeof buf, "%.17g %.17g %.17g\n", p[0], p[1], p[2]);
-    ply += buf;
-  }
-  for (auto& t : f) ply += "3 " + std::to_string(t[0]) + " " + std::to_string(t[1]) + " " + std::to_string(t[2]) + "\n";
-  std::string path = tmp.file("nonmanifold.ply");
-  writeFile(path, ply);
-  return path;
-}
-
 TEST(Mtbuild, CutsAreCrackFreeOnClosedHoledMultiComponentAndNonManifoldMeshes) {
   std::vector<VerifyCase> cases = {
       {"closed", "--triangles 50k --seed 11", "--patch-triangles 400"},
@@ -147,7 +109,7 @@ TEST(Mtbuild, CutsAreCrackFreeOnClosedHoledMultiComponentAndNonManifoldMeshes) {
   };
   for (const VerifyCase& c : cases) {
     TempDir tmp;
-    std::string in = *c.mtgen ? makeScan(tmp, "in.ply", c.mtgen) : nonManifoldMesh(tmp);
+    std::string in = *c.mtgen ? makeScan(tmp, "in.ply", c.mtgen) : writeNonManifoldPly(tmp);
     build(in, tmp.file("c.mt"), c.build);
     CommandResult v = runTool("mtverify", tmp.file("c.mt") + " --cuts 12");
     EXPECT_EQ(v.exitCode, 0) << c.name << "\n" << v.output;

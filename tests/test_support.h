@@ -31,4 +31,9 @@ std::string readFile(const std::string& path);
 void writeFile(const std::string& path, const std::string& bytes);
 bool fileExists(const std::string& path);
 
+// An ascii PLY (dir/nonmanifold.ply, returned) of two wavy 60 x 60 grids crossing along a shared
+// row of vertices: the edges of that row are used by four triangles (non-manifold in the input,
+// which cuts must keep, not crack). 14400 triangles.
+std::string writeNonManifoldPly(const TempDir& dir);
+
 }  // namespace mt::test

@@ -1,5 +1,5 @@
 // mtverify: check the invariants an MT file promises (BRIEF "Invariants", issue 4 item 5).
-//   mtverify OUT.mt [--cuts K] [--seed S]
+//   mtverify OUT.mt [--cuts K] [--seed S] [--memory SIZE] [--quiet]
 // 1. every payload's checksum and decode (each damaged patch reported, and checking goes on);
 // 2. DAG shape: source has no predecessors, sink no successors, acyclic, every inner node on arcs;
 // 3. monotone errors (BMT 4.1, 5.1): a node's error >= each predecessor's, the sink's is +inf;
@@ -10,10 +10,15 @@
 //    (the builder writes radius 0); what a node must hold of it is its floor;
 // 5. crack-free cuts: the finest and coarsest cuts and K random valid cuts, each welded by exact
 //    grid position, are conforming by the rule in mtbuild/mt_cut.h (no boundary / non-manifold
-//    edge away from the input's own).
-// One line per problem on stderr, a summary on stdout; exit 0 only if everything holds.
+//    edge away from the input's own). The cuts are never assembled: their edges are counted in
+//    parts that fit --memory (mt_cut.h "Conformity in bounded memory"), so any file size can be
+//    checked; the payload pass of 1 gathers the patches' grid boxes the parts are planned from.
+// One line per problem on stderr, a summary on stdout; exit 0 only if everything holds. Files of
+// a million input triangles or more also get a progress line per step on stderr ("mtverify: ...")
+// unless --quiet.
 #include <CLI/CLI.hpp>
 
+#include <chrono>
 #include <cinttypes>
 #include <cmath>
 #include <cstdio>
@@ -25,6 +30,7 @@
 #include "mtbuild/mt_cut.h"
 #include "mtbuild/mt_file.h"
 #include "patchstore/error.h"
+#include "patchstore/patch_store.h"
 
 namespace {
 
@@ -68,7 +74,12 @@ std::string nodeName(const mt::MtFileReader& r, uint32_t v) {
   return "node " + std::to_string(v) + " (level " + std::to_string(r.nodes()[v].level) + ")";
 }
 
-int run(const std::string& path, uint32_t randomCuts, uint64_t seed) {
+double secondsSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+int run(const std::string& path, uint32_t randomCuts, uint64_t seed, uint64_t memoryBytes, bool quiet) {
+  const auto started = std::chrono::steady_clock::now();
   auto reader = mt::MtFileReader::open(path);
   const mt::MtFileReader& r = *reader;
   const auto& nodes = r.nodes();
@@ -125,10 +136,15 @@ int run(const std::string& path, uint32_t randomCuts, uint64_t seed) {
 
   // 1 + 4b. Every payload: checksum, decode, and its vertices inside the sphere of the node whose
   // fragment it is (arc.from) and of the node whose floor it is (arc.to); source and sink skipped.
+  // The grid boxes are kept for planning the crack check's parts (a damaged patch keeps
+  // `everything`; cuts holding one are skipped anyway).
   const mt::QuantizationGrid grid = r.grid();
   std::vector<double> worstOutside(nodes.size(), 0.0);  // per node: max distance beyond the sphere
   std::mutex worstLock;
+  std::vector<mt::GridBox> patchBoxes(r.patches().size(), mt::GridBox::everything());
+  const bool progress = !quiet && r.header().inputTriangles >= 1000000;
   std::vector<mt::PatchDamage> damaged = mt::checkAllPatches(r, [&](uint32_t p, const mt::DecodedPatch& d) {
+    patchBoxes[p] = mt::patchBox(d);
     const mt::format::ArcRecord& arc = r.arcs()[r.patches()[p].arc];
     for (uint32_t v : {arc.from, arc.to}) {
       if (v == 0 || v == sink) continue;
@@ -148,7 +164,11 @@ int run(const std::string& path, uint32_t randomCuts, uint64_t seed) {
       }
     }
   });
+  if (progress)
+    std::fprintf(stderr, "mtverify: payloads: %zu patches read and checked, %.1f s\n", r.patches().size(), secondsSince(started));
+  std::vector<uint8_t> isDamaged(r.patches().size(), 0);
   for (const auto& d : damaged) {
+    isDamaged[d.patch] = 1;
     uint32_t v = r.arcs()[r.patches()[d.patch].arc].from;
     problems.add("checksum", d.message + " [" + nodeName(r, v) + "]");
   }
@@ -166,6 +186,9 @@ int run(const std::string& path, uint32_t randomCuts, uint64_t seed) {
   cuts.push_back({"coarsest cut", mt::coarsestCut(r)});
   std::mt19937_64 rng(seed);
   for (uint32_t k = 0; k < randomCuts; ++k) cuts.push_back({"random cut " + std::to_string(k), mt::randomCut(r, rng)});
+  mt::EdgeCountOptions countOptions;
+  countOptions.memoryBytes = memoryBytes;
+  countOptions.patchBoxes = &patchBoxes;
   mt::ConformityReference reference;
   bool haveReference = false;
   uint32_t cutsChecked = 0, cutsConforming = 0;
@@ -177,21 +200,33 @@ int run(const std::string& path, uint32_t randomCuts, uint64_t seed) {
       continue;
     }
     mt::CutStats stats = mt::cutStats(r, cut.inSet);
-    mt::WeldedMesh mesh;
-    try {
-      mesh = mt::assembleCut(r, mt::cutArcs(r, cut.inSet));
-    } catch (const mt::Error&) {
-      // Only a damaged payload makes this throw, and those are reported above, each once.
+    const std::vector<uint32_t> arcs = mt::cutArcs(r, cut.inSet);
+    bool touchesDamage = false;
+    for (uint32_t a : arcs)
+      for (uint32_t k = 0; k < r.arcs()[a].patchCount; ++k) touchesDamage |= isDamaged[r.patchRefs()[r.arcs()[a].firstPatchRef + k]] != 0;
+    if (touchesDamage) {
+      // The damaged payloads are reported above, each once.
       if (i == 0) problems.add("cut", path + ": crack-free check skipped: the finest cut (the reference) has a damaged patch");
       continue;
     }
+    if (i > 0 && !haveReference) continue;  // nothing to compare with
+    mt::EdgeCountStats counted;
+    mt::ConformityReport rep;
     if (i == 0) {
-      reference = mt::makeConformityReference(mesh);
+      // The finest cut against the reference made from it conforms by construction (every edge
+      // the rule looks at is one the reference was made from): one pass instead of two.
+      reference = mt::makeConformityReference(r, arcs, countOptions, &counted);
       haveReference = true;
+      rep.edges = reference.edges;
+    } else {
+      rep = mt::checkConforming(r, arcs, reference, countOptions, &counted);
     }
-    if (!haveReference) continue;  // nothing to compare with
+    if (progress)
+      std::fprintf(stderr, "mtverify: %s: %" PRIu64 " triangles, %u parts%s, %.2f patch reads per patch, %.1f s\n",
+                   name.c_str(), counted.triangles, counted.parts,
+                   counted.splitParts ? (" (" + std::to_string(counted.splitParts) + " split)").c_str() : "",
+                   counted.patches ? double(counted.patchReads) / double(counted.patches) : 0.0, counted.seconds);
     ++cutsChecked;
-    mt::ConformityReport rep = mt::checkConforming(mesh, reference, &r);
     if (rep.conforming()) {
       ++cutsConforming;
     } else {
@@ -227,20 +262,28 @@ int main(int argc, char** argv) {
                "and containing their patches; and crack-free cuts: the finest, the coarsest and K random valid\n"
                "cuts, each welded by exact grid position, may have no boundary or non-manifold edge away from the\n"
                "input's own (rule in mtbuild/mt_cut.h). One line per problem on stderr; exit 0 only if all hold.\n"
-               "Memory: a cut is held whole, so about 60 bytes per input triangle."};
-  std::string path;
+               "Memory: --memory, plus the file's DAG and index and the check's own per-patch arrays (about 120\n"
+               "bytes per patch in all, ~0.15 byte per input triangle), for any file size. Cuts are never assembled:\n"
+               "their edges are counted in parts that fit --memory (32-byte table slots, 3/4 full at most), each\n"
+               "part reading only the patches near it, so less memory means more parts but hardly more reading.\n"
+               "The input's boundary and non-manifold vertices (12 bytes each) are kept throughout and must fit a\n"
+               "quarter of --memory."};
+  std::string path, memory = "1G";
   uint32_t cuts = 8;
   uint64_t seed = 1;
+  bool quiet = false;
   app.add_option("file", path, "The MT file to verify")->required();
   app.add_option("--cuts", cuts, "Random valid cuts to check besides the finest and coarsest")->capture_default_str();
   app.add_option("--seed", seed, "Seed of the random cuts (the same seed checks the same cuts)")->capture_default_str();
+  app.add_option("--memory", memory, "Memory for the crack-free check, e.g. 512M, 4G (default 1G); results do not depend on it");
+  app.add_flag("-q,--quiet", quiet, "No progress lines on stderr (printed for files of 1M input triangles or more)");
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     return app.exit(e) == 0 ? 0 : 1;
   }
   try {
-    return run(path, cuts, seed);
+    return run(path, cuts, seed, mt::parseSize(memory), quiet);
   } catch (const std::exception& e) {
     std::fflush(stdout);
     std::fprintf(stderr, "mtverify: %s\n", e.what());
