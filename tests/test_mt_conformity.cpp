@@ -101,6 +101,14 @@ struct Variant {
   bool spatial;
   double edgesPerTriangle;
 };
+EdgeCountOptions optionsOf(const Variant& v, const std::vector<GridBox>& boxes) {
+  EdgeCountOptions o;
+  o.memoryBytes = v.memory;
+  o.patchBoxes = v.boxes ? &boxes : nullptr;
+  o.spatialParts = v.spatial;
+  o.edgesPerTriangle = v.edgesPerTriangle;
+  return o;
+}
 // 512 KiB: a table of 12288 slots (the lists take a quarter while the reference is built): the
 // finest cut of these 14-24k triangle meshes needs several parts.
 const Variant kVariants[] = {
@@ -143,11 +151,7 @@ TEST(BoundedConformity, SameReferenceAndCountsAsInMemoryOnClosedHoledMultiCompon
 
     for (const Variant& v : kVariants) {
       SCOPED_TRACE(v.name);
-      EdgeCountOptions o;
-      o.memoryBytes = v.memory;
-      o.patchBoxes = v.boxes ? &boxes : nullptr;
-      o.spatialParts = v.spatial;
-      o.edgesPerTriangle = v.edgesPerTriangle;
+      const EdgeCountOptions o = optionsOf(v, boxes);
       EdgeCountStats st;
       const ConformityReference bounded = makeConformityReference(*r, finest, o, &st);
       EXPECT_EQ(bounded.edges.edges, ref.edges.edges);
@@ -209,11 +213,7 @@ TEST(BoundedConformity, BrokenCutsAreNonConformingInBothWithARealFirstProblem) {
     std::string first;
     for (const Variant& v : kVariants) {
       SCOPED_TRACE(v.name);
-      EdgeCountOptions o;
-      o.memoryBytes = v.memory;
-      o.patchBoxes = v.boxes ? &boxes : nullptr;
-      o.spatialParts = v.spatial;
-      o.edgesPerTriangle = v.edgesPerTriangle;
+      const EdgeCountOptions o = optionsOf(v, boxes);
       EdgeCountStats st;
       const ConformityReport rep = checkConforming(*r, arcs, ref, o, &st);
       expectSameReport(rep, inMemory, name);
