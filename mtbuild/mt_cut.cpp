@@ -110,6 +110,14 @@ std::string formatPoint(const WeldedMesh& m, uint32_t v) {
   return buf;
 }
 
+// ConformityReport::firstProblem, the same words for both checks: the edge, where it is, and
+// which rule it breaks.
+std::string problemText(uint64_t uses, const std::string& a, const std::string& b, const std::string& where) {
+  const bool boundary = uses == 1;
+  return (boundary ? "boundary edge " : "non-manifold edge (used " + std::to_string(uses) + " times) ") + a + "-" + b + where +
+         (boundary ? " is not on the input's boundary" : " is not one of the input's non-manifold edges");
+}
+
 GridKey keyOf(const WeldedMesh& m, uint32_t v) { return {m.q[3 * v], m.q[3 * v + 1], m.q[3 * v + 2]}; }
 
 // Undirected edges as (min << 32 | max), sorted: equal runs are one edge and its use count.
@@ -422,7 +430,7 @@ ConformityReference makeConformityReference(const WeldedMesh& finest) {
 
 ConformityReport checkConforming(const WeldedMesh& cut, const ConformityReference& ref, const MtFileReader* reader) {
   ConformityReport rep;
-  uint64_t firstKey = 0;
+  uint64_t firstKey = 0, firstUses = 0;
   forEachEdge(sortedEdgeKeys(cut), [&](uint64_t key, uint64_t uses) {
     ++rep.edges.edges;
     if (uses == 2) return;
@@ -432,27 +440,23 @@ ConformityReport checkConforming(const WeldedMesh& cut, const ConformityReferenc
     const auto& allowed = boundary ? ref.boundaryVertices : ref.nonManifoldVertices;
     if (contains(allowed, keyOf(cut, a)) && contains(allowed, keyOf(cut, b))) return;
     (boundary ? rep.newBoundaryEdges : rep.newNonManifoldEdges)++;
-    if (rep.firstProblem.empty()) {
-      firstKey = key;
-      rep.firstProblem = (boundary ? "boundary edge " : "non-manifold edge (used " + std::to_string(uses) + " times) ") +
-                         formatPoint(cut, a) + "-" + formatPoint(cut, b);
-    }
+    if (!firstUses) firstKey = key, firstUses = uses;
   });
-  if (!rep.firstProblem.empty()) {
+  if (firstUses) {
     // Name a patch holding the edge, so the damage can be traced to a node of the DAG.
     const uint32_t a = uint32_t(firstKey >> 32), b = uint32_t(firstKey);
+    std::string where;
     for (uint32_t t = 0; t < cut.triangleCount(); ++t) {
       const uint32_t* tri = &cut.triangles[3 * t];
       bool hasA = tri[0] == a || tri[1] == a || tri[2] == a, hasB = tri[0] == b || tri[1] == b || tri[2] == b;
       if (!hasA || !hasB) continue;
       const uint32_t patch = cut.trianglePatch[t];
-      rep.firstProblem += " of patch " + std::to_string(patch);
+      where = " of patch " + std::to_string(patch);
       if (reader && patch < reader->patches().size())
-        rep.firstProblem += " (node " + std::to_string(reader->arcs()[reader->patches()[patch].arc].from) + ")";
+        where += " (node " + std::to_string(reader->arcs()[reader->patches()[patch].arc].from) + ")";
       break;
     }
-    rep.firstProblem += rep.firstProblem.rfind("boundary", 0) == 0 ? " is not on the input's boundary"
-                            : " is not one of the input's non-manifold edges";
+    rep.firstProblem = problemText(firstUses, formatPoint(cut, a), formatPoint(cut, b), where);
   }
   return rep;
 }
@@ -847,13 +851,8 @@ ConformityReference makeConformityReference(const MtFileReader& r, const std::ve
           }
           return e;
         },
-        [](EdgeReport a, const EdgeReport& b) {
-          a.edges += b.edges, a.boundaryEdges += b.boundaryEdges, a.nonManifoldEdges += b.nonManifoldEdges;
-          return a;
-        });
-    ref.edges.edges += part.edges;
-    ref.edges.boundaryEdges += part.boundaryEdges;
-    ref.edges.nonManifoldEdges += part.nonManifoldEdges;
+        [](EdgeReport a, const EdgeReport& b) { return a += b; });
+    ref.edges += part;
     makeRoom(ref.boundaryVertices, ref.nonManifoldVertices, 2 * part.boundaryEdges);
     makeRoom(ref.nonManifoldVertices, ref.boundaryVertices, 2 * part.nonManifoldEdges);
     const size_t boundaryFrom = ref.boundaryVertices.size(), nonManifoldFrom = ref.nonManifoldVertices.size();
@@ -892,9 +891,7 @@ ConformityReport checkConforming(const MtFileReader& r, const std::vector<uint32
     EdgeKey firstKey{};
     uint32_t firstUses = 0, firstPatch = 0;
     void add(const Tally& b) {
-      edges.edges += b.edges.edges;
-      edges.boundaryEdges += b.edges.boundaryEdges;
-      edges.nonManifoldEdges += b.edges.nonManifoldEdges;
+      edges += b.edges;
       newBoundary += b.newBoundary;
       newNonManifold += b.newNonManifold;
       if (b.found && (!found || b.firstKey < firstKey))
@@ -934,12 +931,10 @@ ConformityReport checkConforming(const MtFileReader& r, const std::vector<uint32
   rep.newNonManifoldEdges = total.newNonManifold;
   if (total.found) {
     const QuantizationGrid grid = r.grid();
-    const bool boundary = total.firstUses == 1;
-    rep.firstProblem = (boundary ? "boundary edge " : "non-manifold edge (used " + std::to_string(total.firstUses) + " times) ") +
-                       formatGridPoint(grid, &total.firstKey[0]) + "-" + formatGridPoint(grid, &total.firstKey[3]) +
-                       " of patch " + std::to_string(total.firstPatch) + " (node " +
-                       std::to_string(r.arcs()[r.patches()[total.firstPatch].arc].from) + ")" +
-                       (boundary ? " is not on the input's boundary" : " is not one of the input's non-manifold edges");
+    rep.firstProblem = problemText(total.firstUses, formatGridPoint(grid, &total.firstKey[0]),
+                                   formatGridPoint(grid, &total.firstKey[3]),
+                                   " of patch " + std::to_string(total.firstPatch) + " (node " +
+                                       std::to_string(r.arcs()[r.patches()[total.firstPatch].arc].from) + ")");
   }
   if (stats) *stats = st;
   return rep;

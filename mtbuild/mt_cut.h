@@ -151,6 +151,10 @@ struct EdgeReport {
   uint64_t edges = 0;             // undirected
   uint64_t boundaryEdges = 0;     // used by exactly one triangle
   uint64_t nonManifoldEdges = 0;  // used by three or more
+  EdgeReport& operator+=(const EdgeReport& o) {
+    edges += o.edges, boundaryEdges += o.boundaryEdges, nonManifoldEdges += o.nonManifoldEdges;
+    return *this;
+  }
 };
 EdgeReport countEdges(const WeldedMesh& mesh);
 
