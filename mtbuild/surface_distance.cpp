@@ -188,34 +188,49 @@ TriangleGrid::TriangleGrid(const double* positions, size_t vertexCount, const ui
     g.n[a] = int32_t(std::floor((hi[a] - lo[a]) * g.inv)) + 1;
   }
   const double nMax[3] = {double(g.n[0] - 1), double(g.n[1] - 1), double(g.n[2] - 1)};
-  // clamp, then truncate (== floor on [0, n-1]); monotone in x, so a point of a triangle always
-  // falls in a cell of the triangle's cell box
-  auto cellOf = [&](double x, int a) { return int32_t(std::min(std::max((x - g.lo[a]) * g.inv, 0.0), nMax[a])); };
+  // Cell coordinates per vertex, once: clamp, then truncate (== floor on [0, n-1]). Monotone in x,
+  // so a triangle's cell box is the min/max of its corners' cells, and a point of the triangle
+  // always falls in a cell of that box.
+  std::vector<int32_t> vertexCell(vertexCount * 3);
+  for (size_t v = 0; v < vertexCount; ++v)
+    for (int a = 0; a < 3; ++a)
+      vertexCell[v * 3 + a] = int32_t(std::min(std::max((positions[v * 3 + a] - g.lo[a]) * g.inv, 0.0), nMax[a]));
   const size_t cellCount = size_t(g.n[0]) * size_t(g.n[1]) * size_t(g.n[2]);
+  struct CellBox {
+    int32_t lo[3], hi[3];
+  };
+  auto cellBox = [&](size_t t) {
+    const int32_t *a = &vertexCell[size_t(triangles[t * 3]) * 3], *b = &vertexCell[size_t(triangles[t * 3 + 1]) * 3],
+                  *c = &vertexCell[size_t(triangles[t * 3 + 2]) * 3];
+    CellBox box;
+    for (int k = 0; k < 3; ++k) box.lo[k] = std::min(std::min(a[k], b[k]), c[k]), box.hi[k] = std::max(std::max(a[k], b[k]), c[k]);
+    return box;
+  };
   // One pass: bounding spheres, and (cell, triangle) entries with per-cell counts at [cell + 2].
+  // Any center works for a sphere (its radius is measured from it): the centroid, by a multiply.
   g.sphere.resize(triangleCount * 4);
   g.start.assign(cellCount + 2, 0);
   struct Entry {
     uint32_t cell, tri;
   };
   std::vector<Entry> entries;
-  entries.reserve(triangleCount * 3);
+  entries.reserve(triangleCount * 4);
   for (size_t t = 0; t < triangleCount; ++t) {
     V3 a = at(positions, triangles[t * 3]), b = at(positions, triangles[t * 3 + 1]), c = at(positions, triangles[t * 3 + 2]);
-    V3 m = {(a.x + b.x + c.x) / 3, (a.y + b.y + c.y) / 3, (a.z + b.z + c.z) / 3};
+    constexpr double third = 1.0 / 3.0;
+    V3 m = {(a.x + b.x + c.x) * third, (a.y + b.y + c.y) * third, (a.z + b.z + c.z) * third};
     double r2 = std::max(std::max(dot(sub(a, m), sub(a, m)), dot(sub(b, m), sub(b, m))), dot(sub(c, m), sub(c, m)));
     double* s = &g.sphere[t * 4];
     s[0] = m.x, s[1] = m.y, s[2] = m.z, s[3] = std::sqrt(r2) * (1 + kSlack);
-    int32_t x0 = cellOf(std::min(std::min(a.x, b.x), c.x), 0), x1 = cellOf(std::max(std::max(a.x, b.x), c.x), 0);
-    int32_t y0 = cellOf(std::min(std::min(a.y, b.y), c.y), 1), y1 = cellOf(std::max(std::max(a.y, b.y), c.y), 1);
-    int32_t z0 = cellOf(std::min(std::min(a.z, b.z), c.z), 2), z1 = cellOf(std::max(std::max(a.z, b.z), c.z), 2);
-    for (int32_t z = z0; z <= z1; ++z)
-      for (int32_t y = y0; y <= y1; ++y)
-        for (int32_t x = x0; x <= x1; ++x) {
-          uint32_t k = uint32_t(g.cellIndex(x, y, z));
-          entries.push_back({k, uint32_t(t)});
-          ++g.start[k + 2];
+    CellBox box = cellBox(t);
+    for (int32_t z = box.lo[2]; z <= box.hi[2]; ++z)
+      for (int32_t y = box.lo[1]; y <= box.hi[1]; ++y) {
+        uint32_t row = uint32_t(g.cellIndex(0, y, z));
+        for (int32_t x = box.lo[0]; x <= box.hi[0]; ++x) {
+          entries.push_back({row + uint32_t(x), uint32_t(t)});
+          ++g.start[row + size_t(x) + 2];
         }
+      }
   }
   for (size_t k = 2; k < cellCount + 2; ++k) g.start[k] += g.start[k - 1];
   // counting sort: start[k + 1] runs from the begin to the end of cell k; triangles ascending

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <map>
 #include <random>
@@ -203,8 +204,12 @@ double bruteDistance2(const double* p, const double* positions, const uint32_t* 
 }
 
 // The definition in simplify_region.h, computed the slow way: max of (a) removed input vertices
-// -> result triangles and (b) result triangle centroids -> input triangles.
+// -> result triangles and (b) the centroids of the result triangles that are not input triangles
+// -> input triangles.
 double bruteForceError(const ScanGrid& g, const SimplifiedRegion& s) {
+  std::set<std::array<uint32_t, 3>> input;
+  for (size_t t = 0; t < g.triangleCount(); ++t)
+    input.insert({g.triangles[t * 3], g.triangles[t * 3 + 1], g.triangles[t * 3 + 2]});
   std::vector<uint8_t> used(g.vertexCount(), 0), kept(g.vertexCount(), 0);
   for (uint32_t v : g.triangles) used[v] = 1;
   for (uint32_t o : s.origin) kept[o] = 1;
@@ -213,6 +218,8 @@ double bruteForceError(const ScanGrid& g, const SimplifiedRegion& s) {
     if (used[v] && !kept[v])
       worst2 = std::max(worst2, bruteDistance2(&g.positions[v * 3], s.positions.data(), s.triangles.data(), s.triangleCount()));
   for (uint32_t t = 0; t < s.triangleCount(); ++t) {
+    if (input.count({s.origin[s.triangles[t * 3]], s.origin[s.triangles[t * 3 + 1]], s.origin[s.triangles[t * 3 + 2]]}))
+      continue;
     double c[3];
     for (int a = 0; a < 3; ++a)
       c[a] = (s.positions[s.triangles[t * 3] * 3 + a] + s.positions[s.triangles[t * 3 + 1] * 3 + a] +
