@@ -33,7 +33,7 @@
 // (EdgeReport) for information.
 //
 // Cost: the finest cut is the whole input. checkConforming(WeldedMesh) and
-// makeConformityReference(WeldedMesh) need the cut assembled (about 60 bytes per triangle); the
+// makeConformityReference(WeldedMesh) need the cut assembled (about 52 bytes per triangle); the
 // overloads taking a reader and the cut's arcs (section "Conformity in bounded memory") decide
 // exactly the same from the patches, in parts that fit a memory budget, for any file size.
 #pragma once
@@ -141,8 +141,10 @@ struct WeldedMesh {
   uint32_t triangleCount() const { return uint32_t(triangles.size() / 3); }
 };
 
-// Decodes the arcs' patches in parallel (TBB) and welds them by exact grid coordinate, in arc
-// order then patchRefs order (deterministic). A damaged patch throws its readPatch error.
+// Decodes the arcs' patches in parallel (TBB), 1024 at a time, and welds them by exact grid
+// coordinate, in arc order then patchRefs order (deterministic). A damaged patch throws its
+// readPatch error. Peak memory: the welded mesh, its weld index (16 bytes per slot, at most 2/3
+// full) and one batch of decoded patches: 2.75 GB for the 53M finest cut, written by mtextract.
 WeldedMesh assembleCut(const MtFileReader& reader, const std::vector<uint32_t>& arcs);
 
 // ---- Conformity -----------------------------------------------------------------------------
