@@ -41,8 +41,9 @@ struct SimplifiedRegion {
   // estimate: max of (a) the exact distance from every removed input vertex to the result and
   // (b) the distance from every result triangle centroid to the input; kept vertices, and the
   // result triangles that are input triangles (a third of them; their centroids are not
-  // queried), lie on both surfaces. Sampled, so a deviation between samples can be missed. It bounds the distance to
-  // the region's INPUT (the previous level); the builder adds the previous level's bound.
+  // queried), lie on both surfaces. Sampled, so a deviation between samples can be missed. It
+  // bounds the distance to the region's INPUT (the previous level); the builder adds the
+  // previous level's bound.
   double error = 0;
   double quadricError = 0;  // meshoptimizer's own estimate (absolute units), for reference
   uint32_t attempts = 0;    // meshopt_simplify runs (retries after a rule was broken; for profiling)

