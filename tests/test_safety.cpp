@@ -1,0 +1,115 @@
+// The primitives every tool uses to keep the user's files safe: the advisory lock, the output
+// checks, the unique temporary names, the interrupt flag.
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <set>
+
+#include "patchstore/error.h"
+#include "patchstore/file_lock.h"
+#include "patchstore/interrupt.h"
+#include "patchstore/output_path.h"
+#include "test_support.h"
+
+using namespace mt;
+using mt::test::TempDir;
+
+TEST(FileLock, SecondHolderIsRefusedWithThePid) {
+  TempDir tmp;
+  const std::string lock = tmp.file("LOCK");
+  {
+    FileLock held(lock, "store S");
+    EXPECT_EQ(FileLock::holder(lock), long(getpid()));
+    // flock locks belong to the open file description: a second open in this process conflicts
+    // just as another process would.
+    try {
+      FileLock second(lock, "store S");
+      FAIL() << "second lock taken";
+    } catch (const Error& e) {
+      std::string m = e.what();
+      EXPECT_NE(m.find("store S: in use by process " + std::to_string(getpid())), std::string::npos) << m;
+    }
+  }
+  EXPECT_FALSE(mt::test::fileExists(lock)) << "the lock file is removed on release";
+  EXPECT_EQ(FileLock::holder(lock), 0);
+  FileLock again(lock, "store S");  // free again
+}
+
+TEST(FileLock, DeadHolderDoesNotBlock) {
+  TempDir tmp;
+  const std::string lock = tmp.file("LOCK");
+  pid_t child = fork();
+  if (child == 0) {
+    FileLock held(lock, "x");
+    held.keepFile();
+    _exit(0);  // dies holding it: the kernel releases the lock, the file stays
+  }
+  int status = 0;
+  waitpid(child, &status, 0);
+  EXPECT_TRUE(mt::test::fileExists(lock));
+  EXPECT_EQ(FileLock::holder(lock), 0);
+  FileLock mine(lock, "x");
+}
+
+TEST(OutputPath, RefusesInputsDirectoriesAndMissingFolders) {
+  TempDir tmp;
+  const std::string in = tmp.file("in.ply");
+  mt::test::writeFile(in, "ply\n");
+  EXPECT_THROW(checkOutputPath(in, {in}), Error);
+  EXPECT_THROW(checkOutputPath(tmp.path() + "/./in.ply", {in}), Error);
+  ASSERT_EQ(::link(in.c_str(), tmp.file("hard.ply").c_str()), 0);
+  EXPECT_THROW(checkOutputPath(tmp.file("hard.ply"), {in}), Error) << "same inode under another name";
+  EXPECT_THROW(checkOutputPath(tmp.path(), {in}), Error);
+  EXPECT_THROW(checkOutputPath(tmp.file("nope/out.mt"), {in}), Error);
+  EXPECT_NO_THROW(checkOutputPath(tmp.file("out.mt"), {in}));
+  mt::test::writeFile(tmp.file("old.mt"), "x");
+  EXPECT_NO_THROW(checkOutputPath(tmp.file("old.mt"), {in})) << "an earlier output may be replaced";
+}
+
+TEST(OutputPath, RegularFileCheckNamesTheKind) {
+  TempDir tmp;
+  ASSERT_EQ(mkfifo(tmp.file("fifo").c_str(), 0644), 0);
+  auto message = [](const std::string& p) {
+    try {
+      requireRegularFile(p, "an MT file");
+    } catch (const Error& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  EXPECT_NE(message(tmp.file("fifo")).find("is a FIFO, not an MT file"), std::string::npos);
+  EXPECT_NE(message(tmp.path()).find("is a directory"), std::string::npos);
+  EXPECT_NE(message("/dev/null").find("is a character device"), std::string::npos);
+  EXPECT_NE(message(tmp.file("missing")).find("no such file"), std::string::npos);
+  mt::test::writeFile(tmp.file("f"), "x");
+  EXPECT_EQ(message(tmp.file("f")), "");
+}
+
+TEST(OutputPath, TempNamesAreUniqueAndBesideTheOutput) {
+  std::set<std::string> names;
+  for (int i = 0; i < 100; ++i) {
+    std::string n = uniqueTempName("/a/b/out.mt");
+    EXPECT_EQ(n.rfind("/a/b/out.mt.tmp." + std::to_string(getpid()) + ".", 0), 0u) << n;
+    names.insert(n);
+  }
+  EXPECT_EQ(names.size(), 100u);
+}
+
+TEST(Interrupt, SignalBecomesAnExceptionAtTheNextSafePoint) {
+  installInterruptHandlers();
+  clearInterrupt();
+  EXPECT_NO_THROW(checkInterrupt("work"));
+  raise(SIGTERM);
+  EXPECT_EQ(interruptRequested(), SIGTERM);
+  try {
+    checkInterrupt("level 3");
+    FAIL();
+  } catch (const Interrupted& e) {
+    EXPECT_EQ(e.signal(), SIGTERM);
+    EXPECT_STREQ(e.what(), "level 3: interrupted by SIGTERM");
+  }
+  clearInterrupt();
+}
