@@ -30,6 +30,7 @@
 #include "mtbuild/patch_codec.h"
 #include "mtbuild/simplify_region.h"
 #include "patchstore/byte_io.h"
+#include "patchstore/heal/heal.h"
 #include "patchstore/patch_store.h"
 #include "patchstore/progress.h"
 
@@ -630,6 +631,21 @@ void LevelBuilder::State::startFresh(bool storeInput) {
   // 2. The global quantization grid (mt_format.h): shared vertices quantize identically.
   QuantizationGrid grid = QuantizationGrid::fromBounds(info.bounds.lo, info.bounds.hi, chooseGridStep(*store));
   report.gridStep = grid.step;
+  {
+    heal::GridCells cells;
+    for (int a = 0; a < 3; ++a) cells.origin[a] = grid.origin[a];
+    cells.step = grid.step;
+    heal::HealOptions ho;
+    ho.memoryBytes = std::max<uint64_t>(options.memoryBytes / 4, 16ull << 20);
+    ho.progress = options.progress;
+    heal::PassReport w = heal::weldToGrid(*store, cells, ho);
+    if (w.get("merged")) {
+      say("grid weld: " + std::to_string(w.get("merged")) + " vertices closer than the grid step merged, " +
+          std::to_string(w.get("degenerate")) + " triangles that became degenerate removed");
+      info = store->info();
+      liveTriangles = info.triangles;
+    }
+  }
   const double qError = grid.maxError();
   header = format::FileHeader{};
   header.codec = uint32_t(options.codec);

@@ -31,8 +31,9 @@ struct MeshHeader {
   int64_t declaredFaces = -1;
   bool hasNormals = false;  // per-vertex nx,ny,nz (PLY, OBJ vn when one normal per vertex)
   bool hasColors = false;   // per-vertex red,green,blue[,alpha] (PLY)
-  // True when the input's coordinates need more than float32 to round-trip exactly (PLY with
-  // double or 32-bit integer coordinates). Text formats are parsed to the nearest float32.
+  // True when the input's coordinates need more than float32 to round-trip exactly: binary PLY
+  // with double or 32-bit integer coordinates, and every text format (decimal text carries the
+  // precision its writer gave it, whatever type it declares; it is parsed to double).
   bool doublePrecision = false;
 };
 

@@ -298,8 +298,10 @@ TEST(PlyReader, AsciiFloatAndDoubleAndRecordsAcrossLines) {
   writeFile(dir.file("a.ply"), plyHeader("ascii", body) + data);
   Collect c = readMesh(dir.file("a.ply"));
   EXPECT_EQ(c.header.format, mt::MeshFormat::PlyAscii);
-  EXPECT_FALSE(c.header.doublePrecision);
-  EXPECT_EQ(c.v[0].p[0], double(0.1f));  // text floats are parsed as float32
+  // Decimal text is parsed to double whatever type it declares: "float" at survey coordinates
+  // would lose the centimetres.
+  EXPECT_TRUE(c.header.doublePrecision);
+  EXPECT_EQ(c.v[0].p[0], 0.1);
   expectPos(c.v[3], 1, 1, 1);
   EXPECT_EQ(c.t, (std::vector<uint32_t>{0, 1, 3, 0, 3, 2, 0, 1, 3}));
   EXPECT_EQ(c.stats.polygons, 1u);
@@ -608,7 +610,7 @@ TEST(ReaderErrors, PlyNonFiniteAndGarbage) {
   EXPECT_THAT(errorOf(p), HasSubstr("invalid number 'abc' at vertex 1 (line 12)"));
   writeFile(p, plyHeader("ascii", body) + "0 0 0\n1 0 0\n0 inf 0\n3 0 1 2\n");
   EXPECT_THAT(errorOf(p), HasSubstr("vertex 2 has a non-finite coordinate (line 13)"));
-  writeFile(p, plyHeader("ascii", body) + "0 0 0\n1 0 0\n0 1e39 0\n3 0 1 2\n");  // overflows float
+  writeFile(p, plyHeader("ascii", body) + "0 0 0\n1 0 0\n0 1e309 0\n3 0 1 2\n");  // overflows double
   EXPECT_THAT(errorOf(p), HasSubstr("vertex 2 has a non-finite coordinate (line 13)"));
 }
 

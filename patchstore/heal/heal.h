@@ -44,6 +44,18 @@ struct PassReport {
 // with the lexicographically smallest position. Triangles that become degenerate are kept (run
 // --remove-degenerate after). Counts: "merged" (vertices removed), "clusters".
 PassReport weld(PatchStore& store, double eps, const HealOptions& options);
+// The cells of a quantization grid: position p is in cell floor((p - origin) / step + 0.5) per
+// axis, the rounding every quantized coordinate of an MT file uses.
+struct GridCells {
+  double origin[3] = {0, 0, 0};
+  double step = 1;
+};
+// Merges all vertices that fall in one grid cell into one (the member with the smallest position),
+// across patches: after it, distinct vertices have distinct quantized positions, so a cut welded
+// by quantized position has the same topology as the store; the triangles that become degenerate
+// are removed. Counts "merged" (vertices removed), "clusters", "degenerate" (triangles removed),
+// "vertices" (dropped as unused).
+PassReport weldToGrid(PatchStore& store, const GridCells& grid, const HealOptions& options);
 // --remove-degenerate: triangles with a repeated vertex. Counts "triangles", "vertices" (that no
 // triangle uses any more and that were dropped).
 PassReport removeDegenerate(PatchStore& store, const HealOptions& options);

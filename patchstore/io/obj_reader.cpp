@@ -23,6 +23,7 @@ class ObjReader final : public MeshReader {
  public:
   explicit ObjReader(std::unique_ptr<InputFile> in) : in_(std::move(in)), path_(in_->path()) {
     header_.format = MeshFormat::Obj;
+    header_.doublePrecision = true;  // decimal text: parsed and kept as double (see off_reader.cpp)
     header_.hasColors = firstVertexHasColor();
   }
 
@@ -71,7 +72,7 @@ class ObjReader final : public MeshReader {
   void readVertex(std::string_view rest, uint64_t index, Batcher& batch) {
     if (index >= kMaxVertices) fail(path_, "more vertices than the supported " + std::to_string(kMaxVertices));
     Tokens tok{rest};
-    float values[6];
+    double values[6];
     int n = 0;
     std::string_view word;
     while (n < 6 && tok.next(word)) {

@@ -16,6 +16,9 @@ class OffReader final : public MeshReader {
  public:
   explicit OffReader(std::unique_ptr<InputFile> in) : in_(std::move(in)), path_(in_->path()) {
     header_.format = MeshFormat::Off;
+    // Decimal text carries whatever precision its writer gave it (survey coordinates in metres
+    // need more than float32): parsed and kept as double.
+    header_.doublePrecision = true;
     parseHeader();
   }
 
@@ -97,7 +100,7 @@ class OffReader final : public MeshReader {
     if (!nextDataLine(tok)) truncated("vertex", index);
     InputVertex& v = batch.addVertex();
     v = blankVertex();
-    for (int k = 0; k < 3; ++k) v.p[k] = number<float>(tok, "vertex", index);
+    for (int k = 0; k < 3; ++k) v.p[k] = number<double>(tok, "vertex", index);
     if (!isFinite(v))
       fail(path_, "vertex " + std::to_string(index) + " has a non-finite coordinate" + atLine(in_->line()));
     if (header_.hasNormals)

@@ -262,7 +262,9 @@ class PlyReader final : public MeshReader {
     for (int k = 0; k < 3; ++k) {
       xyz[k]->slot = Slot(kX + k);
       Type t = xyz[k]->type;
-      if (t == Type::Float64 || t == Type::Int32 || t == Type::UInt32) header_.doublePrecision = true;
+      // Decimal text is kept as double whatever type it declares: "property float x" above survey
+      // coordinates with centimetres is common, and float32 would round them to half a metre.
+      if (t == Type::Float64 || t == Type::Int32 || t == Type::UInt32 || !binary_) header_.doublePrecision = true;
     }
     Property* n[3] = {findScalar(e, {"nx"}), findScalar(e, {"ny"}), findScalar(e, {"nz"})};
     if (n[0] && n[1] && n[2]) {
@@ -479,7 +481,7 @@ class PlyReader final : public MeshReader {
       if (!parseNumber(tok, v)) badNumber(tok, kind, index);
       return double(v);
     }
-    if (t == Type::Float32 || !coordinate) {
+    if (!coordinate) {
       float f;
       if (!parseNumber(tok, f)) badNumber(tok, kind, index);
       return f;

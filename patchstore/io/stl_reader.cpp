@@ -16,6 +16,7 @@ class StlReader final : public MeshReader {
  public:
   StlReader(std::unique_ptr<InputFile> in, bool binary) : in_(std::move(in)), path_(in_->path()) {
     header_.format = binary ? MeshFormat::StlBinary : MeshFormat::StlAscii;
+    header_.doublePrecision = !binary;  // decimal text: parsed and kept as double (see off_reader.cpp)
     if (binary) parseBinaryHeader();
   }
 
@@ -118,7 +119,7 @@ class StlReader final : public MeshReader {
         InputVertex& v = pending[corners];
         v = blankVertex();
         for (int k = 0; k < 3; ++k) {
-          float f;
+          double f;
           if (!tok.next(word) || !parseNumber(word, f))
             syntax("invalid number " + quoted(word) + " at facet " + std::to_string(facet));
           v.p[k] = f;

@@ -1,0 +1,208 @@
+// The grid weld: every vertex that falls in one cell of a quantization grid becomes one vertex.
+//
+// Why: an MT file stores positions on one global grid and its cuts are welded by grid position
+// (mt_format.h), so two distinct store vertices in one cell are one vertex in every cut. If the
+// store keeps them distinct, the simplifier treats them as two (it may keep both and connect them
+// to the same neighbour, or collapse one of them only on one side of a region border), and cuts
+// that mix levels gain non-manifold or boundary edges that the finest cut does not have. Real
+// scans have such pairs everywhere (vertices closer than the grid step, needles, overlapping
+// passes, duplicated seam vertices). After this pass the store's topology is the grid's: distinct
+// vertices have distinct cells at every level, since simplification only keeps store vertices.
+//
+// How, out of core: one parallel read of every patch gives a (cell key, vertex) record per
+// vertex (each once, from its owner patch), sorted by key with the radix external sort; equal
+// keys are the clusters. Clusters are few (a fraction of a percent of the vertices), so they are
+// applied like weld()'s: groups of clusters loaded with every patch around their vertices, each
+// member replaced by the member with the smallest position, and the triangles that become
+// degenerate dropped in the same edit.
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <map>
+#include <set>
+
+#include <xxhash.h>
+
+#include "patchstore/external_sort.h"
+#include "patchstore/heal/region.h"
+#include "patchstore/progress.h"
+
+namespace mt::heal {
+
+namespace {
+
+using Cell = std::array<int64_t, 3>;
+using Pos = std::array<double, 3>;
+
+struct CellRecord {
+  uint64_t key;  // the packed cell, or its hash when the cells need more than 64 bits
+  uint64_t gid;
+};
+struct CellKey {
+  uint64_t operator()(const CellRecord& r) const { return r.key; }
+};
+
+Cell cellOf(const GridCells& g, const double* p) {
+  Cell c;
+  for (int a = 0; a < 3; ++a) c[a] = int64_t(std::floor((p[a] - g.origin[a]) / g.step + 0.5));
+  return c;
+}
+
+}  // namespace
+
+PassReport weldToGrid(PatchStore& store, const GridCells& grid, const HealOptions& options) {
+  auto start = std::chrono::steady_clock::now();
+  if (!(grid.step > 0) || !std::isfinite(grid.step)) fail(store.dir(), "grid weld: the step must be a finite number > 0");
+  // Cells of the store's box, relative to its lowest cell: packed exactly when 3 x bits <= 64.
+  const StoreInfo info = store.info();
+  Cell lo = cellOf(grid, info.bounds.lo), hi = cellOf(grid, info.bounds.hi);
+  unsigned bits = 1;
+  for (int a = 0; a < 3; ++a)
+    while (bits < 63 && (uint64_t(hi[a] - lo[a]) >> bits) != 0) ++bits;
+  const bool packed = 3 * bits <= 64;
+  auto keyOf = [&](const Cell& c) {
+    if (!packed) return uint64_t(XXH64(c.data(), sizeof c, 0));
+    uint64_t k = 0;
+    for (int a = 0; a < 3; ++a) k = (k << bits) | uint64_t(c[a] - lo[a]);
+    return k;
+  };
+
+  // 1. One record per vertex, read in parallel, added in patch order (deterministic runs).
+  std::vector<PatchId> ids = store.patchIds();
+  StableKeySorter<CellRecord, CellKey> sorter(scratchPrefix(store, options, "gridweld"), options.memoryBytes, CellKey{},
+                                              packed ? 3 * bits : 64);
+  Progress progress(options.progress, "grid weld: scan", info.vertices, "vertices");
+  uint64_t scanned = 0;
+  constexpr size_t kBatch = 256;
+  std::vector<std::vector<CellRecord>> batch(kBatch);
+  for (size_t first = 0; first < ids.size(); first += kBatch) {
+    const size_t n = std::min(kBatch, ids.size() - first);
+    tbb::parallel_for(size_t(0), n, [&](size_t i) {
+      const PatchId id = ids[first + i];
+      Patch p = store.patch(id);
+      std::vector<uint64_t> key = ownerKeys(p);
+      std::vector<CellRecord>& out = batch[i];
+      out.clear();
+      for (uint32_t v = 0; v < p.vertexCount(); ++v)
+        if (gidPatch(key[v]) == id) out.push_back({keyOf(cellOf(grid, &p.positions[3 * size_t(v)])), key[v]});
+    });
+    for (size_t i = 0; i < n; ++i) {
+      sorter.addBatch(batch[i].data(), batch[i].size());
+      scanned += batch[i].size();
+    }
+    progress.update(scanned);
+  }
+  std::vector<std::vector<CellRecord>>().swap(batch);
+  progress.finish(scanned);
+
+  // 2. Equal keys: candidate clusters (ascending key, members in patch order).
+  sorter.finish();
+  std::vector<std::vector<uint64_t>> candidates;
+  {
+    CellRecord r{}, prev{};
+    bool have = false, open = false;
+    while (sorter.next(r)) {
+      if (have && r.key == prev.key) {
+        if (!open) candidates.push_back({prev.gid}), open = true;
+        candidates.back().push_back(r.gid);
+      } else {
+        open = false;
+      }
+      prev = r, have = true;
+    }
+  }
+  sorter.release();
+
+  // 3. The clusters' exact cells and targets, read before anything is committed (commits move
+  // patch-local indices, so a member's gid is only good until then). A hashed key may join
+  // vertices of different cells: members are regrouped by their exact cell.
+  std::sort(candidates.begin(), candidates.end());
+  std::map<PatchId, std::vector<std::pair<uint32_t, size_t>>> byPatch;  // owner -> (local, candidate)
+  for (size_t c = 0; c < candidates.size(); ++c)
+    for (uint64_t m : candidates[c]) byPatch[gidPatch(m)].push_back({gidLocal(m), c});
+  struct Cluster {
+    Cell cell;
+    Pos target;  // the member with the smallest position
+    uint32_t members = 0;
+    std::set<PatchId> patches;  // the members' owners
+  };
+  std::map<std::pair<size_t, Cell>, Cluster> found;  // (candidate, cell) -> cluster
+  for (auto& [id, list] : byPatch) {
+    Patch p = store.patch(id);
+    for (auto [local, c] : list) {
+      const double* q = &p.positions[3 * size_t(local)];
+      Pos pos{q[0], q[1], q[2]};
+      Cell cell = cellOf(grid, q);
+      auto [it, fresh] = found.try_emplace({c, cell}, Cluster{cell, pos, 0, {}});
+      it->second.target = std::min(it->second.target, pos);
+      ++it->second.members;
+      it->second.patches.insert(id);
+    }
+  }
+  std::vector<Cluster> list;
+  for (auto& [key, cluster] : found)
+    if (cluster.members >= 2) list.push_back(std::move(cluster));
+
+  // 4. Apply in groups of clusters that need few patches; every vertex in a cluster's cell is
+  // that cluster's, which stays true as groups are committed.
+  uint64_t merged = 0, degenerate = 0, dropped = 0;
+  Progress apply(options.progress, "grid weld: merge", list.size(), "clusters");
+  for (size_t i = 0; i < list.size();) {
+    std::set<PatchId> patches;
+    std::map<Cell, Pos> target;
+    size_t j = i;
+    while (j < list.size() && (patches.size() < 32 || j == i)) {
+      patches.insert(list[j].patches.begin(), list[j].patches.end());
+      target[list[j].cell] = list[j].target;
+      ++j;
+    }
+    if (!target.empty()) {
+      auto wanted = [&](const Region& r, uint32_t u) { return target.count(cellOf(grid, &r.positions[3 * size_t(u)])) != 0; };
+      Region r = loadUnlocked(store, {patches.begin(), patches.end()}, wanted);
+      // Every region vertex in a cluster's cell is that cluster's: the member copies of one store
+      // vertex (shared between loaded patches) are one region vertex already.
+      std::map<Cell, uint32_t> targetVertex;
+      std::vector<uint32_t> to(r.vertexCount());
+      for (uint32_t u = 0; u < r.vertexCount(); ++u) {
+        to[u] = u;
+        const double* q = &r.positions[3 * size_t(u)];
+        auto it = target.find(cellOf(grid, q));
+        if (it == target.end()) continue;
+        if (r.locked[u]) fail(store.dir(), "grid weld: a cluster spans too many patches to load together");
+        if (Pos{q[0], q[1], q[2]} == it->second && !targetVertex.count(it->first)) targetVertex[it->first] = u;
+      }
+      for (uint32_t u = 0; u < r.vertexCount(); ++u) {
+        auto it = target.find(cellOf(grid, &r.positions[3 * size_t(u)]));
+        if (it != target.end()) to[u] = targetVertex.at(it->first);
+        merged += it != target.end() && to[u] != u;
+      }
+      RegionEdit e = identityEdit(r);
+      RegionEdit out = e;
+      out.triangles.clear();
+      out.trianglePatch.clear();
+      for (size_t t = 0; t < e.triangles.size() / 3; ++t) {
+        uint32_t a = to[e.triangles[3 * t]], b = to[e.triangles[3 * t + 1]], c = to[e.triangles[3 * t + 2]];
+        if (a == b || b == c || a == c) {
+          ++degenerate;
+          continue;
+        }
+        out.triangles.insert(out.triangles.end(), {a, b, c});
+        out.trianglePatch.push_back(e.trianglePatch[t]);
+      }
+      dropped += commitRegion(store, r, out).droppedVertices;
+    }
+    apply.update(j);
+    i = j;
+  }
+  apply.finish(list.size());
+  store.sync();
+  double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return {"grid-weld",
+          {{"merged", merged}, {"clusters", uint64_t(list.size())}, {"degenerate", degenerate}, {"vertices", dropped}},
+          seconds};
+}
+
+}  // namespace mt::heal
