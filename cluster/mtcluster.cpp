@@ -25,7 +25,7 @@ int main(int argc, char** argv) {
   cli.add(app, true);
   const std::string& input = cli.input;
   const std::string& output = cli.output;
-  const bool quiet = cli.quiet;
+  const bool& quiet = cli.quiet;  // read after parsing
   const char* rankEnv = std::getenv("OMPI_COMM_WORLD_RANK");
   const bool rankZero = !rankEnv || std::atoi(rankEnv) == 0;
   try {

@@ -905,7 +905,15 @@ LevelBuilder::~LevelBuilder() {
   if (s_->taskTimes) std::fclose(s_->taskTimes);
   // Stopped by an error after a checkpoint: keep the temporary file beside the work directory so
   // that --resume can continue from the last finished level (the final name is never written).
-  if (!s_->completed && s_->writer && s_->store && !s_->noted) s_->say("stopped " + stopNote());
+  if (!s_->completed && s_->writer && s_->store) {
+    if (!s_->noted) s_->say("stopped " + stopNote());
+    // PatchStore's destructor commits pending write-backs even with autoCommit off: here they are
+    // a part of the level being built, and committing them would leave a store the checkpoint no
+    // longer describes ("checkpoint does not know live patch N" on --resume). Nothing of the
+    // store needs closing before the process exits (every committed byte is synced), so it is
+    // dropped without its destructor.
+    (void)s_->store.release();
+  }
 }
 
 std::string LevelBuilder::stopNote() {
