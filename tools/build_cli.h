@@ -71,8 +71,8 @@ struct BuildCli {
         ->required();
     app.add_option("-o,--output", output,
                    std::string("Output MT file, ending in .mt") + (cluster ? ", written by rank 0" : "") +
-                       " (written as OUT.tmp.PID.RANDOM, renamed over OUT only when complete; OUT may not be the input;\n"
-                       "OUT.lock is held meanwhile, so a second build of OUT is refused)")
+                       " (written as OUT.tmp.PID.RANDOM, renamed over OUT only when\n"
+                       "complete; OUT may not be the input; OUT.lock is held meanwhile, so a second build of OUT is refused)")
         ->required();
     app.add_option("--memory", memory,
                    std::string(cluster ? "Memory cap of rank 0's ingest and store" : "Memory cap for the whole build") +
@@ -84,9 +84,9 @@ struct BuildCli {
     app.add_option("--partition", partition, "V-partition: irregular (default; BMT 4.2.2) or regular (4.2.1)");
     patchTrianglesOption = app.add_option("--patch-triangles", patchTriangles,
                    "Target triangles per patch (default " + std::to_string(kDefaultMtPatchTriangles) +
-                       ": smallest file at no extra build time, see docs/mt-format.md; accepted " +
+                       ": smallest file at no extra build time, see docs/mt-format.md;\naccepted " +
                        std::to_string(kMinPatchTriangles) + " to " + std::to_string(kMaxPatchTriangles) +
-                       ": below, the per-patch\nrecord outweighs the geometry; above, a region no longer fits a small "
+                       ": below, the per-patch record outweighs the geometry; above, a region no longer fits\na small "
                        "memory cap and a level has too few regions to share out; ignored for a store input, which keeps "
                        "its own)");
     app.add_option("--codec", codec, "Patch coding: meshopt (default, fast decode) or draco (smallest files)");
@@ -107,10 +107,10 @@ struct BuildCli {
                    "cluster would move): the input of the scaling model in docs/cluster.md");
     app.add_option("--work-dir", workDir,
                    std::string(cluster ? "Rank 0's scratch" : "Scratch") +
-                       " directory for the patch store (default OUT.work; up to ~3x the input). Created and\n"
-                       "marked (" + kWorkMarker +
-                       ") by the build, removed when it completes. An existing directory the build did not make (\".\",\n"
-                       "the input's folder) is never emptied: the build works in DIR/OUT.work inside it");
+                       " directory for the patch store (default OUT.work; up to ~3x the input). Created\n"
+                       "and marked (" + kWorkMarker +
+                       ") by the build, removed when it completes. An existing directory the build did not\n"
+                       "make (\".\", the input's folder) is never emptied: the build works in DIR/OUT.work inside it");
     app.add_flag("-q,--quiet", quiet, "No progress lines on stderr");
   }
 
