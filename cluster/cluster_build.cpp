@@ -37,6 +37,7 @@
 #include "cluster/region_messages.h"
 #include "patchstore/byte_io.h"
 #include "patchstore/error.h"
+#include "patchstore/interrupt.h"
 
 namespace mt::cluster {
 
@@ -52,8 +53,10 @@ char gStopNote[1024] = "";
 char gWorkNote[256] = "";
 
 void onTerminate(int) {
-  // Called when mpirun aborts the job because a rank died: say where the build was.
-  static const char head[] = "\nmtcluster: stopped by mpirun: a rank died (mpirun names it below) ";
+  // mpirun sends SIGTERM to every rank when it stops the job: on Ctrl-C (it does not forward
+  // SIGINT), or because a rank died. Rank 0 cannot reach a safe point before mpirun's SIGKILL, but
+  // the checkpoint of the last finished level is intact: say where the build was and what is kept.
+  static const char head[] = "\nmtcluster: stopped by SIGTERM from mpirun (Ctrl-C, or a rank died: mpirun names it) ";
   ssize_t ignored = ::write(2, head, sizeof head - 1);
   ignored = ::write(2, gStopNote, std::strlen(gStopNote));
   ignored = ::write(2, gWorkNote, std::strlen(gWorkNote));
@@ -269,6 +272,9 @@ struct Master {
       size_t next = 0;
       note(level, holding, regionOf);
       for (;;) {
+        // SIGINT sent to rank 0 itself (mpirun turns Ctrl-C into SIGTERM, handled above): stop
+        // handing out regions; the level is redone from its checkpoint on --resume.
+        checkInterrupt("mtcluster");
         const size_t committed = committer.done();
         if (committed == n) break;
         bool progressed = false;
@@ -317,6 +323,7 @@ struct Master {
       }
       std::snprintf(gStopNote, sizeof gStopNote, "after level %u was checkpointed (rerun with --resume)\n", level);
       builder.endLevel();
+      checkInterrupt("mtcluster");
     }
     commitSeconds = committer.seconds;
   }
@@ -359,7 +366,9 @@ ClusterReport runCluster(const std::string& input, const std::string& output, co
   report.ranks.resize(size_t(size));
   for (int r = 0; r < size; ++r) report.ranks[size_t(r)].rank = r;
   if (size == 1) {
-    // One rank: the ordinary mtbuild build (threads and all).
+    // One rank: the ordinary mtbuild build (threads and all), stopped by SIGINT/SIGTERM at its
+    // safe points (buildMt throws BuildInterrupted saying what was kept).
+    installInterruptHandlers();
     auto t0 = Clock::now();
     report.build = buildMt(input, output, options);
     report.loopSeconds = report.build.buildSeconds;
@@ -367,13 +376,14 @@ ClusterReport runCluster(const std::string& input, const std::string& output, co
     report.parallelEfficiency = 1;
     return report;
   }
+  installInterruptHandlers();  // SIGINT; SIGTERM is mpirun's stop, handled at once:
   std::signal(SIGTERM, onTerminate);
   std::snprintf(gStopNote, sizeof gStopNote, "during ingest (nothing to resume yet)\n");
-  std::snprintf(gWorkNote, sizeof gWorkNote, "mtcluster: work directory: %s\n",
-                (options.workDir.empty() ? output + ".work" : options.workDir).c_str());
   std::unique_ptr<LevelBuilder> owned;
   try {
     owned = std::make_unique<LevelBuilder>(input, output, options);
+    std::snprintf(gWorkNote, sizeof gWorkNote, "mtcluster: kept %s and %s for --resume\n", owned->workDir().c_str(),
+                  owned->tempPath().c_str());
   } catch (const std::exception& e) {
     // Bad input or options: no region is out yet, so the workers can be stopped cleanly.
     stopAll(size, report.ranks);
@@ -383,6 +393,11 @@ ClusterReport runCluster(const std::string& input, const std::string& output, co
   auto loopStart = Clock::now();
   try {
     master.run();
+  } catch (const Interrupted& e) {
+    std::signal(SIGTERM, SIG_DFL);
+    std::string note = std::string("interrupted by ") + (e.signal() == SIGTERM ? "SIGTERM " : "SIGINT ") + owned->stopNote();
+    owned.reset();
+    throw BuildInterrupted(note, e.signal());
   } catch (...) {
     // Workers may be mid-region: abort the job (the checkpoint stays for --resume).
     std::signal(SIGTERM, SIG_DFL);

@@ -9,7 +9,9 @@
 #include <fstream>
 
 #include "cluster/cluster_build.h"
+#include "patchstore/interrupt.h"
 #include "patchstore/patch_store.h"
+#include "tools/build_cli.h"
 
 int main(int argc, char** argv) {
   CLI::App app{
@@ -19,26 +21,11 @@ int main(int argc, char** argv) {
       "ranks. Run it as: mpirun -np N mtcluster IN -o OUT.mt [options]. One rank is the ordinary build.\n"
       "If a rank dies, mpirun stops the job; rank 0 says which level and regions were in flight, and\n"
       "--resume continues from the last finished level (the checkpoint format of mtbuild --resume)."};
-  std::string input, output, memory = "1G", partition = "irregular", codec = "meshopt", statsJson, workDir, taskTimes;
-  uint32_t threads = 0, patchTriangles = 0;
-  bool normals = false, noNormals = false, resume = false, quiet = false;
-  app.add_option("input", input, "Input mesh (PLY, OBJ, OFF, STL) or a patch store made by `mtstore ingest`, read by rank 0")
-      ->required();
-  app.add_option("-o,--output", output, "Output MT file, written by rank 0 (as OUT.tmp, renamed when complete)")->required();
-  app.add_option("--memory", memory, "Memory cap of rank 0's ingest and store, e.g. 512M, 4G (default 1G)");
-  app.add_option("--threads", threads, "Threads of a one-rank run (default: all cores); the output does not depend on it");
-  app.add_option("--partition", partition, "V-partition: irregular (default; BMT 4.2.2) or regular (4.2.1)");
-  app.add_option("--patch-triangles", patchTriangles, "Target triangles per patch (default 2000, as mtbuild; see docs/mt-format.md)");
-  app.add_option("--codec", codec, "Patch coding: meshopt (default, fast decode) or draco (smallest files)");
-  app.add_flag("--normals", normals, "Store per-vertex normals (2x8 bit) instead of letting the renderer compute them");
-  app.add_flag("--no-normals", noNormals, "Store no normals (the default)");
-  app.add_flag("--resume", resume,
-               "Continue a stopped build from the checkpoint in OUT.work (its last finished level); any number of\n"
-               "ranks, same bytes. Refused with the reason when the input or a byte-changing option differs");
-  app.add_option("--stats-json", statsJson, "Write build figures and per-rank busy time, bytes, efficiency as JSON");
-  app.add_option("--task-times", taskTimes, "Write one CSV line per region (times, triangles, bytes moved); see docs/cluster.md");
-  app.add_option("--work-dir", workDir, "Rank 0's scratch directory for the patch store (default OUT.work)");
-  app.add_flag("-q,--quiet", quiet, "No progress lines on stderr");
+  mt::tools::BuildCli cli;
+  cli.add(app, true);
+  const std::string& input = cli.input;
+  const std::string& output = cli.output;
+  const bool& quiet = cli.quiet;  // read after parsing
   const char* rankEnv = std::getenv("OMPI_COMM_WORLD_RANK");
   const bool rankZero = !rankEnv || std::atoi(rankEnv) == 0;
   try {
@@ -49,20 +36,7 @@ int main(int argc, char** argv) {
   }
   mt::BuildOptions o;
   try {
-    if (normals && noNormals) throw mt::Error("--normals and --no-normals contradict each other");
-    o.memoryBytes = mt::parseSize(memory);
-    o.threads = threads;
-    o.partition = mt::parsePartitionKind(partition);
-    o.patchTriangles = patchTriangles;
-    if (codec == "meshopt") o.codec = mt::format::Codec::Meshopt;
-    else if (codec == "draco") o.codec = mt::format::Codec::Draco;
-    else throw mt::Error("unknown --codec '" + codec + "' (expected meshopt or draco)");
-    o.normals = normals;
-    o.resume = resume;
-    o.progress = !quiet;
-    o.workDir = workDir;
-    o.taskTimesPath = taskTimes;
-    o.toolName = "mtcluster";
+    o = cli.options("mtcluster");
   } catch (const std::exception& e) {
     if (rankZero) std::fprintf(stderr, "mtcluster: %s\n", e.what());
     return 1;
@@ -82,12 +56,18 @@ int main(int argc, char** argv) {
                    "triangle, %.1f s (%.2f M input triangles/s), rank 0 peak RSS %.0f MiB\n",
                    r.inputTriangles, output.c_str(), r.nodes, r.patches, double(r.fileBytes) / double(r.inputTriangles),
                    r.totalSeconds, double(r.inputTriangles) / r.totalSeconds / 1e6, double(r.peakRssBytes) / (1 << 20));
-      if (!statsJson.empty()) {
-        std::ofstream f(statsJson);
+      if (!cli.statsJson.empty()) {
+        std::ofstream f(cli.statsJson);
         f << report.build.toJson();
-        if (!f) throw mt::Error(statsJson + ": cannot write");
+        if (!f) throw mt::Error(cli.statsJson + ": cannot write");
       }
     }
+  } catch (const mt::BuildInterrupted& e) {
+    // Workers may be mid-region: stop the job; the work and the temporary file stay for --resume.
+    std::fprintf(stderr, "mtcluster: %s\n", e.what());
+    std::fflush(stderr);
+    MPI_Abort(MPI_COMM_WORLD, 128 + e.signal());
+    return 128 + e.signal();
   } catch (const mt::cluster::StoppedCleanly& e) {
     std::fprintf(stderr, "mtcluster: %s\n", e.what());
     MPI_Finalize();
@@ -96,7 +76,7 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "mtcluster: %s\n", e.what());
     std::fflush(stderr);
     // Other ranks may be mid-region or waiting for rank 0: stop them all (the work directory and
-    // OUT.mt.tmp stay for --resume when a level was checkpointed).
+    // temporary MT file stay for --resume when a level was checkpointed).
     MPI_Abort(MPI_COMM_WORLD, 1);
     return 1;
   }

@@ -7,6 +7,7 @@
 #include <tbb/task_arena.h>
 
 #include <fcntl.h>
+#include <sys/stat.h>
 #include <unistd.h>
 #include <xxhash.h>
 
@@ -19,7 +20,9 @@
 #include <cstring>
 #include <cmath>
 #include <cstdio>
+#include <ctime>
 #include <filesystem>
+#include <fstream>
 #include <limits>
 #include <map>
 #include <memory>
@@ -30,7 +33,10 @@
 #include "mtbuild/patch_codec.h"
 #include "mtbuild/simplify_region.h"
 #include "patchstore/byte_io.h"
+#include "patchstore/file_lock.h"
 #include "patchstore/heal/heal.h"
+#include "patchstore/interrupt.h"
+#include "patchstore/output_path.h"
 #include "patchstore/patch_store.h"
 #include "patchstore/progress.h"
 
@@ -106,6 +112,133 @@ void normalCone(const std::vector<double>& p, const std::vector<uint32_t>& t, fl
 }
 
 bool isStoreDir(const std::string& path) { return fs::is_directory(path) && fs::exists(path + "/CURRENT"); }
+
+// ---- The work directory: ours or left alone ---------------------------------------------------
+// A build empties or removes a directory only when it carries kWorkMarker, which only a build
+// writes, in a directory it has just created itself. So a --work-dir naming a user's folder (".",
+// the input's folder) is never emptied: the build works in a subdirectory of it instead.
+
+// Inside the work directory: its lock, and the name of the temporary MT file beside the output
+// (the name is unique to the process that started the build; a resumed build continues that file).
+constexpr char kWorkLock[] = "LOCK";
+constexpr char kTempNameFile[] = "output-temp-name";
+
+bool hasWorkMarker(const std::string& dir) {
+  std::error_code ec;
+  return fs::is_regular_file(fs::path(dir) / kWorkMarker, ec);
+}
+
+// Creates `dir` (its parents too) and marks it ours; false when `dir` already exists.
+bool createWorkDir(const std::string& dir, const std::string& output) {
+  std::error_code ec;
+  fs::path parent = fs::path(dir).parent_path();
+  if (!parent.empty()) fs::create_directories(parent, ec);
+  if (::mkdir(dir.c_str(), 0755) != 0) {
+    if (errno == EEXIST) return false;
+    fail(dir, std::string("cannot create the work directory: ") + std::strerror(errno));
+  }
+  std::ofstream marker(fs::path(dir) / kWorkMarker);
+  marker << "work directory of an MT build of " << fs::weakly_canonical(output, ec).string()
+         << "; removed by the build when it completes\n";
+  if (!marker) fail(dir, std::string("cannot write the marker ") + kWorkMarker);
+  return true;
+}
+
+struct WorkChoice {
+  std::string dir;
+  bool created = false;  // made by this run (else an earlier build's, ours by its marker)
+};
+
+WorkChoice chooseWorkDir(const std::string& output, const std::string& requested) {
+  auto oursOrRefuse = [&](const std::string& dir) -> WorkChoice {
+    if (createWorkDir(dir, output)) return {dir, true};
+    std::error_code ec;
+    if (!fs::is_directory(dir, ec)) fail(dir, "exists and is not a directory; move it away or give another --work-dir");
+    if (hasWorkMarker(dir)) return {dir, false};
+    fail(dir, std::string("exists and was not made by a build (no ") + kWorkMarker +
+                  " in it), so it is left alone; move it away or give another --work-dir");
+  };
+  if (requested.empty()) return oursOrRefuse(output + ".work");
+  if (createWorkDir(requested, output)) return {requested, true};
+  std::error_code ec;
+  if (!fs::is_directory(requested, ec)) fail(requested, "--work-dir: exists and is not a directory");
+  if (hasWorkMarker(requested)) return {requested, false};
+  // A folder of the user's: work in a subdirectory of it, named after the output.
+  return oursOrRefuse((fs::path(requested) / (fs::path(output).filename().string() + ".work")).string());
+}
+
+// The temporary MT file an earlier build in `work` recorded, or "" (also when the record does not
+// name a temporary file of `output`: nothing else is ever opened, reused or removed through it).
+std::string recordedTempPath(const std::string& work, const std::string& output) {
+  std::ifstream f(fs::path(work) / kTempNameFile);
+  std::string name;
+  if (!f || !std::getline(f, name)) return "";
+  const std::string prefix = fs::path(output).filename().string() + ".tmp.";
+  if (name.size() <= prefix.size() || name.compare(0, prefix.size(), prefix) != 0 || name.find('/') != std::string::npos)
+    return "";
+  return (fs::path(output).parent_path() / name).string();
+}
+
+void recordTempPath(const std::string& work, const std::string& tempPath) {
+  const std::string path = (fs::path(work) / kTempNameFile).string();
+  std::ofstream f(path);
+  f << fs::path(tempPath).filename().string() << "\n";
+  f.flush();
+  if (!f) fail(path, "cannot write");
+}
+
+// Empties a work directory of ours for a fresh start, keeping its marker and lock.
+void clearWorkDir(const std::string& work) {
+  std::error_code ec;
+  for (auto it = fs::directory_iterator(work, ec); !ec && it != fs::directory_iterator(); it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    if (name == kWorkMarker || name == kWorkLock) continue;
+    std::error_code rc;
+    fs::remove_all(it->path(), rc);
+    if (rc) fail(it->path().string(), "cannot remove (clearing the work directory of an earlier build): " + rc.message());
+  }
+}
+
+const char* signalName(int sig) { return sig == SIGINT ? "SIGINT" : sig == SIGTERM ? "SIGTERM" : "a signal"; }
+
+// The modification time as "2026-12-02 05:27:00.123456789 UTC".
+std::string utcTime(const struct timespec& t) {
+  struct tm tm {};
+  time_t sec = t.tv_sec;
+  gmtime_r(&sec, &tm);
+  char buf[64], out[96];
+  std::strftime(buf, sizeof buf, "%Y-%m-%d %H:%M:%S", &tm);
+  std::snprintf(out, sizeof out, "%s.%09ld UTC", buf, long(t.tv_nsec));
+  return out;
+}
+
+// XXH3-64 of the whole file, streamed through an 8 MiB buffer (a 1 GB PLY: see docs/mtbuild.md).
+uint64_t hashFile(const std::string& path) {
+  int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) fail(path, std::string("cannot open: ") + std::strerror(errno));
+  ::posix_fadvise(fd, 0, 0, POSIX_FADV_SEQUENTIAL);
+  XXH3_state_t* state = XXH3_createState();
+  XXH3_64bits_reset(state);
+  std::vector<char> buf(8 << 20);
+  uint64_t at = 0;
+  for (;;) {
+    ssize_t n = ::read(fd, buf.data(), buf.size());
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0) {
+      std::string why = std::strerror(errno);
+      XXH3_freeState(state);
+      ::close(fd);
+      fail(path, "read failed at byte offset " + std::to_string(at) + ": " + why);
+    }
+    if (n == 0) break;
+    XXH3_64bits_update(state, buf.data(), size_t(n));
+    at += uint64_t(n);
+  }
+  uint64_t h = XXH3_64bits_digest(state);
+  XXH3_freeState(state);
+  ::close(fd);
+  return h;
+}
 
 // The quantization step: 1/8 of the mean edge length (estimated from a sample of patches): the
 // quantization error (step * sqrt(3)/2) stays a fraction of an edge, and /16 measured 0.2 bytes
@@ -208,7 +341,7 @@ uint64_t treeBytes(const std::string& path) {
 
 constexpr char kCheckpointBlob[] = "mtbuild.checkpoint";
 constexpr uint64_t kCheckpointMagic = 0x31544b43544d4dull;  // "MMTCKT1"
-constexpr uint32_t kCheckpointVersion = 2;
+constexpr uint32_t kCheckpointVersion = 3;  // 3: the input hash covers the whole file
 
 // "key=value" lines: the input's identity and every option that changes the bytes (not --threads
 // or --memory, which do not). Compared line by line so a refused resume can say what changed.
@@ -237,22 +370,12 @@ std::string fingerprint(const std::string& input, const BuildOptions& o, bool st
     s << "input_store_files=" << files.size() << "\ninput_store_hash=" << std::hex << XXH64(current.data(), current.size(), h)
       << std::dec << "\n";
   } else {
-    uint64_t size = fs::file_size(input, ec);
-    auto mtime = fs::last_write_time(input, ec).time_since_epoch().count();
-    // Size, modification time and a hash of the first and last MiB: cheap, and catches a
-    // regenerated or edited file without reading the whole scan again.
-    uint64_t h = 0;
-    if (FILE* f = std::fopen(input.c_str(), "rb")) {
-      std::vector<char> buf(1 << 20);
-      size_t n = std::fread(buf.data(), 1, buf.size(), f);
-      h = XXH64(buf.data(), n, 0);
-      if (size > buf.size() && std::fseek(f, long(size - buf.size()), SEEK_SET) == 0) {
-        n = std::fread(buf.data(), 1, buf.size(), f);
-        h = XXH64(buf.data(), n, h);
-      }
-      std::fclose(f);
-    }
-    s << "input_size=" << size << "\ninput_mtime=" << int64_t(mtime) << "\ninput_hash=" << std::hex << h << std::dec << "\n";
+    // Size, modification time (readable, for a refused resume's message) and a hash of every
+    // byte: an edit anywhere is caught, even one that kept the size and restored the mtime.
+    struct stat st {};
+    if (::stat(input.c_str(), &st) != 0) fail(input, std::string("cannot stat: ") + std::strerror(errno));
+    s << "input_size=" << uint64_t(st.st_size) << "\ninput_mtime=" << utcTime(st.st_mtim) << "\ninput_hash=" << std::hex
+      << hashFile(input) << std::dec << "\n";
   }
   s << "partition=" << (o.partition == PartitionKind::Regular ? "regular" : "irregular") << "\n";
   s << "patch_triangles=" << o.patchTriangles << "\n";
@@ -376,8 +499,13 @@ RegionResult processRegion(const RegionTask& task, const RegionContext& ctx) {
 // ---- The level loop's state ---------------------------------------------------------------------
 
 struct LevelBuilder::State {
+  // First, so released last: after the temporary file is renamed or removed.
+  std::unique_ptr<FileLock> outputLock, workLock;
   BuildOptions options;
   std::string input, output, work, storeDir;
+  std::string tempPath;     // the MT file being written, beside the output
+  bool workCreated = false;  // the work directory was made by this run
+  bool noted = false;        // stopNote() said what was kept
   Clock::time_point t0, buildStart;
   std::unique_ptr<PatchStore> store;
   PartitionSequence sequence;
@@ -406,8 +534,9 @@ struct LevelBuilder::State {
   Clock::time_point levelStart;
   std::unique_ptr<Progress> progress;
   uint64_t doneTriangles = 0, outTriangles = 0;
-  // Test hooks (SIGKILL at a chosen point) and the task-time log.
-  long killAfterLevel = -1, killAfterRegions = -1, committedRegions = 0;
+  // Test hooks (SIGKILL at a chosen point, a pause after each region so that a test can signal a
+  // running build) and the task-time log.
+  long killAfterLevel = -1, killAfterRegions = -1, committedRegions = 0, regionPauseMs = 0;
   FILE* taskTimes = nullptr;
 
   // Checkpoint side file (see checkpointBytes): its committed length and chained hash, and how
@@ -577,7 +706,7 @@ void LevelBuilder::State::restore(const std::string& bytes) {
   for (PatchId id : store->patchIds())
     if (!producer.count(id)) fail(where, "checkpoint does not know live patch " + std::to_string(id));
   if (producer.size() != store->patchIds().size()) fail(where, "checkpoint names patches the store does not hold");
-  writer = std::make_unique<MtFileWriter>(output, header, length, std::move(records));
+  writer = std::make_unique<MtFileWriter>(output, header, length, std::move(records), tempPath);
 }
 
 void LevelBuilder::State::writeCheckpoint() {
@@ -591,16 +720,16 @@ void LevelBuilder::State::writeCheckpoint() {
   report.checkpointBytes = std::max<uint64_t>(report.checkpointBytes, bytes.size());
   store->putBlob(kCheckpointBlob, bytes);
   store->sync();
-  report.peakTempBytes = std::max(report.peakTempBytes, treeBytes(work) + treeBytes(output + ".tmp"));
+  report.peakTempBytes = std::max(report.peakTempBytes, treeBytes(work) + treeBytes(tempPath));
 }
 
 void LevelBuilder::State::startFresh(bool storeInput) {
   std::error_code ec;
-  fs::remove_all(work, ec);
-  fs::create_directories(work, ec);
-  if (ec) fail(work, "cannot create the work directory: " + ec.message());
+  // An earlier build's work (ours by its marker, locked by us now) and its temporary file.
+  if (std::string old = recordedTempPath(work, output); !old.empty()) fs::remove(old, ec);
+  clearWorkDir(work);
   // 1. The level-0 patch store, partitioned by V*0 (BMT 4: "the mesh partitioned according to V*0").
-  // Nothing to resume from yet: a failure here leaves no work directory behind.
+  // Nothing to resume from yet: a failure (or a signal) here leaves no work directory behind.
   try {
     if (storeInput) {
       fs::copy(input, storeDir, fs::copy_options::recursive, ec);
@@ -615,15 +744,20 @@ void LevelBuilder::State::startFresh(bool storeInput) {
       io.progress = options.progress;
       PatchStore::ingest(input, storeDir, assigner, io);
     }
+    store = PatchStore::open(storeDir);
+    store->setAutoCommit(false);
+    if (!loadStoreSequence(*store, sequence))
+      fail(input, "the patch store was not made with a V-partition (ingest it with --partition irregular or regular)");
+    // An empty surface (e.g. a heal removed every component) would give an MT file without
+    // patches, which no reader accepts.
+    if (store->info().triangles == 0)
+      fail(input, storeInput ? "the patch store holds no triangles; nothing to build" : "has no triangles; nothing to build");
   } catch (...) {
+    store.reset();
     fs::remove_all(work, ec);
     throw;
   }
   report.ingestSeconds = secondsSince(t0);
-  store = PatchStore::open(storeDir);
-  store->setAutoCommit(false);
-  if (!loadStoreSequence(*store, sequence))
-    fail(input, "the patch store was not made with a V-partition (ingest it with --partition irregular or regular)");
   StoreInfo info = store->info();
   report.inputTriangles = info.triangles;
   liveTriangles = info.triangles;
@@ -661,7 +795,9 @@ void LevelBuilder::State::startFresh(bool storeInput) {
   header.gridStep = grid.step;
   header.quantizationError = qError;
   header.gridBits = grid.bits;
-  writer = std::make_unique<MtFileWriter>(output, header);
+  tempPath = uniqueTempName(output);
+  recordTempPath(work, tempPath);
+  writer = std::make_unique<MtFileWriter>(output, header, tempPath);
   header = writer->header();
 
   // 3. The DAG. Node 0 is the source: the full-resolution fragment (BMT 3.1).
@@ -688,22 +824,43 @@ LevelBuilder::LevelBuilder(const std::string& input, const std::string& output, 
   s.options = options;
   s.input = input;
   s.output = output;
-  s.work = options.workDir.empty() ? output + ".work" : options.workDir;
+  if (options.patchTriangles != 0 && (options.patchTriangles < kMinPatchTriangles || options.patchTriangles > kMaxPatchTriangles))
+    throw Error("--patch-triangles " + std::to_string(options.patchTriangles) + ": out of range (accepted " +
+                std::to_string(kMinPatchTriangles) + " to " + std::to_string(kMaxPatchTriangles) + ")");
+  // Nothing is touched before the input and the output are known to be what they should.
+  const bool storeInput = isStoreDir(input);
+  if (!storeInput) requireRegularFile(input, "a mesh file (PLY, OBJ, OFF, STL) or a patch store");
+  checkOutputPath(output, {input});
+  // One build per output, one per work directory: a second one is refused (naming the first's
+  // PID) before it removes or writes anything.
+  s.outputLock = std::make_unique<FileLock>(output + ".lock", output);
+  WorkChoice choice = chooseWorkDir(output, options.workDir);
+  s.work = choice.dir;
+  s.workCreated = choice.created;
+  try {
+    s.workLock = std::make_unique<FileLock>(s.work + "/" + kWorkLock, "work directory " + s.work);
+  } catch (...) {
+    std::error_code ec;
+    if (s.workCreated) fs::remove_all(s.work, ec);
+    throw;
+  }
+  s.workLock->keepFile();  // the directory goes as a whole, or stays for --resume
   s.storeDir = s.work + "/store";
+  s.say("work directory " + s.work + (s.workCreated ? " (new)" : ""));
   // The level loop frees and allocates region buffers all the time; from a patch store (no
   // ingest, which sets the same) glibc's defaults returned and re-faulted them: 10M store, level
   // loop 12.5-14.2 s -> 11.4-12.4 s, sys 1.8 -> 0.7 s.
   useStreamingAllocator();
   if (const char* k = std::getenv("MT_TEST_KILL_AFTER_LEVEL")) s.killAfterLevel = std::atol(k);
   if (const char* k = std::getenv("MT_TEST_KILL_AFTER_REGIONS")) s.killAfterRegions = std::atol(k);
-  const bool storeInput = isStoreDir(input);
-  if (!storeInput && !fs::is_regular_file(input)) fail(input, "no such file");
+  if (const char* k = std::getenv("MT_TEST_PAUSE_MS_PER_REGION")) s.regionPauseMs = std::atol(k);
   s.fingerprint = fingerprint(input, options, storeInput);
 
   bool resumed = false;
-  if (fs::exists(s.work)) {
+  if (!s.workCreated) {
+    const std::string recorded = recordedTempPath(s.work, output);
     if (!options.resume) {
-      s.say("removing the work directory " + s.work + " of an earlier build and starting over (--resume continues it)");
+      s.say("removing the work in " + s.work + " of an earlier build and starting over (--resume continues it)");
     } else if (!fs::exists(s.storeDir + "/CURRENT")) {
       s.say("--resume: " + s.work + " holds no finished ingest; starting from the input");
     } else {
@@ -712,22 +869,32 @@ LevelBuilder::LevelBuilder(const std::string& input, const std::string& output, 
       if (bytes.empty()) {
         s.say("--resume: " + s.work + " has no checkpoint yet; starting from the input");
         s.store.reset();
-      } else if (!fs::exists(output + ".tmp")) {
-        s.say("--resume: " + output + ".tmp of the killed build is gone; starting from the input");
+      } else if (recorded.empty() || !fs::exists(recorded)) {
+        s.say("--resume: the temporary file " + (recorded.empty() ? output + ".tmp.*" : recorded) +
+              " of the stopped build is gone; starting from the input");
         s.store.reset();
       } else {
         s.store->setAutoCommit(false);
         if (!loadStoreSequence(*s.store, s.sequence)) fail(s.storeDir, "work store has no V-partition");
+        s.tempPath = recorded;
         s.restore(bytes);
         s.report.resumedAtLevel = s.builtLevels;
-        s.say("--resume: continuing after level " + std::to_string(s.builtLevels) + " from " + s.work);
+        s.say("--resume: continuing after level " + std::to_string(s.builtLevels) + " from " + s.work + " and " + recorded);
         resumed = true;
       }
     }
   } else if (options.resume) {
     s.say("--resume: no work directory " + s.work + "; starting from the input");
   }
-  if (!resumed) s.startFresh(storeInput);
+  if (!resumed) {
+    try {
+      s.startFresh(storeInput);
+    } catch (const Interrupted& e) {
+      throw BuildInterrupted(std::string("interrupted by ") + signalName(e.signal()) + " during the ingest; removed " + s.work +
+                                 " (nothing to resume yet)",
+                             e.signal());
+    }
+  }
 
   s.buildStart = Clock::now();
   s.sequenceBytes = s.sequence.serialize();
@@ -752,17 +919,35 @@ LevelBuilder::LevelBuilder(const std::string& input, const std::string& output, 
 LevelBuilder::~LevelBuilder() {
   if (!s_) return;
   if (s_->taskTimes) std::fclose(s_->taskTimes);
-  // Stopped by an error after a checkpoint: keep OUT.mt.tmp beside the work directory so that
-  // --resume can continue from the last finished level (the final name is never written).
+  // Stopped by an error after a checkpoint: keep the temporary file beside the work directory so
+  // that --resume can continue from the last finished level (the final name is never written).
   if (!s_->completed && s_->writer && s_->store) {
-    s_->writer->detach();
-    s_->say("stopped; the work in " + s_->work + " continues with --resume (or delete it)");
+    if (!s_->noted) s_->say("stopped " + stopNote());
+    // PatchStore's destructor commits pending write-backs even with autoCommit off: here they are
+    // a part of the level being built, and committing them would leave a store the checkpoint no
+    // longer describes ("checkpoint does not know live patch N" on --resume). Nothing of the
+    // store needs closing before the process exits (every committed byte is synced), so it is
+    // dropped without its destructor.
+    (void)s_->store.release();
   }
+}
+
+std::string LevelBuilder::stopNote() {
+  State& s = *s_;
+  if (s.completed || !s.writer || !s.store) return "; nothing to resume";
+  s.writer->detach();
+  s.noted = true;
+  const bool inLevel = s.progress && s.nextCommit < s.regionIds.size() && s.nextCommit > 0;
+  std::string where = s.builtLevels == 0 ? "after the ingest" : "after level " + std::to_string(s.builtLevels);
+  if (inLevel) where = "during level " + std::to_string(s.builtLevels + 1) + " (the checkpoint " + where + " is kept)";
+  return where + "; kept " + s.work + " and " + s.tempPath + "; run the same command with --resume to continue";
 }
 
 const RegionContext& LevelBuilder::context() const { return s_->ctx; }
 const std::string& LevelBuilder::sequenceBytes() const { return s_->sequenceBytes; }
 const BuildOptions& LevelBuilder::options() const { return s_->options; }
+const std::string& LevelBuilder::workDir() const { return s_->work; }
+const std::string& LevelBuilder::tempPath() const { return s_->tempPath; }
 uint32_t LevelBuilder::level() const { return s_->builtLevels + 1; }
 size_t LevelBuilder::regionCount() const { return s_->regionIds.size(); }
 uint64_t LevelBuilder::regionTriangles(size_t i) const { return s_->floorTriangles.at(i); }
@@ -868,8 +1053,9 @@ void LevelBuilder::commitRegion(size_t i, RegionTask task, RegionResult result, 
   // Temporary disk peaks inside a level too (new patches appended before the old ones' space is
   // reclaimed): sample it now and then.
   if (s.nextCommit % 32 == 0)
-    s.report.peakTempBytes = std::max(s.report.peakTempBytes, treeBytes(s.work) + treeBytes(s.output + ".tmp"));
+    s.report.peakTempBytes = std::max(s.report.peakTempBytes, treeBytes(s.work) + treeBytes(s.tempPath));
   if (s.killAfterRegions >= 0 && ++s.committedRegions > s.killAfterRegions) std::raise(SIGKILL);  // test hook
+  if (s.regionPauseMs > 0) ::usleep(useconds_t(s.regionPauseMs) * 1000);                            // test hook
 }
 
 void LevelBuilder::endLevel() {
@@ -924,10 +1110,11 @@ BuildReport LevelBuilder::finish() {
   report.nodes = s.nodes.size();
   report.arcs = arcs.size();
   report.patches = s.writer->patchCount();
-  report.peakTempBytes = std::max(report.peakTempBytes, treeBytes(s.work) + treeBytes(s.output + ".tmp"));
+  report.peakTempBytes = std::max(report.peakTempBytes, treeBytes(s.work) + treeBytes(s.tempPath));
   s.writer->finish(std::move(s.nodes), std::move(arcs));
   report.fileBytes = fs::file_size(s.output);
   s.store.reset();
+  // The work directory is ours (created by a build, marked): it goes as a whole.
   std::error_code ec;
   fs::remove_all(s.work, ec);
   report.buildSeconds = secondsSince(s.buildStart);
@@ -941,12 +1128,27 @@ BuildReport LevelBuilder::finish() {
 
 // ---- mtbuild: the regions on threads ----------------------------------------------------------
 
+// The level loop on threads; checks for SIGINT/SIGTERM between region commits and levels.
+static BuildReport buildLevels(LevelBuilder& builder, const BuildOptions& options);
+
 BuildReport buildMt(const std::string& input, const std::string& output, const BuildOptions& options) {
   std::unique_ptr<tbb::global_control> threadLimit;
   if (options.threads > 0)
     threadLimit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, options.threads);
-  LevelBuilder builder(input, output, options);
+  std::unique_ptr<LevelBuilder> owned = std::make_unique<LevelBuilder>(input, output, options);
+  try {
+    return buildLevels(*owned, options);
+  } catch (const Interrupted& e) {
+    // Say what was kept while the builder still knows, then let it close the files.
+    std::string note = std::string("interrupted by ") + signalName(e.signal()) + " " + owned->stopNote();
+    owned.reset();
+    throw BuildInterrupted(note, e.signal());
+  }
+}
+
+BuildReport buildLevels(LevelBuilder& builder, const BuildOptions& options) {
   const RegionContext& ctx = builder.context();
+  checkInterrupt(options.toolName);
   struct Job {
     size_t index = 0;
     RegionTask task;
@@ -961,7 +1163,9 @@ BuildReport buildMt(const std::string& input, const std::string& output, const B
         tokens,
         tbb::make_filter<void, Job*>(tbb::filter_mode::serial_in_order,
                                      [&](tbb::flow_control& fc) -> Job* {
-                                       if (next == regions) {
+                                       // A signal: start no more regions (the level is redone
+                                       // from its checkpoint on --resume).
+                                       if (next == regions || interruptRequested()) {
                                          fc.stop();
                                          return nullptr;
                                        }
@@ -975,10 +1179,13 @@ BuildReport buildMt(const std::string& input, const std::string& output, const B
                                            return job;
                                          }) &
             tbb::make_filter<Job*, void>(tbb::filter_mode::serial_in_order, [&](Job* job) {
+              checkInterrupt(options.toolName);  // a safe point: between region commits
               builder.commitRegion(job->index, std::move(job->task), std::move(job->result));
               *job = Job();  // free the region's memory now
             }));
+    checkInterrupt(options.toolName);
     builder.endLevel();
+    checkInterrupt(options.toolName);  // after the level's checkpoint
   }
   return builder.finish();
 }

@@ -15,6 +15,7 @@
 
 #include "mtbuild/mt_format.h"
 #include "mtbuild/patch_codec.h"
+#include "patchstore/error.h"
 #include "patchstore/patch_store.h"
 #include "vpartition/vpartition.h"
 
@@ -26,6 +27,17 @@ namespace mt {
 // bytes per input triangle; 1000 gives 2.92 / 2.12) at no extra build CPU; 4000 costs 40-60% more
 // CPU (docs/mt-format.md has the sweep).
 constexpr uint32_t kDefaultMtPatchTriangles = 2000;
+// The --patch-triangles range. Below 100 the per-patch cost (a ~190-byte record and payload
+// header, the region bookkeeping) outweighs the geometry: 1 made a file 106x the default's. Above
+// 100000 a region (its V*i patches, ~6 of them, assembled, simplified and kept twice) needs
+// hundreds of MiB and a level has too few regions to use the threads or ranks.
+constexpr uint32_t kMinPatchTriangles = 100, kMaxPatchTriangles = 100000;
+// The least --memory the build honours: the ingest's and the V-partition's fixed buffers (a 200k
+// scan needs 6 MiB for the partition alone); below it a build either fails late or exceeds the cap.
+constexpr uint64_t kMinBuildMemory = 16ull << 20;
+// The work directory marker: a directory holding it was made by mtbuild/mtcluster, and is the
+// only kind they ever empty or remove.
+constexpr char kWorkMarker[] = ".mtbuild-work";
 
 struct BuildOptions {
   uint64_t memoryBytes = 1ull << 30;  // --memory: the cap for the whole build (ingest included)
@@ -37,7 +49,9 @@ struct BuildOptions {
   // Continue a killed build from the checkpoint in its work directory (the last finished level).
   bool resume = false;
   bool progress = true;
-  std::string workDir;                // default: OUT.work
+  // default OUT.work. A DIR that exists and was not made by a build (no kWorkMarker) is left
+  // alone: the build uses DIR/<output's file name>.work instead.
+  std::string workDir;
   // Stop adding levels once the top level has at most this many triangles (0: 2 x patch size),
   // or when a level removes less than 10% of the triangles.
   uint64_t rootTriangles = 0;
@@ -72,8 +86,25 @@ struct BuildReport {
   std::string toJson() const;
 };
 
+// SIGINT/SIGTERM stopped the build at a safe point (between regions or levels). The message says
+// what was kept (the work directory and temporary file, for --resume) or removed; the tools exit
+// with 128 + signal().
+class BuildInterrupted : public Error {
+ public:
+  BuildInterrupted(const std::string& message, int signal) : Error(message), signal_(signal) {}
+  int signal() const { return signal_; }
+
+ private:
+  int signal_;
+};
+
 // input: a mesh file (PLY/OBJ/OFF/STL) or a patch store directory made with a V-partition.
-// Writes `output` under a temporary name and renames it when complete. Throws mt::Error.
+// Writes `output` under a temporary name unique to the process and renames it when complete.
+// Before any work: the input must be a regular file or a store, `output` may not be the input or
+// a directory, and `output` (OUT.lock) and the work directory (WORK/LOCK) are locked for the whole
+// build, so a second build of the same output or in the same work directory is refused naming the
+// first one's PID. Throws mt::Error; BuildInterrupted after SIGINT/SIGTERM (when
+// installInterruptHandlers() was called).
 BuildReport buildMt(const std::string& input, const std::string& output, const BuildOptions& options);
 
 // ---- The per-region work, as one pure function (BMT section 4, "the i-th simplification step") --
@@ -136,6 +167,12 @@ class LevelBuilder {
   const RegionContext& context() const;
   const std::string& sequenceBytes() const;  // PartitionSequence::serialize() of the build
   const BuildOptions& options() const;
+  const std::string& workDir() const;        // the work directory in use
+  const std::string& tempPath() const;       // the MT file being written (renamed by finish())
+  // For a stop after an error or a signal: what is kept and how to continue, e.g. "after level 3;
+  // kept OUT.work and OUT.mt.tmp.123.ab12; run the same command with --resume to continue". The
+  // destructor then says nothing more.
+  std::string stopNote();
 
   // Plans the next level; false once the build needs no more levels.
   bool beginLevel();

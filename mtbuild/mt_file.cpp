@@ -40,8 +40,8 @@ void appendVec(std::vector<uint8_t>& out, const std::vector<T>& v) {
 // ---------------------------------------------------------------------------------------------
 // Writer
 
-MtFileWriter::MtFileWriter(const std::string& path, const FileHeader& header)
-    : path_(path), tmp_(path + ".tmp"), header_(header) {
+MtFileWriter::MtFileWriter(const std::string& path, const FileHeader& header, const std::string& tempPath)
+    : path_(path), tmp_(tempPath.empty() ? path + ".tmp" : tempPath), header_(header) {
   fd_ = ::open(tmp_.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
   if (fd_ < 0) fail(tmp_, "cannot create: " + errnoText());
   if (header_.payloadAlignment == 0) header_.payloadAlignment = kDefaultPayloadAlignment;
@@ -65,8 +65,8 @@ void MtFileWriter::abandon() {
 }
 
 MtFileWriter::MtFileWriter(const std::string& path, const FileHeader& header, uint64_t length,
-                           std::vector<PatchRecord> patches)
-    : path_(path), tmp_(path + ".tmp"), offset_(length), header_(header), patches_(std::move(patches)) {
+                           std::vector<PatchRecord> patches, const std::string& tempPath)
+    : path_(path), tmp_(tempPath.empty() ? path + ".tmp" : tempPath), offset_(length), header_(header), patches_(std::move(patches)) {
   fd_ = ::open(tmp_.c_str(), O_WRONLY | O_CLOEXEC);
   if (fd_ < 0) fail(tmp_, "cannot reopen to resume: " + errnoText());
   off_t end = ::lseek(fd_, 0, SEEK_END);

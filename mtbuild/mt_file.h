@@ -1,8 +1,10 @@
 // Writing and reading MT files (layout in mt_format.h).
 //
 // MtFileWriter streams: payloads are appended as the builder produces patches, the DAG and the
-// patch index are written at the end, and the file is built under PATH.tmp and renamed to PATH
-// only once complete and synced, so a crash never leaves a half-written file under the final name.
+// patch index are written at the end, and the file is built under a temporary name beside PATH
+// (PATH.tmp, or the name the caller gives: the builder passes one unique to its process, so two
+// builds of one output never write the same file) and renamed to PATH only once complete and
+// synced, so a crash never leaves a half-written file under the final name.
 //
 // MtFileReader validates everything it trusts before returning from open(): magic, version,
 // footer, the metadata checksum, and every offset and count against the file size and each other.
@@ -32,9 +34,10 @@ struct DagArc {
 class MtFileWriter {
  public:
   // `header` gives codec, vertexFlags, levelCount, input counts, bounds and grid; the writer fills
-  // magic, version, sizes, counts and offsets. Creates (truncates) PATH.tmp. Throws mt::Error.
-  MtFileWriter(const std::string& path, const format::FileHeader& header);
-  ~MtFileWriter();  // removes PATH.tmp unless finish() completed
+  // magic, version, sizes, counts and offsets. Creates (truncates) `tempPath` (empty: PATH.tmp),
+  // which must be beside PATH (renamed over it). Throws mt::Error.
+  MtFileWriter(const std::string& path, const format::FileHeader& header, const std::string& tempPath = {});
+  ~MtFileWriter();  // removes the temporary file unless finish() completed
   MtFileWriter(const MtFileWriter&) = delete;
   MtFileWriter& operator=(const MtFileWriter&) = delete;
 
@@ -46,25 +49,28 @@ class MtFileWriter {
   format::FileHeader& header() { return header_; }
   uint64_t bytesWritten() const { return offset_; }
 
-  // Writes the DAG, the index and the footer, syncs, renames PATH.tmp to PATH and syncs the
+  // The file being written, renamed to PATH by finish().
+  const std::string& tempPath() const { return tmp_; }
+
+  // Writes the DAG, the index and the footer, syncs, renames the temporary file to PATH and syncs the
   // directory. nodes: every field except firstArc/arcCount/firstBackArc/backArcCount/triangles,
   // which are derived from `arcs`. Every patch must be on exactly one arc. Throws mt::Error.
   void finish(std::vector<format::NodeRecord> nodes, std::vector<DagArc> arcs);
 
-  // Stops and removes PATH.tmp (also done by the destructor).
+  // Stops and removes the temporary file (also done by the destructor).
   void abandon();
 
   // ---- Checkpointing (mtbuild --resume; added by the cluster/resume work) ----
-  // Reopens the PATH.tmp of a killed build to continue it: `length` and `patches` are what
-  // bytesWritten() and patchRecords() returned when the checkpoint was taken (after
-  // syncPayloads()). Bytes past `length` (payloads of an unfinished level) are cut off. Throws
-  // mt::Error when PATH.tmp is missing or shorter than `length`.
+  // Reopens the temporary file `tempPath` (empty: PATH.tmp) of a killed build to continue it:
+  // `length` and `patches` are what bytesWritten() and patchRecords() returned when the
+  // checkpoint was taken (after syncPayloads()). Bytes past `length` (payloads of an unfinished
+  // level) are cut off. Throws mt::Error when the file is missing or shorter than `length`.
   MtFileWriter(const std::string& path, const format::FileHeader& header, uint64_t length,
-               std::vector<format::PatchRecord> patches);
+               std::vector<format::PatchRecord> patches, const std::string& tempPath = {});
   // Makes every payload appended so far durable (fdatasync), so a checkpoint may refer to them.
   void syncPayloads();
   const std::vector<format::PatchRecord>& patchRecords() const { return patches_; }
-  // Closes PATH.tmp but keeps it, for a build that stopped after a checkpoint and may resume.
+  // Closes the temporary file but keeps it, for a build that stopped after a checkpoint and may resume.
   void detach();
 
  private:

@@ -1,0 +1,153 @@
+// The option set mtbuild and mtcluster share (mtcluster takes every mtbuild option): one
+// definition, so both say the same in --help and refuse the same values, each refusal naming the
+// option and its accepted range.
+#pragma once
+
+#include <CLI/CLI.hpp>
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <string>
+
+#include "mtbuild/build.h"
+#include "patchstore/error.h"
+#include "patchstore/output_path.h"
+#include "patchstore/patch_store.h"
+
+namespace mt::tools {
+
+// --threads: at most this many (beyond it TBB only adds overhead on any machine we know of).
+constexpr int64_t kMaxBuildThreads = 1024;
+
+inline uint64_t physicalRamBytes() {
+  long pages = ::sysconf(_SC_PHYS_PAGES), size = ::sysconf(_SC_PAGESIZE);
+  return pages > 0 && size > 0 ? uint64_t(pages) * uint64_t(size) : uint64_t(1) << 40;
+}
+
+inline std::string sizeText(uint64_t bytes) {
+  char buf[32];
+  if (bytes >= (uint64_t(1) << 30)) std::snprintf(buf, sizeof buf, "%.1fG", double(bytes) / double(1 << 30));
+  else std::snprintf(buf, sizeof buf, "%.0fM", double(bytes) / double(1 << 20));
+  return buf;
+}
+
+// --memory: from the least the build honours (kMinBuildMemory) to the machine's physical RAM (a
+// cap above it is no cap, and sizes the buffers beyond what can be allocated).
+inline uint64_t parseBuildMemory(const std::string& text) {
+  const uint64_t ram = physicalRamBytes();
+  const std::string range = " (accepted " + sizeText(kMinBuildMemory) + " to " + sizeText(ram) + ", this machine's RAM)";
+  size_t pos = 0;
+  double value = 0;
+  try {
+    value = std::stod(text, &pos);
+  } catch (...) {
+    throw Error("--memory '" + text + "': not a size such as 512M or 4G" + range);
+  }
+  uint64_t unit = 0;
+  try {
+    unit = parseSize("1" + text.substr(pos));
+  } catch (const Error&) {
+    throw Error("--memory '" + text + "': unknown unit (use K, M, G or T)" + range);
+  }
+  const double bytes = value * double(unit);
+  if (!std::isfinite(bytes) || bytes < double(kMinBuildMemory) || bytes > double(ram))
+    throw Error("--memory " + text + ": out of range" + range);
+  return uint64_t(bytes);
+}
+
+struct BuildCli {
+  std::string input, output, memory = "1G", partition = "irregular", codec = "meshopt", statsJson, workDir, taskTimes;
+  int64_t threads = 0, patchTriangles = 0;  // signed, so that -1 is refused with the range, not wrapped
+  bool normals = false, noNormals = false, resume = false, quiet = false;
+  CLI::Option *threadsOption = nullptr, *patchTrianglesOption = nullptr;  // given explicitly: 0 is refused
+
+  // `tool`: "mtbuild" or "mtcluster"; `cluster` adds what differs in the help.
+  void add(CLI::App& app, bool cluster) {
+    app.add_option("input", input,
+                   cluster ? "Input mesh (PLY, OBJ, OFF, STL) or a patch store made by `mtstore ingest`, read by rank 0"
+                           : "Input mesh (PLY, OBJ, OFF, STL) or a patch store made by `mtstore ingest`")
+        ->required();
+    app.add_option("-o,--output", output,
+                   std::string("Output MT file, ending in .mt") + (cluster ? ", written by rank 0" : "") +
+                       " (written as OUT.tmp.PID.RANDOM, renamed over OUT only when\n"
+                       "complete; OUT may not be the input; OUT.lock is held meanwhile, so a second build of OUT is refused)")
+        ->required();
+    app.add_option("--memory", memory,
+                   std::string(cluster ? "Memory cap of rank 0's ingest and store" : "Memory cap for the whole build") +
+                       ", e.g. 512M, 4G (default 1G; accepted " + sizeText(kMinBuildMemory) + " to this machine's RAM, " +
+                       sizeText(physicalRamBytes()) + ")");
+    threadsOption = app.add_option("--threads", threads,
+                   std::string(cluster ? "Threads of a one-rank run" : "Worker threads") + " (default: all cores; 1 to " +
+                       std::to_string(kMaxBuildThreads) + "); the output does not depend on it");
+    app.add_option("--partition", partition, "V-partition: irregular (default; BMT 4.2.2) or regular (4.2.1)");
+    patchTrianglesOption = app.add_option("--patch-triangles", patchTriangles,
+                   "Target triangles per patch (default " + std::to_string(kDefaultMtPatchTriangles) +
+                       ": smallest file at no extra build time, see docs/mt-format.md;\naccepted " +
+                       std::to_string(kMinPatchTriangles) + " to " + std::to_string(kMaxPatchTriangles) +
+                       ": below, the per-patch record outweighs the geometry; above, a region no longer fits\na small "
+                       "memory cap and a level has too few regions to share out; ignored for a store input, which keeps "
+                       "its own)");
+    app.add_option("--codec", codec, "Patch coding: meshopt (default, fast decode) or draco (smallest files)");
+    app.add_flag("--normals", normals, "Store per-vertex normals (2x8 bit) instead of letting the renderer compute them");
+    app.add_flag("--no-normals", noNormals, "Store no normals (the default; kept for scripts that say so explicitly)");
+    app.add_flag("--resume", resume,
+                 "Continue a stopped build (killed, or interrupted with Ctrl-C) from the checkpoint in its work directory:\n"
+                 "the last finished level; the same bytes as an uninterrupted build" +
+                     std::string(cluster ? ", with any number of ranks" : "") +
+                     ". Refused (with the reason) when the input\n"
+                     "(size, time, a hash of every byte) or an option that changes the output differs (--threads and "
+                     "--memory may\nchange). Without --resume the work of an earlier build is removed and the build starts over");
+    app.add_option("--stats-json", statsJson,
+                   cluster ? "Write build figures and per-rank busy time, bytes, efficiency as JSON"
+                           : "Write build figures (per level, throughput, peak RSS, sizes) as JSON");
+    app.add_option("--task-times", taskTimes,
+                   "Write one CSV line per region (level, region, triangles, load/simplify/commit seconds, bytes a\n"
+                   "cluster would move): the input of the scaling model in docs/cluster.md");
+    app.add_option("--work-dir", workDir,
+                   std::string(cluster ? "Rank 0's scratch" : "Scratch") +
+                       " directory for the patch store (default OUT.work; up to ~3x the input). Created\n"
+                       "and marked (" + kWorkMarker +
+                       ") by the build, removed when it completes. An existing directory the build did not\n"
+                       "make (\".\", the input's folder) is never emptied: the build works in DIR/OUT.work inside it");
+    app.add_flag("-q,--quiet", quiet, "No progress lines on stderr");
+  }
+
+  // The validated options; throws mt::Error naming the option and its accepted range.
+  BuildOptions options(const std::string& tool) const {
+    if (normals && noNormals) throw Error("--normals and --no-normals contradict each other");
+    BuildOptions o;
+    o.memoryBytes = parseBuildMemory(memory);
+    const bool threadsGiven = threadsOption && threadsOption->count() > 0;
+    const bool patchGiven = patchTrianglesOption && patchTrianglesOption->count() > 0;
+    if ((threadsGiven || threads != 0) && (threads < 1 || threads > kMaxBuildThreads))
+      throw Error("--threads " + std::to_string(threads) + ": out of range (accepted 1 to " + std::to_string(kMaxBuildThreads) +
+                  "; default all cores)");
+    o.threads = uint32_t(threads);
+    if ((patchGiven || patchTriangles != 0) && (patchTriangles < kMinPatchTriangles || patchTriangles > kMaxPatchTriangles))
+      throw Error("--patch-triangles " + std::to_string(patchTriangles) + ": out of range (accepted " +
+                  std::to_string(kMinPatchTriangles) + " to " + std::to_string(kMaxPatchTriangles) + "; default " +
+                  std::to_string(kDefaultMtPatchTriangles) + ")");
+    o.patchTriangles = uint32_t(patchTriangles);
+    o.partition = parsePartitionKind(partition);
+    if (codec == "meshopt") o.codec = format::Codec::Meshopt;
+    else if (codec == "draco") o.codec = format::Codec::Draco;
+    else throw Error("unknown --codec '" + codec + "' (expected meshopt or draco)");
+    // The output may not be the input (by inode, whatever the spelling): said first, as it matters
+    // most. The MT tools know a file by its contents, but a build's output named .ply or .glb
+    // would be taken for one by everything else.
+    checkOutputPath(output, {input});
+    if (output.size() < 4 || output.compare(output.size() - 3, 3, ".mt") != 0 || output.back() == '/')
+      throw Error("-o " + output + ": an MT file name must end in .mt");
+    o.normals = normals;
+    o.resume = resume;
+    o.progress = !quiet;
+    o.workDir = workDir;
+    o.taskTimesPath = taskTimes;
+    o.toolName = tool;
+    return o;
+  }
+};
+
+}  // namespace mt::tools
