@@ -429,6 +429,7 @@ std::string BuildReport::toJson() const {
     << ",\n  \"nodes\": " << nodes << ",\n  \"arcs\": " << arcs << ",\n  \"patches\": " << patches
     << ",\n  \"file_bytes\": " << fileBytes << ",\n  \"bytes_per_input_triangle\": "
     << (inputTriangles ? double(fileBytes) / double(inputTriangles) : 0) << ",\n  \"grid_step\": " << gridStep
+    << ",\n  \"welded_vertices\": " << weldedVertices << ",\n  \"welded_triangles\": " << weldedTriangles
     << ",\n  \"ingest_seconds\": " << ingestSeconds << ",\n  \"build_seconds\": " << buildSeconds
     << ",\n  \"total_seconds\": " << totalSeconds << ",\n  \"input_triangles_per_second\": "
     << (totalSeconds > 0 ? double(inputTriangles) / totalSeconds : 0) << ",\n  \"peak_rss_bytes\": " << peakRssBytes
@@ -689,6 +690,8 @@ void LevelBuilder::State::restore(const std::string& bytes) {
   finished = r.get<uint8_t>() != 0;
   liveTriangles = r.get<uint64_t>();
   header = r.get<format::FileHeader>();
+  report.weldedVertices = header.weldedVertices;
+  report.weldedTriangles = header.weldedTriangles;
   uint64_t length = r.get<uint64_t>();
   uint64_t patchCount = r.get<uint64_t>(), nodeCount = r.get<uint64_t>();
   uint64_t sideLen = r.get<uint64_t>(), sideH = r.get<uint64_t>();
@@ -773,9 +776,12 @@ void LevelBuilder::State::startFresh(bool storeInput) {
     ho.memoryBytes = std::max<uint64_t>(options.memoryBytes / 4, 16ull << 20);
     ho.progress = options.progress;
     heal::PassReport w = heal::weldToGrid(*store, cells, ho);
-    if (w.get("merged")) {
-      say("grid weld: " + std::to_string(w.get("merged")) + " vertices closer than the grid step merged, " +
-          std::to_string(w.get("degenerate")) + " triangles that became degenerate removed");
+    report.weldedVertices = w.get("merged");
+    report.weldedTriangles = w.get("degenerate");
+    if (report.weldedVertices) {
+      say("grid weld: " + std::to_string(report.weldedVertices) + " vertices closer than the grid step (" +
+          std::to_string(grid.step) + ") merged, " + std::to_string(report.weldedTriangles) +
+          " triangles that became degenerate removed");
       info = store->info();
       liveTriangles = info.triangles;
     }
@@ -785,8 +791,10 @@ void LevelBuilder::State::startFresh(bool storeInput) {
   header.codec = uint32_t(options.codec);
   header.vertexFlags = (options.normals ? format::kHasNormals : 0) | (info.layout.colors ? format::kHasColors : 0);
   header.payloadAlignment = format::kDefaultPayloadAlignment;
-  header.inputTriangles = info.triangles;
+  header.inputTriangles = report.inputTriangles;
   header.inputVertices = info.vertices;  // (copies of shared vertices counted once per patch)
+  header.weldedVertices = report.weldedVertices;
+  header.weldedTriangles = report.weldedTriangles;
   for (int a = 0; a < 3; ++a) {
     header.boundsMin[a] = info.bounds.lo[a];
     header.boundsMax[a] = info.bounds.hi[a];

@@ -76,6 +76,7 @@ struct BuildReport {
   uint64_t nodes = 0, arcs = 0, patches = 0;
   uint64_t fileBytes = 0;
   double gridStep = 0;
+  uint64_t weldedVertices = 0, weldedTriangles = 0;  // by the grid weld (vertices closer than the grid step)
   double ingestSeconds = 0, buildSeconds = 0, totalSeconds = 0;
   uint64_t peakRssBytes = 0;
   uint32_t resumedAtLevel = 0;        // 0: built from the start; k: continued after level k

@@ -95,7 +95,12 @@ struct FileHeader {
   uint64_t backArcsOffset;
   uint64_t patchRefsOffset;
   uint64_t patchesOffset;
-  uint8_t reserved[24];      // zero
+  // The grid weld (patchstore/heal/heal.h weldToGrid): input vertices that fell into one grid
+  // cell became one vertex, and the triangles that became degenerate were removed, so the finest
+  // cut has inputTriangles - weldedTriangles triangles. Zero in files written before the weld.
+  uint64_t weldedVertices;
+  uint64_t weldedTriangles;
+  uint8_t reserved[8];       // zero
 };
 static_assert(sizeof(FileHeader) == kHeaderSize, "FileHeader is the first 256 bytes of the file");
 

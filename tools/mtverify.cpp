@@ -143,8 +143,16 @@ int run(const std::string& path, uint32_t randomCuts, uint64_t seed, uint64_t me
   std::mutex worstLock;
   std::vector<mt::GridBox> patchBoxes(r.patches().size(), mt::GridBox::everything());
   const bool progress = !quiet && r.header().inputTriangles >= 1000000;
+  // Triangles with two corners at one grid point, per patch: a cut drops them when it welds, so
+  // a build must have removed them (the grid weld) and counted them in the header.
+  std::vector<uint32_t> degenerate(r.patches().size(), 0);
   std::vector<mt::PatchDamage> damaged = mt::checkAllPatches(r, [&](uint32_t p, const mt::DecodedPatch& d) {
     patchBoxes[p] = mt::patchBox(d);
+    for (uint32_t t = 0; t < d.triangleCount(); ++t) {
+      const uint32_t* q[3] = {&d.q[3 * d.triangles[3 * t]], &d.q[3 * d.triangles[3 * t + 1]], &d.q[3 * d.triangles[3 * t + 2]]};
+      auto same = [](const uint32_t* a, const uint32_t* b) { return a[0] == b[0] && a[1] == b[1] && a[2] == b[2]; };
+      degenerate[p] += same(q[0], q[1]) || same(q[1], q[2]) || same(q[0], q[2]);
+    }
     const mt::format::ArcRecord& arc = r.arcs()[r.patches()[p].arc];
     for (uint32_t v : {arc.from, arc.to}) {
       if (v == 0 || v == sink) continue;
@@ -171,6 +179,23 @@ int run(const std::string& path, uint32_t randomCuts, uint64_t seed, uint64_t me
     isDamaged[d.patch] = 1;
     uint32_t v = r.arcs()[r.patches()[d.patch].arc].from;
     problems.add("checksum", d.message + " [" + nodeName(r, v) + "]");
+  }
+  {
+    // The finest cut holds every input triangle but those the build recorded as welded away.
+    const mt::format::FileHeader& h = r.header();
+    uint64_t finest = 0, finestDegenerate = 0, anyDegenerate = 0;
+    for (uint32_t p = 0; p < r.patches().size(); ++p) {
+      anyDegenerate += degenerate[p];
+      if (r.arcs()[r.patches()[p].arc].from == 0) finest += r.patches()[p].triangles - degenerate[p], finestDegenerate += degenerate[p];
+    }
+    if (finest + h.weldedTriangles != h.inputTriangles)
+      problems.add("lost", path + ": the finest cut has " + std::to_string(finest) + " triangles (" +
+                               std::to_string(finestDegenerate) + " degenerate ones dropped); the input had " +
+                               std::to_string(h.inputTriangles) + " and the build recorded " +
+                               std::to_string(h.weldedTriangles) + " as welded away");
+    else if (anyDegenerate)
+      problems.add("lost", path + ": " + std::to_string(anyDegenerate) +
+                               " stored triangles have two corners at one grid point (cuts drop them)");
   }
   for (uint32_t v = 0; v < nodes.size(); ++v)
     if (worstOutside[v] > 0) {
@@ -241,6 +266,8 @@ int run(const std::string& path, uint32_t randomCuts, uint64_t seed, uint64_t me
   std::fflush(stderr);
   std::printf("%s: %zu nodes, %zu arcs, %zu patches\n", path.c_str(), nodes.size(), r.arcs().size(), r.patches().size());
   std::printf("  payloads         %zu checked, %zu damaged\n", r.patches().size(), damaged.size());
+  std::printf("  input kept       %s (%" PRIu64 " triangles, %" PRIu64 " welded away by the build)\n",
+              problems.count("lost") ? "PROBLEMS" : "ok", r.header().inputTriangles, r.header().weldedTriangles);
   std::printf("  DAG shape        %s\n", problems.count("dag") ? "PROBLEMS" : "ok");
   std::printf("  monotone errors  %s\n", problems.count("error") ? "PROBLEMS" : "ok");
   std::printf("  nested spheres   %s\n", problems.count("sphere") ? "PROBLEMS" : "ok");

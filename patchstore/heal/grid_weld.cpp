@@ -78,6 +78,8 @@ PassReport weldToGrid(PatchStore& store, const GridCells& grid, const HealOption
   uint64_t scanned = 0;
   constexpr size_t kBatch = 256;
   std::vector<std::vector<CellRecord>> batch(kBatch);
+  std::vector<uint8_t> repeated(kBatch);  // the patch has a triangle with a repeated vertex
+  std::vector<PatchId> withRepeated;
   for (size_t first = 0; first < ids.size(); first += kBatch) {
     const size_t n = std::min(kBatch, ids.size() - first);
     tbb::parallel_for(size_t(0), n, [&](size_t i) {
@@ -88,8 +90,14 @@ PassReport weldToGrid(PatchStore& store, const GridCells& grid, const HealOption
       out.clear();
       for (uint32_t v = 0; v < p.vertexCount(); ++v)
         if (gidPatch(key[v]) == id) out.push_back({keyOf(cellOf(grid, &p.positions[3 * size_t(v)])), key[v]});
+      repeated[i] = 0;
+      for (size_t t = 0; t < p.triangles.size(); t += 3) {
+        const uint32_t* f = &p.triangles[t];
+        repeated[i] |= f[0] == f[1] || f[1] == f[2] || f[0] == f[2];
+      }
     });
     for (size_t i = 0; i < n; ++i) {
+      if (repeated[i]) withRepeated.push_back(ids[first + i]);
       sorter.addBatch(batch[i].data(), batch[i].size());
       scanned += batch[i].size();
     }
@@ -198,6 +206,25 @@ PassReport weldToGrid(PatchStore& store, const GridCells& grid, const HealOption
     i = j;
   }
   apply.finish(list.size());
+  // 5. Triangles the input itself had with a repeated vertex, in patches no cluster touched:
+  // removed too, so that the finest cut has exactly the store's triangles less those counted.
+  for (PatchId id : withRepeated) {
+    Region r = loadRegion(store, {id});
+    RegionEdit e = identityEdit(r);
+    RegionEdit out = e;
+    out.triangles.clear();
+    out.trianglePatch.clear();
+    for (size_t t = 0; t < e.triangles.size() / 3; ++t) {
+      const uint32_t* f = &e.triangles[3 * t];
+      if (f[0] == f[1] || f[1] == f[2] || f[0] == f[2]) {
+        ++degenerate;
+        continue;
+      }
+      out.triangles.insert(out.triangles.end(), f, f + 3);
+      out.trianglePatch.push_back(e.trianglePatch[t]);
+    }
+    if (out.triangles.size() != e.triangles.size()) dropped += commitRegion(store, r, out).droppedVertices;
+  }
   store.sync();
   double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return {"grid-weld",

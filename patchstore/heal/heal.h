@@ -53,7 +53,8 @@ struct GridCells {
 // Merges all vertices that fall in one grid cell into one (the member with the smallest position),
 // across patches: after it, distinct vertices have distinct quantized positions, so a cut welded
 // by quantized position has the same topology as the store; the triangles that become degenerate
-// are removed. Counts "merged" (vertices removed), "clusters", "degenerate" (triangles removed),
+// are removed, and so are the triangles with a repeated vertex the input had. Counts "merged"
+// (vertices removed), "clusters", "degenerate" (triangles removed),
 // "vertices" (dropped as unused).
 PassReport weldToGrid(PatchStore& store, const GridCells& grid, const HealOptions& options);
 // --remove-degenerate: triangles with a repeated vertex. Counts "triangles", "vertices" (that no
