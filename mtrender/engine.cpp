@@ -12,26 +12,6 @@
 
 namespace mt::render {
 
-uint64_t parseSize(const std::string& text) {
-  size_t pos = 0;
-  double v = 0;
-  try {
-    v = std::stod(text, &pos);
-  } catch (...) {
-    throw Error("mtrender: bad size '" + text + "' (e.g. 256M, 1G)");
-  }
-  std::string unit = text.substr(pos);
-  for (auto& c : unit) c = char(std::toupper(c));
-  double mul = 1;
-  if (unit.empty() || unit == "B") mul = 1;
-  else if (unit == "K" || unit == "KB" || unit == "KIB") mul = 1024.0;
-  else if (unit == "M" || unit == "MB" || unit == "MIB") mul = 1024.0 * 1024;
-  else if (unit == "G" || unit == "GB" || unit == "GIB") mul = 1024.0 * 1024 * 1024;
-  else throw Error("mtrender: bad size unit in '" + text + "' (use K, M or G)");
-  if (v <= 0) throw Error("mtrender: size must be positive: '" + text + "'");
-  return uint64_t(v * mul);
-}
-
 Engine::Engine(EngineOptions options) : options_(std::move(options)) {
   scene_ = std::make_unique<Scene>(options_.files);
   double c[3], r;

@@ -113,7 +113,4 @@ class Engine {
   uint32_t baselineLoads_ = 0;
 };
 
-// "256M", "1G", "64MiB", "1048576" -> bytes. Throws mt::Error.
-uint64_t parseSize(const std::string& text);
-
 }  // namespace mt::render

@@ -21,6 +21,9 @@
 #include "mtrender/engine.h"
 #include "mtrender/viewer.h"
 #include "patchstore/error.h"
+#include "patchstore/output_path.h"
+#include "patchstore/patch_store.h"
+#include "tools/cli_checks.h"
 
 using namespace mt::render;
 using Clock = std::chrono::steady_clock;
@@ -31,8 +34,18 @@ struct Summary {
   std::vector<FrameRecord> frames;
 };
 
+// Removes a temporary file unless it was renamed over its final name.
+struct TemporaryFile {
+  std::string path;
+  bool kept = false;
+  ~TemporaryFile() {
+    if (!kept) std::remove(path.c_str());
+  }
+};
+
 void writeCsv(const std::string& path, const std::vector<FrameRecord>& frames) {
-  const std::string tmp = path + ".tmp";
+  TemporaryFile tmpFile{mt::uniqueTempName(path)};
+  const std::string& tmp = tmpFile.path;
   {
     std::ofstream out(tmp);
     if (!out) mt::fail(path, "cannot write the stats CSV");
@@ -53,6 +66,7 @@ void writeCsv(const std::string& path, const std::vector<FrameRecord>& frames) {
     if (!out) mt::fail(path, "write failed");
   }
   std::filesystem::rename(tmp, path);
+  tmpFile.kept = true;
 }
 
 void writePlots(const std::string& dir, const std::string& csv, double budgetMs, uint64_t cap) {
@@ -78,6 +92,45 @@ void writePlots(const std::string& dir, const std::string& csv, double budgetMs,
   if (std::system(cmd.c_str()) != 0) throw mt::Error(script + ": gnuplot failed (is gnuplot installed?)");
 }
 
+// The outputs may not replace an input MT file (or each other's folder): checked before anything
+// is opened or rendered. Folders get the names written inside them checked.
+void checkOutputs(const std::vector<std::string>& files, const std::string& statsPath, const std::string& screenshotPath,
+                  const std::string& recordPath, bool recordGiven, const std::string& screenshotDir,
+                  const std::string& plotDir) {
+  if (!statsPath.empty()) mt::checkOutputPath(statsPath, files);
+  if (!screenshotPath.empty()) {
+    mt::checkOutputPath(screenshotPath, files);
+    const std::string ext = std::filesystem::path(screenshotPath).extension().string();
+    if (ext != ".png" && ext != ".PNG") mt::fail(screenshotPath, "the screenshot is a PNG: the name must end in .png");
+  }
+  if (recordGiven) mt::checkOutputPath(recordPath, files);
+  auto checkFolder = [&](const std::string& dir, const char* option) {
+    std::error_code ec;
+    if (std::filesystem::exists(dir, ec) && !std::filesystem::is_directory(dir, ec))
+      mt::fail(dir, std::string("is not a directory (") + option + " names the folder the images are written into)");
+  };
+  if (!screenshotDir.empty()) {
+    checkFolder(screenshotDir, "--screenshots");
+    // Screenshots are frame_NNNNN.png inside the folder: none of them may be an input.
+    for (const std::string& f : files) {
+      const std::filesystem::path p(f);
+      const std::string name = p.filename().string();
+      const std::string parent = p.parent_path().empty() ? "." : p.parent_path().string();
+      if (name.rfind("frame_", 0) == 0 && p.extension() == ".png" && mt::sameFile(parent, screenshotDir))
+        mt::fail(f, "is an input and would be overwritten by a screenshot in " + screenshotDir);
+    }
+  }
+  if (!plotDir.empty()) {
+    checkFolder(plotDir, "--plot");
+    for (const char* name : {"frames.csv", "plots.gnuplot", "frame_ms.png", "triangles.png", "loads_misses.png",
+                             "cache_bytes.png", "screen_error.png"}) {
+      const std::string out = plotDir + "/" + name;
+      for (const std::string& f : files)
+        if (mt::sameFile(out, f)) mt::fail(out, "is the input " + f + "; choose another --plot folder (the input is never overwritten)");
+    }
+  }
+}
+
 double median(std::vector<double> v) {
   if (v.empty()) return 0;
   std::sort(v.begin(), v.end());
@@ -101,55 +154,84 @@ int main(int argc, char** argv) {
   double readDelayMs = 0, extractMs = 0;
   uint64_t fixedTriangles = 0;
   uint32_t loadBudget = 0;
+  // Ranges of the numeric options: checked as the command line is parsed, shown by --help.
+  const mt::cli::Interval kBudgetMs{0, 60000, true, false, "ms"}, kTolerance{0, 10000, true, false, "pixels"},
+      kExtractMs{0, 60000, true, false, "ms"}, kDelayMs{0, 60000, false, false, "ms"};
+  constexpr uint64_t kMaxFrames = 10'000'000;
   app.add_option("files", files, "MT files to show together (they share one cache and one budget)")->required();
   app.add_flag("--headless", headless, "render offscreen on EGL surfaceless (no X), for tests and benchmarks");
   app.add_option("--camera-path", cameraPath,
                  "camera path: a path file (docs/mtrender.md) or a built-in: orbit, flythrough, fixed "
                  "(headless default: fixed; in the viewer the path is replayed)");
-  app.add_option("--frames", frames, "frames to render (headless; default: the path's length, or 100)");
-  app.add_option("--budget-ms", budgetMs, "frame-time budget in ms")->capture_default_str();
-  app.add_option("--cache", cacheText, "RAM patch cache cap, e.g. 64M, 1G (default 256M)");
-  app.add_option("--gpu-cache", gpuCacheText, "GPU buffer cache cap (default: same as --cache)");
-  app.add_option("--width", width, "image width")->capture_default_str();
-  app.add_option("--height", height, "image height")->capture_default_str();
-  app.add_option("--stats", statsPath, "write one CSV row per frame (columns in docs/mtrender.md)");
+  app.add_option("--frames", frames, "frames to render (headless; default: the path's length, or 100)")
+      ->check(mt::cli::countIn(1, kMaxFrames));
+  app.add_option("--budget-ms", budgetMs, "frame-time budget in ms")->check(mt::cli::numberIn(kBudgetMs))->capture_default_str();
+  app.add_option("--cache", cacheText, "RAM patch cache cap, from 1M to 1024T, e.g. 64M, 1G (K, M, G, T: powers of 1024)")
+      ->capture_default_str();
+  app.add_option("--gpu-cache", gpuCacheText, "GPU buffer cache cap, from 1M to 1024T (default: same as --cache)");
+  app.add_option("--width", width, "image width in pixels")->check(mt::cli::countIn(16, 16384))->capture_default_str();
+  app.add_option("--height", height, "image height in pixels")->check(mt::cli::countIn(16, 16384))->capture_default_str();
+  app.add_option("--stats", statsPath, "write one CSV row per frame (columns in docs/mtrender.md); not an input file");
   app.add_option("--screenshots", screenshotDir, "headless: write frame_NNNNN.png into this directory");
-  app.add_option("--screenshot-every", screenshotEvery, "headless: a screenshot every K frames")->capture_default_str();
+  app.add_option("--screenshot-every", screenshotEvery, "headless: a screenshot every K frames (and the last one)")
+      ->check(mt::cli::countIn(1, kMaxFrames))
+      ->capture_default_str();
   app.add_option("--plot", plotDir, "write PNG charts of the per-frame series with gnuplot into this directory");
   app.add_flag("--baseline-mmap", baseline,
                "baseline: map the files and render the same kind of cut with no RAM cache, no PatchServer "
                "thread and no prefetch (patches decoded inside the frame)");
-  app.add_option("--tolerance", tolerance, "target screen-space error in pixels")->capture_default_str();
-  app.add_option("--fixed-triangles", fixedTriangles, "a fixed render budget (triangles per frame) instead of the time model");
-  app.add_option("--extract-ms", extractMs, "deadline of the cut update per frame (default min(2, budget/20))");
-  app.add_option("--load-budget", loadBudget, "patches requested per frame (default: from the measured load time)");
+  app.add_option("--tolerance", tolerance, "target screen-space error in pixels")
+      ->check(mt::cli::numberIn(kTolerance))
+      ->capture_default_str();
+  app.add_option("--fixed-triangles", fixedTriangles,
+                 "a fixed render budget (triangles per frame) instead of the time model (default: the time model)")
+      ->check(mt::cli::countIn(1, 1'000'000'000'000ull));
+  app.add_option("--extract-ms", extractMs, "deadline of the cut update per frame (default min(2, budget/20))")
+      ->check(mt::cli::numberIn(kExtractMs));
+  app.add_option("--load-budget", loadBudget, "patches requested per frame (default: from the measured load time)")
+      ->check(mt::cli::countIn(1, 1'000'000));
   uint32_t stillFrames = engineDefaults.stillFrames;
   app.add_option("--still-frames", stillFrames,
                  "progressive refinement of a still view: once the camera stops, a finer cut is drawn over up to "
                  "this many frames (each within --budget-ms) and shown when complete; 1 turns it off")
-      ->check(CLI::Range(1u, 64u))
+      ->check(mt::cli::countIn(1, 64))
       ->capture_default_str();
   app.add_flag("--no-prefetch", noPrefetch, "no prefetching");
   app.add_flag("--no-cull", noCull, "no frustum / normal-cone culling");
-  app.add_option("--color", colorMode, "shaded, patch or lod colours (default shaded)");
+  app.add_option("--color", colorMode, "shaded, patch or lod colours")
+      ->check(CLI::IsMember({"shaded", "patch", "lod"}))
+      ->capture_default_str();
   app.add_flag("--wireframe", wireframe, "draw edges only");
   std::vector<int> background;
-  app.add_option("--background", background, "background colour R G B (0-255; default 20 23 28)")->expected(3);
+  app.add_option("--background", background, "background colour R G B, each 0-255 (default 20 23 28)")
+      ->expected(3)
+      ->check(mt::cli::countIn(0, 255));
   double frameInterval = 0;
   app.add_option("--frame-interval-ms", frameInterval,
                  "headless: start frames at this interval, like a display refresh (0: back to back, the default); "
-                 "frame_ms does not include the wait");
-  app.add_option("--test-read-delay-ms", readDelayMs, "test hook: add this latency to every patch read (a slow disk)");
+                 "frame_ms does not include the wait")
+      ->check(mt::cli::numberIn(kDelayMs));
+  app.add_option("--test-read-delay-ms", readDelayMs, "test hook: add this latency to every patch read (a slow disk)")
+      ->check(mt::cli::numberIn(kDelayMs))
+      ->capture_default_str();
   bool cold = false;
   app.add_flag("--cold", cold,
                "drop the MT files from the OS page cache first (posix_fadvise DONTNEED), for cold-start figures");
   app.add_flag("--quiet", quiet, "no progress or warnings on stderr");
-  app.add_option("--max-frames", maxFrames, "viewer: close after this many frames (for tests)");
-  app.add_option("--screenshot", screenshotPath, "viewer: write the last frame to this PNG when closing");
-  app.add_option("--record", recordPath, "viewer: where key R records the camera path (default mtrender-path.txt)");
-  CLI11_PARSE(app, argc, argv);
+  app.add_option("--max-frames", maxFrames, "viewer: close after this many frames (for tests; default: when closed)")
+      ->check(mt::cli::countIn(1, 1'000'000'000));
+  app.add_option("--screenshot", screenshotPath, "viewer: write the last frame to this PNG (.png) when closing");
+  auto* recordOption =
+      app.add_option("--record", recordPath, "viewer: where key R records the camera path")->capture_default_str();
+  if (int code = mt::cli::parse(app, argc, argv, "mtrender"); code >= 0) return code;
 
   try {
+    // Every input a regular file (a FIFO would block the reader, a device or folder mislead it),
+    // every output none of them, before anything is opened.
+    for (const std::string& f : files) mt::requireRegularFile(f, "an MT file");
+    if (!cameraPath.empty() && cameraPath != "orbit" && cameraPath != "flythrough" && cameraPath != "fixed")
+      mt::requireRegularFile(cameraPath, "a camera path file");
+    checkOutputs(files, statsPath, screenshotPath, recordPath, recordOption->count() > 0, screenshotDir, plotDir);
     if (cold)
       for (const auto& f : files) {
         int fd = ::open(f.c_str(), O_RDONLY | O_CLOEXEC);
@@ -161,8 +243,12 @@ int main(int argc, char** argv) {
       }
     EngineOptions eo;
     eo.files = files;
-    eo.cacheBytes = parseSize(cacheText);
-    eo.gpuCacheBytes = gpuCacheText.empty() ? 0 : parseSize(gpuCacheText);
+    // Below 1M no useful cut fits; the cache is sized by what the files need, so a large cap
+    // costs nothing.
+    constexpr uint64_t kMinCache = uint64_t(1) << 20, kMaxCache = uint64_t(1) << 50;
+    eo.cacheBytes = mt::cli::sizeOption(cacheText, "--cache", kMinCache, kMaxCache, "1M", "1024T");
+    eo.gpuCacheBytes =
+        gpuCacheText.empty() ? 0 : mt::cli::sizeOption(gpuCacheText, "--gpu-cache", kMinCache, kMaxCache, "1M", "1024T");
     eo.baseline = baseline;
     eo.readDelayMs = readDelayMs;
     eo.quiet = quiet;
@@ -178,11 +264,9 @@ int main(int argc, char** argv) {
     ds.wireframe = wireframe;
     if (colorMode == "shaded") ds.mode = ColorMode::Shaded;
     else if (colorMode == "patch") ds.mode = ColorMode::Patch;
-    else if (colorMode == "lod") ds.mode = ColorMode::Lod;
-    else throw mt::Error("mtrender: --color must be shaded, patch or lod");
+    else ds.mode = ColorMode::Lod;  // CLI11 checked the name
     if (background.size() == 3)
       ds.background = glm::vec3(float(background[0]), float(background[1]), float(background[2])) / 255.0f;
-    if (width < 16 || height < 16 || width > 16384 || height > 16384) throw mt::Error("mtrender: bad --width/--height");
 
     if (!headless) {
       ViewerOptions vo;
@@ -241,7 +325,7 @@ int main(int argc, char** argv) {
       FrameRecord r = engine.frame(pose, prev, gl, ds, width, height);
       if (f == 0) firstFrameMs = std::chrono::duration<double, std::milli>(Clock::now() - programStart).count();
       recs.push_back(r);
-      if (!screenshotDir.empty() && (f % std::max(1, screenshotEvery) == 0 || f + 1 == frames)) {
+      if (!screenshotDir.empty() && (f % screenshotEvery == 0 || f + 1 == frames)) {
         char name[64];
         std::snprintf(name, sizeof name, "/frame_%05d.png", f);
         writePng(screenshotDir + name, gl.readPixels());
@@ -312,7 +396,9 @@ int main(int argc, char** argv) {
     else std::printf("settle_ms %.1f\n", settleMs);
     return 0;
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "%s\n", e.what());
+    // One line "mtrender: MESSAGE"; some layers already name the tool.
+    const std::string message = e.what();
+    std::fprintf(stderr, "%s%s\n", message.rfind("mtrender: ", 0) == 0 ? "" : "mtrender: ", message.c_str());
     return 1;
   }
 }

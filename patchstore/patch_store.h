@@ -245,8 +245,10 @@ class PatchStore {
   std::string dir_;
 };
 
-// "256M", "4G", "512MiB", "1000000" -> bytes. Throws mt::Error on garbage.
-uint64_t parseSize(const std::string& text);
+// "256M", "4G", "512MiB", "1000000" -> bytes (units are powers of 1024). Throws mt::Error, with
+// the accepted form and range, on garbage, NaN, infinity, a sign, zero, less than one byte or
+// more than 1 PiB; the message starts with "OPTION: " when `option` is given.
+uint64_t parseSize(const std::string& text, const std::string& option = {});
 // Peak resident set size of this process so far (VmHWM), in bytes.
 uint64_t peakRssBytes();
 // glibc malloc settings for long streaming passes under a memory cap (ingest, mtbuild's level

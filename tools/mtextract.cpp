@@ -4,14 +4,18 @@
 //   mtextract OUT.mt --eye X,Y,Z --target X,Y,Z [--fov DEG] [--width PX] [--pixels TOL]
 //                    [--triangles N] -o CUT.ply           view-dependent (BMT 5.1)
 // The cut is chosen by mtbuild/mt_cut.h, its patches decoded and welded by exact grid position,
-// and written with PlyWriter (temporary name, renamed when complete): on any error nothing is
-// left under CUT.ply.
+// and written with PlyWriter under a name unique to the process (CUT.ply.tmp.PID.RANDOM), renamed
+// over CUT.ply when complete: on any error nothing is left under CUT.ply. The input is never the
+// output (refused by inode), and the output format is chosen by the extension: .ply only.
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
+#include <cctype>
 #include <cinttypes>
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -20,6 +24,8 @@
 #include "mtbuild/mt_file.h"
 #include "patchstore/error.h"
 #include "patchstore/io/ply_writer.h"
+#include "patchstore/output_path.h"
+#include "tools/cli_checks.h"
 
 namespace {
 
@@ -51,20 +57,53 @@ void parseVector(const std::string& text, const char* option, double out[3]) {
   if (n != 3) throw mt::Error(std::string(option) + " wants X,Y,Z: got '" + text + "'");
 }
 
+// The ranges of the numeric options, checked by CLI11 as the command line is parsed and shown by
+// --help. Budgets far above any file's triangle count are refused as typos (they would mean the
+// finest cut anyway).
+constexpr uint64_t kMaxTriangles = 1'000'000'000'000ull;
+const mt::cli::Interval kErrorRange{0, INFINITY, false, false, "object units"};
+const mt::cli::Interval kFovRange{0, 180, true, true, "degrees"};
+const mt::cli::Interval kWidthRange{1, 1e6, false, false, "pixels"};
+const mt::cli::Interval kPixelsRange{0, 1e6, true, false, "pixels"};
+
+// The output's format by its extension (case-insensitive): only binary PLY is written, so any
+// other name (.xyz, .glb, none) is refused rather than given PLY bytes under a misleading name.
+void checkOutputFormat(const std::string& output) {
+  const std::string name = output.substr(output.find_last_of('/') + 1);
+  const size_t dot = name.find_last_of('.');
+  std::string ext = dot == std::string::npos || dot == 0 ? "" : name.substr(dot);
+  for (auto& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+  if (ext == ".ply") return;
+  if (ext.empty()) mt::fail(output, "the output name has no extension: cannot choose its format (supported: .ply)");
+  mt::fail(output, "cannot write the format " + name.substr(dot) + " (supported: .ply)");
+}
+
+// Removes a finished temporary file unless it was renamed over the final name.
+struct TemporaryFile {
+  std::string path;
+  bool kept = false;
+  ~TemporaryFile() {
+    if (!kept) std::remove(path.c_str());
+  }
+};
+
 int run(const Options& o) {
   // Argument checks first: a bad command line opens nothing and writes nothing.
   if (o.hasError && o.hasTriangles) throw mt::Error("--error and --triangles are exclusive: give one");
   if (o.hasEye && o.hasError) throw mt::Error("--error and --eye are exclusive (with --eye use --pixels, and --triangles as a budget)");
   if (!o.hasEye && !o.hasError && !o.hasTriangles) throw mt::Error("give --error E, --triangles N or --eye/--target");
   if (o.hasEye != o.hasTarget) throw mt::Error("--eye and --target go together");
-  if (o.hasError && !(o.error >= 0)) throw mt::Error("--error must be a number >= 0");
+  // CLI11 checked the ranges; these hold for values that reach run() another way.
+  if (o.hasError && !kErrorRange.contains(o.error)) throw mt::Error("--error must be " + kErrorRange.text());
+  if (o.hasTriangles && (o.triangles < 1 || o.triangles > kMaxTriangles))
+    throw mt::Error("--triangles must be an integer in [1, " + std::to_string(kMaxTriangles) + "]");
   mt::ViewParams view;
   if (o.hasEye) {
     parseVector(o.eye, "--eye", view.eye);
     parseVector(o.target, "--target", view.target);
-    if (!(o.fov > 0 && o.fov < 180)) throw mt::Error("--fov must be in (0, 180) degrees");
-    if (!(o.width > 0)) throw mt::Error("--width must be > 0 pixels");
-    if (!(o.pixels > 0)) throw mt::Error("--pixels must be > 0");
+    if (!kFovRange.contains(o.fov)) throw mt::Error("--fov must be " + kFovRange.text());
+    if (!kWidthRange.contains(o.width)) throw mt::Error("--width must be " + kWidthRange.text());
+    if (!kPixelsRange.contains(o.pixels)) throw mt::Error("--pixels must be " + kPixelsRange.text());
     if (view.eye[0] == view.target[0] && view.eye[1] == view.target[1] && view.eye[2] == view.target[2])
       throw mt::Error("--eye and --target are the same point");
     view.fovDegrees = o.fov;
@@ -72,6 +111,12 @@ int run(const Options& o) {
     view.pixelTolerance = o.pixels;
     if (o.hasTriangles) view.maxTriangles = o.triangles;
   }
+
+  // A FIFO or a device would block the reader or be read as garbage; the output may not replace
+  // the input.
+  mt::requireRegularFile(o.input, "an MT file");
+  mt::checkOutputPath(o.output, {o.input});
+  checkOutputFormat(o.output);
 
   auto reader = mt::MtFileReader::open(o.input);
   const mt::MtFileReader& r = *reader;
@@ -98,13 +143,17 @@ int run(const Options& o) {
   plyOptions.doublePrecision = maxAbs * 0x1.0p-23 > r.header().gridStep * 0.5;
   plyOptions.normals = !mesh.normals.empty();
   plyOptions.colors = !mesh.colors.empty();
-  mt::PlyWriter ply(o.output, plyOptions);
+  TemporaryFile tmp{mt::uniqueTempName(o.output)};
+  mt::PlyWriter ply(tmp.path, plyOptions);
   for (uint32_t v = 0; v < mesh.vertexCount(); ++v)
     ply.addVertex(&mesh.positions[3 * v], plyOptions.normals ? &mesh.normals[3 * v] : nullptr,
                   plyOptions.colors ? &mesh.colors[4 * v] : nullptr);
   for (uint32_t t = 0; t < mesh.triangleCount(); ++t)
     ply.addTriangle(mesh.triangles[3 * t], mesh.triangles[3 * t + 1], mesh.triangles[3 * t + 2]);
   ply.finish();
+  if (std::rename(tmp.path.c_str(), o.output.c_str()) != 0)
+    mt::fail(o.output, std::string("cannot rename the temporary output: ") + std::strerror(errno));
+  tmp.kept = true;
 
   std::fprintf(stderr, "mtextract: %s: %u triangles, %u vertices from %" PRIu64 " patches; %u nodes in the set, %u on the "
                "front; max error %.9g", o.output.c_str(), mesh.triangleCount(), mesh.vertexCount(), mesh.patches,
@@ -133,19 +182,26 @@ int main(int argc, char** argv) {
                "file under the output name."};
   Options o;
   app.add_option("file", o.input, "The MT file")->required();
-  app.add_option("-o,--output", o.output, "The PLY file to write (binary little-endian, welded)")->required();
-  auto* err = app.add_option("--error", o.error, "Maximum object-space error of the cut (object units)");
-  auto* tri = app.add_option("--triangles", o.triangles, "Maximum triangles of the cut (a budget with --eye)");
+  app.add_option("-o,--output", o.output,
+                 "The PLY file to write (binary little-endian, welded); the name must end in .ply, and may not be "
+                 "the input")
+      ->required();
+  auto* err = app.add_option("--error", o.error, "Maximum object-space error of the cut")
+                  ->check(mt::cli::numberIn(kErrorRange));
+  auto* tri = app.add_option("--triangles", o.triangles, "Maximum triangles of the cut (a budget with --eye)")
+                  ->check(mt::cli::countIn(1, kMaxTriangles));
   auto* eye = app.add_option("--eye", o.eye, "View-dependent: eye position X,Y,Z (object space)");
   auto* target = app.add_option("--target", o.target, "View-dependent: point looked at X,Y,Z (needed with --eye)");
-  app.add_option("--fov", o.fov, "View-dependent: horizontal field of view in degrees")->capture_default_str();
-  app.add_option("--width", o.width, "View-dependent: viewport width in pixels")->capture_default_str();
-  app.add_option("--pixels", o.pixels, "View-dependent: tolerated screen-space error in pixels")->capture_default_str();
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
-    return app.exit(e) == 0 ? 0 : 1;
-  }
+  app.add_option("--fov", o.fov, "View-dependent: horizontal field of view in degrees")
+      ->check(mt::cli::numberIn(kFovRange))
+      ->capture_default_str();
+  app.add_option("--width", o.width, "View-dependent: viewport width in pixels")
+      ->check(mt::cli::numberIn(kWidthRange))
+      ->capture_default_str();
+  app.add_option("--pixels", o.pixels, "View-dependent: tolerated screen-space error in pixels")
+      ->check(mt::cli::numberIn(kPixelsRange))
+      ->capture_default_str();
+  if (int code = mt::cli::parse(app, argc, argv, "mtextract"); code >= 0) return code;
   o.hasError = err->count() > 0;
   o.hasTriangles = tri->count() > 0;
   o.hasEye = eye->count() > 0;

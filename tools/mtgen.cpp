@@ -17,12 +17,14 @@
 
 #include <atomic>
 #include <algorithm>
+#include <cctype>
 #include <cerrno>
 #include <cmath>
 #include <cstdarg>
 #include <chrono>
 #include <cstdio>
 #include <cstring>
+#include <filesystem>
 #include <iostream>
 #include <memory>
 #include <string>
@@ -31,9 +33,15 @@
 
 #include "patchstore/error.h"
 #include "patchstore/io/ply_writer.h"
+#include "patchstore/output_path.h"
+#include "tools/cli_checks.h"
 #include "tools/scan_generator.h"
 
 namespace {
+
+// Hole placement is quadratic in the number of holes (10000 take ~7 s on 1M triangles, 100000
+// on 10M over a minute): more is refused as a typo.
+constexpr uint32_t kMaxHoles = 20'000;
 
 using mtgen::Component;
 using mtgen::ScanGenerator;
@@ -42,19 +50,24 @@ enum class Format { PlyBinary, PlyAscii, Obj, Off, Stl };
 
 struct OutputSettings {
   std::string path;
+  std::string tmpPath;  // uniqueTempName(path): written there, renamed over path when complete
   Format format = Format::PlyBinary;
   bool normals = false;
   bool colors = false;
   bool doublePrecision = false;
 };
 
-std::string temporaryPath(const std::string& path) { return path + ".tmp-" + std::to_string(getpid()); }
+// PlyWriter writes its own temporary name (its path + ".tmp-PID") and renames it when finished:
+// binary PLY passes through that name before the run's unique temporary name.
+std::string plyWriterTemporary(const std::string& path) { return path + ".tmp-" + std::to_string(getpid()); }
 
-// The temporary file of the current run, removed if the process is interrupted.
+// The temporary files of the current run, removed if the process is interrupted.
 char gTemporaryPath[4096] = {0};
+char gPlyTemporaryPath[4096] = {0};
 
 extern "C" void removeTemporaryAndExit(int signal) {
   if (gTemporaryPath[0]) unlink(gTemporaryPath);
+  if (gPlyTemporaryPath[0]) unlink(gPlyTemporaryPath);
   _exit(128 + signal);
 }
 
@@ -75,15 +88,25 @@ class MeshOutput {
 class BinaryPlyOutput final : public MeshOutput {
  public:
   BinaryPlyOutput(const OutputSettings& s)
-      : writer_(s.path, mt::PlyWriteOptions{s.doublePrecision, s.normals, s.colors}) {}
+      : settings_(s), writer_(s.tmpPath, mt::PlyWriteOptions{s.doublePrecision, s.normals, s.colors}) {}
+  ~BinaryPlyOutput() override {
+    if (!renamed_) std::remove(settings_.tmpPath.c_str());
+  }
   void vertex(const double p[3], const float* normal, const uint8_t* color) override {
     writer_.addVertex(p, normal, color);
   }
   void triangle(const uint32_t t[3], const float*) override { writer_.addTriangle(t[0], t[1], t[2]); }
-  void finish() override { writer_.finish(); }
+  void finish() override {
+    writer_.finish();
+    if (std::rename(settings_.tmpPath.c_str(), settings_.path.c_str()) != 0)
+      mt::fail(settings_.path, std::string("cannot rename temporary output: ") + std::strerror(errno));
+    renamed_ = true;
+  }
 
  private:
+  OutputSettings settings_;
   mt::PlyWriter writer_;
+  bool renamed_ = false;
 };
 
 // Text formats for small meshes. Coordinates are printed with %.9g of their float32 value, which a
@@ -91,7 +114,7 @@ class BinaryPlyOutput final : public MeshOutput {
 class TextOutput final : public MeshOutput {
  public:
   TextOutput(const OutputSettings& s, uint64_t vertices, uint64_t triangles)
-      : settings_(s), tmpPath_(temporaryPath(s.path)) {
+      : settings_(s), tmpPath_(s.tmpPath) {
     file_ = std::fopen(tmpPath_.c_str(), "wb");
     if (!file_) mt::fail(s.path, std::string("cannot create output: ") + std::strerror(errno));
     std::setvbuf(file_, nullptr, _IOFBF, 1 << 20);
@@ -479,24 +502,29 @@ int run(int argc, char** argv) {
   mtgen::GeneratorOptions gen;
   bool shuffle = false;
   unsigned threads = 0;
-  app.add_option("-o,--output", settings.path, "Output file (written as OUT.tmp-PID, renamed when complete)")
+  app.add_option("-o,--output", settings.path,
+                 "Output file; its extension gives the format unless --format does (.ply, .obj, .off, .stl). "
+                 "Written as OUT.tmp.PID.RANDOM, renamed when complete")
       ->required();
   app.add_option("-t,--triangles", trianglesText,
                  "Number of triangles, with optional suffix k (1e3), M (1e6), G (1e9): 2.5k, 1M, 53M. "
-                 "The output has this count within 1% (exactly, in most cases)")
+                 "The output has this count within 1% (exactly, in most cases); from 18 per component to 4G")
       ->default_str("1M");
   app.add_option("-s,--seed", gen.seed, "Seed of every random choice (shape, holes, layout, shuffle)")
+      ->check(mt::cli::countIn(0, UINT64_MAX))
       ->default_str("1");
   app.add_option("--holes", gen.holes,
                  "Number of holes (open boundaries like scanner occlusions): roughly round, sizes from a few "
                  "edges around to about half the tube radius, never touching each other, so the mesh has "
-                 "exactly this many boundary loops; fails if they cannot fit")
+                 "exactly this many boundary loops; fails if they cannot fit. At most one per 100 triangles "
+                 "(placing them takes time quadratic in their number)")
+      ->check(mt::cli::countIn(0, kMaxHoles))
       ->default_str("0");
   app.add_option("--components", gen.components,
                  "Number of separate closed components of different sizes, placed apart on a lattice; the "
                  "triangle budget is split by surface area")
       ->default_str("1")
-      ->check(CLI::Range(1u, 1000000u));
+      ->check(mt::cli::countIn(1, 1000000));
   app.add_option("--density", densityText,
                  "uniform: near-uniform triangle size; varying: the parameterization is warped so the edge "
                  "length varies smoothly by 10x around the major circle (3x around the minor one)")
@@ -509,33 +537,45 @@ int run(int argc, char** argv) {
                "Write unit per-vertex normals (central differences of the grid) [ply, ply-ascii, obj]");
   app.add_flag("--colors", settings.colors,
                "Write per-vertex RGBA colours (stone-like shading by displacement) [ply, ply-ascii]");
-  app.add_option("--format", formatText,
-                 "ply (binary little-endian), ply-ascii, obj, off, stl (ASCII triangle soup). Text formats are "
-                 "meant for small meshes; their coordinates are the float32 values printed with %.9g")
-      ->check(CLI::IsMember({"ply", "ply-ascii", "obj", "off", "stl"}))
-      ->default_str("ply");
+  auto* formatOption =
+      app.add_option("--format", formatText,
+                     "ply (binary little-endian), ply-ascii, obj, off, stl (ASCII triangle soup); it must agree with "
+                     "the output's extension (.ply for both PLY forms). Text formats are meant for small meshes; "
+                     "their coordinates are the float32 values printed with %.9g")
+          ->check(CLI::IsMember({"ply", "ply-ascii", "obj", "off", "stl"}))
+          ->default_str("from the extension");
   app.add_flag("--double", settings.doublePrecision,
                "Binary PLY with double x,y,z (the full-precision generated values) [ply only]");
   app.add_option("--threads", threads, "Worker threads (0 = all cores); the output does not depend on it")
+      ->check(mt::cli::countIn(0, 4096))
       ->default_str("0");
 
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::CallForHelp& e) {
-    return app.exit(e);
-  } catch (const CLI::CallForAllHelp& e) {
-    return app.exit(e);
-  } catch (const CLI::ParseError& e) {
-    std::string message = e.what();
-    std::replace(message.begin(), message.end(), '\n', ' ');
-    std::fprintf(stderr, "mtgen: error: %s (see --help)\n", message.c_str());
-    return 1;
-  }
+  if (int code = mt::cli::parse(app, argc, argv, "mtgen: error"); code >= 0) return code;
 
   gen.triangles = parseCount(trianglesText);
   if (gen.triangles == 0) {
-    std::fprintf(stderr, "mtgen: error: --triangles must be a positive count like 1000, 2.5k, 1M (got '%s')\n",
+    std::fprintf(stderr, "mtgen: error: --triangles must be a positive count like 1000, 2.5k, 1M, at most 4G (got '%s')\n",
                  trianglesText.c_str());
+    return 1;
+  }
+  if (gen.holes > gen.triangles / 100) {
+    std::fprintf(stderr, "mtgen: error: --holes %u: at most one hole per 100 triangles (%llu for --triangles %s)\n",
+                 gen.holes, (unsigned long long)(gen.triangles / 100), trianglesText.c_str());
+    return 1;
+  }
+  // The format: from the extension, and --format (if given) must agree with it, so that no file
+  // gets bytes its name does not announce.
+  std::string ext = std::filesystem::path(settings.path).extension().string();
+  for (auto& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+  const char* byExtension = ext == ".ply" ? "ply" : ext == ".obj" ? "obj" : ext == ".off" ? "off" : ext == ".stl" ? "stl" : nullptr;
+  if (!byExtension) {
+    std::fprintf(stderr, "mtgen: error: %s: %s (supported: .ply, .obj, .off, .stl)\n", settings.path.c_str(),
+                 ext.empty() ? "the output name has no extension: cannot choose its format" : ("cannot write the format " + ext).c_str());
+    return 1;
+  }
+  if (formatOption->count() == 0) formatText = byExtension;
+  else if (formatText.rfind(byExtension, 0) != 0) {
+    std::fprintf(stderr, "mtgen: error: --format %s does not match the output's extension %s\n", formatText.c_str(), ext.c_str());
     return 1;
   }
   gen.varyingDensity = densityText == "varying";
@@ -570,8 +610,18 @@ int run(int argc, char** argv) {
     return 1;
   }
 
-  std::string tmp = temporaryPath(settings.path);
-  if (tmp.size() < sizeof gTemporaryPath) std::memcpy(gTemporaryPath, tmp.c_str(), tmp.size() + 1);
+  try {
+    mt::checkOutputPath(settings.path, {});  // not a directory, and its folder exists
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "mtgen: error: %s\n", e.what());
+    return 1;
+  }
+  settings.tmpPath = mt::uniqueTempName(settings.path);
+  const std::string plyTmp = plyWriterTemporary(settings.tmpPath);
+  if (settings.tmpPath.size() < sizeof gTemporaryPath && plyTmp.size() < sizeof gPlyTemporaryPath) {
+    std::memcpy(gTemporaryPath, settings.tmpPath.c_str(), settings.tmpPath.size() + 1);
+    std::memcpy(gPlyTemporaryPath, plyTmp.c_str(), plyTmp.size() + 1);
+  }
   for (int sig : {SIGINT, SIGTERM, SIGHUP}) signal(sig, removeTemporaryAndExit);
 
   try {
@@ -588,6 +638,7 @@ int run(int argc, char** argv) {
     streamFaces(*generator, shuffle, *out, progress);
     out->finish();
     gTemporaryPath[0] = 0;
+    gPlyTemporaryPath[0] = 0;
 
     struct stat st {};
     stat(settings.path.c_str(), &st);

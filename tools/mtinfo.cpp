@@ -15,6 +15,8 @@
 #include "mtbuild/mt_cut.h"
 #include "mtbuild/mt_file.h"
 #include "patchstore/error.h"
+#include "patchstore/output_path.h"
+#include "tools/cli_checks.h"
 
 namespace {
 
@@ -57,6 +59,7 @@ const char* codecName(mt::format::Codec c) {
 }
 
 int run(const std::string& path, bool json, bool check) {
+  mt::requireRegularFile(path, "an MT file");  // a FIFO would block the reader, a device mislead it
   auto reader = mt::MtFileReader::open(path);
   const auto& h = reader->header();
   const auto& nodes = reader->nodes();
@@ -179,11 +182,7 @@ int main(int argc, char** argv) {
   app.add_flag("--check", check,
                "Also read and decode every patch payload, verifying its checksum; each damaged patch is named "
                "on stderr with its node and level, and the exit code is 1 if any is damaged");
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
-    return app.exit(e) == 0 ? 0 : 1;  // --help: 0; bad arguments: 1, like every other failure
-  }
+  if (int code = mt::cli::parse(app, argc, argv, "mtinfo"); code >= 0) return code;
   try {
     return run(path, json, check);
   } catch (const std::exception& e) {

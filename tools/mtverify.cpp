@@ -30,7 +30,9 @@
 #include "mtbuild/mt_cut.h"
 #include "mtbuild/mt_file.h"
 #include "patchstore/error.h"
+#include "patchstore/output_path.h"
 #include "patchstore/patch_store.h"
+#include "tools/cli_checks.h"
 
 namespace {
 
@@ -78,8 +80,12 @@ double secondsSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
+// Each random cut is welded and counted in full: a million is days on a large file, more a typo.
+constexpr uint32_t kMaxCuts = 1'000'000;
+
 int run(const std::string& path, uint32_t randomCuts, uint64_t seed, uint64_t memoryBytes, bool quiet) {
   const auto started = std::chrono::steady_clock::now();
+  mt::requireRegularFile(path, "an MT file");  // a FIFO would block the reader, a device mislead it
   auto reader = mt::MtFileReader::open(path);
   const mt::MtFileReader& r = *reader;
   const auto& nodes = r.nodes();
@@ -300,17 +306,23 @@ int main(int argc, char** argv) {
   uint64_t seed = 1;
   bool quiet = false;
   app.add_option("file", path, "The MT file to verify")->required();
-  app.add_option("--cuts", cuts, "Random valid cuts to check besides the finest and coarsest")->capture_default_str();
-  app.add_option("--seed", seed, "Seed of the random cuts (the same seed checks the same cuts)")->capture_default_str();
-  app.add_option("--memory", memory, "Memory for the crack-free check, e.g. 512M, 4G (default 1G); results do not depend on it");
+  app.add_option("--cuts", cuts, "Random valid cuts to check besides the finest and coarsest")
+      ->check(mt::cli::countIn(0, kMaxCuts))
+      ->capture_default_str();
+  app.add_option("--seed", seed, "Seed of the random cuts (the same seed checks the same cuts)")
+      ->check(mt::cli::countIn(0, UINT64_MAX))
+      ->capture_default_str();
+  app.add_option("--memory", memory,
+                 "Memory for the crack-free check, from 64K to 1024T, e.g. 512M, 4G (K, M, G, T are powers of 1024); "
+                 "results do not depend on it")
+      ->capture_default_str();
   app.add_flag("-q,--quiet", quiet, "No progress lines on stderr (printed for files of 1M input triangles or more)");
+  if (int code = mt::cli::parse(app, argc, argv, "mtverify"); code >= 0) return code;
   try {
-    app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
-    return app.exit(e) == 0 ? 0 : 1;
-  }
-  try {
-    return run(path, cuts, seed, mt::parseSize(memory), quiet);
+    // Below 64K the edge table is its 4096-slot minimum anyway and the reference lists get a few
+    // KiB: no file worth checking fits.
+    const uint64_t memoryBytes = mt::cli::sizeOption(memory, "--memory", uint64_t(64) << 10, uint64_t(1) << 50, "64K", "1024T");
+    return run(path, cuts, seed, memoryBytes, quiet);
   } catch (const std::exception& e) {
     std::fflush(stdout);
     std::fprintf(stderr, "mtverify: %s\n", e.what());
