@@ -42,6 +42,7 @@ void PatchStore::rewritePatches(const std::vector<PatchRewrite>& rewrites, bool 
   auto bad = [&](const std::string& what) { fail(dir_, "rewrite: " + what); };
   std::lock_guard<std::mutex> writer(impl_->writeMutex);
   if (!impl_->failedCommit.empty()) fail(dir_, "store refuses updates after a failed commit; reopen it");
+  impl_->lockForWriting();
 
   // The patches as they will be (rewritten ones) and as they are (their outside neighbours, old
   // and new): every entry between the two groups is checked in both directions.
@@ -154,6 +155,7 @@ void PatchStore::rewritePatches(const std::vector<PatchRewrite>& rewrites, bool 
 void PatchStore::stageGeometry(StagedUpdate& staged, const Patch& p) {
   std::lock_guard<std::mutex> writer(impl_->writeMutex);
   if (!impl_->failedCommit.empty()) fail(dir_, "store refuses updates after a failed commit; reopen it");
+  impl_->lockForWriting();
   PatchRecord rec;
   {
     std::shared_lock lock(impl_->stateMutex);
@@ -169,6 +171,7 @@ void PatchStore::stageGeometry(StagedUpdate& staged, const Patch& p) {
     // segment as dead before commitStaged references it.
     std::unique_lock lock(impl_->stateMutex);
     impl_->liveBytes[e.newGeometry.segment] += e.newGeometry.size + sizeof(BlockHeader);
+    ++impl_->stagedBlocks;
   }
   staged.entries_->list.push_back(e);
 }
@@ -189,6 +192,7 @@ void PatchStore::commitStaged(StagedUpdate& staged) {
     rec.meta.bounds = e.bounds;
     impl_->pendingUpserted[e.id] = rec;
   }
+  impl_->stagedBlocks -= std::min(impl_->stagedBlocks, list.size());
   list.clear();
   impl_->pendingDirty = true;
   impl_->commitPending();  // one manifest edit for the whole iteration

@@ -45,6 +45,7 @@
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_pipeline.h>
 #include <tbb/task_arena.h>
+#include <signal.h>
 #include <sys/resource.h>
 #include <unistd.h>
 
@@ -67,6 +68,9 @@
 
 #include "patchstore/byte_io.h"
 #include "patchstore/external_sort.h"
+#include "patchstore/file_lock.h"
+#include "patchstore/interrupt.h"
+#include "patchstore/output_path.h"
 #include "patchstore/progress.h"
 #include "patchstore/store_impl.h"
 #include "patchstore/temp_file.h"
@@ -200,6 +204,7 @@ class ScratchSink : public MeshSink {
     }
   }
   void vertices(const InputVertex* v, size_t count, uint64_t) override {
+    checkInterrupt("ingest: parse");  // a safe point per batch (on the reader's thread, whose errors are rethrown)
     if (fused_) {
       // Vertices after faces: the codes computed so far used a bounding box that is not final.
       // Stop handing over chunks; the Morton sort, left incomplete, is redone after the parse.
@@ -237,6 +242,7 @@ class ScratchSink : public MeshSink {
     vertexCount += count;
   }
   void triangles(const uint32_t* idx, size_t count) override {
+    checkInterrupt("ingest: parse");
     if (writeFaces_) face_.write(idx, count * 12);
     // The first and last faces, to check a face block read in place against (FaceFile).
     for (size_t i = 0; i < count && firstFaces_.size() < 3 * kCheckedFaces; ++i)
@@ -690,6 +696,7 @@ uint64_t weldSoup(const std::string& scratch, const VertexRecordLayout& layout, 
       byPosition.add(r);
     }
   }
+  checkInterrupt("ingest: sort");
   byPosition.finish();
   ExternalSorter<MapRec, MapLess> byVertex(scratch + "/w2", budget / 2, {}, true);
   uint64_t welded = 0;
@@ -705,6 +712,7 @@ uint64_t weldSoup(const std::string& scratch, const VertexRecordLayout& layout, 
       }
     }
   }
+  checkInterrupt("ingest: sort");
   byVertex.finish();
   TempReader fr(scratch + "/face.bin", 4 << 20);
   TempWriter fw(scratch + "/face.welded", 4 << 20);
@@ -753,6 +761,7 @@ class StageClock {
  public:
   explicit StageClock(bool enabled) : enabled_(enabled) { reset(); }
   void mark(const char* stage) {
+    checkInterrupt(std::string("ingest: after the ") + stage + " stage");  // the end of every stage is a safe point
     if (!enabled_) return;
     double wall = now(), cpu = cpuSeconds();
     std::fprintf(stderr, "ingest: stage %s: %.2f s wall, %.2f s cpu, rss %.0f MiB (peak %.0f)\n", stage, wall - wall_,
@@ -1106,6 +1115,7 @@ class ResidentCentroids : public CentroidSource {
       progress.finish(faces_);
     }
     StableKeySorter<MortonKey, MortonKeyOf>& sorter = morton_.sorter();
+    checkInterrupt("ingest: sort");
     sorter.finish();
     clock_.mark("morton");
     // Ranks 0, stride, 2 stride, ... of the merged order; then their centroids, in one more
@@ -1177,6 +1187,7 @@ class ResidentCentroids : public CentroidSource {
           }
         },
         [&](FaceBatch<Cents>& b) { sorter.addBatch(b.out.recs.data(), b.out.recs.size()); });
+    checkInterrupt("ingest: sort");
     sorter.finish();
     TempWriter out(scratch_ + "/morton.bin", 4 << 20);
     MortonCentroid m;
@@ -1477,6 +1488,7 @@ void residentStages(const std::string& scratch, const FaceFile& faceFile, const 
           progress.update(b.first + b.count());
         });
     if (groups.count() != nf) fail(scratch, "internal: face file holds " + std::to_string(groups.count()) + " faces");
+    checkInterrupt("ingest: sort");
     groups.finish();
     progress.finish(nf);
   }
@@ -1799,6 +1811,7 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
       std::remove((scratch + "/face.bin").c_str());
       endOfPass();
       clock.mark("centroids");
+      checkInterrupt("ingest: sort");
       byCode.finish();
       TempWriter out(scratch + "/morton.bin", 4 << 20);
       forEachInMortonOrder(byCode, [&](const MortonFace& m) { out.put(FaceCentroid{m.face, {m.v[0], m.v[1], m.v[2]}, m.c}); });
@@ -1845,6 +1858,7 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
 
     clock.mark("assign");
     // 4 group into patches
+    checkInterrupt("ingest: sort");
     byCell.finish();
     std::vector<uint64_t>& patchKey = patchStage.patchKey;
     std::vector<uint32_t> patchTris;
@@ -1887,6 +1901,7 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
 
     clock.mark("group");
     // 5 join pairs with vertex data
+    checkInterrupt("ingest: sort");
     pairs.finish();
     ExternalSorter<VertexData<Full>, KeyLess<VertexData<Full>>> byPatch(scratch + "/s3", B / 4, {}, true);
     {
@@ -1934,6 +1949,7 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
 
     clock.mark("vertices");
     // 6 patches
+    checkInterrupt("ingest: sort");
     byPatch.finish();
     sharedPtr = std::make_unique<SharedSorter>(scratch + "/s4", B / 8);
     edgesPtr = std::make_unique<EdgeSorter>(scratch + "/s5", B / 16);
@@ -2039,6 +2055,7 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
   auto& shared = *sharedPtr;
   auto& edges = *edgesPtr;
   // Edges shared between patches: sum their uses.
+  checkInterrupt("ingest: sort");
   edges.finish();
   {
     EdgeRec e;
@@ -2056,6 +2073,7 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
 
   clock.mark("edges");
   // 7 boundary lists
+  checkInterrupt("ingest: sort");
   shared.finish();
   EntrySorter entries(scratch + "/s6", B / 8);
   {
@@ -2076,6 +2094,7 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
           if (a.first != b.first) entries.add({uint64_t(a.first) << 32 | a.second, b.first, b.second});
     }
   }
+  checkInterrupt("ingest: sort");
   entries.finish();
   {
     EntryRec e;
@@ -2112,28 +2131,75 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
 }  // namespace
 
 
+namespace {
+
+constexpr const char* kIngestLockName = "INGEST-LOCK";
+
+// Folders `prefix`PID left in `folder` by an ingest that was killed: each holds the lock file
+// kIngestLockName while its ingest runs, so one whose lock no process holds, and whose PID names
+// no running process, is certainly dead (a folder without the lock file is never touched).
+void removeDeadLeftovers(const std::string& folder, const std::string& prefix) {
+  std::error_code ec;
+  for (fs::directory_iterator it(folder.empty() ? "." : folder, ec), end; !ec && it != end; it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    if (name.size() <= prefix.size() || name.compare(0, prefix.size(), prefix) != 0) continue;
+    const std::string digits = name.substr(prefix.size());
+    if (digits.find_first_not_of("0123456789") != std::string::npos || digits.size() > 9) continue;
+    const long pid = std::stol(digits);
+    const std::string path = it->path().string(), lock = path + "/" + kIngestLockName;
+    std::error_code e2;
+    if (pid == long(getpid()) || !fs::is_directory(path, e2) || !fs::exists(lock, e2)) continue;
+    if (FileLock::holder(lock) != 0 || ::kill(pid_t(pid), 0) == 0 || errno != ESRCH) continue;
+    fs::remove_all(path, e2);
+    if (!e2)
+      std::fprintf(stderr, "ingest: removed %s, left by an ingest that was killed (process %ld is gone)\n", path.c_str(), pid);
+  }
+}
+
+std::string parentOf(const std::string& path) {
+  std::string parent = fs::path(path).parent_path().string();
+  return parent.empty() ? "." : parent;
+}
+
+}  // namespace
+
 IngestReport PatchStore::ingest(const std::string& input, const std::string& dirIn, CellAssigner& assigner,
                                 const IngestOptions& options, Env* env) {
   std::string dir = dirIn;
   while (dir.size() > 1 && dir.back() == '/') dir.pop_back();
-  if (env->exists(dir) && !(fs::is_directory(dir) && fs::is_empty(dir)))
-    fail(dir, "already exists (remove it or choose another store directory)");
+  // A directory, FIFO or device would block or be misread; say what it is.
+  requireRegularFile(input, "a mesh file");
+  // The store directory is made here and only here: an existing folder (even an empty one, which
+  // may be a mount point or carry permissions) is the user's, never removed or replaced.
+  if (fs::is_directory(dir))
+    fail(dir, std::string(env->exists(dir + "/CURRENT") ? "is an existing patch store" : "is an existing folder") +
+                  "; ingest creates the store directory itself: choose a name that does not exist (nothing was changed)");
+  if (env->exists(dir)) fail(dir, "already exists (remove it or choose another store directory)");
+  const std::string base = fs::path(dir).filename().string();
+  removeDeadLeftovers(parentOf(dir), base + ".ingest-");
+  if (!options.tempDir.empty()) removeDeadLeftovers(options.tempDir, "mt-ingest-");
   std::string building = dir + ".ingest-" + std::to_string(getpid());
   std::error_code ec;
-  fs::remove_all(building, ec);
+  fs::remove_all(building, ec);  // our own PID: a leftover of a dead process that had it
   env->createDir(building);
   std::string scratch = options.tempDir.empty() ? building + "/tmp" : options.tempDir + "/mt-ingest-" + std::to_string(getpid());
   try {
+    // Held while the folders are in use, so that another ingest knows they are not leftovers.
+    auto buildingLock = std::make_unique<FileLock>(building + "/" + kIngestLockName, building);
+    std::unique_ptr<FileLock> scratchLock;
     env->createDir(scratch);
+    if (!options.tempDir.empty()) scratchLock = std::make_unique<FileLock>(scratch + "/" + kIngestLockName, scratch);
     // Peek at the header to pick the record type; the reader is reopened by build().
     const MeshHeader header = openMesh(input)->header();
     bool full = header.doublePrecision || header.hasNormals || header.hasColors;
     IngestReport report = full ? build<true>(input, building, scratch, assigner, options, env)
                                : build<false>(input, building, scratch, assigner, options, env);
+    checkInterrupt("ingest");
+    scratchLock.reset();
     fs::remove_all(scratch, ec);
-    if (env->exists(dir)) fs::remove(dir, ec);  // the empty directory the user pointed at
+    buildingLock.reset();  // removes the lock file: the store holds only its own files
     env->renameFile(building, dir);
-    env->syncDir(fs::path(dir).parent_path().empty() ? "." : fs::path(dir).parent_path().string());
+    env->syncDir(parentOf(dir));
     return report;
   } catch (...) {
     fs::remove_all(scratch, ec);

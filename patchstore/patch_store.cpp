@@ -11,6 +11,8 @@
 #include <cstring>
 #include <fstream>
 #include <limits>
+#include <set>
+#include <thread>
 #include <unordered_map>
 
 #include "patchstore/byte_io.h"
@@ -25,6 +27,9 @@ namespace {
 
 constexpr uint64_t kSegmentRollBytes = 256ull << 20;
 constexpr uint64_t kPendingCommitBytes = 32ull << 20;  // auto-commit large unsynced batches
+// Compaction starts when the segment files exceed twice the live blocks by more than this (so a
+// small store is not rewritten for a few KiB of dead blocks).
+constexpr uint64_t kCompactSlackBytes = 1ull << 20;
 
 uint64_t hash(const void* data, size_t size) { return XXH64(data, size, 0); }
 
@@ -187,6 +192,7 @@ void PatchStore::Impl::startSegment() {
   activeSegment = nextSegment++;
   activeWriter = env->newWritableFile(segmentPath(activeSegment));
   liveBytes[activeSegment] += 0;
+  segmentBytes[activeSegment] = 0;
 }
 
 BlockHandle PatchStore::Impl::appendBlock(const std::string& payload) {
@@ -195,6 +201,7 @@ BlockHandle PatchStore::Impl::appendBlock(const std::string& payload) {
   BlockHandle handle{activeSegment, h.size, activeWriter->size(), h.checksum};
   activeWriter->append(&h, sizeof h);
   activeWriter->append(payload.data(), payload.size());
+  segmentBytes[activeSegment] = activeWriter->size();
   return handle;
 }
 
@@ -232,13 +239,21 @@ void PatchStore::Impl::addLive(const PatchRecord& r, int sign) {
 }
 
 void PatchStore::Impl::dropDeadSegments() {
+  retiredReaders.clear();
   for (auto it = liveBytes.begin(); it != liveBytes.end();) {
     if (it->second == 0 && it->first != activeSegment) {
       {
         std::lock_guard<std::mutex> lock(readersMutex);
-        readers.erase(it->first);
+        auto r = readers.find(it->first);
+        if (r != readers.end()) {
+          retiredReaders.push_back(r->second);
+          readers.erase(r);
+        }
       }
+      // Unlinked, not overwritten: a reader in another process opened every segment of the
+      // version it reads when it opened the store, so it keeps reading this one until it closes.
       env->removeFile(segmentPath(it->first));
+      segmentBytes.erase(it->first);
       it = liveBytes.erase(it);
     } else {
       ++it;
@@ -333,10 +348,78 @@ void PatchStore::Impl::commitPendingUnchecked() {
   pendingBlobs.clear();
   pendingDirty = false;
   dropDeadSegments();
+  compact();
   if (manifestWriter->size() > 2 * snapshotBytes + (1 << 20)) writeNewManifest();
 }
 
-void PatchStore::Impl::recover() {
+// Segments are append-only, so blocks replaced by later updates stay on disk until every block of
+// their segment is dead; a pass that rewrites every patch (smoothing) would grow the store by its
+// size on every step. When the segment files exceed twice the live blocks, the live blocks of
+// every segment that is less than half live are copied to the end of a new segment and the
+// records repointed in one edit (same patch ids, same bytes); those segments are then dead and
+// dropped as usual. Afterwards every remaining segment is at least half live, so the files are
+// at most twice the live data. A checkpointed build (autoCommit off) is left alone: it commits
+// whole levels, which kill whole segments, and loads patches on other threads while it writes.
+void PatchStore::Impl::compact() {
+  if (compacting || stagedBlocks > 0 || !autoCommit) return;
+  uint64_t live = 0, total = 0;
+  auto liveOf = [&](uint32_t seg) {
+    auto it = liveBytes.find(seg);
+    return it == liveBytes.end() ? uint64_t(0) : it->second;
+  };
+  for (auto& [seg, size] : segmentBytes) {
+    total += size;
+    live += liveOf(seg);
+  }
+  if (total <= 2 * live + kCompactSlackBytes) return;
+  std::set<uint32_t> victims;
+  for (auto& [seg, size] : segmentBytes)
+    if (2 * liveOf(seg) < size) victims.insert(seg);
+  if (victims.empty()) return;
+  compacting = true;
+  try {
+    if (victims.count(activeSegment)) startSegment();
+    for (auto& [id, rec] : patches) {
+      bool g = victims.count(rec.geometry.segment) > 0, b = victims.count(rec.boundary.segment) > 0;
+      if (!g && !b) continue;
+      PatchRecord next = rec;
+      std::string what = "patch " + std::to_string(id);
+      if (g) next.geometry = appendBlock(readBlock(rec.geometry, what + " geometry"));
+      if (b) next.boundary = appendBlock(readBlock(rec.boundary, what + " boundary list"));
+      addLive(rec, -1);
+      addLive(next, +1);
+      rec = next;
+      pendingUpserted[id] = next;
+    }
+    pendingDirty = true;
+    commitPendingUnchecked();
+  } catch (...) {
+    compacting = false;
+    throw;
+  }
+  compacting = false;
+}
+
+// One attempt at opening the committed version: false (with the path) when a file it names has
+// vanished, which happens when a writer commits a newer version meanwhile.
+bool PatchStore::Impl::recoverOnce(std::string& missing) {
+  patches.clear();
+  blobs.clear();
+  liveBytes.clear();
+  segmentBytes.clear();
+  {
+    std::lock_guard<std::mutex> lock(readersMutex);
+    readers.clear();
+  }
+  auto tryOpen = [&](const std::string& path) -> std::shared_ptr<RandomAccessFile> {
+    try {
+      return std::shared_ptr<RandomAccessFile>(env->newRandomAccessFile(path));
+    } catch (const Error&) {
+      if (env->exists(path)) throw;
+      missing = path;
+      return nullptr;
+    }
+  };
   std::string currentPath = dir + "/CURRENT";
   if (!env->exists(currentPath)) fail(dir, "not a patch store (no CURRENT file)");
   auto cur = env->newRandomAccessFile(currentPath);
@@ -346,7 +429,8 @@ void PatchStore::Impl::recover() {
     fail(currentPath, "corrupted (expected MANIFEST-<n>)");
   manifestNumber = std::stoull(line.substr(9));
   std::string mpath = manifestPath(manifestNumber);
-  auto file = env->newRandomAccessFile(mpath);
+  auto file = tryOpen(mpath);
+  if (!file) return false;
   uint64_t size = file->size(), offset = 0;
   bool first = true;
   while (offset + sizeof(RecordHeader) <= size) {
@@ -402,7 +486,61 @@ void PatchStore::Impl::recover() {
   }
   if (first) fail(mpath, "no valid snapshot record");
   for (auto& [id, rec] : patches) addLive(rec, +1);
-  if (offset != size) {
+  manifestFileBytes = size;
+  manifestValidBytes = offset;
+  // Every segment this version references is opened now, so that a writer deleting it later
+  // (compaction, dead segments) only unlinks it: this store reads it until it is closed.
+  for (auto& [seg, bytes] : liveBytes) {
+    auto f = tryOpen(segmentPath(seg));
+    if (!f) return false;
+    segmentBytes[seg] = f->size();
+    std::lock_guard<std::mutex> lock(readersMutex);
+    readers[seg] = f;
+  }
+  return true;
+}
+
+// Opening reads only: no lock, nothing written or removed, so any number of readers may open a
+// store while one writer updates it; each sees the last version committed when it opened.
+void PatchStore::Impl::recover() {
+  std::string currentPath = dir + "/CURRENT";
+  auto readCurrent = [&]() {
+    try {
+      auto cur = env->newRandomAccessFile(currentPath);
+      std::string line(cur->size(), '\0');
+      cur->read(0, line.size(), line.data());
+      return line;
+    } catch (const Error&) {
+      return std::string();
+    }
+  };
+  for (int attempt = 0;; ++attempt) {
+    std::string before = readCurrent();
+    std::string missing;
+    if (recoverOnce(missing)) return;
+    // Unchanged CURRENT and manifest: nobody committed meanwhile, the file is really missing.
+    bool moved = readCurrent() != before || !env->exists(manifestPath(manifestNumber)) ||
+                 env->fileSize(manifestPath(manifestNumber)) != manifestFileBytes;
+    if (!moved || attempt >= 50) fail(missing, "missing (the store's manifest references it)");
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+}
+
+void PatchStore::Impl::lockForWriting() {
+  if (writeLock) return;
+  auto lock = std::make_unique<FileLock>(dir + "/LOCK", dir);
+  // The version this store opened must still be the last one: another writer may have committed
+  // between our open and our lock.
+  std::string line;
+  {
+    auto cur = env->newRandomAccessFile(dir + "/CURRENT");
+    line.assign(cur->size(), '\0');
+    cur->read(0, line.size(), line.data());
+  }
+  std::string mpath = manifestPath(manifestNumber);
+  if (line != mpath.substr(dir.size() + 1) + "\n" || !env->exists(mpath) || env->fileSize(mpath) != manifestFileBytes)
+    fail(dir, "was changed by another process after it was opened here; open it again");
+  if (manifestValidBytes != manifestFileBytes) {
     // A torn tail from an interrupted commit: start a fresh manifest from the recovered state.
     writeNewManifest();
   } else {
@@ -415,6 +553,7 @@ void PatchStore::Impl::recover() {
     unsigned long long m = 0;
     if (std::sscanf(name.c_str(), "MANIFEST-%llu", &m) == 1 && m != manifestNumber) env->removeFile(dir + "/" + name);
   }
+  writeLock = std::move(lock);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -438,6 +577,13 @@ std::unique_ptr<PatchStore> PatchStore::open(const std::string& dir, Env* env) {
   impl->recover();
   return std::unique_ptr<PatchStore>(new PatchStore(std::move(impl), dir));
 }
+
+void PatchStore::lockForWriting() {
+  std::lock_guard<std::mutex> w(impl_->writeMutex);
+  impl_->lockForWriting();
+}
+
+bool PatchStore::lockedForWriting() const { return impl_->writeLock != nullptr; }
 
 const VertexLayout& PatchStore::layout() const { return impl_->layout; }
 
@@ -464,6 +610,7 @@ std::string PatchStore::blob(const std::string& name) const {
 
 void PatchStore::putBlob(const std::string& name, const std::string& bytes) {
   std::lock_guard<std::mutex> w(impl_->writeMutex);
+  impl_->lockForWriting();
   std::unique_lock lock(impl_->stateMutex);
   impl_->blobs[name] = bytes;
   impl_->pendingBlobs[name] = bytes;
@@ -507,6 +654,7 @@ StoreInfo PatchStore::info() const {
     s.boundaryEntries += rec.meta.boundaryEntries;
     s.minPatchTriangles = std::min(s.minPatchTriangles, rec.meta.triangles);
     s.maxPatchTriangles = std::max(s.maxPatchTriangles, rec.meta.triangles);
+    s.liveBytes += rec.geometry.size + rec.boundary.size + 2 * sizeof(BlockHeader);
   }
   s.meanPatchTriangles = s.patches ? double(s.triangles) / double(s.patches) : 0;
   for (const std::string& name : impl_->env->listDir(dir_))
@@ -577,6 +725,7 @@ LoadedMesh PatchStore::assemble(const std::vector<Patch>& patchesIn) const {
 std::vector<PatchId> PatchStore::writeBack(const LoadedMesh& loadedIn, const ReplacementMesh& r, bool syncNow) {
   std::lock_guard<std::mutex> writer(impl_->writeMutex);
   if (!impl_->failedCommit.empty()) fail(dir_, "store refuses updates after a failed commit; reopen it");
+  impl_->lockForWriting();
   // The outside patches may have been replaced since the load (a neighbouring region written back
   // in between): re-read where they hold our vertices from the loaded patches' current lists.
   LoadedMesh refreshed;

@@ -145,6 +145,7 @@ struct IngestReport {
 
 struct StoreInfo {
   uint64_t patches = 0, triangles = 0, vertices = 0, boundaryEntries = 0, bytesOnDisk = 0;
+  uint64_t liveBytes = 0;  // of the blocks live patches reference (bytesOnDisk less dead blocks)
   uint32_t minPatchTriangles = 0, maxPatchTriangles = 0;
   double meanPatchTriangles = 0;
   VertexLayout layout;
@@ -186,8 +187,18 @@ class PatchStore {
   static IngestReport ingest(const std::string& input, const std::string& dir,
                              CellAssigner& assigner, const IngestOptions& options,
                              Env* env = Env::Default());
+  // Opens the last committed version for reading: no lock, nothing on disk changes, so it may
+  // run while another process writes the store (it keeps seeing the version it opened). The first
+  // update (writeBack, rewritePatches, stageGeometry, putBlob) takes the store's write lock.
   static std::unique_ptr<PatchStore> open(const std::string& dir, Env* env = Env::Default());
   ~PatchStore();
+  // Takes the exclusive lock STORE/LOCK now (updates take it by themselves), held until the store
+  // is closed. Throws mt::Error "STORE: in use by process PID (lock STORE/LOCK)..." when another
+  // writer holds it, or "...was changed by another process after it was opened here" when a
+  // writer committed after this open. Also finishes recovery (a torn manifest tail, files of
+  // uncommitted updates), which only a writer may do.
+  void lockForWriting();
+  bool lockedForWriting() const;
 
   const std::string& dir() const { return dir_; }
   const VertexLayout& layout() const;

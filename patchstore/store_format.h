@@ -12,6 +12,9 @@
 //                      BlockHeader + payload. A block is referenced from the manifest by a
 //                      BlockHandle (segment, offset, size, checksum), so it is verified twice.
 //   tmp/               scratch space for ingest and healing (deleted on success).
+//   LOCK               while a writer has the store open: its PID, flock()ed (patchstore/file_lock.h).
+//                      Removed when it closes; one left by a killed writer is not held, so it is
+//                      simply taken by the next one.
 //
 // Crash safety (the order every update follows): new blocks are appended to a segment and the
 // segment is fsynced; then one Edit record listing every change of the update is appended to the
@@ -20,7 +23,17 @@
 // are deleted only after the edit that killed them is durable. When the manifest log grows past
 // twice its snapshot size, a new manifest is written (Snapshot only) and CURRENT is switched to it.
 //
-// Ingest builds a whole store in DIR.ingest-<pid> and renames it to DIR when complete.
+// Readers take no lock and change nothing: they replay the manifest as it is (a torn tail is
+// ignored, not repaired) and open every segment the replayed version references at once, retrying
+// when one vanished meanwhile (a newer version was committed). A writer holds LOCK from its first
+// update, checks the store is still the version it opened, and only then repairs a torn tail and
+// removes unreferenced files. Compaction (patch_store.cpp) copies the live blocks of segments that
+// are less than half live to a new segment, commits, then unlinks them: a reader that opened an
+// older version still holds them open, so their data goes only when it closes.
+//
+// Ingest builds a whole store in DIR.ingest-<pid> (holding DIR.ingest-<pid>/INGEST-LOCK) and
+// renames it to DIR when complete; such a folder whose lock no process holds and whose PID is
+// gone is a killed ingest's, and the next ingest beside it removes it.
 #pragma once
 
 #include <cstdint>

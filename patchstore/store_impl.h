@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "patchstore/file_lock.h"
 #include "patchstore/patch_store.h"
 #include "patchstore/store_format.h"
 
@@ -21,6 +22,9 @@ struct PatchRecord {
 };
 
 struct PatchStore::Impl {
+  // Held from the first update until the store is closed (declared first: released last, after
+  // the manifest and segment writers are closed).
+  std::unique_ptr<FileLock> writeLock;
   Env* env = nullptr;
   std::string dir;
   VertexLayout layout;
@@ -34,11 +38,23 @@ struct PatchStore::Impl {
   uint32_t activeSegment = 0;
   std::unique_ptr<WritableFile> activeWriter;
   std::map<uint32_t, uint64_t> liveBytes;  // per segment, of blocks referenced by live patches
+  std::map<uint32_t, uint64_t> segmentBytes;  // per segment, its file size (live and dead blocks)
   mutable std::mutex readersMutex;
   mutable std::map<uint32_t, std::shared_ptr<RandomAccessFile>> readers;
 
+  // Segments deleted by the last commit, still open here: a load() that copied a patch record
+  // before that commit reads the (identical) old copy of a relocated block. Closed by the next
+  // commit.
+  std::vector<std::shared_ptr<RandomAccessFile>> retiredReaders;
+  // Staged geometry blocks not yet committed (they are referenced by no record, so compaction
+  // waits until they are committed).
+  size_t stagedBlocks = 0;
+  bool compacting = false;
+
   // Manifest log.
   uint64_t manifestNumber = 0;
+  uint64_t manifestFileBytes = 0;  // size of the manifest file when it was replayed at open
+  uint64_t manifestValidBytes = 0; // the records replayed (less than the file after a torn append)
   std::unique_ptr<WritableFile> manifestWriter;
   uint64_t snapshotBytes = 0;
 
@@ -69,8 +85,11 @@ struct PatchStore::Impl {
   void writeNewManifest();  // snapshot into MANIFEST-(n+1), then switch CURRENT
   void commitPending();     // segment fsync, edit append, manifest fsync (the commit point)
   void commitPendingUnchecked();
-  void recover();           // open: CURRENT -> manifest replay
+  void recover();           // open: CURRENT -> manifest replay -> every referenced segment opened
+  bool recoverOnce(std::string& missing);
+  void lockForWriting();    // the store's LOCK, then the writer's part of recovery
   void dropDeadSegments();
+  void compact();           // relocates live blocks out of mostly-dead segments
 
   void addLive(const PatchRecord& r, int sign);
 };

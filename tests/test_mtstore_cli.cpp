@@ -66,7 +66,7 @@ TEST(MtstoreCli, BadInputGivesOneClearLineAndLeavesNothing) {
       {"unknown format, known extension", "fake.stl", std::string("\x01\x02\x03", 3), ""},
       {"empty mesh", "empty.off", "OFF\n3 0 0\n0 0 0\n1 0 0\n0 1 0\n", "no triangles"},
       {"zero-byte file", "zero.ply", "", "empty"},
-      {"missing file", "missing.ply", "", "cannot open"},
+      {"missing file", "missing.ply", "", "no such file"},
   };
   for (const BadCase& c : cases) {
     std::string in = tmp.file(c.file);

@@ -9,11 +9,16 @@
 #include <algorithm>
 #include <cinttypes>
 #include <filesystem>
+#include <cerrno>
+#include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <iostream>
 #include <sstream>
 
 #include "patchstore/heal/heal.h"
+#include "patchstore/interrupt.h"
+#include "patchstore/output_path.h"
 #include "patchstore/patch_store.h"
 #include "tools/partition_choice.h"
 
@@ -87,9 +92,29 @@ int runInfo(const std::string& dir, bool json, bool components) {
   return 0;
 }
 
+// export: the PLY is written under a name of its own and renamed over OUT only when complete, so
+// an error or a signal leaves OUT as it was.
+void runExport(const std::string& dir, const std::string& output, bool quiet) {
+  auto store = mt::PatchStore::open(dir);
+  std::vector<std::string> inputs;
+  std::error_code ec;
+  for (const auto& e : std::filesystem::directory_iterator(dir, ec)) inputs.push_back(e.path().string());
+  mt::checkOutputPath(output, inputs);
+  const std::string tmp = mt::uniqueTempName(output);
+  try {
+    store->exportPly(tmp, !quiet);
+    mt::checkInterrupt("export");
+    if (std::rename(tmp.c_str(), output.c_str()) != 0) mt::fail(output, std::string("cannot rename from ") + tmp + ": " + std::strerror(errno));
+  } catch (...) {
+    std::filesystem::remove(tmp, ec);
+    throw;
+  }
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
+  mt::installInterruptHandlers();
   CLI::App app{"mtstore: the out-of-core patch store (ingest a scan, inspect, export, check)"};
   app.require_subcommand(1);
   app.set_help_all_flag("--help-all", "Print the help of every subcommand");
@@ -100,7 +125,8 @@ int main(int argc, char** argv) {
 
   CLI::App* ingest = app.add_subcommand("ingest", "Build a patch store from a mesh file (PLY, OBJ, OFF, STL)");
   ingest->add_option("input", input, "Input mesh file")->required();
-  ingest->add_option("-o,--output", output, "Store directory to create (must not exist)")->required();
+  ingest->add_option("-o,--output", output,
+                     "Store directory to create (must not exist: an existing folder, even empty, is refused)")->required();
   ingest->add_option("--memory", memory, "Memory cap for the whole ingest, e.g. 256M, 4G (default 256M)");
   ingest->add_option("--patch-triangles", patchTriangles,
                      "Target triangles per patch (default: the partition's own, see docs/vpartition.md)");
@@ -131,22 +157,35 @@ int main(int argc, char** argv) {
   std::string healMemory = "256M";
   bool flagDegenerate = false, flagDuplicate = false, flagUnreferenced = false, flagNonManifold = false;
   heal->add_option("store", dir, "Store directory (changed in place)")->required();
-  CLI::Option* optWeld = heal->add_option(
-      "--weld", weldEps, "Merge vertices closer than EPS into one, across patches too (0: exactly equal positions)");
+  char weldHelp[256];
+  std::snprintf(weldHelp, sizeof weldHelp,
+                "Merge vertices closer than EPS into one, across patches too (0: exactly equal positions); EPS from 0 "
+                "to %g%% of the bounding-box diagonal (more only with --force)",
+                mt::heal::kMaxWeldFraction * 100);
+  CLI::Option* optWeld = heal->add_option("--weld", weldEps, weldHelp);
   CLI::Option* optDegenerate = heal->add_flag("--remove-degenerate", flagDegenerate, "Remove triangles with a repeated vertex");
   CLI::Option* optDuplicate =
       heal->add_flag("--remove-duplicate-faces", flagDuplicate, "Remove triangles with the same three vertices as an earlier one");
   CLI::Option* optUnreferenced = heal->add_flag("--remove-unreferenced", flagUnreferenced, "Remove vertices no triangle uses");
   CLI::Option* optComponents = heal->add_option(
-      "--remove-small-components", minComponent, "Remove connected components with fewer than N triangles (even across patches)");
+      "--remove-small-components", minComponent,
+      "Remove connected components with fewer than N triangles (even across patches); N >= 1; refused when it would "
+      "remove every component, unless --force");
   CLI::Option* optNonManifold = heal->add_flag(
       "--fix-nonmanifold", flagNonManifold, "Split non-manifold edges (more than two triangles) and vertices (several fans) into manifold ones");
   CLI::Option* optHoles = heal->add_option(
       "--fill-holes", maxHoleEdges,
-      "Fill holes whose border has at most MAXEDGES edges: triangulate, refine and fair (CGAL), across patch borders too");
+      "Fill holes whose border has at most MAXEDGES edges: triangulate, refine and fair (CGAL), across patch borders "
+      "too; MAXEDGES from 3 to 1000000");
   CLI::Option* optSmooth = heal->add_option(
-      "--smooth", smoothIterations, "Taubin smoothing (lambda 0.5, mu -0.53), ITER iterations, borders included");
+      "--smooth", smoothIterations,
+      "Taubin smoothing (lambda 0.5, mu -0.53), ITER iterations from 1 to 1000000, borders included; old blocks are "
+      "reclaimed as it goes (the store stays within about twice its live data)");
   heal->add_option("--memory", healMemory, "Memory cap for sorts and tables, e.g. 512M, 4G (default 256M)");
+  bool force = false;
+  heal->add_flag("--force", force,
+                 "Run parameters refused as nonsense for the model: a --weld EPS above the diagonal fraction, a "
+                 "--remove-small-components N that removes every component");
   heal->add_flag("-q,--quiet", quiet, "No progress lines on stderr");
 
   CLI11_PARSE(app, argc, argv);
@@ -157,7 +196,13 @@ int main(int argc, char** argv) {
       options.patchTriangles = patchTriangles;
       options.progress = !quiet;
       auto assigner = mt::tools::makeAssigner(partition, patchTriangles);
-      mt::IngestReport r = mt::PatchStore::ingest(input, output, *assigner, options);
+      mt::IngestReport r;
+      try {
+        r = mt::PatchStore::ingest(input, output, *assigner, options);
+      } catch (const mt::Interrupted& e) {
+        std::fprintf(stderr, "mtstore: %s; nothing was written (no store %s, scratch removed)\n", e.what(), output.c_str());
+        return 128 + e.signal();
+      }
       std::fprintf(stderr, "ingested %" PRIu64 " triangles in %.2f s (%.2f M triangles/s), peak RSS %.1f MiB -> %s\n",
                    r.inputTriangles, r.seconds, double(r.inputTriangles) / r.seconds / 1e6,
                    double(r.peakBytes) / (1 << 20), output.c_str());
@@ -169,8 +214,7 @@ int main(int argc, char** argv) {
     }
     if (*info) return runInfo(dir, json, !noComponents);
     if (*exportCmd) {
-      auto store = mt::PatchStore::open(dir);
-      store->exportPly(output, !quiet);
+      runExport(dir, output, quiet);
       return 0;
     }
     if (*heal) {
@@ -185,9 +229,50 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "mtstore heal: no pass given (see mtstore heal --help)\n");
         return 1;
       }
+      // Ranges first: nothing is opened for a command line that cannot run.
+      auto refuse = [](const std::string& what) {
+        std::fprintf(stderr, "mtstore heal: %s\n", what.c_str());
+        return 1;
+      };
+      if (*optWeld && (!std::isfinite(weldEps) || weldEps < 0))
+        return refuse("--weld " + optWeld->as<std::string>() + ": EPS must be a finite number >= 0");
+      if (*optComponents && minComponent < 1) return refuse("--remove-small-components 0: N must be at least 1");
+      if (*optHoles && (maxHoleEdges < mt::heal::kMinHoleEdges || maxHoleEdges > mt::heal::kMaxHoleEdges))
+        return refuse("--fill-holes " + std::to_string(maxHoleEdges) + ": MAXEDGES must be from 3 to 1000000");
+      if (*optSmooth && (smoothIterations < 1 || smoothIterations > mt::heal::kMaxSmoothIterations))
+        return refuse("--smooth " + std::to_string(smoothIterations) + ": ITER must be from 1 to 1000000");
+      options.force = force;
       auto store = mt::PatchStore::open(dir);
-      for (const CLI::Option* o : heal->parse_order()) {
-        mt::heal::PassReport r;
+      // One writer at a time: a second heal is refused here, before it reads or writes anything.
+      store->lockForWriting();
+      std::error_code tmpEc;
+      if (std::filesystem::exists(dir + "/tmp", tmpEc)) {
+        // Under the lock, nobody uses the store's scratch: it is what a killed heal left.
+        std::filesystem::remove_all(dir + "/tmp", tmpEc);
+        std::fprintf(stderr, "heal: removed %s/tmp, scratch left by an earlier heal that was stopped\n", dir.c_str());
+      }
+      std::vector<std::string> done, names;
+      for (const CLI::Option* o : heal->parse_order())
+        if (o == optWeld || o == optDegenerate || o == optDuplicate || o == optUnreferenced || o == optComponents ||
+            o == optNonManifold || o == optHoles || o == optSmooth)
+          names.push_back(o->get_name(false, true));
+      // What a signal leaves: the passes that finished are committed; smoothing keeps its whole
+      // iterations (the message says how many); the rest did not run.
+      auto stopped = [&](const mt::Interrupted& e, bool inPass) {
+        auto list = [&](size_t from, size_t to) {
+          std::string out;
+          for (size_t i = from; i < to && i < names.size(); ++i) out += (out.empty() ? "" : ", ") + names[i];
+          return out.empty() ? std::string("none") : out;
+        };
+        const size_t k = done.size();
+        std::fprintf(stderr, "mtstore heal: %s; the store is at its last committed version: passes finished: %s%s%s; not run: %s\n",
+                     e.what(), list(0, k).c_str(), inPass ? "; stopped in: " : "", inPass ? list(k, k + 1).c_str() : "",
+                     list(k + (inPass ? 1 : 0), names.size()).c_str());
+        std::error_code ec;
+        std::filesystem::remove_all(dir + "/tmp", ec);
+        return 128 + e.signal();
+      };
+      auto runPass = [&](const CLI::Option* o, mt::heal::PassReport& r) {
         if (o == optWeld) r = mt::heal::weld(*store, weldEps, options);
         else if (o == optDegenerate) r = mt::heal::removeDegenerate(*store, options);
         else if (o == optDuplicate) r = mt::heal::removeDuplicateFaces(*store, options);
@@ -196,9 +281,26 @@ int main(int argc, char** argv) {
         else if (o == optNonManifold) r = mt::heal::fixNonManifold(*store, options);
         else if (o == optHoles) r = mt::heal::fillHoles(*store, maxHoleEdges, options);
         else if (o == optSmooth) r = mt::heal::smooth(*store, smoothIterations, options);
-        else continue;  // --memory, --quiet, the store
+        else return false;  // --memory, --quiet, --force, the store
+        return true;
+      };
+      for (const CLI::Option* o : heal->parse_order()) {
+        mt::heal::PassReport r;
+        try {
+          if (!runPass(o, r)) continue;
+        } catch (const mt::Interrupted& e) {
+          return stopped(e, true);
+        } catch (...) {
+          std::error_code ec;
+          std::filesystem::remove_all(dir + "/tmp", ec);
+          throw;
+        }
         std::printf("%s\n", r.line().c_str());
         std::fflush(stdout);
+        done.push_back(names[done.size()]);
+        // Between passes is a safe point: every pass ends with a commit.
+        if (int sig = mt::interruptRequested(); sig && done.size() < names.size())
+          return stopped(mt::Interrupted("heal: after " + done.back(), sig), false);
       }
       store->sync();
       std::error_code ec;

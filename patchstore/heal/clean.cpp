@@ -234,9 +234,19 @@ PassReport removeSmallComponents(PatchStore& store, uint64_t minTriangles, const
   }
   std::vector<uint64_t> total(base.back(), 0);
   for (uint32_t n = 0; n < base.back(); ++n) total[uf.find(n)] += nodeTriangles[n];
-  uint64_t components = 0, triangles = 0, vertices = 0;
+  uint64_t components = 0, triangles = 0, vertices = 0, allComponents = 0, allTriangles = 0, largest = 0;
   for (uint32_t n = 0; n < base.back(); ++n)
-    if (uf.find(n) == n && total[n] < minTriangles) ++components, triangles += total[n];
+    if (uf.find(n) == n) {
+      ++allComponents;
+      allTriangles += total[n];
+      largest = std::max(largest, total[n]);
+      if (total[n] < minTriangles) ++components, triangles += total[n];
+    }
+  if (triangles == allTriangles && allTriangles > 0 && !options.force)
+    fail(store.dir(), "remove-small-components " + std::to_string(minTriangles) + " would remove every component (" +
+                          std::to_string(components) + " components, " + std::to_string(triangles) +
+                          " triangles: the whole surface; the largest has " + std::to_string(largest) +
+                          " triangles); nothing was changed: choose N at most " + std::to_string(largest) + ", or --force");
   Progress drop(options.progress, "remove-small-components: drop", ids.size(), "patches");
   for (size_t i = 0; i < ids.size(); ++i) {
     bool any = false;

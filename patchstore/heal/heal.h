@@ -28,7 +28,15 @@ struct HealOptions {
   uint64_t memoryBytes = 256ull << 20;  // the --memory cap (external sorts and tables)
   bool progress = false;                // progress lines on stderr
   std::string tempDir;                  // scratch files; default STORE/tmp
+  bool force = false;                   // run parameters refused as nonsense for the model (--force)
 };
+
+// Refused unless forced: a weld epsilon above this fraction of the store's bounding-box diagonal
+// (it would merge distant parts of the model into one vertex), and a component threshold that
+// removes every component.
+constexpr double kMaxWeldFraction = 0.01;
+constexpr uint32_t kMaxSmoothIterations = 1000000;
+constexpr uint32_t kMinHoleEdges = 3, kMaxHoleEdges = 1000000;
 
 // What a pass changed: named counts, in a fixed order, and one summary line.
 struct PassReport {
@@ -42,7 +50,8 @@ struct PassReport {
 // --weld EPS: merge vertices closer than eps (eps 0: exactly equal positions) into one, across
 // patches too. A cluster is a connected set of the "closer than eps" graph; it becomes its member
 // with the lexicographically smallest position. Triangles that become degenerate are kept (run
-// --remove-degenerate after). Counts: "merged" (vertices removed), "clusters".
+// --remove-degenerate after). Counts: "merged" (vertices removed), "clusters". Throws when eps is
+// above kMaxWeldFraction of the bounding-box diagonal, unless options.force.
 PassReport weld(PatchStore& store, double eps, const HealOptions& options);
 // The cells of a quantization grid: position p is in cell floor((p - origin) / step + 0.5) per
 // axis, the rounding every quantized coordinate of an MT file uses.
@@ -66,7 +75,8 @@ PassReport removeDuplicateFaces(PatchStore& store, const HealOptions& options);
 // --remove-unreferenced: vertices no triangle uses. Counts "vertices".
 PassReport removeUnreferenced(PatchStore& store, const HealOptions& options);
 // --remove-small-components N: connected components (sharing a vertex) of fewer than n triangles.
-// Counts "components", "triangles", "vertices".
+// Counts "components", "triangles", "vertices". Throws, with nothing changed, when every component
+// is smaller than n (the whole surface would go), unless options.force.
 PassReport removeSmallComponents(PatchStore& store, uint64_t minTriangles, const HealOptions& options);
 // --fix-nonmanifold: every edge with more than two triangles stops connecting them, and every
 // vertex whose triangles then form several fans is split into one vertex per fan. Decided on the

@@ -12,12 +12,16 @@
 //     the table (so all copies of a vertex get bit-identical positions), and stages the new
 //     geometry block. All blocks of the step become live in one manifest edit (commitStaged), so
 //     pass A and B of the step read only old positions, exactly like an in-core Jacobi step.
+#include <unistd.h>
+
 #include <algorithm>
 #include <chrono>
+#include <cstdio>
 #include <tuple>
 
 #include "patchstore/external_sort.h"
 #include "patchstore/heal/region.h"
+#include "patchstore/interrupt.h"
 #include "patchstore/progress.h"
 
 namespace mt::heal {
@@ -59,8 +63,14 @@ void localRings(const Patch& p, std::vector<uint32_t>& offset, std::vector<uint3
   for (size_t i = 0; i < pairs.size(); ++i) ring[i] = pairs[i].second;  // pairs sorted by first
 }
 
+// `interruptible`: stop at a signal before anything of the step is committed (the lambda step:
+// once it is committed, the mu step runs to its end, so the store only ever holds whole
+// iterations).
 void step(PatchStore& store, double factor, const HealOptions& options, const std::vector<PatchId>& ids,
-          const std::string& task) {
+          const std::string& task, bool interruptible) {
+  auto poll = [&]() {
+    if (interruptible) checkInterrupt(task);
+  };
   // A. 1-rings of shared vertices.
   ExternalSorter<RingRecord, RingLess> sorter(scratchPrefix(store, options, "smooth"), options.memoryBytes / 2);
   std::vector<uint32_t> offset, ring;
@@ -80,6 +90,7 @@ void step(PatchStore& store, double factor, const HealOptions& options, const st
       }
     }
     progressA.update(++done);
+    poll();
   }
   sorter.finish();
   std::vector<RingSum> table;
@@ -126,6 +137,7 @@ void step(PatchStore& store, double factor, const HealOptions& options, const st
     p.positions.swap(next);
     store.stageGeometry(staged, p);
     progressB.update(++done);
+    poll();
   }
   store.commitStaged(staged);
 }
@@ -135,11 +147,40 @@ void step(PatchStore& store, double factor, const HealOptions& options, const st
 PassReport smooth(PatchStore& store, uint32_t iterations, const HealOptions& options, double lambda, double mu) {
   auto start = std::chrono::steady_clock::now();
   store.sync();
+  if (iterations > kMaxSmoothIterations)
+    fail(store.dir(), "smooth: " + std::to_string(iterations) + " iterations is out of range (1 to " +
+                          std::to_string(kMaxSmoothIterations) + ")");
   std::vector<PatchId> ids = store.patchIds();
+  const uint64_t vertices = store.info().vertices;
+  const bool tty = isatty(2);
   for (uint32_t i = 0; i < iterations; ++i) {
+    auto t0 = std::chrono::steady_clock::now();
     std::string task = "smooth " + std::to_string(i + 1) + "/" + std::to_string(iterations);
-    step(store, lambda, options, ids, task + " lambda");
-    step(store, mu, options, ids, task + " mu");
+    try {
+      step(store, lambda, options, ids, task + " lambda", true);
+    } catch (const Interrupted& e) {
+      throw Interrupted("smooth: " + std::to_string(i) + " of " + std::to_string(iterations) +
+                            " iterations done and kept in the store",
+                        e.signal());
+    }
+    step(store, mu, options, ids, task + " mu", false);
+    if (options.progress) {
+      // One line per iteration: its rate, and the store's size against its live blocks (the
+      // compaction bound).
+      const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      const double total = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      StoreInfo info = store.info();
+      std::fprintf(stderr, tty ? "\r\033[Kheal: %s: %.2f s (%.2f M vertices/s), store %.1f MiB (live %.1f MiB), ETA %.0f s%s"
+                             : "heal: %s: %.2f s (%.2f M vertices/s), store %.1f MiB (live %.1f MiB), ETA %.0f s%s",
+                   task.c_str(), s, s > 0 ? double(vertices) / s / 1e6 : 0.0, double(info.bytesOnDisk) / (1 << 20),
+                   double(info.liveBytes) / (1 << 20), total / double(i + 1) * double(iterations - i - 1),
+                   tty && i + 1 < iterations ? "" : "\n");
+      std::fflush(stderr);
+    }
+    if (int sig = interruptRequested())
+      throw Interrupted("smooth: " + std::to_string(i + 1) + " of " + std::to_string(iterations) +
+                            " iterations done and kept in the store",
+                        sig);
   }
   double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return {"smooth", {{"iterations", iterations}, {"patches", uint64_t(ids.size())}}, seconds};

@@ -11,6 +11,7 @@
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <map>
 #include <set>
 #include <tuple>
@@ -42,6 +43,20 @@ using Pos = std::array<double, 3>;
 PassReport weld(PatchStore& store, double eps, const HealOptions& options) {
   auto start = std::chrono::steady_clock::now();
   if (!(eps >= 0) || !std::isfinite(eps)) fail(store.dir(), "weld: epsilon must be a finite number >= 0");
+  {
+    // An epsilon near the model's size merges distant parts into one vertex, and puts most points
+    // in a handful of cells (quadratic candidate pairs): refuse it unless asked for.
+    const Box3 b = store.info().bounds;
+    double d2 = 0;
+    for (int a = 0; a < 3; ++a) d2 += (b.hi[a] - b.lo[a]) * (b.hi[a] - b.lo[a]);
+    const double diagonal = std::sqrt(d2), limit = kMaxWeldFraction * diagonal;
+    char msg[256];
+    std::snprintf(msg, sizeof msg,
+                  "weld: epsilon %g is above %g%% of the bounding-box diagonal (%g), the most --weld accepts (%g): "
+                  "it would merge distant parts of the model; choose a smaller epsilon, or --force",
+                  eps, kMaxWeldFraction * 100, diagonal, limit);
+    if (eps > limit && !options.force) fail(store.dir(), msg);
+  }
   const int grids = eps > 0 ? 8 : 1;
   std::vector<std::unique_ptr<ExternalSorter<Point, PointLess>>> sorters;
   for (int g = 0; g < grids; ++g)
@@ -85,8 +100,11 @@ PassReport weld(PatchStore& store, double eps, const HealOptions& options) {
     sorter->finish();
     Point pt;
     auto flush = [&]() {
+      // A cell is sorted by x (PointLess): past eps along x no later point is closer than eps,
+      // which keeps a crowded cell (a large eps) from comparing every pair.
       for (size_t i = 0; i < cell.size(); ++i)
         for (size_t j = i + 1; j < cell.size(); ++j) {
+          if (eps > 0 && cell[j].p[0] - cell[i].p[0] >= eps) break;
           if (eps == 0) {
             if (cell[i].p[0] != cell[j].p[0] || cell[i].p[1] != cell[j].p[1] || cell[i].p[2] != cell[j].p[2]) break;
             pair(cell[i], cell[j]);
