@@ -234,8 +234,29 @@ TEST(PatchStore, SameStoreBytesWhateverTheCapOrThePath) {
   EXPECT_EQ(ref.nonManifoldEdges, chunked.nonManifoldEdges);
   EXPECT_EQ(ref.unreferencedVertices, chunked.unreferencedVertices);
   EXPECT_EQ(ref.assigner, chunked.assigner);
+  // OBJ (no declared vertex count) is decimal text, kept as double: the same bytes as a double
+  // PLY of the values its text gives.
   ingestIrregular(tmp.file("in.obj"), tmp.file("obj"), 1ull << 30);
-  EXPECT_TRUE(bytes == segmentBytes(tmp.file("obj"))) << "OBJ (no declared vertex count)";
+  {
+    TestMesh parsed = m;
+    for (double& x : parsed.positions) {
+      std::ostringstream o;
+      o.precision(9);
+      o << x;
+      x = std::stod(o.str());
+    }
+    PlyWriteOptions d{};
+    d.doublePrecision = true;
+    PlyWriter w(tmp.file("in-double.ply"), d);
+    for (size_t i = 0; i < parsed.positions.size(); i += 3) w.addVertex(&parsed.positions[i]);
+    for (size_t i = 0; i < parsed.triangles.size(); i += 3)
+      w.addTriangle(parsed.triangles[i], parsed.triangles[i + 1], parsed.triangles[i + 2]);
+    w.finish();
+  }
+  ingestIrregular(tmp.file("in-double.ply"), tmp.file("double"), 1ull << 30);
+  const std::string doubleBytes = segmentBytes(tmp.file("double"));
+  EXPECT_FALSE(doubleBytes == bytes) << "double positions are stored as double";
+  EXPECT_TRUE(doubleBytes == segmentBytes(tmp.file("obj"))) << "OBJ (no declared vertex count)";
   auto store = PatchStore::open(tmp.file("resident"));
   EXPECT_TRUE(store->check().ok);
   store->exportPly(tmp.file("out.ply"));
