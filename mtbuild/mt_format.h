@@ -46,8 +46,11 @@ namespace mt::format {
 constexpr char kMagic[8] = {'B', 'M', 'T', '-', 'M', 'T', '\r', '\n'};
 constexpr char kFooterMagic[8] = {'B', 'M', 'T', '-', 'E', 'N', 'D', '\n'};
 // Version 2: meshopt payloads may set kPayloadRangePositions (positions range-coded after the
-// zstd frame instead of byte planes inside it). Readers accept kMinReadableVersion..kVersion.
-constexpr uint32_t kVersion = 2;
+// zstd frame instead of byte planes inside it). Version 3: meshopt payloads may also set
+// kPayloadPositionContexts (another residual model) and kPayloadRangeIndices (the index code
+// range-coded ahead of the positions). Readers accept kMinReadableVersion..kVersion; the payload
+// flags say how each payload is coded, so one decoder reads all three.
+constexpr uint32_t kVersion = 3;
 constexpr uint32_t kMinReadableVersion = 1;
 constexpr uint32_t kHeaderSize = 256;
 constexpr uint32_t kFooterSize = 32;
@@ -168,6 +171,8 @@ constexpr uint8_t kPayloadColors = 1u << 1;   // RGBA8 colours present
 constexpr uint8_t kPayloadWide = 1u << 2;     // meshopt: position residuals need 32 bits (else 16)
 constexpr uint8_t kPayloadStrip = 1u << 3;    // meshopt: indices are a strip (restart ~0u)
 constexpr uint8_t kPayloadRangePositions = 1u << 4;  // meshopt: positions range-coded after the zstd frame (v2)
+constexpr uint8_t kPayloadRangeIndices = 1u << 5;      // meshopt: index code range-coded ahead of the positions (v3)
+constexpr uint8_t kPayloadPositionContexts = 1u << 6;  // meshopt: positions with the version-3 model (v3)
 
 // Codec::Meshopt, after the PayloadHeader:
 //   uint32 rawSize, uint32 zstdSize, then zstdSize bytes (one zstd frame) that decompress to
@@ -182,13 +187,34 @@ constexpr uint8_t kPayloadRangePositions = 1u << 4;  // meshopt: positions range
 //     positions, without kPayloadRangePositions (version 1 files): 3 axes x P byte planes x
 //         vertexCount bytes (P = 4 with kPayloadWide, else 2): plane b of axis x holds byte b of
 //         zigzag(r) for every vertex, r = qRel - prediction.
-//   With kPayloadRangePositions (what version 2 writers emit) the frame holds no positions; after
-//   it comes one range-coded stream (LZMA's binary range coder: 32-bit low/range, probabilities
-//   of 11 bits starting at 1024 and adapted by 1/32, the encoder's always-zero first byte not
-//   stored, so the decoder starts with code = the first 4 bytes) of zigzag(r) for vertex 0..n-1,
-//   axis x, y, z: the bit length k of z (0..32) as a 6-bit binary tree (MSB first, node index m
-//   from 1, probability length[axis][m]), then for k >= 2 the k-1 bits below the leading one, MSB
-//   first, probability mantissa[axis][k][bit]. A decoder reads no byte past the payload.
+//   With kPayloadRangePositions (version 2 and 3 writers) the frame holds no positions; after
+//   it comes one range-coded stream (LZMA's binary range coder: 32-bit low/range, the encoder's
+//   always-zero first byte not stored, so the decoder starts with code = the first 4 bytes).
+//   Version 2 (kPayloadPositionContexts clear): probabilities of 11 bits starting at 1024 and
+//   adapted by 1/32; zigzag(r) for vertex 0..n-1, axis x, y, z: the bit length k of z (0..32) as a
+//   6-bit binary tree (MSB first, node index m from 1, probability length[axis][m]), then for
+//   k >= 2 the k-1 bits below the leading one, MSB first, probability mantissa[axis][k][bit].
+//   Version 3 bits ("counted"): probability p of a 0 in 12 bits starting at 2048 with a count n
+//   starting at 0; bound = (range >> 12) * p; after coding bit b, rate = 65536 / (min(n, 30) + 2)
+//   (integer division), p += ((4096 - p) * rate) >> 16 if b = 0 else p -= (p * rate) >> 16, then p is
+//   clamped to [31, 4065] and n incremented up to 30.
+//   kPayloadPositionContexts (version 3): as version 2 but with counted bits, and length
+//   probabilities length[kind][axis][m], kind = the prediction case below (0 parallelogram,
+//   1 midpoint, 2 one vertex known, 3 none known); mantissa[axis][k][bit].
+//   kPayloadRangeIndices (version 3, needs kPayloadRangePositions and kPayloadPositionContexts,
+//   never kPayloadStrip): the frame holds only uint32 indexBytes, indexCount, attributeBytes and the
+//   attribute code (rawSize = 12 + attributeBytes); zSize 0 means those rawSize bytes are stored as
+//   they are instead of a zstd frame. The range-coded stream starts with the meshopt index code
+//   (indexBytes >= 1 + triangles + 16 bytes: header byte, one code byte per triangle, data bytes,
+//   16-byte table), counted bits, fresh per payload:
+//     one bit, probability `standard`: 0 = header 0xe1 and the version-1 table 00 76 87 56 67 78
+//       a9 86 65 89 68 98 01 69 00 00; 1 = header then the 16 table bytes follow, each an 8-bit
+//       tree over data[0];
+//     per triangle t, code byte c = (h << 4) | l: h as a 4-bit tree over hi[ctx], then l as a 4-bit
+//       tree over lo[(h << 1) | (ctx & 1)]; ctx = (h' << 1) | (l' == 0) of the previous triangle's
+//       code (0 for the first);
+//     each data byte as an 8-bit tree over data[top bit of the previous data byte (0 first)];
+//   then the positions (kPayloadPositionContexts) in the same stream.
 //   Prediction (parallelogram rule): walk the decoded triangles in order; at the first use of a
 //   vertex v in triangle (v, a, b) (rotated so v comes first):
 //     a, b known and a visited triangle has directed edge (b, a) or else (a, b) with third vertex

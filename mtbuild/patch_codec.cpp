@@ -5,8 +5,11 @@
 #include <zstd.h>
 
 #include <algorithm>
+#include <array>
 #include <cassert>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <memory>
 #include <mutex>
@@ -270,8 +273,16 @@ class EdgeMap {
   uint64_t mask_;
 };
 
-// Visits the vertices in first-use order of `indices` and calls f(v, pred) with the prediction of
-// v from already visited vertices; f must make q[v] known before returning (the encoder already
+// How a vertex was predicted (the parallelogramWalk cases, mt_format.h), and from which corners:
+// the context of its residual in the version-3 position model.
+enum PredictionKind : uint32_t { kParallelogram = 0, kMidpoint = 1, kOneKnown = 2, kNoneKnown = 3 };
+struct Prediction {
+  uint32_t kind;
+  uint32_t a, b, c;  // kParallelogram: a + b - c; kMidpoint: a, b; kOneKnown: a; kNoneKnown: a = last or ~0u
+};
+
+// Visits the vertices in first-use order of `indices` and calls f(v, pred, how) with the prediction
+// of v from already visited vertices; f must make q[v] known before returning (the encoder already
 // has it, the decoder computes it from the residual). Predictions are clamped to [0, range].
 template <typename F>
 void parallelogramWalk(const uint32_t* indices, size_t indexCount, size_t vertexCount, const int64_t* q,
@@ -285,20 +296,24 @@ void parallelogramWalk(const uint32_t* indices, size_t indexCount, size_t vertex
       if (known[v]) continue;
       uint32_t a = indices[t + (k + 1) % 3], b = indices[t + (k + 2) % 3], c;
       int64_t pred[3] = {0, 0, 0};
+      Prediction how{kNoneKnown, last, ~0u, ~0u};
       if (known[a] && known[b]) {
         if (edges.get(b, a, &c) || edges.get(a, b, &c)) {
           for (int x = 0; x < 3; ++x) pred[x] = q[a * 3 + x] + q[b * 3 + x] - q[c * 3 + x];
+          how = {kParallelogram, a, b, c};
         } else {
           for (int x = 0; x < 3; ++x) pred[x] = (q[a * 3 + x] + q[b * 3 + x]) >> 1;
+          how = {kMidpoint, a, b, ~0u};
         }
       } else if (known[a] || known[b]) {
         uint32_t s = known[a] ? a : b;
         for (int x = 0; x < 3; ++x) pred[x] = q[s * 3 + x];
+        how = {kOneKnown, s, ~0u, ~0u};
       } else if (last != ~0u) {
         for (int x = 0; x < 3; ++x) pred[x] = q[last * 3 + x];
       }
       for (int x = 0; x < 3; ++x) pred[x] = std::clamp<int64_t>(pred[x], 0, range[x]);
-      f(v, pred);
+      f(v, pred, how);
       known[v] = 1;
       last = v;
     }
@@ -313,6 +328,33 @@ constexpr int64_t kMaxQ = 0x7FFFFFFF;
 
 inline uint32_t zigzag(int64_t r) { return uint32_t((uint64_t(r) << 1) ^ uint64_t(r >> 63)); }
 inline int64_t unzigzag(uint32_t z) { return int64_t(z >> 1) ^ -int64_t(z & 1); }
+
+// ---- Version-3 models (kPayloadRangeIndices, kPayloadPositionContexts) ----
+//
+// A patch codes ~1000 vertices and ~2000 triangles: with LZMA's fixed adaptation rate (1/32 from
+// an even start) most of the cost of a context is learning it, so every added context measured
+// worse. Version-3 probabilities count their updates and move by 1/(n+2) for the n-th one (the
+// frequency estimate, as in Krichevsky-Trofimov), by 1/32 from the 30th on (the LZMA rate): the
+// first samples of a context teach it as much as a static table would.
+struct CountedBit {
+  uint16_t p = 2048;  // P(bit = 0) in 1/4096
+  uint16_t n = 0;     // updates so far, saturating at kCountedBitLimit
+};
+constexpr uint16_t kCountedBitLimit = 30;
+// kRate[n] = 65536 / (n + 2): integer, the same everywhere.
+constexpr auto kRate = [] {
+  std::array<uint32_t, kCountedBitLimit + 1> r{};
+  for (uint32_t n = 0; n <= kCountedBitLimit; ++n) r[n] = 65536 / (n + 2);
+  return r;
+}();
+inline void adapt(CountedBit& c, uint32_t b) {
+  uint32_t rate = kRate[c.n];
+  int32_t p = c.p;
+  if (!b) p += int32_t((uint32_t(4096 - p) * rate) >> 16);
+  else p -= int32_t((uint32_t(p) * rate) >> 16);
+  c.p = uint16_t(std::clamp(p, 31, 4065));
+  if (c.n < kCountedBitLimit) ++c.n;
+}
 
 // Adaptive binary range coder (the LZMA one: 32-bit range, 11-bit probabilities adapted by 1/32,
 // carries propagated through a cached byte) for the position residuals. Measured on level-1
@@ -333,6 +375,25 @@ class RangeEncoder {
       p = uint16_t(p - (p >> 5));
     }
     while (range_ < (1u << 24)) range_ <<= 8, shiftLow();
+  }
+  void bit(CountedBit& c, uint32_t b) {
+    uint32_t bound = (range_ >> 12) * c.p;
+    if (!b) {
+      range_ = bound;
+    } else {
+      low_ += bound;
+      range_ -= bound;
+    }
+    adapt(c, b);
+    while (range_ < (1u << 24)) range_ <<= 8, shiftLow();
+  }
+  // nbits of sym, most significant first, through the binary tree probs[1 .. 2^nbits - 1].
+  void tree(CountedBit* probs, uint32_t sym, int nbits) {
+    for (uint32_t i = uint32_t(nbits), m = 1; i-- > 0;) {
+      uint32_t b = (sym >> i) & 1;
+      bit(probs[m], b);
+      m = (m << 1) | b;
+    }
   }
   void finish() {
     for (int i = 0; i < 5; ++i) shiftLow();
@@ -379,6 +440,27 @@ class RangeDecoder {
     while (range_ < (1u << 24)) range_ <<= 8, code_ = (code_ << 8) | next();
     return b;
   }
+  uint32_t bit(CountedBit& c) {
+    uint32_t bound = (range_ >> 12) * c.p, b;
+    if (code_ < bound) {
+      range_ = bound;
+      b = 0;
+    } else {
+      code_ -= bound;
+      range_ -= bound;
+      b = 1;
+    }
+    adapt(c, b);
+    while (range_ < (1u << 24)) range_ <<= 8, code_ = (code_ << 8) | next();
+    return b;
+  }
+  uint32_t tree(CountedBit* probs, int nbits) {
+    uint32_t m = 1;
+    for (int i = 0; i < nbits; ++i) m = (m << 1) | bit(probs[m]);
+    return m - (1u << nbits);
+  }
+  // Stream bytes read so far (the first 4 are read at construction).
+  size_t consumed(const uint8_t* begin) const { return size_t(p_ - begin) + overrun_; }
   // Bytes asked for beyond the stream (a valid stream needs none).
   size_t overrun() const { return overrun_; }
 
@@ -426,7 +508,125 @@ struct ResidualModel {
   }
 };
 
+// meshopt_encodeIndexBuffer, version 1, lays out a header byte (0xe1), one code byte per triangle,
+// the data bytes (varint vertex deltas of the codes that need them), then its 16-byte auxiliary
+// code table, which version 1 always writes as these bytes (meshoptimizer 0.18 indexcodec.cpp,
+// kCodeAuxEncodingTable).
+constexpr uint8_t kIndexHeaderV1 = 0xe1;
+constexpr uint8_t kCodeAuxTableV1[16] = {0x00, 0x76, 0x87, 0x56, 0x67, 0x78, 0xa9, 0x86,
+                                         0x65, 0x89, 0x68, 0x98, 0x01, 0x69, 0x00, 0x00};
+
+// The index code's bytes, range-coded. A code byte's high nibble is the edge-FIFO slot the
+// triangle reuses (15: none), its low nibble how the third vertex comes (0: the next new one);
+// both depend on the triangle before (in fan order a fan's triangles repeat one code, a new fan
+// starts with another). Measured on the patches of a 0.8M scan-derived build, bytes per input
+// triangle for the index code: zstd 1.101, this model 0.924 (a static order-1 table 0.90).
+struct IndexModel {
+  CountedBit standard;
+  CountedBit hi[32][16], lo[32][16];  // [previous high nibble, previous low nibble == 0][tree node]
+  CountedBit data[2][256];            // [previous data byte continues a varint][tree node]
+};
+
+// The position residual model: zigzag(r)'s bit length k (0..32) as a 6-bit tree, then the k-1
+// bits below its leading one, with probabilities per (prediction kind, axis): parallelogram
+// residuals are several times smaller than midpoint, one-known and first-vertex ones (mean k 2.2
+// against 3.2, 3.4 and 7.6 per axis on a 0.8M scan-derived build), and mixing them in one context
+// cost bits. Measured, position bytes per input triangle (0.8M scan-derived / 1M mtgen builds):
+// version 2 (axis contexts, LZMA rate) 1.566 / 1.363; counted probabilities 1.530 / 1.316; and
+// kind contexts 1.533 / 1.264. Also tried, all larger because a patch is too short to learn
+// more contexts: the predicting edge's length in grid steps (bit length; as context 1.571 /
+// 1.290, as the offset of k 1.636 / 1.352), the axis' share of the predicting triangle's normal
+// (1.550 / 1.272), the mantissa by that share (1.558 / 1.272).
+struct ContextModel {
+  CountedBit length[4][3][64];     // [kind][axis][tree node]
+  CountedBit mantissa[3][33][32];  // [axis][k][bit]
+};
+
+// The index code (meshopt_encodeIndexBuffer bytes, `bytes` of them, for `triangles` triangles;
+// bytes >= 1 + triangles + 16 as version 1 always writes).
+void encodeIndexCode(RangeEncoder& rc, const uint8_t* code, size_t bytes, uint32_t triangles) {
+  IndexModel m;
+  const uint8_t* tail = code + bytes - 16;
+  bool standard = code[0] == kIndexHeaderV1 && std::memcmp(tail, kCodeAuxTableV1, 16) == 0;
+  rc.bit(m.standard, standard ? 0 : 1);
+  if (!standard) {
+    rc.tree(m.data[0], code[0], 8);
+    for (int i = 0; i < 16; ++i) rc.tree(m.data[0], tail[i], 8);
+  }
+  uint32_t ctx = 0;
+  for (uint32_t t = 0; t < triangles; ++t) {
+    uint32_t c = code[1 + t], h = c >> 4;
+    rc.tree(m.hi[ctx], h, 4);
+    rc.tree(m.lo[(h << 1) | (ctx & 1)], c & 15, 4);
+    ctx = (h << 1) | ((c & 15) == 0);
+  }
+  uint32_t cont = 0;
+  for (size_t i = 1 + triangles; i < bytes - 16; ++i) {
+    rc.tree(m.data[cont], code[i], 8);
+    cont = code[i] >> 7;
+  }
+}
+
+void decodeIndexCode(RangeDecoder& rc, uint8_t* code, size_t bytes, uint32_t triangles) {
+  IndexModel m;
+  uint8_t* tail = code + bytes - 16;
+  if (rc.bit(m.standard) == 0) {
+    code[0] = kIndexHeaderV1;
+    std::memcpy(tail, kCodeAuxTableV1, 16);
+  } else {
+    code[0] = uint8_t(rc.tree(m.data[0], 8));
+    for (int i = 0; i < 16; ++i) tail[i] = uint8_t(rc.tree(m.data[0], 8));
+  }
+  uint32_t ctx = 0;
+  for (uint32_t t = 0; t < triangles; ++t) {
+    uint32_t h = rc.tree(m.hi[ctx], 4);
+    uint32_t l = rc.tree(m.lo[(h << 1) | (ctx & 1)], 4);
+    code[1 + t] = uint8_t((h << 4) | l);
+    ctx = (h << 1) | (l == 0);
+  }
+  uint32_t cont = 0;
+  for (size_t i = 1 + triangles; i < bytes - 16; ++i) {
+    code[i] = uint8_t(rc.tree(m.data[cont], 8));
+    cont = code[i] >> 7;
+  }
+}
+
+void encodeResidual(RangeEncoder& rc, ContextModel& m, uint32_t kind, uint32_t axis, uint32_t z) {
+  uint32_t k = z ? 32 - uint32_t(__builtin_clz(z)) : 0;
+  rc.tree(m.length[kind][axis], k, 6);
+  CountedBit* man = m.mantissa[axis][k];
+  for (uint32_t i = k >= 2 ? k - 1 : 0; i-- > 0;) rc.bit(man[i], (z >> i) & 1);
+}
+
+// False when the stream names a length above 32 (damaged payload).
+bool decodeResidual(RangeDecoder& rc, ContextModel& m, uint32_t kind, uint32_t axis, uint32_t& z) {
+  uint32_t k = rc.tree(m.length[kind][axis], 6);
+  if (k > 32) return false;
+  if (k <= 1) return z = k, true;
+  CountedBit* man = m.mantissa[axis][k];
+  z = 1;
+  for (uint32_t i = k - 1; i-- > 0;) z = (z << 1) | rc.bit(man[i]);
+  return true;
+}
+
+// zstd over `raw` with one compression context per thread, reused: ZSTD_compress would allocate
+// and clear a new one for every ~1 KB patch (its table set-up cost more than the compression
+// itself). Same bytes.
+std::vector<uint8_t> zstdFrame(const std::vector<uint8_t>& raw, int level) {
+  std::vector<uint8_t> z(ZSTD_compressBound(raw.size()));
+  thread_local std::unique_ptr<ZSTD_CCtx, size_t (*)(ZSTD_CCtx*)> cctx(ZSTD_createCCtx(), ZSTD_freeCCtx);
+  if (!cctx) throw Error("encodePatch: zstd: cannot create a compression context");
+  size_t zs = ZSTD_compressCCtx(cctx.get(), z.data(), z.size(), raw.data(), raw.size(), level);
+  if (ZSTD_isError(zs)) throw Error(std::string("encodePatch: zstd: ") + ZSTD_getErrorName(zs));
+  z.resize(zs);
+  return z;
+}
+
 // One candidate encoding of the patch with the given triangle list (already in final order).
+// Version 3: the index code goes either into the zstd frame (as in version 2: zstd finds the
+// repeats of a regular grid's codes, 0.15 B/triangle on mtgen's level-0 patches) or, when that is
+// smaller, range-coded ahead of the positions (kPayloadRangeIndices: 0.92 against 1.10 B/input
+// triangle on the patches of a 0.8M scan-derived build, whose codes do not repeat).
 std::vector<uint8_t> encodeMeshoptWith(const Prepared& p, const std::vector<uint32_t>& tri,
                                        const std::vector<uint8_t>& ibuf, uint32_t indexCount, bool strip,
                                        const PatchCodecOptions& options) {
@@ -436,12 +636,15 @@ std::vector<uint8_t> encodeMeshoptWith(const Prepared& p, const std::vector<uint
   std::vector<int64_t> q(n * 3);
   for (size_t i = 0; i < n * 3; ++i) q[i] = p.q[i];
   std::vector<uint32_t> res(n * 3, 0);
+  std::vector<uint8_t> kind(n, 0);
   // res in first-use order (the decoder's order): vertices are numbered by first use already.
-  parallelogramWalk(tri.data(), tri.size(), n, q.data(), range, [&](uint32_t v, const int64_t pred[3]) {
+  parallelogramWalk(tri.data(), tri.size(), n, q.data(), range, [&](uint32_t v, const int64_t pred[3], const Prediction& how) {
     for (int x = 0; x < 3; ++x) res[v * 3 + x] = zigzag(q[v * 3 + x] - pred[x]);
+    kind[v] = uint8_t(how.kind);
   });
   uint8_t flags = uint8_t((h.flags & (format::kPayloadNormals | format::kPayloadColors)) |
-                          format::kPayloadRangePositions | (strip ? format::kPayloadStrip : 0));
+                          format::kPayloadRangePositions | format::kPayloadPositionContexts |
+                          (strip ? format::kPayloadStrip : 0));
   uint32_t attrStride = format::attributeStride(flags);
   std::vector<uint8_t> abuf;
   if (attrStride > 0) {
@@ -455,32 +658,52 @@ std::vector<uint8_t> encodeMeshoptWith(const Prepared& p, const std::vector<uint
     abuf.resize(meshopt_encodeVertexBuffer(abuf.data(), abuf.size(), attrs.data(), n, attrStride));
   }
 
+  // Candidate A: sizes, index code and attributes in the frame.
   std::vector<uint8_t> raw;
   uint32_t sizes[3] = {uint32_t(ibuf.size()), indexCount, uint32_t(abuf.size())};
   appendBytes(raw, sizes, sizeof sizes);
   appendBytes(raw, ibuf.data(), ibuf.size());
   appendBytes(raw, abuf.data(), abuf.size());
+  std::vector<uint8_t> frame = zstdFrame(raw, options.zstdLevel);
+  // Candidate B: sizes and attributes in the frame (stored as they are when zstd does not make
+  // them smaller: zSize 0), the index code range-coded.
+  const bool rangeable = !strip && ibuf.size() >= 1 + size_t(h.triangleCount) + 16;
+  if (rangeable) {
+    std::vector<uint8_t> rawB;
+    appendBytes(rawB, sizes, sizeof sizes);
+    appendBytes(rawB, abuf.data(), abuf.size());
+    std::vector<uint8_t> frameB = abuf.empty() ? std::vector<uint8_t>() : zstdFrame(rawB, options.zstdLevel);
+    bool stored = frameB.empty() || frameB.size() >= rawB.size();
+    std::vector<uint8_t> idx;
+    {
+      RangeEncoder rc(idx);
+      encodeIndexCode(rc, ibuf.data(), ibuf.size(), h.triangleCount);
+      rc.finish();
+    }
+    if ((stored ? rawB.size() : frameB.size()) + idx.size() < frame.size()) {
+      flags |= format::kPayloadRangeIndices;
+      raw.swap(rawB);
+      if (stored) frame.clear();
+      else frame.swap(frameB);
+    }
+  }
 
   PayloadHeader hh = h;
   hh.flags = flags;
   std::vector<uint8_t> out;
   appendBytes(out, &hh, sizeof hh);
-  uint32_t rawSize = uint32_t(raw.size());
-  std::vector<uint8_t> z(ZSTD_compressBound(raw.size()));
-  // One compression context per thread, reused: ZSTD_compress would allocate and clear a new one
-  // for every ~1 KB patch (its table set-up cost more than the compression itself). Same bytes.
-  thread_local std::unique_ptr<ZSTD_CCtx, size_t (*)(ZSTD_CCtx*)> cctx(ZSTD_createCCtx(), ZSTD_freeCCtx);
-  if (!cctx) throw Error("encodePatch: zstd: cannot create a compression context");
-  size_t zs = ZSTD_compressCCtx(cctx.get(), z.data(), z.size(), raw.data(), raw.size(), options.zstdLevel);
-  if (ZSTD_isError(zs)) throw Error(std::string("encodePatch: zstd: ") + ZSTD_getErrorName(zs));
-  uint32_t zSize = uint32_t(zs);
+  uint32_t rawSize = uint32_t(raw.size()), zSize = uint32_t(frame.size());
   appendBytes(out, &rawSize, 4);
   appendBytes(out, &zSize, 4);
-  appendBytes(out, z.data(), zs);
-  // Positions after the zstd frame, residuals in vertex order, x y z per vertex.
-  ResidualModel model;
+  if (zSize) appendBytes(out, frame.data(), frame.size());
+  else appendBytes(out, raw.data(), raw.size());
+  // After the frame one range-coded stream: the index code (kPayloadRangeIndices), then the
+  // position residuals in vertex order, x y z per vertex.
   RangeEncoder rc(out);
-  for (size_t i = 0; i < n * 3; ++i) model.encode(rc, int(i % 3), res[i]);
+  if (flags & format::kPayloadRangeIndices) encodeIndexCode(rc, ibuf.data(), ibuf.size(), h.triangleCount);
+  auto model = std::make_unique<ContextModel>();
+  for (size_t v = 0; v < n; ++v)
+    for (uint32_t x = 0; x < 3; ++x) encodeResidual(rc, *model, kind[v], x, res[v * 3 + x]);
   rc.finish();
   return out;
 }
@@ -518,8 +741,15 @@ void decodeMeshopt(const uint8_t* data, size_t size, const PayloadHeader& h, Dec
   std::memcpy(&zSize, data + pos + 4, 4);
   pos += 8;
   const bool ranged = h.flags & format::kPayloadRangePositions;
-  // Version 1 payloads end with the zstd frame; range-coded positions follow it.
-  if (ranged ? zSize > size - pos : size - pos != zSize)
+  const bool rangeIndices = h.flags & format::kPayloadRangeIndices;
+  const bool contextual = h.flags & format::kPayloadPositionContexts;
+  if ((rangeIndices || contextual) && !ranged) bad("version-3 flags without range-coded positions");
+  if (rangeIndices && (h.flags & format::kPayloadStrip)) bad("range-coded indices cannot be a strip");
+  // Version 3 with range-coded indices may store the raw bytes as they are (zSize 0).
+  const bool stored = rangeIndices && zSize == 0;
+  const size_t frameBytes = stored ? rawSize : zSize;
+  // Version 1 payloads end with the zstd frame; range-coded streams follow it.
+  if (ranged ? frameBytes > size - pos : size - pos != zSize)
     bad("zstd frame size " + std::to_string(zSize) + " does not match payload");
   // rawSize is bounded by what the counts allow, so a damaged header cannot make us allocate GBs
   size_t n = h.vertexCount;
@@ -528,18 +758,36 @@ void decodeMeshopt(const uint8_t* data, size_t size, const PayloadHeader& h, Dec
                     meshopt_encodeIndexBufferBound(tri3, n) + meshopt_encodeVertexBufferBound(n, 8) + n * 12;
   if (rawSize > maxRaw) bad("raw size " + std::to_string(rawSize) + " too large for its counts");
   std::vector<uint8_t> raw(rawSize);
-  thread_local std::unique_ptr<ZSTD_DCtx, size_t (*)(ZSTD_DCtx*)> dctx(ZSTD_createDCtx(), ZSTD_freeDCtx);
-  if (!dctx) bad("cannot create a zstd decompression context");
-  size_t got = ZSTD_decompressDCtx(dctx.get(), raw.data(), raw.size(), data + pos, zSize);
-  if (ZSTD_isError(got) || got != rawSize) bad("zstd frame does not decompress");
+  if (stored) {
+    std::memcpy(raw.data(), data + pos, rawSize);
+  } else {
+    thread_local std::unique_ptr<ZSTD_DCtx, size_t (*)(ZSTD_DCtx*)> dctx(ZSTD_createDCtx(), ZSTD_freeDCtx);
+    if (!dctx) bad("cannot create a zstd decompression context");
+    size_t got = ZSTD_decompressDCtx(dctx.get(), raw.data(), raw.size(), data + pos, zSize);
+    if (ZSTD_isError(got) || got != rawSize) bad("zstd frame does not decompress");
+  }
   if (rawSize < 12) bad("raw stream too short");
   uint32_t sizes[3];
   std::memcpy(sizes, raw.data(), 12);
   bool wide = h.flags & format::kPayloadWide;
   size_t planes = ranged ? 0 : wide ? 4 : 2;
-  if (uint64_t(sizes[0]) + sizes[2] + 12 + n * 3 * planes != rawSize) bad("stream sizes do not add up");
+  // The range-coded stream (positions, and first the index code with kPayloadRangeIndices).
+  RangeDecoder rc(data + pos + frameBytes, data + size);
+  std::vector<uint8_t> rangedIndex;
   const uint8_t* ib = raw.data() + 12;
   const uint8_t* ab = ib + sizes[0];
+  if (rangeIndices) {
+    if (uint64_t(sizes[2]) + 12 != rawSize) bad("stream sizes do not add up");
+    if (sizes[0] < 1 + uint64_t(h.triangleCount) + 16 || sizes[0] > meshopt_encodeIndexBufferBound(tri3, n))
+      bad("index code size " + std::to_string(sizes[0]) + " does not fit the triangle count");
+    rangedIndex.resize(sizes[0]);
+    decodeIndexCode(rc, rangedIndex.data(), rangedIndex.size(), h.triangleCount);
+    if (rc.overrun() > 0) bad("index stream truncated");
+    ib = rangedIndex.data();
+    ab = raw.data() + 12;
+  } else if (uint64_t(sizes[0]) + sizes[2] + 12 + n * 3 * planes != rawSize) {
+    bad("stream sizes do not add up");
+  }
   const uint8_t* pb = ab + sizes[2];
 
   uint32_t indexCount = sizes[1];
@@ -580,10 +828,34 @@ void decodeMeshopt(const uint8_t* data, size_t size, const PayloadHeader& h, Dec
 
   // Positions: replay the encoder's walk; each residual plus its prediction gives q.
   std::vector<uint32_t> res;
+  if (contextual) {
+    std::vector<int64_t> q(n * 3, 0);
+    const int64_t range[3] = {kMaxQ, kMaxQ, kMaxQ};
+    size_t seenCount = 0;
+    bool tooWide = false;
+    auto model = std::make_unique<ContextModel>();
+    parallelogramWalk(out.triangles.data(), out.triangles.size(), n, q.data(), range,
+                      [&](uint32_t v, const int64_t pred[3], const Prediction& how) {
+                        for (uint32_t x = 0; x < 3; ++x) {
+                          uint32_t z = 0;
+                          if (!decodeResidual(rc, *model, how.kind, x, z)) tooWide = true;
+                          q[v * 3 + x] = pred[x] + unzigzag(z);
+                        }
+                        ++seenCount;
+                      });
+    if (tooWide) bad("position stream names a residual wider than 32 bits");
+    if (rc.overrun() > 0) bad("position stream truncated");
+    if (seenCount != n) bad("vertices not referenced by any triangle");
+    qRel.resize(n * 3);
+    for (size_t i = 0; i < n * 3; ++i) {
+      if (q[i] < 0 || q[i] > kMaxQ) bad("decoded grid coordinate out of range");
+      qRel[i] = uint32_t(q[i]);
+    }
+    return;
+  }
   if (ranged) {
     res.resize(n * 3);
     ResidualModel model;
-    RangeDecoder rc(data + pos + zSize, data + size);
     for (size_t i = 0; i < n * 3; ++i)
       if (!model.decode(rc, int(i % 3), res[i])) bad("position stream names a residual wider than 32 bits");
     if (rc.overrun() > 0) bad("position stream truncated");
@@ -593,7 +865,7 @@ void decodeMeshopt(const uint8_t* data, size_t size, const PayloadHeader& h, Dec
   std::vector<uint8_t> seen(n, 0);
   size_t seenCount = 0;
   parallelogramWalk(out.triangles.data(), out.triangles.size(), n, q.data(), range,
-                    [&](uint32_t v, const int64_t pred[3]) {
+                    [&](uint32_t v, const int64_t pred[3], const Prediction&) {
                       for (int x = 0; x < 3; ++x) {
                         uint32_t z = 0;
                         if (ranged) z = res[v * 3 + x];
@@ -708,6 +980,45 @@ void decodeDraco(const uint8_t* data, size_t size, const PayloadHeader& h, Decod
 
 // ---------------------------------------------------------------------------------------------
 
+PayloadBytes payloadBytes(const uint8_t* data, size_t size, Codec codec) {
+  PayloadBytes b;
+  b.header = std::min(size, sizeof(PayloadHeader));
+  if (codec != Codec::Meshopt) return b.other = size - b.header, b;
+  PayloadHeader h;
+  if (size < sizeof h + 8) return b.other = size - b.header, b;
+  std::memcpy(&h, data, sizeof h);
+  uint32_t rawSize, zSize;
+  std::memcpy(&rawSize, data + sizeof h, 4);
+  std::memcpy(&zSize, data + sizeof h + 4, 4);
+  b.header += 8;
+  const bool rangeIndices = h.flags & format::kPayloadRangeIndices;
+  size_t frame = rangeIndices && zSize == 0 ? rawSize : zSize;
+  if (frame > size - b.header) return b.other = size - b.header, b;
+  if (!(h.flags & format::kPayloadRangePositions)) return b.index = size - b.header, b;
+  const uint8_t* rs = data + b.header + frame;
+  size_t rest = size - b.header - frame;
+  if (!rangeIndices) {
+    // The frame holds the index code (and the attributes, if any).
+    b.index = frame, b.positions = rest;
+    return b;
+  }
+  b.attributes = frame;
+  std::vector<uint8_t> raw(std::max<uint32_t>(rawSize, 12));
+  if (zSize == 0) std::memcpy(raw.data(), data + b.header, rawSize);
+  else if (ZSTD_isError(ZSTD_decompress(raw.data(), raw.size(), data + b.header, zSize))) return b.other = rest, b;
+  uint32_t indexBytes;
+  std::memcpy(&indexBytes, raw.data(), 4);
+  if (indexBytes < 1 + uint64_t(h.triangleCount) + 16 || indexBytes > (uint64_t(h.triangleCount) + 1) * 64)
+    return b.other = rest, b;
+  std::vector<uint8_t> code(indexBytes);
+  RangeDecoder rc(rs, rs + rest);
+  decodeIndexCode(rc, code.data(), code.size(), h.triangleCount);
+  // The decoder has read up to 4 bytes ahead of what the index code needed.
+  b.index = std::min(rest, rc.consumed(rs) > 4 ? rc.consumed(rs) - 4 : size_t(0));
+  b.positions = rest - b.index;
+  return b;
+}
+
 std::vector<uint8_t> encodePatch(const PatchInput& patch, const QuantizationGrid& grid,
                                  const PatchCodecOptions& options) {
   Prepared p = prepare(patch, grid, options);
@@ -722,7 +1033,7 @@ DecodedPatch decodePatch(const uint8_t* data, size_t size, Codec codec, const Qu
   if (size < sizeof(PayloadHeader)) bad("shorter than its header (" + std::to_string(size) + " bytes)");
   PayloadHeader h;
   std::memcpy(&h, data, sizeof h);
-  if (h.flags & ~uint8_t(0x1F)) bad("unknown flags");
+  if (h.flags & ~uint8_t(0x7F)) bad("unknown flags");
   // A payload cannot describe more than ~8 triangles per byte in any codec; this bounds every
   // allocation below by the payload size even when the header is damaged.
   if (uint64_t(h.triangleCount) > uint64_t(size) * 64 + 64 || uint64_t(h.vertexCount) > uint64_t(size) * 64 + 64)

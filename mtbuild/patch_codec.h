@@ -92,6 +92,15 @@ struct DecodedPatch {
 DecodedPatch decodePatch(const uint8_t* data, size_t size, format::Codec codec,
                          const QuantizationGrid& grid);
 
+// Where a payload's bytes go (bench_mt_payload): the payload and frame headers, the index code
+// (the zstd frame when it holds the index code; with kPayloadRangeIndices the range-coded index
+// bytes, found by decoding them), the attributes' frame (kPayloadRangeIndices only), the positions,
+// and whatever could not be split. Meshopt payloads only; other codecs give header + other.
+struct PayloadBytes {
+  size_t header = 0, index = 0, attributes = 0, positions = 0, other = 0;
+};
+PayloadBytes payloadBytes(const uint8_t* data, size_t size, format::Codec codec);
+
 // Octahedral 2x8-bit normal coding (mt_format.h describes it).
 void encodeOctahedral8(const float n[3], uint8_t out[2]);
 void decodeOctahedral8(const uint8_t in[2], float n[3]);
