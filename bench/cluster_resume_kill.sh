@@ -24,7 +24,7 @@ clean=$(awk "BEGIN{print $(date +%s.%N) - $t0}")
 echo "clean build: $clean s"
 fail=0
 for ((i = 1; i <= K; i++)); do
-  rm -rf "$TMP/k.mt" "$TMP/k.mt.tmp" "$TMP/k.mt.work"
+  rm -rf "$TMP/k.mt" "$TMP"/k.mt.tmp* "$TMP/k.mt.work"
   delay=$(awk -v s="$RANDOM" -v c="$clean" 'BEGIN{srand(s); print 0.1 + rand() * c * 0.9}')
   run "$TMP/k.mt" > "$TMP/kill.log" 2>&1 &
   pid=$!

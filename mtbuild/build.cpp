@@ -931,12 +931,6 @@ LevelBuilder::~LevelBuilder() {
   // that --resume can continue from the last finished level (the final name is never written).
   if (!s_->completed && s_->writer && s_->store) {
     if (!s_->noted) s_->say("stopped " + stopNote());
-    // PatchStore's destructor commits pending write-backs even with autoCommit off: here they are
-    // a part of the level being built, and committing them would leave a store the checkpoint no
-    // longer describes ("checkpoint does not know live patch N" on --resume). Nothing of the
-    // store needs closing before the process exits (every committed byte is synced), so it is
-    // dropped without its destructor.
-    (void)s_->store.release();
   }
 }
 

@@ -14,6 +14,7 @@ namespace mt::render {
 
 Engine::Engine(EngineOptions options) : options_(std::move(options)) {
   scene_ = std::make_unique<Scene>(options_.files);
+  drawnPerFile_.assign(scene_->fileCount(), 0);
   double c[3], r;
   scene_->boundingSphere(c, r);
   center_ = {c[0], c[1], c[2]};
@@ -53,6 +54,19 @@ Engine::~Engine() {
 }
 
 uint64_t Engine::badPatches() const { return server_ ? server_->badPatches() : baselineBad_.size(); }
+
+size_t Engine::warnUndrawnFiles() const {
+  size_t n = 0;
+  for (uint32_t f = 0; f < drawnPerFile_.size(); ++f)
+    if (drawnPerFile_[f] == 0 && frame_ > 0) {
+      std::fprintf(stderr,
+                   "mtrender: warning: %s: nothing of it was drawn in %llu frames (out of view all along, or its "
+                   "triangles are degenerate: run mtverify)\n",
+                   scene_->reader(f).path().c_str(), (unsigned long long)frame_);
+      ++n;
+    }
+  return n;
+}
 
 void Engine::start(double timeoutMs) { extract_->start(timeoutMs); }
 
@@ -107,6 +121,7 @@ void Engine::drawArcs(size_t from, size_t to, GlRenderer& gl, FrameRecord& rec) 
       if (t) {
         ++rec.drawnPatches;
         rec.drawnTriangles += t;
+        drawnPerFile_[scene_->fileOfPatch(id)] += t;
       }
     }
   }

@@ -69,6 +69,13 @@ class Engine {
   glm::dvec3 center() const { return center_; }
   double radius() const { return radius_; }
   uint64_t badPatches() const;
+  // Triangles drawn so far from each file (all frames). A loaded file with none drawn (out of
+  // view all along, or a model whose triangles collapsed) is worth a warning: see
+  // warnUndrawnFiles.
+  const std::vector<uint64_t>& drawnPerFile() const { return drawnPerFile_; }
+  // Prints "mtrender: warning: FILE: nothing of it was drawn in N frames ..." for each such file;
+  // returns how many.
+  size_t warnUndrawnFiles() const;
 
   // The coarsest cut, loaded (blocking up to timeoutMs).
   void start(double timeoutMs = 30000);
@@ -87,6 +94,7 @@ class Engine {
   glm::dvec3 center_{0};
   double radius_ = 1;
   uint64_t frame_ = 0, lastLoads_ = 0;
+  std::vector<uint64_t> drawnPerFile_;
   std::vector<std::pair<double, uint32_t>> drawOrder_;  // (distance, cut arc), reused every frame
   // Sorts the cut arcs visible in `view` front to back into drawOrder_.
   void orderVisibleArcs(const View& view);

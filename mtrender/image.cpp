@@ -6,6 +6,7 @@
 #include <cstring>
 
 #include "patchstore/error.h"
+#include "patchstore/output_path.h"
 
 namespace mt::render {
 
@@ -16,7 +17,7 @@ void writePng(const std::string& path, const Image& image) {
   img.width = uint32_t(image.width);
   img.height = uint32_t(image.height);
   img.format = PNG_FORMAT_RGBA;
-  const std::string tmp = path + ".tmp";
+  const std::string tmp = uniqueTempName(path);  // a viewer and a headless run may share a folder
   if (!png_image_write_to_file(&img, tmp.c_str(), 0, image.rgba.data(), 0, nullptr)) {
     std::remove(tmp.c_str());
     fail(path, std::string("cannot write PNG: ") + img.message);

@@ -390,6 +390,7 @@ int main(int argc, char** argv) {
                 (unsigned long long)cs.secondChance, (unsigned long long)cs.evictions,
                 (unsigned long long)cs.urgentEvictions, (unsigned long long)cs.givenUp);
     std::printf("bad_patches %llu\n", (unsigned long long)engine.badPatches());
+    std::printf("undrawn_files %zu\n", engine.warnUndrawnFiles());
     std::printf("stop_frame %d\n", stop);
     if (stop >= frames) std::printf("settle_ms none (the camera never stops)\n");
     else if (settleMs < 0) std::printf("settle_ms not_reached (final error %.2f px)\n", recs.back().maxScreenError);

@@ -7,6 +7,7 @@
 // and patchstore/error.h only.
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -71,6 +72,10 @@ class Scene {
   uint64_t decodedBytesBound(uint32_t patch) const;
   // A patch's id within the scene from (file, local patch id).
   uint32_t globalPatch(uint32_t file, uint32_t local) const { return patchBase_[file] + local; }
+  // The file a scene patch comes from.
+  uint32_t fileOfPatch(uint32_t global) const {
+    return uint32_t(std::upper_bound(patchBase_.begin(), patchBase_.end(), global) - patchBase_.begin()) - 1;
+  }
 
  private:
   std::vector<std::unique_ptr<MtFileReader>> readers_;

@@ -15,6 +15,7 @@
 #include <fstream>
 
 #include "patchstore/error.h"
+#include "patchstore/output_path.h"
 
 namespace mt::render {
 
@@ -262,14 +263,27 @@ int runViewer(const ViewerOptions& options) {
     }
     if (st.recording && !recorded.poses.empty()) saveCameraPath(options.recordPath, recorded);
     if (!options.statsPath.empty()) {
-      std::ofstream out(options.statsPath);
-      out << "frame,frame_ms,extract_ms,triangles,patches,loads,misses,cache_bytes,max_screen_error\n";
-      for (size_t i = 0; i < recs.size(); ++i)
-        out << i << ',' << recs[i].frameMs << ',' << recs[i].extractMs << ',' << recs[i].triangles << ','
-            << recs[i].patches << ',' << recs[i].loads << ',' << recs[i].misses << ',' << recs[i].cacheBytes << ','
-            << recs[i].maxScreenError << '\n';
+      // Written under a temporary name and renamed when complete, like every output.
+      const std::string tmp = uniqueTempName(options.statsPath);
+      {
+        std::ofstream out(tmp);
+        out << "frame,frame_ms,extract_ms,triangles,patches,loads,misses,cache_bytes,max_screen_error\n";
+        for (size_t i = 0; i < recs.size(); ++i)
+          out << i << ',' << recs[i].frameMs << ',' << recs[i].extractMs << ',' << recs[i].triangles << ','
+              << recs[i].patches << ',' << recs[i].loads << ',' << recs[i].misses << ',' << recs[i].cacheBytes << ','
+              << recs[i].maxScreenError << '\n';
+        if (!out.flush()) {
+          std::remove(tmp.c_str());
+          fail(options.statsPath, "cannot write the stats CSV");
+        }
+      }
+      if (std::rename(tmp.c_str(), options.statsPath.c_str()) != 0) {
+        std::remove(tmp.c_str());
+        fail(options.statsPath, "cannot rename the stats CSV into place");
+      }
     }
     std::printf("frames %d\nbad_patches %llu\n", frame, (unsigned long long)engine.badPatches());
+    std::printf("undrawn_files %zu\n", engine.warnUndrawnFiles());
   }
 #if MT_HAVE_IMGUI
   ImGui_ImplOpenGL3_Shutdown();

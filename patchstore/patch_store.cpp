@@ -562,7 +562,10 @@ void PatchStore::Impl::lockForWriting() {
 PatchStore::PatchStore(std::unique_ptr<Impl> impl, std::string dir) : impl_(std::move(impl)), dir_(std::move(dir)) {}
 
 PatchStore::~PatchStore() {
-  if (!impl_->failedCommit.empty()) return;
+  // With autoCommit off only sync() commits (a checkpointed build's pending write-backs are part
+  // of a level that is not finished; committing them here would leave a store its checkpoint
+  // does not describe). Their blocks are unreferenced and reclaimed by the next writer.
+  if (!impl_->failedCommit.empty() || !impl_->autoCommit) return;
   try {
     sync();
   } catch (const std::exception& e) {

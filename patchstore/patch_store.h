@@ -217,8 +217,9 @@ class PatchStore {
   // Replaces the loaded patches by the replacement's partition; returns the new patch ids in
   // ascending cell-key order. Durable once sync() returns (or at once with syncNow). Regions with
   // disjoint patch sets may be loaded concurrently and written back in any order.
-  // With autoCommit off, write-backs are committed only by sync() (so a checkpointed build can
-  // resume from exactly its last sync); on by default, large batches commit by themselves.
+  // With autoCommit off, write-backs are committed only by sync(), never by the destructor (so a
+  // checkpointed build can resume from exactly its last sync); on by default, large batches commit
+  // by themselves and the destructor commits the rest.
   std::vector<PatchId> writeBack(const LoadedMesh& loaded, const ReplacementMesh& replacement,
                                  bool syncNow = false);
   void sync();

@@ -562,6 +562,21 @@ TEST_F(MtRender, BaselineRendersTheSameImage) {
   EXPECT_EQ(differ, 0u);
 }
 
+TEST_F(MtRender, AModelNothingOfWhichIsDrawnIsWarnedAbout) {
+  // In view: drawn, no warning. Looking away for the whole run: the summary counts the file as
+  // undrawn and a warning names it (an empty image must not pass as a good run).
+  auto seen = runTool("mtrender", headless(mt(), "--camera-path fixed --frames 5"));
+  ASSERT_EQ(seen.exitCode, 0) << seen.output;
+  EXPECT_NE(seen.output.find("undrawn_files 0"), std::string::npos) << seen.output;
+  EXPECT_EQ(seen.output.find("nothing of it was drawn"), std::string::npos) << seen.output;
+  const std::string away = dir_->file("away.path");
+  std::ofstream(away) << "# looking away from the model\n0 0 3  0 0 9\n";
+  auto r = runTool("mtrender", headless(mt(), "--camera-path " + away + " --frames 5"));
+  ASSERT_EQ(r.exitCode, 0) << r.output;
+  EXPECT_NE(r.output.find("undrawn_files 1"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find(mt() + ": nothing of it was drawn in 5 frames"), std::string::npos) << r.output;
+}
+
 TEST_F(MtRender, BadInputIsOneLineErrorAndNonZeroExit) {
   const std::string junk = dir_->file("junk.mt");
   mt::test::writeFile(junk, std::string(4096, 'x'));

@@ -121,7 +121,7 @@ TEST(MtstoreCli, CheckFindsACorruptedStoreAndExportLeavesNoPartialFile) {
   CommandResult exp = runTool("mtstore", "export " + tmp.file("s") + " -o " + tmp.file("out.ply"));
   EXPECT_EQ(exp.exitCode, 1) << exp.output;
   EXPECT_FALSE(fs::exists(tmp.file("out.ply")));
-  for (auto& e : fs::directory_iterator(tmp.path())) EXPECT_EQ(e.path().string().find(".tmp-"), std::string::npos) << e.path();
+  for (auto& e : fs::directory_iterator(tmp.path())) EXPECT_EQ(e.path().filename().string().find(".tmp"), std::string::npos) << e.path();
 }
 
 // The round trip at scale: a 1M-triangle scan with holes and shuffled faces, ingested

@@ -23,6 +23,7 @@
 #include "mtbuild/mt_cut.h"
 #include "mtbuild/mt_file.h"
 #include "patchstore/error.h"
+#include "patchstore/interrupt.h"
 #include "patchstore/io/ply_writer.h"
 #include "patchstore/output_path.h"
 #include "tools/cli_checks.h"
@@ -78,15 +79,6 @@ void checkOutputFormat(const std::string& output) {
   mt::fail(output, "cannot write the format " + name.substr(dot) + " (supported: .ply)");
 }
 
-// Removes a finished temporary file unless it was renamed over the final name.
-struct TemporaryFile {
-  std::string path;
-  bool kept = false;
-  ~TemporaryFile() {
-    if (!kept) std::remove(path.c_str());
-  }
-};
-
 int run(const Options& o) {
   // Argument checks first: a bad command line opens nothing and writes nothing.
   if (o.hasError && o.hasTriangles) throw mt::Error("--error and --triangles are exclusive: give one");
@@ -134,6 +126,7 @@ int run(const Options& o) {
                  "; writing it\n", stats.triangles, o.triangles);
 
   mt::WeldedMesh mesh = mt::assembleCut(r, mt::cutArcs(r, cut.inSet));
+  mt::checkInterrupt(o.output);
 
   // Float coordinates unless the grid is finer than float spacing at this distance from the
   // origin (distinct grid points must stay distinct in the PLY: it is "welded").
@@ -143,17 +136,19 @@ int run(const Options& o) {
   plyOptions.doublePrecision = maxAbs * 0x1.0p-23 > r.header().gridStep * 0.5;
   plyOptions.normals = !mesh.normals.empty();
   plyOptions.colors = !mesh.colors.empty();
-  TemporaryFile tmp{mt::uniqueTempName(o.output)};
-  mt::PlyWriter ply(tmp.path, plyOptions);
-  for (uint32_t v = 0; v < mesh.vertexCount(); ++v)
+  // PlyWriter writes under uniqueTempName(output) and renames when finished; an error or a
+  // signal (polled here) unwinds through its destructor, which removes the temporary file.
+  mt::PlyWriter ply(o.output, plyOptions);
+  for (uint32_t v = 0; v < mesh.vertexCount(); ++v) {
+    if ((v & 0xfffff) == 0) mt::checkInterrupt(o.output);
     ply.addVertex(&mesh.positions[3 * v], plyOptions.normals ? &mesh.normals[3 * v] : nullptr,
                   plyOptions.colors ? &mesh.colors[4 * v] : nullptr);
-  for (uint32_t t = 0; t < mesh.triangleCount(); ++t)
+  }
+  for (uint32_t t = 0; t < mesh.triangleCount(); ++t) {
+    if ((t & 0xfffff) == 0) mt::checkInterrupt(o.output);
     ply.addTriangle(mesh.triangles[3 * t], mesh.triangles[3 * t + 1], mesh.triangles[3 * t + 2]);
+  }
   ply.finish();
-  if (std::rename(tmp.path.c_str(), o.output.c_str()) != 0)
-    mt::fail(o.output, std::string("cannot rename the temporary output: ") + std::strerror(errno));
-  tmp.kept = true;
 
   std::fprintf(stderr, "mtextract: %s: %u triangles, %u vertices from %" PRIu64 " patches; %u nodes in the set, %u on the "
                "front; max error %.9g", o.output.c_str(), mesh.triangleCount(), mesh.vertexCount(), mesh.patches,
@@ -206,8 +201,12 @@ int main(int argc, char** argv) {
   o.hasTriangles = tri->count() > 0;
   o.hasEye = eye->count() > 0;
   o.hasTarget = target->count() > 0;
+  mt::installInterruptHandlers();
   try {
     return run(o);
+  } catch (const mt::Interrupted& e) {
+    std::fprintf(stderr, "mtextract: %s; nothing was written\n", e.what());
+    return 128 + e.signal();
   } catch (const std::exception& e) {
     std::fprintf(stderr, "mtextract: %s\n", e.what());
     return 1;

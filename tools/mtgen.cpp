@@ -57,17 +57,11 @@ struct OutputSettings {
   bool doublePrecision = false;
 };
 
-// PlyWriter writes its own temporary name (its path + ".tmp-PID") and renames it when finished:
-// binary PLY passes through that name before the run's unique temporary name.
-std::string plyWriterTemporary(const std::string& path) { return path + ".tmp-" + std::to_string(getpid()); }
-
-// The temporary files of the current run, removed if the process is interrupted.
+// The temporary file of the current run, removed if the process is interrupted.
 char gTemporaryPath[4096] = {0};
-char gPlyTemporaryPath[4096] = {0};
 
 extern "C" void removeTemporaryAndExit(int signal) {
   if (gTemporaryPath[0]) unlink(gTemporaryPath);
-  if (gPlyTemporaryPath[0]) unlink(gPlyTemporaryPath);
   _exit(128 + signal);
 }
 
@@ -88,25 +82,15 @@ class MeshOutput {
 class BinaryPlyOutput final : public MeshOutput {
  public:
   BinaryPlyOutput(const OutputSettings& s)
-      : settings_(s), writer_(s.tmpPath, mt::PlyWriteOptions{s.doublePrecision, s.normals, s.colors}) {}
-  ~BinaryPlyOutput() override {
-    if (!renamed_) std::remove(settings_.tmpPath.c_str());
-  }
+      : writer_(s.path, mt::PlyWriteOptions{s.doublePrecision, s.normals, s.colors}, s.tmpPath) {}
   void vertex(const double p[3], const float* normal, const uint8_t* color) override {
     writer_.addVertex(p, normal, color);
   }
   void triangle(const uint32_t t[3], const float*) override { writer_.addTriangle(t[0], t[1], t[2]); }
-  void finish() override {
-    writer_.finish();
-    if (std::rename(settings_.tmpPath.c_str(), settings_.path.c_str()) != 0)
-      mt::fail(settings_.path, std::string("cannot rename temporary output: ") + std::strerror(errno));
-    renamed_ = true;
-  }
+  void finish() override { writer_.finish(); }  // renames the temporary file over the output
 
  private:
-  OutputSettings settings_;
   mt::PlyWriter writer_;
-  bool renamed_ = false;
 };
 
 // Text formats for small meshes. Coordinates are printed with %.9g of their float32 value, which a
@@ -617,11 +601,8 @@ int run(int argc, char** argv) {
     return 1;
   }
   settings.tmpPath = mt::uniqueTempName(settings.path);
-  const std::string plyTmp = plyWriterTemporary(settings.tmpPath);
-  if (settings.tmpPath.size() < sizeof gTemporaryPath && plyTmp.size() < sizeof gPlyTemporaryPath) {
+  if (settings.tmpPath.size() < sizeof gTemporaryPath)
     std::memcpy(gTemporaryPath, settings.tmpPath.c_str(), settings.tmpPath.size() + 1);
-    std::memcpy(gPlyTemporaryPath, plyTmp.c_str(), plyTmp.size() + 1);
-  }
   for (int sig : {SIGINT, SIGTERM, SIGHUP}) signal(sig, removeTemporaryAndExit);
 
   try {
@@ -638,7 +619,6 @@ int run(int argc, char** argv) {
     streamFaces(*generator, shuffle, *out, progress);
     out->finish();
     gTemporaryPath[0] = 0;
-    gPlyTemporaryPath[0] = 0;
 
     struct stat st {};
     stat(settings.path.c_str(), &st);

@@ -1,5 +1,7 @@
 #include "patchstore/io/ply_writer.h"
 
+#include "patchstore/output_path.h"
+
 #include <unistd.h>
 
 #include <cerrno>
@@ -28,8 +30,8 @@ std::string headerText(const PlyWriteOptions& o, uint64_t vertices, uint64_t tri
 }
 }  // namespace
 
-PlyWriter::PlyWriter(const std::string& path, const PlyWriteOptions& options)
-    : path_(path), tmpPath_(path + ".tmp-" + std::to_string(getpid())), options_(options) {
+PlyWriter::PlyWriter(const std::string& path, const PlyWriteOptions& options, const std::string& temporaryPath)
+    : path_(path), tmpPath_(temporaryPath.empty() ? uniqueTempName(path) : temporaryPath), options_(options) {
   file_ = std::fopen(tmpPath_.c_str(), "wb");
   if (!file_) fail(path_, std::string("cannot create output: ") + std::strerror(errno));
   buffer_.reserve(kBufferBytes);

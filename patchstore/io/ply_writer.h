@@ -1,7 +1,7 @@
 // Streaming binary little-endian PLY writer: vertices first, then triangles, counts known only at
 // the end. The header is written with room for the final counts and rewritten on finish(); the
-// file is written under PATH.tmp-PID and renamed to PATH by finish(), so a failed or interrupted
-// write never leaves a partial file under the final name.
+// file is written under PATH.tmp.PID.RANDOM (uniqueTempName) and renamed to PATH by finish(), so a
+// failed or interrupted write never leaves a partial file under the final name.
 #pragma once
 
 #include <cstdint>
@@ -21,7 +21,9 @@ struct PlyWriteOptions {
 
 class PlyWriter {
  public:
-  PlyWriter(const std::string& path, const PlyWriteOptions& options);
+  // Writes under `temporaryPath` (default: uniqueTempName(path)) and renames it over `path` in
+  // finish(): nothing is ever left under `path` half written.
+  PlyWriter(const std::string& path, const PlyWriteOptions& options, const std::string& temporaryPath = "");
   ~PlyWriter();  // removes the temporary file if finish() was not reached
   PlyWriter(const PlyWriter&) = delete;
   PlyWriter& operator=(const PlyWriter&) = delete;
