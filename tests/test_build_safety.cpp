@@ -26,17 +26,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-CommandResult sh(const std::string& command) {
-  CommandResult result;
-  FILE* pipe = popen((command + " 2>&1").c_str(), "r");
-  if (!pipe) return result;
-  char buf[4096];
-  size_t n;
-  while ((n = fread(buf, 1, sizeof buf, pipe)) > 0) result.output.append(buf, n);
-  int status = pclose(pipe);
-  result.exitCode = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return result;
-}
+CommandResult sh(const std::string& command) { return mt::test::runShell(command); }
 
 bool haveMpirun() { return std::system("command -v mpirun > /dev/null 2>&1") == 0; }
 

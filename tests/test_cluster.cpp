@@ -23,16 +23,8 @@ bool haveMpirun() { return std::system("command -v mpirun > /dev/null 2>&1") == 
 // mpirun as CI runs it: as root, more ranks than cores. `env`: a variable to pass to the ranks.
 CommandResult mpirun(int ranks, const std::string& args, const std::string& env = "") {
   std::string cmd = "mpirun --allow-run-as-root --oversubscribe -np " + std::to_string(ranks) +
-                    (env.empty() ? "" : " -x " + env) + " " + binDir() + "/mtcluster " + args + " 2>&1";
-  CommandResult result;
-  FILE* pipe = popen(cmd.c_str(), "r");
-  if (!pipe) return result;
-  char buf[4096];
-  size_t n;
-  while ((n = fread(buf, 1, sizeof buf, pipe)) > 0) result.output.append(buf, n);
-  int status = pclose(pipe);
-  result.exitCode = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return result;
+                    (env.empty() ? "" : " -x " + env) + " " + binDir() + "/mtcluster " + args;
+  return mt::test::runShell(cmd);
 }
 
 std::string scanAndReference(const TempDir& tmp, const std::string& mtgen, const std::string& build) {

@@ -20,6 +20,7 @@
 namespace fs = std::filesystem;
 using namespace mt;
 using test::CommandResult;
+using test::runShell;
 using test::runTool;
 using test::TempDir;
 
@@ -54,18 +55,6 @@ struct Background {
   }
   std::string output() const { return test::readFile(log); }
 };
-
-CommandResult runShell(const std::string& command) {
-  CommandResult result;
-  FILE* pipe = popen((command + " 2>&1").c_str(), "r");
-  if (!pipe) return result;
-  char buf[4096];
-  size_t n;
-  while ((n = fread(buf, 1, sizeof buf, pipe)) > 0) result.output.append(buf, n);
-  int status = pclose(pipe);
-  result.exitCode = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return result;
-}
 
 bool waitFor(const std::function<bool()>& cond, double seconds) {
   auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);

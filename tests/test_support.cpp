@@ -30,7 +30,11 @@ TempDir::~TempDir() {
 std::string binDir() { return MT_BIN_DIR; }
 
 CommandResult runTool(const std::string& tool, const std::string& args) {
-  std::string cmd = binDir() + "/" + tool + " " + args + " 2>&1";
+  return runShell(binDir() + "/" + tool + " " + args);
+}
+
+CommandResult runShell(const std::string& command) {
+  const std::string cmd = command + " 2>&1";
   CommandResult result;
   FILE* pipe = popen(cmd.c_str(), "r");
   if (!pipe) throw std::runtime_error("popen failed: " + cmd);

@@ -25,6 +25,8 @@ struct CommandResult {
 
 // Runs `tool args` where tool is an executable in build/bin (MT_BIN_DIR).
 CommandResult runTool(const std::string& tool, const std::string& args);
+// Runs a shell command line (stderr joined to stdout).
+CommandResult runShell(const std::string& command);
 std::string binDir();
 
 std::string readFile(const std::string& path);

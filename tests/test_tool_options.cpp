@@ -28,17 +28,7 @@ constexpr int kTimedOut = 124;  // timeout(1)'s exit code
 
 // `tool args` from build/bin with stdin closed, killed after `seconds`.
 CommandResult runLimited(const std::string& tool, const std::string& args, int seconds = 20) {
-  const std::string cmd =
-      "timeout " + std::to_string(seconds) + " " + binDir() + "/" + tool + " " + args + " </dev/null 2>&1";
-  CommandResult result;
-  FILE* pipe = popen(cmd.c_str(), "r");
-  if (!pipe) throw std::runtime_error("popen failed: " + cmd);
-  char buf[4096];
-  size_t n;
-  while ((n = fread(buf, 1, sizeof buf, pipe)) > 0) result.output.append(buf, n);
-  int status = pclose(pipe);
-  result.exitCode = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return result;
+  return mt::test::runShell("timeout " + std::to_string(seconds) + " " + binDir() + "/" + tool + " " + args + " </dev/null");
 }
 
 size_t lines(const std::string& s) { return size_t(std::count(s.begin(), s.end(), '\n')); }
