@@ -464,7 +464,10 @@ RegionResult processRegion(const RegionTask& task, const RegionContext& ctx) {
   out.encoded = encodePatches(floorPatches(lm), ctx.grid, codec);
   // Simplify to about half with the region's border locked (BMT 4), split by V*(level).
   SimplifyRegionOptions so;
-  so.targetTriangles = task.root ? std::min<size_t>(lm.triangleCount() / 2, ctx.rootTriangles / 2) : lm.triangleCount() / 2;
+  // At least one triangle: a region that had some must keep some, or its node would carry no
+  // patch and have no arc to the sink (a one-triangle input built such a file).
+  so.targetTriangles = std::max<size_t>(
+      1, task.root ? std::min<size_t>(lm.triangleCount() / 2, ctx.rootTriangles / 2) : lm.triangleCount() / 2);
   SimplifiedRegion sr = simplifyRegion(lm, so);
   out.deviation = sr.error;
   ReplacementMesh& rep = out.replacement;
