@@ -738,8 +738,13 @@ void LevelBuilder::State::startFresh(bool storeInput) {
   // Nothing to resume from yet: a failure (or a signal) here leaves no work directory behind.
   try {
     if (storeInput) {
+      // The store's writer lock while its files are copied: the build is refused (with the
+      // PID) while a heal writes it, and a heal started during the copy is refused, so no copy is
+      // half one version, half another (a heal may compact, replacing segment files).
+      FileLock inputLock(input + "/LOCK", input);
       fs::copy(input, storeDir, fs::copy_options::recursive, ec);
       if (ec) fail(input, "cannot copy the store into " + work + ": " + ec.message());
+      fs::remove(storeDir + "/LOCK", ec);
     } else {
       VPartitionOptions vp;
       vp.kind = options.partition;

@@ -19,6 +19,7 @@
 #include <regex>
 #include <thread>
 
+#include "patchstore/file_lock.h"
 #include "tests/test_support.h"
 
 namespace mt::test {
@@ -234,6 +235,29 @@ TEST(BuildSafety, ConcurrentBuildsOfOneOutputOrInOneWorkDirGiveOneGoodFileAndACl
     EXPECT_TRUE(matching(tmp.path(), ".*\\.(tmp.*|lock|work)").empty()) << c.what << ": left behind";
     EXPECT_FALSE(fs::exists(tmp.file("w1")) || fs::exists(tmp.file("w2")) || fs::exists(tmp.file("w3"))) << c.what;
   }
+}
+
+TEST(BuildSafety, AStoreBeingWrittenIsNotCopiedHalfWay) {
+  // A build from a store copies its files under the store's writer lock: while a writer (here
+  // this test, as a heal would) holds it, the build is refused with the holder's PID, and the
+  // store is left as it was.
+  TempDir tmp;
+  makeScan(tmp.file("in.ply"), "--triangles 20k");
+  auto ingest = runTool("mtstore", "ingest " + tmp.file("in.ply") + " -o " + tmp.file("s") + " -q");
+  ASSERT_EQ(ingest.exitCode, 0) << ingest.output;
+  const auto before = snapshot(tmp.file("s"));
+  {
+    FileLock writer(tmp.file("s") + "/LOCK", tmp.file("s"));
+    auto b = runTool("mtbuild", tmp.file("s") + " -o " + tmp.file("out.mt") + kOpts);
+    EXPECT_EQ(b.exitCode, 1) << b.output;
+    EXPECT_NE(b.output.find("in use by process " + std::to_string(getpid())), std::string::npos) << b.output;
+    EXPECT_FALSE(fs::exists(tmp.file("out.mt")));
+  }
+  EXPECT_EQ(snapshot(tmp.file("s")), before);
+  auto b = runTool("mtbuild", tmp.file("s") + " -o " + tmp.file("out.mt") + kOpts);
+  ASSERT_EQ(b.exitCode, 0) << b.output;
+  EXPECT_EQ(runTool("mtverify", tmp.file("out.mt")).exitCode, 0);
+  EXPECT_EQ(snapshot(tmp.file("s")), before) << "the build does not leave its lock file in the input";
 }
 
 TEST(BuildSafety, TemporaryFileIsUniqueAndResumeContinuesIt) {
