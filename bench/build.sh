@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# End-to-end build benchmark (issue 4 "Done means"): runs mtbuild on a mesh (or a patch store made
+# End-to-end build benchmark: runs mtbuild on a mesh (or a patch store made
 # by `mtstore ingest`, to time the level loop alone) and prints throughput in M input triangles/s
 # (end to end and for the level loop), CPU time (user+sys: the honest figure on a shared machine),
 # peak RSS against the cap, bytes per input triangle, and one line per level; then mtverify.

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# mtcluster across separate network stacks on one machine (issue 6, optional): three network
+# mtcluster across separate network stacks on one machine (optional): three network
 # namespaces joined by veth pairs on a bridge act as three hosts; mpirun starts the remote
 # daemons through an "rsh agent" that enters the host's namespace (with its own hostname, so Open
 # MPI sees three nodes and must use TCP between them: --mca btl tcp,self). Compares the file with

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# --resume under kills at arbitrary moments (issue 4 item 4, issue 6): builds IN once cleanly, then
+# --resume under kills at arbitrary moments: builds IN once cleanly, then
 # K times starts the build, kills it with SIGKILL from outside after a random delay (ingest,
 # mid-level, mid-commit, mid-checkpoint: wherever it happens to be), resumes and compares the
 # bytes. NP=1: mtbuild is killed; NP>1: mtcluster under mpirun, one random rank is killed (mpirun

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Fidelity of an MT build, measured by an independent tool (issue 4, "Fidelity"): for three error
+# Fidelity of an MT build, measured by an independent tool (BRIEF "Fidelity"): for three error
 # levels E, `mtextract --error E` is compared with the input by MeshLab's Hausdorff filter in both
 # directions. The bound is true when Hausdorff <= E, tight when Hausdorff >= E/3 (checked for the two
 # finer levels). The finest cut (E = the quantization error) must match the input within the

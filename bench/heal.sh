@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Healing benchmark (issue 7): generates an mtgen scan with many holes (default 53M triangles,
+# Healing benchmark: generates an mtgen scan with many holes (default 53M triangles,
 # --holes 300, shuffled faces), ingests it, runs `mtstore heal STORE --fill-holes 200 --memory 512M`
 # under /usr/bin/time -v and prints wall time and peak RSS; then verifies that no hole of at most
 # 200 edges is left (a second fill pass must find only larger ones) and that the store checks.

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# bench/render.sh MT_FILE [MT_FILE...]: the mtrender figures of issue 5 on one recorded path.
+# bench/render.sh MT_FILE [MT_FILE...]: the mtrender figures on one recorded path.
 #
 #   1. the main run: a built-in path (default flythrough: fast turns and zooms, then the camera
 #      stops for the last 15% of the frames), >= 600 frames at 1280x720, --budget-ms 50, a cold

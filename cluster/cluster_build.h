@@ -1,4 +1,4 @@
-// mtcluster's ranks (issue 6): rank 0 runs mtbuild's LevelBuilder (ingest or resume, plan, commit
+// mtcluster's ranks: rank 0 runs mtbuild's LevelBuilder (ingest or resume, plan, commit
 // in region order, checkpoints, the file); the regions of each level go out dynamically to the
 // other ranks as messages (region_messages.h) and their results come back, so the file has the
 // same bytes as mtbuild's whatever the number of ranks. One rank: the ordinary mtbuild build.

@@ -1,4 +1,4 @@
-// mtcluster: the batched MT build distributed over MPI ranks (issue 6), same bytes as mtbuild.
+// mtcluster: the batched MT build distributed over MPI ranks, same bytes as mtbuild.
 //   mpirun -np N mtcluster IN -o OUT.mt [every mtbuild option]
 #include <CLI/CLI.hpp>
 #include <mpi.h>

@@ -1037,7 +1037,7 @@ void LevelBuilder::commitRegion(size_t i, RegionTask task, RegionResult result, 
     if (from != 0) enclose(sphere, s.spheres[from]);
     s.producer.erase(e.storeId);
   }
-  // A real, monotone bound (issue 4 item 2): the floor is within predecessorError of the input,
+  // A real, monotone bound: the floor is within predecessorError of the input,
   // the new fragment within `deviation` of the floor.
   rec.error = std::nextafter(float(predecessorError + result.deviation), std::numeric_limits<float>::infinity());
   for (int a = 0; a < 3; ++a) rec.center[a] = sphere.c[a];

@@ -9,7 +9,7 @@
 //   * simplification is by half-edge collapse: every output vertex IS an input vertex (origin[]),
 //     with its position copied bit for bit, so shared vertices keep their identity and position;
 //   * the returned error is MEASURED on the result (see SimplifiedRegion::error), so the builder
-//     can accumulate a real, monotone error bound level by level (BMT 4.1, issue 4 item 2).
+//     can accumulate a real, monotone error bound level by level (BMT 4.1).
 //
 // Approach: meshoptimizer 0.18's quadric simplifier (meshopt_simplify). It has no per-vertex lock
 // argument, and meshopt_SimplifyLockBorder would freeze scan holes too. But it classifies a vertex

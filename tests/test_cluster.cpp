@@ -1,4 +1,4 @@
-// mtcluster (issue 6) under mpirun on this machine (oversubscribed ranks): the same bytes as
+// mtcluster under mpirun on this machine (oversubscribed ranks): the same bytes as
 // mtbuild, the work spread over the ranks, and a rank killed mid-build stops the job with an
 // error naming the rank and the level, after which --resume finishes with the same bytes.
 #include <gtest/gtest.h>

@@ -164,7 +164,7 @@ TEST(Mtbuild, BadInputIsAClearErrorAndLeavesNoFile) {
 }
 
 
-// --resume (issue 4 item 4): a build killed with SIGKILL after a level's checkpoint, or in the
+// --resume: a build killed with SIGKILL after a level's checkpoint, or in the
 // middle of a level, continues from its last finished level and writes the same bytes as a build
 // that was never interrupted. The kill points are test hooks in LevelBuilder (env variables).
 int levelRegions(const std::string& statsJson, int level) {

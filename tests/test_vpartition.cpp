@@ -640,7 +640,7 @@ TEST(Store, IngestKeysPatchesByV0CrossingAndInfoPrintsMetrics) {
       EXPECT_EQ(PartitionSequence::crossHigh(seq.crossKey(0, c)), PartitionSequence::crossHigh(p.cell) & 0xFFFFFFu);
     }
   }
-  // V*0 cells, i.e. patches: no slivers, max/mean <= 2 (issue 3).
+  // V*0 cells, i.e. patches: no slivers, max/mean <= 2.
   StoreInfo info = store->info();
   EXPECT_LE(double(info.maxPatchTriangles) / info.meanPatchTriangles, 2.0);
   EXPECT_GE(info.minPatchTriangles, 150u / 4 / 2);

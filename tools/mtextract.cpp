@@ -1,4 +1,4 @@
-// mtextract: extract one cut of an MT file as a single welded PLY (issue 4, item 5).
+// mtextract: extract one cut of an MT file as a single welded PLY.
 //   mtextract OUT.mt --error E -o CUT.ply                 every rendered node within error E
 //   mtextract OUT.mt --triangles N -o CUT.ply             best cut of at most N triangles
 //   mtextract OUT.mt --eye X,Y,Z --target X,Y,Z [--fov DEG] [--width PX] [--pixels TOL]

@@ -1,4 +1,4 @@
-// mtinfo: what an MT file holds (issue 4, item 5).
+// mtinfo: what an MT file holds.
 //   mtinfo OUT.mt [--json] [--check]
 // Opening validates the header, the DAG and the patch index (mt_file.h); payloads are only read
 // with --check, which decodes every one and names the damaged patches with their node and level.

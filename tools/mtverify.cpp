@@ -1,4 +1,4 @@
-// mtverify: check the invariants an MT file promises (BRIEF "Invariants", issue 4 item 5).
+// mtverify: check the invariants an MT file promises (BRIEF "Invariants").
 //   mtverify OUT.mt [--cuts K] [--seed S] [--memory SIZE] [--quiet]
 // 1. every payload's checksum and decode (each damaged patch reported, and checking goes on);
 // 2. DAG shape: source has no predecessors, sink no successors, acyclic, every inner node on arcs;
