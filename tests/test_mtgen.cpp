@@ -717,6 +717,482 @@ TEST(Mtgen, ReportsASummaryLine) {
   EXPECT_NE(r.output.find("bytes"), std::string::npos) << r.output;
 }
 
+// ---- scan pathologies -------------------------------------------------------------------------
+// Each --pathology is measured on the output alone, with a counter that is zero on the default
+// output (DefaultOutputHasNoPathology) and clearly positive with the option.
+
+double length(const std::array<double, 3>& a, const std::array<double, 3>& b) {
+  return std::sqrt((a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1]) + (a[2] - b[2]) * (a[2] - b[2]));
+}
+
+double medianEdge(const Mesh& mesh) {
+  std::vector<double> lengths;
+  for (const Triangle& t : mesh.triangles)
+    for (int k = 0; k < 3; ++k) lengths.push_back(length(mesh.positions[t[k]], mesh.positions[t[(k + 1) % 3]]));
+  std::nth_element(lengths.begin(), lengths.begin() + lengths.size() / 2, lengths.end());
+  return lengths[lengths.size() / 2];
+}
+
+double percentile(std::vector<double> values, double q) {
+  if (values.empty()) return 0;
+  size_t at = std::min(values.size() - 1, size_t(q * double(values.size())));
+  std::nth_element(values.begin(), values.begin() + at, values.end());
+  return values[at];
+}
+
+struct PathologyCounts {
+  uint64_t closePairs = 0;       // distinct vertices 0 < distance < 1e-3 median edge
+  uint64_t duplicateVertices = 0;  // vertices at exactly the position of another one
+  uint64_t needles = 0;          // shortest edge < 0.12 of the longest, no angle above 150 degrees
+  uint64_t caps = 0;             // an angle above 150 degrees
+  uint64_t tJunctions = 0;       // a vertex on the interior of an edge of the other side
+  double medianAspect = 0;       // longest / shortest edge of a triangle, median
+  double areaJump = 0;           // area ratio of the two triangles of an edge, 90th percentile
+  uint64_t components = 0;
+  uint64_t boundaryEdges = 0, nonManifoldEdges = 0, inconsistentlyOriented = 0;
+};
+
+PathologyCounts measurePathologies(const Mesh& mesh) {
+  PathologyCounts m;
+  const double edge = medianEdge(mesh);
+  // Vertex pairs closer than 1e-3 edge, and exact duplicates: a hash grid of that cell size.
+  const double cell = 1e-3 * edge;
+  std::unordered_map<uint64_t, std::vector<uint32_t>> cells;
+  auto cellKey = [](int64_t x, int64_t y, int64_t z) {
+    return uint64_t(x) * 0x9E3779B97F4A7C15ull ^ uint64_t(y) * 0xC2B2AE3D27D4EB4Full ^ uint64_t(z) * 0x165667B19E3779F9ull;
+  };
+  std::vector<std::array<int64_t, 3>> at(mesh.positions.size());
+  for (uint32_t v = 0; v < mesh.positions.size(); ++v) {
+    for (int a = 0; a < 3; ++a) at[v][a] = int64_t(std::floor(mesh.positions[v][a] / cell));
+    cells[cellKey(at[v][0], at[v][1], at[v][2])].push_back(v);
+  }
+  std::vector<uint8_t> duplicate(mesh.positions.size(), 0);
+  for (uint32_t v = 0; v < mesh.positions.size(); ++v)
+    for (int dx = -1; dx <= 1; ++dx)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dz = -1; dz <= 1; ++dz) {
+          auto it = cells.find(cellKey(at[v][0] + dx, at[v][1] + dy, at[v][2] + dz));
+          if (it == cells.end()) continue;
+          for (uint32_t w : it->second) {
+            if (w == v) continue;
+            double d = length(mesh.positions[v], mesh.positions[w]);
+            if (d == 0) duplicate[v] = 1;
+            else if (d < cell && w > v) ++m.closePairs;
+          }
+        }
+  for (uint8_t d : duplicate) m.duplicateVertices += d;
+
+  // Triangle shapes.
+  std::vector<double> aspects, areas(mesh.triangles.size(), 0);
+  for (size_t f = 0; f < mesh.triangles.size(); ++f) {
+    const Triangle& t = mesh.triangles[f];
+    double l[3], maxCos = -1;
+    for (int k = 0; k < 3; ++k) l[k] = length(mesh.positions[t[k]], mesh.positions[t[(k + 1) % 3]]);
+    for (int k = 0; k < 3; ++k) {  // angle opposite edge k from the law of cosines
+      double a = l[(k + 1) % 3], b = l[(k + 2) % 3];
+      if (a > 0 && b > 0) maxCos = std::max(maxCos, -(a * a + b * b - l[k] * l[k]) / (2 * a * b));
+    }
+    double shortest = std::min({l[0], l[1], l[2]}), longest = std::max({l[0], l[1], l[2]});
+    bool cap = maxCos > -std::cos(150.0 * mtgen::kPi / 180.0);  // maxCos is -cos(largest angle)
+    if (cap) ++m.caps;
+    else if (shortest < 0.12 * longest) ++m.needles;
+    if (shortest > 0) aspects.push_back(longest / shortest);
+    double s = 0.5 * (l[0] + l[1] + l[2]);
+    areas[f] = std::sqrt(std::max(0.0, s * (s - l[0]) * (s - l[1]) * (s - l[2])));
+  }
+  m.medianAspect = percentile(aspects, 0.5);
+
+  // Edges: counts, orientation, area jumps, boundary pattern of T-junctions.
+  std::unordered_map<uint64_t, std::vector<uint32_t>> edgeFaces;
+  std::unordered_map<uint64_t, int> directed;
+  for (uint32_t f = 0; f < mesh.triangles.size(); ++f) {
+    const Triangle& t = mesh.triangles[f];
+    for (int k = 0; k < 3; ++k) {
+      edgeFaces[edgeKey(t[k], t[(k + 1) % 3])].push_back(f);
+      ++directed[(uint64_t(t[k]) << 32) | t[(k + 1) % 3]];
+    }
+  }
+  for (auto& [key, count] : directed) m.inconsistentlyOriented += count > 1;
+  std::vector<double> jumps;
+  std::unordered_map<uint32_t, std::vector<uint32_t>> boundaryNeighbours;
+  for (auto& [key, faces] : edgeFaces) {
+    if (faces.size() > 2) ++m.nonManifoldEdges;
+    if (faces.size() == 2 && areas[faces[0]] > 0 && areas[faces[1]] > 0)
+      jumps.push_back(std::max(areas[faces[0]], areas[faces[1]]) / std::min(areas[faces[0]], areas[faces[1]]));
+    if (faces.size() == 1) {
+      ++m.boundaryEdges;
+      uint32_t a = uint32_t(key >> 32), b = uint32_t(key);
+      boundaryNeighbours[a].push_back(b);
+      boundaryNeighbours[b].push_back(a);
+    }
+  }
+  m.areaJump = percentile(jumps, 0.9);
+  // T-junction: boundary vertex v with boundary edges v-a, v-b, where a-b is a boundary edge too
+  // and v lies on the segment a-b (within float rounding).
+  for (auto& [v, around] : boundaryNeighbours) {
+    if (around.size() != 2) continue;
+    uint32_t a = around[0], b = around[1];
+    auto ab = edgeFaces.find(edgeKey(a, b));
+    if (ab == edgeFaces.end() || ab->second.size() != 1) continue;
+    double lab = length(mesh.positions[a], mesh.positions[b]);
+    double detour = length(mesh.positions[a], mesh.positions[v]) + length(mesh.positions[v], mesh.positions[b]) - lab;
+    if (detour < 1e-4 * lab) ++m.tJunctions;
+  }
+  UnionFind uf(mesh.positions.size());
+  for (const Triangle& t : mesh.triangles) uf.join(t[0], t[1]), uf.join(t[1], t[2]);
+  std::set<uint32_t> roots;
+  for (const Triangle& t : mesh.triangles) roots.insert(uf.find(t[0]));
+  m.components = roots.size();
+  return m;
+}
+
+std::string describe(const PathologyCounts& m) {
+  std::ostringstream out;
+  out << "close " << m.closePairs << " duplicates " << m.duplicateVertices << " needles " << m.needles << " caps "
+      << m.caps << " tjunctions " << m.tJunctions << " aspect " << m.medianAspect << " areaJump " << m.areaJump
+      << " components " << m.components << " boundary " << m.boundaryEdges << " nonmanifold " << m.nonManifoldEdges
+      << " misoriented " << m.inconsistentlyOriented;
+  return out.str();
+}
+
+const std::string kPathologyBase = "--triangles 60k --holes 4 --seed 3";
+
+TEST(MtgenPathology, DefaultOutputHasNoPathology) {
+  TempDir dir;
+  for (const std::string& args : {kPathologyBase, kPathologyBase + " --density varying --components 2",
+                                  kPathologyBase + " --pathology none"}) {
+    PathologyCounts m = measurePathologies(generate(dir, args).mesh);
+    SCOPED_TRACE(args + ": " + describe(m));
+    EXPECT_EQ(m.closePairs, 0u);
+    EXPECT_EQ(m.duplicateVertices, 0u);
+    EXPECT_EQ(m.needles, 0u);
+    EXPECT_EQ(m.caps, 0u);
+    EXPECT_EQ(m.tJunctions, 0u);
+    EXPECT_LT(m.medianAspect, 2.5);
+    EXPECT_LT(m.areaJump, 1.3);
+    EXPECT_EQ(m.nonManifoldEdges + m.inconsistentlyOriented, 0u);
+  }
+}
+
+// The default bytes are what every earlier measurement was made on: pathologies must not change
+// them. FNV-1a of two default outputs, recorded before the pathologies existed.
+TEST(MtgenPathology, DefaultBytesUnchanged) {
+  TempDir dir;
+  auto fnv = [](const std::string& bytes) {
+    uint64_t h = 0xCBF29CE484222325ull;
+    for (unsigned char c : bytes) h = (h ^ c) * 0x100000001B3ull;
+    return h;
+  };
+  EXPECT_EQ(fnv(generate(dir, "--triangles 20k --holes 3 --components 2 --seed 5").bytes), 0x2f00b94362df55ebull);
+  EXPECT_EQ(fnv(generate(dir, "--triangles 20k --density varying --shuffle --normals --colors").bytes), 0x7d3f3a63ac8f6da3ull);
+}
+
+Generated generatePathology(const TempDir& dir, const std::string& pathology, const std::string& name = "p.ply",
+                            const std::string& base = kPathologyBase) {
+  return generate(dir, base + " --pathology " + pathology, name);
+}
+
+// Topology every pathology keeps: indices valid, each triangle three distinct vertices, every
+// vertex used, consistently oriented, no edge of more than two triangles.
+void expectSoundIndices(const Mesh& mesh, const std::string& what) {
+  Topology t = analyze(mesh);
+  EXPECT_EQ(t.outOfRange + t.repeatedIndex + t.unreferencedVertices + t.zeroArea, 0u) << what;
+  EXPECT_EQ(t.nonManifoldEdges, 0u) << what;
+  EXPECT_EQ(t.inconsistentlyOriented, 0u) << what;
+}
+
+// Triangles of two meshes with the same index lists whose normals point opposite ways.
+size_t flippedAgainst(const Mesh& mesh, const Mesh& reference) {
+  size_t flipped = 0;
+  auto normal = [](const Mesh& m, const Triangle& t) {
+    const auto &a = m.positions[t[0]], &b = m.positions[t[1]], &c = m.positions[t[2]];
+    double e1[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]}, e2[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+    return std::array<double, 3>{e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]};
+  };
+  for (size_t f = 0; f < mesh.triangles.size(); ++f) {
+    auto n = normal(mesh, mesh.triangles[f]), r = normal(reference, reference.triangles[f]);
+    if (n[0] * r[0] + n[1] * r[1] + n[2] * r[2] < 0) ++flipped;
+  }
+  return flipped;
+}
+
+TEST(MtgenPathology, CloseVerticesArePairsFarBelowAnEdge) {
+  TempDir dir;
+  Generated plain = generate(dir, kPathologyBase, "plain.ply");
+  Generated close = generatePathology(dir, "close");
+  PathologyCounts m = measurePathologies(close.mesh);
+  SCOPED_TRACE(describe(m));
+  const size_t vertices = close.mesh.positions.size();
+  EXPECT_GT(m.closePairs, vertices / 100);  // ~2% of the vertices
+  EXPECT_LT(m.closePairs, vertices / 25);
+  EXPECT_EQ(m.duplicateVertices, 0u);  // distinct positions, only very close
+  // Only positions change: same vertices, same triangles, none turned over.
+  ASSERT_EQ(vertices, plain.mesh.positions.size());
+  EXPECT_EQ(close.mesh.triangles, plain.mesh.triangles);
+  EXPECT_EQ(flippedAgainst(close.mesh, plain.mesh), 0u);
+  size_t moved = 0;
+  for (size_t v = 0; v < vertices; ++v) moved += close.mesh.positions[v] != plain.mesh.positions[v];
+  // Each moved vertex makes a pair with the neighbour it went to (and rarely a second one with
+  // another vertex moved to the same neighbour).
+  EXPECT_GE(m.closePairs, moved);
+  EXPECT_LE(m.closePairs, moved + moved / 20);
+  expectSoundIndices(close.mesh, "close");
+}
+
+TEST(MtgenPathology, SliversAreNeedlesAndCaps) {
+  TempDir dir;
+  Generated plain = generate(dir, kPathologyBase, "plain.ply");
+  Generated slivers = generatePathology(dir, "slivers");
+  PathologyCounts m = measurePathologies(slivers.mesh);
+  SCOPED_TRACE(describe(m));
+  const size_t triangles = slivers.mesh.triangles.size();
+  EXPECT_GT(m.needles, triangles / 200);
+  EXPECT_GT(m.caps, triangles / 200);
+  EXPECT_EQ(m.closePairs, 0u);  // a needle's short edge is 3-10% of an edge, not a near-duplicate
+  EXPECT_EQ(slivers.mesh.triangles, plain.mesh.triangles);
+  EXPECT_EQ(flippedAgainst(slivers.mesh, plain.mesh), 0u);
+  expectSoundIndices(slivers.mesh, "slivers");
+}
+
+TEST(MtgenPathology, AnisotropicCellsAreLong) {
+  TempDir dir;
+  for (const std::string& base : {kPathologyBase, kPathologyBase + " --density varying"}) {
+    Generated g = generatePathology(dir, "anisotropic", "p.ply", base);
+    PathologyCounts m = measurePathologies(g.mesh);
+    PathologyCounts plain = measurePathologies(generate(dir, base, "plain.ply").mesh);
+    SCOPED_TRACE(base + ": " + describe(m));
+    EXPECT_GT(m.medianAspect, 4.0);  // 6:1 cells (less where the varying density stretches the other way)
+    EXPECT_GT(m.medianAspect, 2.0 * plain.medianAspect);
+    EXPECT_NEAR(double(g.mesh.triangles.size()), 60000, 600);
+    expectSoundIndices(g.mesh, "anisotropic " + base);
+  }
+}
+
+TEST(MtgenPathology, UnevenSpacingJumpsBetweenNeighbours) {
+  TempDir dir;
+  Generated g = generatePathology(dir, "uneven");
+  PathologyCounts m = measurePathologies(g.mesh);
+  SCOPED_TRACE(describe(m));
+  EXPECT_GT(m.areaJump, 2.0);  // 1 in 10 edges joins triangles of areas more than 2x apart
+  // Smoothly varying density is not uneven: neighbours stay alike.
+  EXPECT_LT(measurePathologies(generate(dir, kPathologyBase + " --density varying", "v.ply").mesh).areaJump, 1.3);
+  expectSoundIndices(g.mesh, "uneven");
+}
+
+TEST(MtgenPathology, OverlapIsASecondSheetJustAboveTheSurface) {
+  TempDir dir;
+  // No holes here: a sheet over a hole (a second pass covering an occlusion) is far from the surface.
+  for (const std::string& base : {std::string("--triangles 60k --seed 3"),
+                                  std::string("--triangles 60k --seed 4 --components 3 --density varying")}) {
+    Generated g = generatePathology(dir, "overlap", "p.ply", base);
+    const Mesh& mesh = g.mesh;
+    const size_t tori = base.find("--components 3") != std::string::npos ? 3 : 1;
+    PathologyCounts m = measurePathologies(mesh);
+    SCOPED_TRACE(base + ": " + describe(m));
+    EXPECT_EQ(m.components, 2 * tori);
+    EXPECT_NEAR(double(mesh.triangles.size()), 60000, 600);  // the budget includes the sheets
+    // Components by size: the sheets are the small ones (~4% of the triangles each) and open.
+    UnionFind uf(mesh.positions.size());
+    for (const Triangle& t : mesh.triangles) uf.join(t[0], t[1]), uf.join(t[1], t[2]);
+    std::map<uint32_t, size_t> size;
+    for (const Triangle& t : mesh.triangles) ++size[uf.find(t[0])];
+    std::vector<std::pair<size_t, uint32_t>> bySize;
+    for (auto& [root, n] : size) bySize.push_back({n, root});
+    std::sort(bySize.begin(), bySize.end());
+    std::set<uint32_t> sheets;
+    size_t sheetTriangles = 0;
+    for (size_t k = 0; k < tori; ++k) sheets.insert(bySize[k].second), sheetTriangles += bySize[k].first;
+    EXPECT_GT(sheetTriangles, mesh.triangles.size() * 3 / 100);
+    EXPECT_LT(sheetTriangles, mesh.triangles.size() * 6 / 100);
+    // Every sheet vertex is within its local spacing (longest edge) of the surface's vertices, and
+    // none on top of one: two passes a fraction of the spacing apart.
+    const double edge = medianEdge(mesh);
+    std::vector<double> spacing(mesh.positions.size(), 0);  // longest edge at each vertex
+    for (const Triangle& t : mesh.triangles)
+      for (int k = 0; k < 3; ++k) {
+        double l = length(mesh.positions[t[k]], mesh.positions[t[(k + 1) % 3]]);
+        spacing[t[k]] = std::max(spacing[t[k]], l), spacing[t[(k + 1) % 3]] = std::max(spacing[t[(k + 1) % 3]], l);
+      }
+    std::unordered_map<uint64_t, std::vector<uint32_t>> cells;
+    auto key = [&](const std::array<double, 3>& p, int dx, int dy, int dz) {
+      return uint64_t(int64_t(std::floor(p[0] / edge)) + dx) * 0x9E3779B97F4A7C15ull ^
+             uint64_t(int64_t(std::floor(p[1] / edge)) + dy) * 0xC2B2AE3D27D4EB4Full ^
+             uint64_t(int64_t(std::floor(p[2] / edge)) + dz) * 0x165667B19E3779F9ull;
+    };
+    std::vector<uint8_t> onSheet(mesh.positions.size(), 0);
+    for (uint32_t v = 0; v < mesh.positions.size(); ++v) {
+      onSheet[v] = sheets.count(uf.find(v)) > 0;
+      if (!onSheet[v]) cells[key(mesh.positions[v], 0, 0, 0)].push_back(v);
+    }
+    size_t sheetVertices = 0, near = 0, onTop = 0;
+    for (uint32_t v = 0; v < mesh.positions.size(); ++v) {
+      if (!onSheet[v]) continue;
+      ++sheetVertices;
+      double best = 1e300;
+      for (int dx = -3; dx <= 3; ++dx)
+        for (int dy = -3; dy <= 3; ++dy)
+          for (int dz = -3; dz <= 3; ++dz) {
+            auto it = cells.find(key(mesh.positions[v], dx, dy, dz));
+            if (it != cells.end())
+              for (uint32_t w : it->second) best = std::min(best, length(mesh.positions[v], mesh.positions[w]));
+          }
+      near += best < spacing[v];
+      onTop += best < 0.05 * spacing[v];
+    }
+    EXPECT_GT(near, sheetVertices * 95 / 100);
+    EXPECT_EQ(onTop, 0u);
+    expectSoundIndices(mesh, "overlap " + base);
+  }
+}
+
+TEST(MtgenPathology, SeamsDuplicateVerticesAndWeldBackToTheSurface) {
+  TempDir dir;
+  Generated plain = generate(dir, kPathologyBase, "plain.ply");
+  Generated g = generatePathology(dir, "seams");
+  PathologyCounts m = measurePathologies(g.mesh);
+  SCOPED_TRACE(describe(m));
+  EXPECT_EQ(g.mesh.triangles.size(), plain.mesh.triangles.size());
+  const size_t copies = g.mesh.positions.size() - plain.mesh.positions.size();  // one row and one column
+  EXPECT_GT(copies, 100u);
+  EXPECT_EQ(m.duplicateVertices, 2 * copies - 2);  // each copy and its original; 4 at the corner
+  // Welding equal positions gives back the watertight surface: same boundary as without seams,
+  // and each side's triangles used their own copy (so before welding, the seams are boundary).
+  std::map<std::array<double, 3>, uint32_t> first;
+  Mesh welded = g.mesh;
+  for (auto& t : welded.triangles)
+    for (auto& v : t) v = first.emplace(g.mesh.positions[v], v).first->second;
+  Topology weldedTopology = analyze(welded), plainTopology = analyze(plain.mesh);
+  EXPECT_EQ(weldedTopology.boundaryEdges, plainTopology.boundaryEdges);
+  EXPECT_EQ(weldedTopology.nonManifoldEdges, 0u);
+  EXPECT_EQ(m.boundaryEdges, plainTopology.boundaryEdges + 2 * copies - 2);  // both seam loops, both sides
+  expectSoundIndices(g.mesh, "seams");
+}
+
+TEST(MtgenPathology, TJunctionsSitOnTheEdgesOfTheOtherSide) {
+  TempDir dir;
+  for (const std::string& base : {std::string("--triangles 60k --seed 3"), kPathologyBase}) {
+    Generated g = generatePathology(dir, "tjunctions", "p.ply", base);
+    PathologyCounts m = measurePathologies(g.mesh);
+    SCOPED_TRACE(base + ": " + describe(m));
+    EXPECT_GT(m.tJunctions, 300u);
+    EXPECT_NEAR(double(g.mesh.triangles.size()), 60000, 600);
+    if (base.find("--holes") == std::string::npos) {
+      // Without holes every boundary edge is a T-junction's: a-m and m-b above, a-b below.
+      EXPECT_EQ(m.boundaryEdges, 3 * m.tJunctions);
+    }
+    expectSoundIndices(g.mesh, "tjunctions " + base);
+  }
+}
+
+TEST(MtgenPathology, NoiseIsHighFrequencyAndSmall) {
+  TempDir dir;
+  Generated plain = generate(dir, kPathologyBase, "plain.ply");
+  Generated g = generatePathology(dir, "noise");
+  ASSERT_EQ(g.mesh.positions.size(), plain.mesh.positions.size());
+  EXPECT_EQ(g.mesh.triangles, plain.mesh.triangles);
+  const double edge = medianEdge(plain.mesh);
+  std::vector<std::array<double, 3>> delta(g.mesh.positions.size());
+  double sum = 0, biggest = 0;
+  for (size_t v = 0; v < delta.size(); ++v) {
+    for (int a = 0; a < 3; ++a) delta[v][a] = g.mesh.positions[v][a] - plain.mesh.positions[v][a];
+    double d = std::hypot(delta[v][0], delta[v][1], delta[v][2]);
+    sum += d, biggest = std::max(biggest, d);
+  }
+  double mean = sum / double(delta.size());
+  EXPECT_GT(mean, 0.05 * edge);
+  EXPECT_LT(biggest, 0.3 * edge);
+  // High frequency: the offsets of the two ends of an edge are unrelated, so their difference is
+  // as large as the offsets themselves (a smooth displacement would make it much smaller).
+  double differences = 0;
+  size_t edges = 0;
+  for (const Triangle& t : plain.mesh.triangles)
+    for (int k = 0; k < 3; ++k) {
+      const auto &a = delta[t[k]], &b = delta[t[(k + 1) % 3]];
+      differences += std::hypot(a[0] - b[0], a[1] - b[1], a[2] - b[2]), ++edges;
+    }
+  EXPECT_GT(differences / double(edges), 1.1 * mean);
+  EXPECT_EQ(flippedAgainst(g.mesh, plain.mesh), 0u);
+  expectSoundIndices(g.mesh, "noise");
+}
+
+TEST(MtgenPathology, AllTogetherEveryOneMeasurable) {
+  TempDir dir;
+  Generated g = generatePathology(dir, "all", "p.ply", kPathologyBase + " --components 2");
+  PathologyCounts m = measurePathologies(g.mesh);
+  SCOPED_TRACE(describe(m));
+  EXPECT_GT(m.closePairs, 100u);
+  EXPECT_GT(m.caps, 100u);
+  EXPECT_GT(m.duplicateVertices, 100u);
+  EXPECT_GT(m.tJunctions, 100u);
+  EXPECT_GT(m.medianAspect, 4.0);
+  EXPECT_GT(m.areaJump, 2.0);
+  EXPECT_EQ(m.components, 4u);  // two tori, two sheets
+  EXPECT_NEAR(double(g.mesh.triangles.size()), 60000, 1200);
+  expectSoundIndices(g.mesh, "all");
+  // A list is the union of its names.
+  Generated listed = generatePathology(dir, "close,slivers,anisotropic,uneven,overlap,seams,tjunctions,noise", "l.ply",
+                                       kPathologyBase + " --components 2");
+  EXPECT_EQ(listed.bytes, g.bytes);
+}
+
+// Every output path computes a vertex the same way: rows in the streaming pipeline (PLY, OBJ),
+// single vertices for triangle soups (STL) and faces by index (--shuffle); any thread count.
+TEST(MtgenPathology, EveryPathGivesTheSameVertices) {
+  TempDir dir;
+  const std::string args = "--triangles 20k --holes 5 --components 2 --seed 6 --pathology all";
+  Generated ref = generate(dir, args + " --normals --colors", "ref.ply");
+  Generated one = generate(dir, args + " --normals --colors --threads 1", "one.ply");
+  EXPECT_EQ(ref.bytes, one.bytes);
+  Generated shuffled = generate(dir, args + " --shuffle", "shuffled.ply");
+  EXPECT_EQ(sortedTriangles(shuffled.mesh.triangles), sortedTriangles(ref.mesh.triangles));
+  ASSERT_EQ(shuffled.mesh.positions, ref.mesh.positions);
+  for (const std::string& order : {std::string(""), std::string(" --shuffle")}) {
+    auto r = runTool("mtgen", "-o " + dir.file("a.stl") + " " + args + order);
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    auto soup = parseStl(readFile(dir.file("a.stl")));
+    const Mesh& faces = order.empty() ? ref.mesh : shuffled.mesh;
+    ASSERT_EQ(soup.size(), faces.triangles.size());
+    for (size_t t = 0; t < soup.size(); ++t)
+      for (int k = 0; k < 3; ++k)
+        for (int a = 0; a < 3; ++a)
+          ASSERT_EQ(soup[t][3 * k + a], float(faces.positions[faces.triangles[t][k]][a])) << t << order;
+  }
+  auto r = runTool("mtgen", "-o " + dir.file("a.obj") + " " + args + " --normals");
+  ASSERT_EQ(r.exitCode, 0) << r.output;
+  Mesh obj = parseObj(readFile(dir.file("a.obj")));
+  EXPECT_EQ(obj.triangles, ref.mesh.triangles);
+  ASSERT_EQ(obj.normals.size(), ref.mesh.normals.size());
+  for (size_t v = 0; v < obj.normals.size(); ++v) {
+    EXPECT_EQ(obj.normals[v], ref.mesh.normals[v]);
+    EXPECT_NEAR(std::hypot(double(obj.normals[v][0]), double(obj.normals[v][1]), double(obj.normals[v][2])), 1.0, 1e-5);
+  }
+}
+
+TEST(MtgenPathology, BadNamesFailCleanly) {
+  TempDir dir;
+  const std::string out = dir.file("bad.ply");
+  for (const std::string args : {"--pathology nosie", "--pathology close,", "--pathology ,seams", "--pathology ALL"}) {
+    auto r = runTool("mtgen", "-o " + out + " --triangles 1k " + args);
+    EXPECT_EQ(r.exitCode, 1) << args << ": " << r.output;
+    EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 1) << args << ": " << r.output;
+    EXPECT_NE(r.output.find("--pathology"), std::string::npos) << r.output;
+    EXPECT_FALSE(fileExists(out)) << args;
+  }
+  auto r = runTool("mtgen", "--help");
+  for (const mtgen::PathologyInfo& p : mtgen::kPathologies)
+    EXPECT_NE(r.output.find(std::string(p.name) + ": "), std::string::npos) << p.name;
+}
+
+// Small meshes keep every pathology (and the minimum component size) valid.
+TEST(MtgenPathology, TinyMeshesStayValid) {
+  TempDir dir;
+  for (const std::string args : {"--triangles 18", "--triangles 200 --seed 2", "--triangles 2.5k --holes 5",
+                                  "--triangles 5k --components 4 --density varying"}) {
+    Generated g = generate(dir, args + " --pathology all");
+    expectSoundIndices(g.mesh, args);
+  }
+}
+
 // ---- the generator's building blocks -----------------------------------------------------------
 
 TEST(ScanGenerator, FeistelPermutationIsABijection) {

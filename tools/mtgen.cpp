@@ -277,40 +277,66 @@ void computeVertexChunk(const ScanGenerator& gen, const std::vector<mtgen::ColPa
                         const OutputSettings& out, VertexChunk& chunk) {
   const Component& c = gen.components()[chunk.component];
   const uint32_t V = c.cols, U = c.rows;
-  // Normals are central differences of the grid neighbours, so compute one halo row each side.
-  const uint32_t halo = out.normals ? 1 : 0;
+  // Normals are central differences of the grid neighbours, and close/slivers move a vertex
+  // towards its neighbours, so compute one halo row each side. Rows past the end of an open sheet
+  // are clamped (one-sided differences at its border), rows of a torus wrap around; vertex row U
+  // (the unwelded seam copy of row 0) wraps to row 0 like any other.
+  const uint32_t halo = out.normals || c.moves() ? 1 : 0;
   const uint32_t gridRows = chunk.rowEnd - chunk.rowBegin + 2 * halo;
   std::vector<double> grid(size_t(gridRows) * V * 3);
   std::vector<double> disp(out.colors ? size_t(gridRows) * V : 0);
   ScanGenerator::RowLattice lattice;
   for (uint32_t k = 0; k < gridRows; ++k) {
-    uint32_t row = uint32_t((uint64_t(chunk.rowBegin) + U - halo + k) % U);
+    uint32_t row = c.sheet ? uint32_t(std::clamp<int64_t>(int64_t(chunk.rowBegin) - halo + k, 0, U - 1))
+                           : uint32_t((uint64_t(chunk.rowBegin) + U - halo + k) % U);
     mtgen::RowParams rp = ScanGenerator::rowParams(c, row);
     lattice.fill(c, rp);
     double* p = &grid[size_t(k) * V * 3];
     for (uint32_t j = 0; j < V; ++j)
       ScanGenerator::position(c, rp, lattice, cols[j], p + 3 * j, out.colors ? &disp[size_t(k) * V + j] : nullptr);
   }
-  size_t capacity = size_t(chunk.rowEnd - chunk.rowBegin) * V;
+  // Final positions of a row: the grid with close/slivers moves applied (from unmoved neighbours,
+  // the same operations as ScanGenerator::finalPosition, so every path gives the same bits).
+  std::vector<double> moved(c.moves() ? size_t(V) * 3 : 0);
+  const uint32_t W = c.vertexCols();
+  size_t capacity = size_t(chunk.rowEnd - chunk.rowBegin) * W;
   chunk.xyz.reserve(capacity * 3);
   if (out.normals) chunk.normals.reserve(capacity * 3);
   if (out.colors) chunk.colors.reserve(capacity * 4);
   for (uint32_t row = chunk.rowBegin; row < chunk.rowEnd; ++row) {
     uint32_t k = row - chunk.rowBegin + halo;
+    const double* final = &grid[size_t(k) * V * 3];
+    if (c.moves()) {
+      std::copy(final, final + size_t(V) * 3, moved.begin());
+      const uint32_t gridRow = row >= U ? row - U : row;
+      for (uint32_t j = 0; j < V; ++j) {
+        mtgen::Move m = ScanGenerator::moveOf(c, gridRow, j);
+        if (m.kind == 0) continue;
+        const double* n[2];
+        for (int e = 0; e < 2; ++e) {
+          const int* d = mtgen::kNeighbour[(m.dir + e) % 6];
+          n[e] = &grid[(size_t(k + d[0]) * V + ScanGenerator::wrap(int64_t(j) + d[1], V)) * 3];
+        }
+        ScanGenerator::applyMove(m, n[0], n[1], &moved[size_t(j) * 3]);
+      }
+      final = moved.data();
+    }
+    const size_t rowStart = chunk.count;
     const mtgen::Interval* drop = ScanGenerator::droppedBegin(c, row);
     const mtgen::Interval* dropEnd = ScanGenerator::droppedEnd(c, row);
-    for (uint32_t j = 0; j < V; ++j) {
+    for (uint32_t j = 0; j < W; ++j) {
       if (drop != dropEnd && j >= drop->lo) {  // skip the vertices strictly inside a hole
         j = drop->hi;
         ++drop;
         continue;
       }
-      const double* p = &grid[(size_t(k) * V + j) * 3];
+      const uint32_t g = j >= V ? j - V : j;  // column V is the seam copy of column 0
+      const double* p = final + size_t(g) * 3;
       chunk.xyz.insert(chunk.xyz.end(), p, p + 3);
       if (out.normals) {
-        uint32_t jn = j + 1 == V ? 0 : j + 1, jp = j == 0 ? V - 1 : j - 1;
-        const double* up = &grid[(size_t(k + 1) * V + j) * 3];
-        const double* down = &grid[(size_t(k - 1) * V + j) * 3];
+        uint32_t jn = g + 1 == V ? (c.sheet ? g : 0) : g + 1, jp = g == 0 ? (c.sheet ? 0 : V - 1) : g - 1;
+        const double* up = &grid[(size_t(k + 1) * V + g) * 3];
+        const double* down = &grid[(size_t(k - 1) * V + g) * 3];
         const double* right = &grid[(size_t(k) * V + jn) * 3];
         const double* left = &grid[(size_t(k) * V + jp) * 3];
         double du[3] = {up[0] - down[0], up[1] - down[1], up[2] - down[2]};
@@ -321,10 +347,31 @@ void computeVertexChunk(const ScanGenerator& gen, const std::vector<mtgen::ColPa
       }
       if (out.colors) {
         uint8_t rgba[4];
-        colorFor(disp[size_t(k) * V + j], c.amplitudeSum, chunk.component, rgba);
+        colorFor(disp[size_t(k) * V + g], c.amplitudeSum, chunk.component, rgba);
         chunk.colors.insert(chunk.colors.end(), rgba, rgba + 4);
       }
       ++chunk.count;
+    }
+    if (c.isLine(row)) {  // the T-junction vertices of this row, after its grid vertices
+      for (uint32_t j = 0; j < V; ++j) {
+        const double* a = final + size_t(j) * 3;
+        const double* b = final + size_t(j + 1 == V ? 0 : j + 1) * 3;
+        const double p[3] = {0.5 * (a[0] + b[0]), 0.5 * (a[1] + b[1]), 0.5 * (a[2] + b[2])};
+        chunk.xyz.insert(chunk.xyz.end(), p, p + 3);
+        // Normal and colour: the mean of the two ends' (a line row loses no vertex to a hole, so
+        // grid vertex j of this row is record rowStart + j).
+        const size_t ea = rowStart + j, eb = rowStart + (j + 1 == V ? 0 : j + 1);
+        if (out.normals) {
+          double n[3], len = 0;
+          for (int e = 0; e < 3; ++e) n[e] = double(chunk.normals[3 * ea + e]) + chunk.normals[3 * eb + e], len += n[e] * n[e];
+          len = std::sqrt(len);
+          for (int e = 0; e < 3; ++e) chunk.normals.push_back(float(len > 0 ? n[e] / len : (e == 2 ? 1.0 : 0.0)));
+        }
+        if (out.colors)
+          for (int e = 0; e < 4; ++e)
+            chunk.colors.push_back(uint8_t((unsigned(chunk.colors[4 * ea + e]) + chunk.colors[4 * eb + e] + 1) / 2));
+        ++chunk.count;
+      }
     }
   }
 }
@@ -351,13 +398,14 @@ void computeFaceChunk(const ScanGenerator& gen, const mtgen::FeistelPermutation*
   chunk.triangles.reserve(size_t(chunk.end - chunk.begin) * 3);
   for (uint64_t k = chunk.begin; k < chunk.end; ++k) {
     uint64_t f = shuffle ? (*shuffle)(k) : k;
-    uint32_t tri[3], grid[3][3];
-    if (!gen.gridTriangle(f, tri, corners ? grid : nullptr)) continue;
+    uint32_t tri[3];
+    mtgen::VertexRef refs[3];
+    if (!gen.gridTriangle(f, tri, corners ? refs : static_cast<mtgen::VertexRef*>(nullptr))) continue;
     chunk.triangles.insert(chunk.triangles.end(), tri, tri + 3);
     if (corners)
-      for (auto& g : grid) {
+      for (const auto& g : refs) {
         double p[3];
-        gen.position(g[0], g[1], g[2], p);
+        gen.position(g, p);
         chunk.corners.insert(chunk.corners.end(), {float(p[0]), float(p[1]), float(p[2])});
       }
   }
@@ -377,14 +425,14 @@ void streamVertices(const ScanGenerator& gen, const OutputSettings& settings, Me
         tbb::make_filter<void, std::shared_ptr<VertexChunk>>(
             tbb::filter_mode::serial_in_order,
             [&](tbb::flow_control& fc) -> std::shared_ptr<VertexChunk> {
-              if (nextRow >= c.rows) {
+              if (nextRow >= c.vertexRows()) {
                 fc.stop();
                 return nullptr;
               }
               auto chunk = std::make_shared<VertexChunk>();
               chunk->component = ci;
               chunk->rowBegin = nextRow;
-              chunk->rowEnd = nextRow = std::min(c.rows, nextRow + rowsPerChunk);
+              chunk->rowEnd = nextRow = std::min(c.vertexRows(), nextRow + rowsPerChunk);
               return chunk;
             }) &
             tbb::make_filter<std::shared_ptr<VertexChunk>, std::shared_ptr<VertexChunk>>(
@@ -514,6 +562,12 @@ int run(int argc, char** argv) {
                  "length varies smoothly by 10x around the major circle (3x around the minor one)")
       ->check(CLI::IsMember({"uniform", "varying"}))
       ->default_str("uniform");
+  std::string pathologyText;
+  std::string pathologyHelp =
+      "Scan pathologies to add, comma-separated, or all (none by default; each is a pure function of the grid "
+      "position, so the bytes still do not depend on the thread count):";
+  for (const mtgen::PathologyInfo& p : mtgen::kPathologies) pathologyHelp += std::string("\n  ") + p.name + ": " + p.help;
+  app.add_option("--pathology", pathologyText, pathologyHelp)->default_str("none");
   app.add_flag("--shuffle", shuffle,
                "Emit faces in a pseudo-random order (a keyed bijection of the face indices, O(1) memory); "
                "vertices stay in grid order and the set of triangles is unchanged");
@@ -540,6 +594,14 @@ int run(int argc, char** argv) {
   if (gen.triangles == 0) {
     std::fprintf(stderr, "mtgen: error: --triangles must be a positive count like 1000, 2.5k, 1M, at most 4G (got '%s')\n",
                  trianglesText.c_str());
+    return 1;
+  }
+  std::string badPathology;
+  if (!mtgen::parsePathologies(pathologyText, gen.pathologies, badPathology)) {
+    std::string names;
+    for (const mtgen::PathologyInfo& p : mtgen::kPathologies) names += std::string(names.empty() ? "" : ", ") + p.name;
+    std::fprintf(stderr, "mtgen: error: --pathology: unknown '%s' (a comma-separated list of %s, or all)\n",
+                 badPathology.c_str(), names.c_str());
     return 1;
   }
   if (gen.holes > gen.triangles / 100) {

@@ -18,6 +18,24 @@
 // column - (dropped vertices left of it in its row); the per-row hole intervals are stored in CSR
 // arrays whose size is O(rows + hole rows).
 //
+// Scan pathologies (--pathology): what real laser and photogrammetry scans have and a clean grid
+// does not. Each is off by default (and then not a single operation of the default path changes,
+// so default outputs keep their bytes) and each is again a pure function of the grid position:
+//   close        a few vertices moved to within 2e-5..5e-4 of an edge length of a neighbour
+//   slivers      a few vertices moved almost onto a neighbour (needles) or onto the far edge of one
+//                of their triangles (caps, angles near 180 degrees)
+//   anisotropic  cells 6x longer around the major circle than around the minor one
+//   uneven       rows and columns spaced irregularly, gaps from 0.2 to 1.8 of the mean
+//   overlap      a second scan pass: an open sheet over part of each component, sampled on its own
+//                grid, 0.35 of an edge above the surface
+//   seams        the periodic grid seams are not welded: row 0 and column 0 are duplicated, same
+//                positions, each side's triangles using their own copy
+//   tjunctions   a few rows of cells are split along their lower edge (a finer scan meeting a
+//                coarser one): the midpoint is a vertex above the line and absent below
+//   noise        per-vertex random displacement along the normal, up to 0.25 of an edge
+// Moved vertices (close, slivers) are never adjacent to each other and stay strictly inside the
+// convex hexagon of their grid neighbours, so no triangle flips.
+//
 // No TBB here: tests include this header without linking TBB.
 #pragma once
 
@@ -38,6 +56,85 @@ constexpr uint64_t kMinComponentTriangles = 18;
 // Indices are written as 32-bit integers; keep the vertex count (about half the triangle count)
 // well inside int32 so every PLY reader accepts the file.
 constexpr uint64_t kMaxTriangles = 4'000'000'000ull;
+
+// ---------------------------------------------------------------------------------------------
+// Scan pathologies, as bits of GeneratorOptions::pathologies.
+
+enum Pathology : uint32_t {
+  kClose = 1u << 0,
+  kSlivers = 1u << 1,
+  kAnisotropic = 1u << 2,
+  kUneven = 1u << 3,
+  kOverlap = 1u << 4,
+  kSeams = 1u << 5,
+  kTJunctions = 1u << 6,
+  kNoise = 1u << 7,
+};
+
+struct PathologyInfo {
+  const char* name;
+  uint32_t bit;
+  const char* help;
+};
+
+inline constexpr PathologyInfo kPathologies[] = {
+    {"close", kClose, "about 2% of the vertices moved to within 2e-5..5e-4 of an edge length of a grid neighbour"},
+    {"slivers", kSlivers,
+     "about 4% of the vertices moved almost onto a neighbour (needles, shortest edge 3-10% of the others) or "
+     "almost onto the far edge of one of their triangles (caps, an angle near 180 degrees)"},
+    {"anisotropic", kAnisotropic, "cells 6x longer around the major circle than around the minor one"},
+    {"uneven", kUneven, "rows and columns spaced irregularly, each gap 0.2 to 1.8 of the mean"},
+    {"overlap", kOverlap,
+     "a second scan pass: an open sheet over ~4% of each component, on its own grid (0.9x the spacing, not "
+     "aligned), 0.35 of an edge above the surface; the triangle budget includes it"},
+    {"seams", kSeams,
+     "the grid's two seams left unwelded: row 0 and column 0 are duplicated (same positions, distinct indices, "
+     "each side's triangles use their own copy)"},
+    {"tjunctions", kTJunctions,
+     "up to 6 rows of cells split along their lower edge: the edge midpoints are vertices of the cells above and "
+     "not of those below (T-junctions, 1 extra triangle per cell)"},
+    {"noise", kNoise, "every vertex displaced along the normal by a random amount of up to 0.25 of an edge"},
+};
+constexpr uint32_t kAllPathologies = kClose | kSlivers | kAnisotropic | kUneven | kOverlap | kSeams | kTJunctions | kNoise;
+
+// "close,seams" or "all" -> bits; false (and the offending word in `bad`) on an unknown name.
+inline bool parsePathologies(const std::string& text, uint32_t& bits, std::string& bad) {
+  bits = 0;
+  if (text.empty()) return true;
+  size_t at = 0;
+  while (at <= text.size()) {
+    size_t comma = text.find(',', at);
+    std::string word = text.substr(at, comma == std::string::npos ? std::string::npos : comma - at);
+    if (word == "all") {
+      bits |= kAllPathologies;
+    } else if (word != "none") {
+      uint32_t bit = 0;
+      for (const PathologyInfo& p : kPathologies)
+        if (word == p.name) bit = p.bit;
+      if (bit == 0) {
+        bad = word;
+        return false;
+      }
+      bits |= bit;
+    }
+    if (comma == std::string::npos) break;
+    at = comma + 1;
+  }
+  return true;
+}
+
+// Strengths of the pathologies (fractions of an edge length or of the vertices).
+constexpr double kCloseShare = 0.08;    // of the candidate vertices (every other row and column)
+constexpr double kSliverShare = 0.16;
+constexpr double kAnisotropy = 6.0;
+constexpr double kUnevenJitter = 0.8;   // row r sits at r + 0.8 h(r), h in [0,1)
+constexpr double kSheetShare = 0.04;    // of a component's triangles
+constexpr double kSheetSpacing = 0.9;   // the second pass is sampled 0.9x as wide
+constexpr double kSheetLift = 0.35;     // edges above the surface
+constexpr double kNoiseAmplitude = 0.25;
+constexpr uint32_t kMaxTJunctionLines = 6;
+// Old-style corner coordinates (component, row, col) mark a T-junction vertex by this bit of col.
+constexpr uint32_t kMidpointBit = 0x8000'0000u;
 
 // ---------------------------------------------------------------------------------------------
 // Hashing and random numbers: everything is derived from the seed by hashing, so the output does
@@ -156,12 +253,33 @@ inline AxisSample axisSample(double fraction, double shift, uint32_t period, uin
 
 struct RowParams {
   double cosTheta = 1, sinTheta = 0;
+  uint32_t row = 0;
+  double step = 0;  // angle between this row and the next (radians), for the noise amplitude
   AxisSample octave[kMaxOctaves];
 };
 struct ColParams {
   double cosPhi = 1, sinPhi = 0;
+  uint32_t col = 0;
+  double step = 0;
   AxisSample octave[kMaxOctaves];
 };
+
+// A vertex of the output: grid vertex (row, col) of a component, or the T-junction vertex at the
+// midpoint of grid vertices (row, col) and (row, col + 1).
+struct VertexRef {
+  uint32_t component = 0, row = 0, col = 0;
+  bool midpoint = false;
+};
+
+// How a close/slivers vertex is moved: to target + keep * (position - target), where target is
+// grid neighbour `dir` (kind 1) or the midpoint of neighbours dir and dir+1 (kind 2).
+struct Move {
+  uint8_t kind = 0, dir = 0;
+  double keep = 1;
+};
+// The six grid neighbours joined to a vertex by an edge, in order around it (cells are split
+// along the (row+1, col+1) diagonal), as (row, col) offsets.
+inline constexpr int kNeighbour[6][2] = {{1, 0}, {1, 1}, {0, 1}, {-1, 0}, {-1, -1}, {0, -1}};
 
 // One of 8 unit gradient directions, chosen by the top bits of a hash.
 inline const double* gradient(uint32_t hash) {
@@ -222,6 +340,7 @@ struct GeneratorOptions {
   uint32_t holes = 0;
   uint32_t components = 1;
   bool varyingDensity = false;
+  uint32_t pathologies = 0;  // Pathology bits
 };
 
 struct Component {
@@ -247,7 +366,29 @@ struct Component {
   uint64_t keptVertices = 0, keptTriangles = 0;
   uint64_t firstVertex = 0;    // global output index of this component's first vertex
   uint64_t firstGridFace = 0;  // global index of its first grid face (holes included)
-  uint64_t gridFaces() const { return 2ull * rows * cols; }
+  // Grid faces, then the third triangle of every split cell (tjunctions).
+  uint64_t gridFaces() const { return 2ull * rows * cols + extraFaces; }
+
+  // Pathologies (all off by default).
+  uint64_t key = 0;             // hash key of this component's pathology choices
+  bool uneven = false, noise = false;
+  bool seamRow = false, seamCol = false;  // an unwelded copy of row 0 / column 0 at index rows / cols
+  double closeShare = 0, sliverShare = 0;
+  std::vector<uint32_t> lines;  // tjunctions: vertex rows whose cells above are split, sorted
+  uint64_t extraFaces = 0;
+  // overlap: an open sheet over part of component `parent`, sampled at fractions u0 + du row,
+  // v0 + dv col of the parent's parameterization, `lift` above it (unit-torus units).
+  bool sheet = false;
+  uint32_t parent = 0;
+  double u0 = 0, du = 0, v0 = 0, dv = 0, lift = 0;
+
+  uint32_t vertexRows() const { return rows + (seamRow ? 1 : 0); }
+  uint32_t vertexCols() const { return cols + (seamCol ? 1 : 0); }
+  bool moves() const { return closeShare > 0 || sliverShare > 0; }
+  bool isLine(uint32_t row) const { return !lines.empty() && std::binary_search(lines.begin(), lines.end(), row); }
+  uint32_t lineIndex(uint32_t row) const {
+    return uint32_t(std::lower_bound(lines.begin(), lines.end(), row) - lines.begin());
+  }
 };
 
 class ScanGenerator {
@@ -261,23 +402,48 @@ class ScanGenerator {
   const std::vector<Component>& components() const { return components_; }
 
   // ---- vertices -------------------------------------------------------------------------------
+  static double unit(uint64_t hash) { return double(hash >> 11) * 0x1.0p-53; }  // [0, 1)
+
+  // Parameter fraction in [0,1) of a row / column, before the density warp.
+  static double rowFraction(const Component& c, uint32_t row) {
+    if (c.sheet) return c.u0 + c.du * double(row);
+    if (c.uneven) return (double(row) + kUnevenJitter * unit(hashKey(c.key ^ 0x0E7E'0001ull, row))) / double(c.rows);
+    return double(row) / double(c.rows);
+  }
+  static double colFraction(const Component& c, uint32_t col) {
+    if (c.sheet) return c.v0 + c.dv * double(col);
+    if (c.uneven) return (double(col) + kUnevenJitter * unit(hashKey(c.key ^ 0x0E7E'0002ull, col))) / double(c.cols);
+    return double(col) / double(c.cols);
+  }
+
   static RowParams rowParams(const Component& c, uint32_t row) {
     RowParams p;
-    double fraction = c.warpU.value(double(row) / double(c.rows));
+    double fraction = c.warpU.value(rowFraction(c, row));
     p.cosTheta = std::cos(kTwoPi * fraction);
     p.sinTheta = std::sin(kTwoPi * fraction);
+    p.row = row;
+    if (c.noise) p.step = kTwoPi * c.warpU.slope(fraction) * (c.sheet ? c.du : 1.0 / double(c.rows));
     for (int o = 0; o < c.octaves; ++o)
       p.octave[o] = axisSample(fraction, c.octave[o].shiftU, c.octave[o].periodU, c.octave[o].seedU);
     return p;
   }
   static ColParams colParams(const Component& c, uint32_t col) {
     ColParams p;
-    double fraction = c.warpV.value(double(col) / double(c.cols));
+    double fraction = c.warpV.value(colFraction(c, col));
     p.cosPhi = std::cos(kTwoPi * fraction);
     p.sinPhi = std::sin(kTwoPi * fraction);
+    p.col = col;
+    if (c.noise) p.step = kTwoPi * c.warpV.slope(fraction) * (c.sheet ? c.dv : 1.0 / double(c.cols));
     for (int o = 0; o < c.octaves; ++o)
       p.octave[o] = axisSample(fraction, c.octave[o].shiftV, c.octave[o].periodV, c.octave[o].seedV);
     return p;
+  }
+
+  // noise: a random offset along the normal, relative to the shorter local edge (tube units).
+  static double noiseAt(const Component& c, const RowParams& r, const ColParams& q) {
+    double edgeU = (c.major + c.minor * q.cosPhi) * r.step, edgeV = c.minor * q.step;
+    double h = unit(hashKey(c.key ^ 0x0015'E000ull, (uint64_t(r.row) << 32) | q.col));
+    return kNoiseAmplitude * std::min(edgeU, edgeV) * (2.0 * h - 1.0);
   }
 
   // Gradient noise of octave o at a point of row u, reduced to a linear function along the column
@@ -341,9 +507,11 @@ class ScanGenerator {
 
   // World position of grid vertex (row, col); also returns the displacement (for colours). Every
   // code path that needs a position goes through here, so positions are bit-identical everywhere.
+  // (This is the grid vertex before close/slivers move it: see finalPosition().)
   static void position(const Component& c, const RowParams& r, const ColParams& q, double out[3],
                        double* displacementOut = nullptr) {
     double d = displacement(c, r, q);
+    if (c.noise) d += noiseAt(c, r, q);
     placeVertex(c, r, q, d, out);
     if (displacementOut) *displacementOut = d;
   }
@@ -351,11 +519,13 @@ class ScanGenerator {
   static void position(const Component& c, const RowParams& r, const RowLattice& lattice, const ColParams& q,
                        double out[3], double* displacementOut = nullptr) {
     double d = lattice.displacement(c, q);
+    if (c.noise) d += noiseAt(c, r, q);
     placeVertex(c, r, q, d, out);
     if (displacementOut) *displacementOut = d;
   }
   static void placeVertex(const Component& c, const RowParams& r, const ColParams& q, double d, double out[3]) {
     double tube = c.minor + d;
+    if (c.sheet) tube += c.lift;
     double ring = c.major + tube * q.cosPhi;
     double local[3] = {c.scale * ring * r.cosTheta, c.scale * ring * r.sinTheta, c.scale * tube * q.sinPhi};
     const double* m = c.rotation;
@@ -363,9 +533,72 @@ class ScanGenerator {
     out[1] = c.center[1] + (m[3] * local[0] + m[4] * local[1] + m[5] * local[2]);
     out[2] = c.center[2] + (m[6] * local[0] + m[7] * local[1] + m[8] * local[2]);
   }
-  void position(uint32_t component, uint32_t row, uint32_t col, double out[3]) const {
-    const Component& c = components_[component];
+  // close, slivers: the move of grid vertex (row, col), kind 0 when it stays. Candidates are on
+  // even rows and columns (never two adjacent), not on the last row or column (whose neighbours
+  // wrap to row or column 0), not on a T-junction line, with all six triangles around them.
+  static Move moveOf(const Component& c, uint32_t row, uint32_t col) {
+    Move m;
+    if (!c.moves() || (row | col) & 1 || row + 1 >= c.rows || col + 1 >= c.cols || c.isLine(row)) return m;
+    uint64_t h = hashKey(c.key ^ 0x30FE'0000ull, (uint64_t(row) << 32) | col);
+    double pick = unit(h);
+    if (pick >= c.closeShare + c.sliverShare) return m;
+    uint32_t rowBefore = row == 0 ? c.rows - 1 : row - 1, colBefore = col == 0 ? c.cols - 1 : col - 1;
+    if (cellRemoved(c, row, col) || cellRemoved(c, rowBefore, colBefore) || cellRemoved(c, rowBefore, col) ||
+        cellRemoved(c, row, colBefore))
+      return m;
+    uint64_t h2 = mix64(h);
+    double strength = unit(h2);
+    m.dir = uint8_t((h2 & 0xFFFF) % 6);
+    if (pick < c.closeShare) {
+      m.kind = 1;
+      m.keep = 2e-5 * std::pow(25.0, strength);  // 2e-5 .. 5e-4 of the edge
+    } else if ((h2 >> 16) & 1) {
+      m.kind = 1;  // needle
+      m.keep = 0.03 + 0.07 * strength;
+    } else {
+      m.kind = 2;  // cap
+      m.keep = 0.02 + 0.06 * strength;
+    }
+    return m;
+  }
+  // Applies a move to p, given the neighbours dir and dir+1 (unmoved grid positions).
+  static void applyMove(const Move& m, const double n0[3], const double n1[3], double p[3]) {
+    for (int a = 0; a < 3; ++a) {
+      double target = m.kind == 1 ? n0[a] : 0.5 * (n0[a] + n1[a]);
+      p[a] = target + m.keep * (p[a] - target);
+    }
+  }
+  static uint32_t wrap(int64_t value, uint32_t period) {
+    return uint32_t(value < 0 ? value + period : value >= int64_t(period) ? value - period : value);
+  }
+
+  // World position of grid vertex (row, col) of a component, every pathology applied; row = rows
+  // and col = cols are the seam copies of row and column 0.
+  static void finalPosition(const Component& c, uint32_t row, uint32_t col, double out[3]) {
+    if (row >= c.rows) row -= c.rows;
+    if (col >= c.cols) col -= c.cols;
     position(c, rowParams(c, row), colParams(c, col), out);
+    Move m = moveOf(c, row, col);
+    if (m.kind == 0) return;
+    double n[2][3];
+    for (int k = 0; k < 2; ++k) {
+      const int* d = kNeighbour[(m.dir + k) % 6];
+      uint32_t r = wrap(int64_t(row) + d[0], c.rows), q = wrap(int64_t(col) + d[1], c.cols);
+      position(c, rowParams(c, r), colParams(c, q), n[k]);
+    }
+    applyMove(m, n[0], n[1], out);
+  }
+  void position(const VertexRef& v, double out[3]) const {
+    const Component& c = components_[v.component];
+    finalPosition(c, v.row, v.col, out);
+    if (!v.midpoint) return;
+    double b[3];
+    finalPosition(c, v.row, v.col + 1, b);
+    for (int a = 0; a < 3; ++a) out[a] = 0.5 * (out[a] + b[a]);
+  }
+  // Grid vertex (row, col); a col with kMidpointBit set is the T-junction vertex right of it.
+  void position(uint32_t component, uint32_t row, uint32_t col, double out[3]) const {
+    position(VertexRef{component, row, col & ~kMidpointBit, (col & kMidpointBit) != 0}, out);
   }
 
   // Dropped-vertex intervals of a vertex row (empty for rows not crossing a hole).
@@ -376,12 +609,17 @@ class ScanGenerator {
     return c.droppedVertices.data() + c.vertexRowStart[row + 1];
   }
 
-  // Output index of a kept vertex.
+  // Output index of a kept vertex (col may be the seam copy, cols).
   static uint32_t vertexIndex(const Component& c, uint32_t row, uint32_t col) {
     uint64_t index = c.firstVertex + c.keptBeforeRow[row] + col;
     for (const Interval* e = droppedBegin(c, row); e != droppedEnd(c, row) && e->hi < col; ++e)
       index -= e->hi - e->lo + 1;
     return uint32_t(index);
+  }
+  // Output index of the T-junction vertex right of (row, col), row a line: written after the
+  // row's grid vertices (line rows never lose a vertex to a hole).
+  static uint32_t midpointIndex(const Component& c, uint32_t row, uint32_t col) {
+    return uint32_t(c.firstVertex + c.keptBeforeRow[row] + c.vertexCols() + col);
   }
 
   static bool cellRemoved(const Component& c, uint32_t row, uint32_t col) {
@@ -393,22 +631,37 @@ class ScanGenerator {
   }
 
   // ---- faces ----------------------------------------------------------------------------------
-  // The two triangles of cell (row, col), oriented with the outward normal.
-  static void cellTriangles(const Component& c, uint32_t row, uint32_t col, uint32_t out[6]) {
-    uint32_t row1 = row + 1 == c.rows ? 0 : row + 1;
-    uint32_t col1 = col + 1 == c.cols ? 0 : col + 1;
+  // The vertex row and column after row / col, across the periodic seam (onto the seam copy when
+  // the seam is left unwelded).
+  static uint32_t nextRow(const Component& c, uint32_t row) {
+    return row + 1 == c.rows ? (c.seamRow ? c.rows : 0) : row + 1;
+  }
+  static uint32_t nextCol(const Component& c, uint32_t col) {
+    return col + 1 == c.cols ? (c.seamCol ? c.cols : 0) : col + 1;
+  }
+
+  // The triangles of cell (row, col), oriented with the outward normal: two, or three when the
+  // cell is on a T-junction line (its lower edge split at the midpoint m:
+  // (v00,v11,v01) becomes (v00,v11,m) and (m,v11,v01)). Returns the count.
+  static int cellTriangles(const Component& c, uint32_t row, uint32_t col, uint32_t out[9]) {
+    uint32_t row1 = nextRow(c, row), col1 = nextCol(c, col);
     uint32_t v00 = vertexIndex(c, row, col), v10 = vertexIndex(c, row1, col);
     uint32_t v11 = vertexIndex(c, row1, col1), v01 = vertexIndex(c, row, col1);
     out[0] = v00, out[1] = v10, out[2] = v11;
     out[3] = v00, out[4] = v11, out[5] = v01;
+    if (!c.isLine(row)) return 2;
+    uint32_t m = midpointIndex(c, row, col);
+    out[5] = m;
+    out[6] = m, out[7] = v11, out[8] = v01;
+    return 3;
   }
 
   // Appends the kept triangles of cell row `row`, in grid order, to `out` (3 indices each).
   static void cellRowTriangles(const Component& c, uint32_t row, std::vector<uint32_t>& out) {
-    uint32_t row1 = row + 1 == c.rows ? 0 : row + 1;
+    uint32_t row1 = nextRow(c, row);
     bool plain = c.vertexRowStart[row] == c.vertexRowStart[row + 1] &&
                  c.vertexRowStart[row1] == c.vertexRowStart[row1 + 1] &&
-                 c.cellRowStart[row] == c.cellRowStart[row + 1];
+                 c.cellRowStart[row] == c.cellRowStart[row + 1] && !c.isLine(row);
     if (plain) {  // no hole touches this row: indices are base + column
       uint32_t base0 = uint32_t(c.firstVertex + c.keptBeforeRow[row]);
       uint32_t base1 = uint32_t(c.firstVertex + c.keptBeforeRow[row1]);
@@ -416,42 +669,64 @@ class ScanGenerator {
       out.resize(at + 6 * size_t(c.cols));
       uint32_t* t = out.data() + at;
       for (uint32_t col = 0; col < c.cols; ++col, t += 6) {
-        uint32_t col1 = col + 1 == c.cols ? 0 : col + 1;
+        uint32_t col1 = nextCol(c, col);
         uint32_t v00 = base0 + col, v10 = base1 + col, v11 = base1 + col1, v01 = base0 + col1;
         t[0] = v00, t[1] = v10, t[2] = v11, t[3] = v00, t[4] = v11, t[5] = v01;
       }
       return;
     }
-    uint32_t tri[6];
+    uint32_t tri[9];
     for (uint32_t col = 0; col < c.cols; ++col) {
       if (cellRemoved(c, row, col)) continue;
-      cellTriangles(c, row, col, tri);
-      out.insert(out.end(), tri, tri + 6);
+      int n = cellTriangles(c, row, col, tri);
+      out.insert(out.end(), tri, tri + 3 * n);
     }
   }
 
   // Triangle of global grid face index f (0 .. gridFaceCount()-1); false when f lies in a hole.
-  // Component, cell and triangle are computed directly from f: this is what --shuffle uses.
-  bool gridTriangle(uint64_t f, uint32_t out[3], uint32_t corners[3][3] = nullptr) const {
+  // Component, cell and triangle are computed directly from f: this is what --shuffle uses. Faces
+  // are numbered in grid order, 2 per cell and 3 per split cell (tjunctions), so that f in order
+  // gives the same triangles in the same order as cellRowTriangles() row by row.
+  bool gridTriangle(uint64_t f, uint32_t out[3], VertexRef* corners) const {
     size_t ci = size_t(std::upper_bound(faceStarts_.begin(), faceStarts_.end(), f) - faceStarts_.begin()) - 1;
     const Component& c = components_[ci];
     uint64_t local = f - c.firstGridFace;
-    uint32_t cell = uint32_t(local >> 1);  // < rows*cols < 2^31: 32-bit division is enough
-    uint32_t row = cell / c.cols, col = cell % c.cols;
-    if (cellRemoved(c, row, col)) return false;
-    uint32_t tri[6];
-    cellTriangles(c, row, col, tri);
-    const uint32_t* t = tri + 3 * (local & 1);
-    out[0] = t[0], out[1] = t[1], out[2] = t[2];
-    if (corners) {  // grid coordinates (component, row, col) of the corners, for triangle soups
-      uint32_t row1 = row + 1 == c.rows ? 0 : row + 1;
-      uint32_t col1 = col + 1 == c.cols ? 0 : col + 1;
-      uint32_t rc[6][2] = {{row, col}, {row1, col}, {row1, col1}, {row, col}, {row1, col1}, {row, col1}};
-      for (int k = 0; k < 3; ++k) {
-        const uint32_t* g = rc[3 * (local & 1) + uint64_t(k)];
-        corners[k][0] = uint32_t(ci), corners[k][1] = g[0], corners[k][2] = g[1];
-      }
+    uint32_t row, col, which;
+    if (c.lines.empty()) {
+      uint32_t cell = uint32_t(local >> 1);  // < rows*cols < 2^31: 32-bit division is enough
+      row = cell / c.cols, col = cell % c.cols, which = uint32_t(local & 1);
+    } else {  // row r starts at 2 r cols + cols (lines before r): at most one step per line back
+      auto rowStart = [&](uint32_t r) { return 2ull * r * c.cols + uint64_t(c.cols) * c.lineIndex(r); };
+      row = uint32_t(std::min<uint64_t>(c.rows - 1, local / (2ull * c.cols)));
+      while (rowStart(row) > local) --row;
+      uint64_t offset = local - rowStart(row);
+      uint32_t perCell = c.isLine(row) ? 3 : 2;
+      col = uint32_t(offset / perCell), which = uint32_t(offset % perCell);
     }
+    if (cellRemoved(c, row, col)) return false;
+    uint32_t tri[9];
+    cellTriangles(c, row, col, tri);
+    const uint32_t* t = tri + 3 * which;
+    out[0] = t[0], out[1] = t[1], out[2] = t[2];
+    if (corners) {  // grid coordinates of the corners, for triangle soups
+      uint32_t row1 = nextRow(c, row), col1 = nextCol(c, col);
+      const uint32_t component = uint32_t(ci);
+      const VertexRef v00{component, row, col}, v10{component, row1, col}, v11{component, row1, col1},
+          v01{component, row, col1}, m{component, row, col, true};
+      const bool split = c.isLine(row);
+      const VertexRef refs[9] = {v00, v10, v11, v00, v11, split ? m : v01, m, v11, v01};
+      for (int k = 0; k < 3; ++k) corners[k] = refs[3 * which + uint32_t(k)];
+    }
+    return true;
+  }
+  // The same with corners as (component, row, col), kMidpointBit in col marking a T-junction vertex.
+  bool gridTriangle(uint64_t f, uint32_t out[3], uint32_t corners[3][3] = nullptr) const {
+    VertexRef refs[3];
+    if (!gridTriangle(f, out, corners ? refs : nullptr)) return false;
+    if (corners)
+      for (int k = 0; k < 3; ++k)
+        corners[k][0] = refs[k].component, corners[k][1] = refs[k].row,
+        corners[k][2] = refs[k].col | (refs[k].midpoint ? kMidpointBit : 0);
     return true;
   }
 
@@ -461,6 +736,9 @@ class ScanGenerator {
   void chooseGrid(Component& c, uint64_t gridFaces) const;
   bool placeHoles(Component& c, uint32_t index, const std::vector<double>& sizes) const;
   void setNoise(Component& c, uint32_t index) const;
+  void setPathologies(Component& c, uint32_t index) const;
+  static void chooseLines(Component& c);
+  Component makeSheet(uint32_t parent, int64_t triangles) const;
   static void buildHoleTables(Component& c);
   static void fitGridAroundHoles(Component& c, int64_t wantTriangles);
 
@@ -502,6 +780,7 @@ inline void ScanGenerator::shapeComponent(Component& c, uint32_t index, uint32_t
 inline void ScanGenerator::chooseGrid(Component& c, uint64_t gridFaces) const {
   uint64_t cells = std::max<uint64_t>(9, (gridFaces + 1) / 2);
   double aspect = c.major / c.minor;
+  if (options_.pathologies & kAnisotropic) aspect /= kAnisotropy;  // fewer, hence longer, rows
   double idealRows = std::sqrt(double(cells) * aspect);
   uint64_t lo = std::max<uint64_t>(3, uint64_t(idealRows * 0.85));
   uint64_t hi = std::max<uint64_t>(lo, uint64_t(idealRows * 1.15) + 1);
@@ -675,32 +954,100 @@ inline void ScanGenerator::buildHoleTables(Component& c) {
       prev = here, prevLo = lo, prevHi = hi;
     }
   }
+  if (c.sheet) {  // an open grid: the cells across the wrap-around are not there (no vertex is lost)
+    for (uint32_t a = 0; a + 1 < c.rows; ++a) cellEntries.push_back({a, {c.cols - 1, c.cols - 1}});
+    cellEntries.push_back({c.rows - 1, {0, c.cols - 1}});
+  }
   auto byRowThenColumn = [](const Entry& a, const Entry& b) {
     return a.row != b.row ? a.row < b.row : a.span.lo < b.span.lo;
   };
-  auto toCsr = [&](std::vector<Entry>& entries, std::vector<uint32_t>& start, std::vector<Interval>& spans) {
+  auto toCsr = [&](std::vector<Entry>& entries, uint32_t rows, std::vector<uint32_t>& start,
+                   std::vector<Interval>& spans) {
     std::sort(entries.begin(), entries.end(), byRowThenColumn);
-    start.assign(size_t(c.rows) + 1, 0);
+    start.assign(size_t(rows) + 1, 0);
     for (const Entry& e : entries) ++start[e.row + 1];
-    for (uint32_t r = 0; r < c.rows; ++r) start[r + 1] += start[r];
+    for (uint32_t r = 0; r < rows; ++r) start[r + 1] += start[r];
     spans.clear();
     for (const Entry& e : entries) spans.push_back(e.span);
   };
-  toCsr(cellEntries, c.cellRowStart, c.removedCells);
-  toCsr(vertexEntries, c.vertexRowStart, c.droppedVertices);
+  toCsr(cellEntries, c.rows, c.cellRowStart, c.removedCells);
+  toCsr(vertexEntries, c.vertexRows(), c.vertexRowStart, c.droppedVertices);
 
-  c.keptBeforeRow.assign(size_t(c.rows) + 1, 0);
-  uint64_t removed = 0;
-  for (uint32_t r = 0; r < c.rows; ++r) {
+  c.keptBeforeRow.assign(size_t(c.vertexRows()) + 1, 0);
+  for (uint32_t r = 0; r < c.vertexRows(); ++r) {
     uint64_t dropped = 0;
     for (uint32_t e = c.vertexRowStart[r]; e < c.vertexRowStart[r + 1]; ++e)
       dropped += c.droppedVertices[e].hi - c.droppedVertices[e].lo + 1;
-    c.keptBeforeRow[r + 1] = c.keptBeforeRow[r] + c.cols - dropped;
+    c.keptBeforeRow[r + 1] = c.keptBeforeRow[r] + c.vertexCols() - dropped + (c.isLine(r) ? c.cols : 0);
+  }
+  uint64_t removed = 0;
+  for (uint32_t r = 0; r < c.rows; ++r)
     for (uint32_t e = c.cellRowStart[r]; e < c.cellRowStart[r + 1]; ++e)
       removed += c.removedCells[e].hi - c.removedCells[e].lo + 1;
+  c.extraFaces = uint64_t(c.lines.size()) * c.cols;
+  c.keptVertices = c.keptBeforeRow[c.vertexRows()];
+  c.keptTriangles = 2ull * c.rows * c.cols - 2 * removed + c.extraFaces;
+}
+
+// The per-component switches and the hash key of the pathologies (holes and grid are chosen).
+inline void ScanGenerator::setPathologies(Component& c, uint32_t index) const {
+  const uint32_t p = options_.pathologies;
+  c.key = hashKey(options_.seed, 0x9A70'0000'0000ull + index);
+  c.uneven = (p & kUneven) != 0;
+  c.noise = (p & kNoise) != 0;
+  c.seamRow = c.seamCol = (p & kSeams) != 0;
+  c.closeShare = p & kClose ? kCloseShare : 0.0;
+  c.sliverShare = p & kSlivers ? kSliverShare : 0.0;
+  if (p & kTJunctions) chooseLines(c);
+}
+
+// T-junction lines: up to kMaxTJunctionLines vertex rows spread over the component, each with no
+// hole in the cell rows either side (so every split cell and its neighbour below exist) and away
+// from the row seam.
+inline void ScanGenerator::chooseLines(Component& c) {
+  c.lines.clear();
+  if (c.rows < 8) return;
+  auto clear = [&](uint32_t r) {
+    for (const Hole& h : c.holes)
+      if (int64_t(r) >= int64_t(h.rowLo) && int64_t(r) - 1 <= int64_t(h.rowHi)) return false;
+    return true;
+  };
+  const uint32_t count = std::min<uint32_t>(kMaxTJunctionLines, c.rows / 8);
+  for (uint32_t k = 0; k < count; ++k) {
+    uint32_t from = uint32_t((2ull * k + 1) * c.rows / (2ull * count)), to = uint32_t((2ull * k + 2) * c.rows / (2ull * count));
+    for (uint32_t r = std::max<uint32_t>(from, 2); r < to && r + 2 <= c.rows; ++r)
+      if (clear(r) && (c.lines.empty() || c.lines.back() + 2 < r)) {
+        c.lines.push_back(r);
+        break;
+      }
   }
-  c.keptVertices = c.keptBeforeRow[c.rows];
-  c.keptTriangles = c.gridFaces() - 2 * removed;
+}
+
+// overlap: the second scan pass over component `parent`, about `triangles` triangles, a quarter
+// of the way around the tube and as far around the major circle as the budget allows (at most
+// half), at a random place that does not cross the seams.
+inline Component ScanGenerator::makeSheet(uint32_t parent, int64_t triangles) const {
+  const Component& p = components_[parent];
+  Component s = p;
+  s.holes.clear();
+  s.lines.clear();
+  s.seamRow = s.seamCol = false;
+  s.uneven = false;
+  s.closeShare = s.sliverShare = 0;
+  s.sheet = true;
+  s.parent = parent;
+  s.key = hashKey(options_.seed, 0x5EE7'0000'0000ull + parent);
+  s.du = kSheetSpacing / double(p.rows);
+  s.dv = kSheetSpacing / double(p.cols);
+  s.cols = std::max<uint32_t>(3, uint32_t(std::lround(0.25 / s.dv)));
+  uint32_t rows = uint32_t(std::max<int64_t>(2, std::llround(double(triangles) / (2.0 * (s.cols - 1))))) + 1;
+  s.rows = std::max<uint32_t>(3, std::min(rows, uint32_t(0.5 / s.du)));
+  Rng rng(s.key);
+  s.u0 = 0.02 + (0.96 - s.du * s.rows) * rng.uniform();
+  s.v0 = 0.02 + (0.96 - s.dv * s.cols) * rng.uniform();
+  s.lift = kSheetLift * std::min(kTwoPi * p.major / double(p.rows), kTwoPi * p.minor / double(p.cols));
+  buildHoleTables(s);
+  return s;
 }
 
 inline void ScanGenerator::build() {
@@ -729,6 +1076,13 @@ inline void ScanGenerator::build() {
     assigned += budget[i];
   }
   for (uint32_t i = 0; assigned < o.triangles; i = (i + 1) % count) ++budget[i], ++assigned;
+  // overlap: the sheets' share comes out of the components' budgets.
+  std::vector<uint64_t> sheetBudget(count, 0);
+  if (o.pathologies & kOverlap)
+    for (uint32_t i = 0; i < count; ++i) {
+      sheetBudget[i] = uint64_t(std::llround(kSheetShare * double(budget[i])));
+      budget[i] = std::max(kMinComponentTriangles, budget[i] - sheetBudget[i]);
+    }
 
   // Hole sizes are stratified over [0,1] (so there are always small and large ones) and dealt to
   // the components in proportion to their triangle budgets (D'Hondt: the next hole goes to the
@@ -751,7 +1105,12 @@ inline void ScanGenerator::build() {
     // Holes remove cells, so grow the grid until the kept triangles match the budget. The hole
     // layout is re-drawn for each grid, so on small grids the count jumps a little with the grid
     // size: a few fixed-point steps, then a scan of nearby grid sizes if still more than 0.1% off.
-    const int64_t want = int64_t(budget[i]);
+    int64_t want = int64_t(budget[i]);
+    if (o.pathologies & kTJunctions) {  // the split cells' third triangles come out of the budget
+      chooseGrid(c, uint64_t(want));
+      int64_t extra = int64_t(std::min<uint32_t>(kMaxTJunctionLines, c.rows / 8)) * c.cols;
+      want = std::max(int64_t(kMinComponentTriangles), want - extra);
+    }
     Component best;
     int64_t bestError = INT64_MAX;
     auto tryGrid = [&](int64_t grid) -> int64_t {  // returns kept triangles, -1 if holes do not fit
@@ -780,6 +1139,7 @@ inline void ScanGenerator::build() {
                                   std::to_string(want) + " triangles: ask for fewer holes or more triangles");
     if (bestError > want / 1000) fitGridAroundHoles(best, want);
     c = best;
+    if (o.pathologies) setPathologies(c, i);
     buildHoleTables(c);
     setNoise(c, i);
   }
@@ -799,6 +1159,10 @@ inline void ScanGenerator::build() {
     for (int axis = 0; axis < 3; ++axis)
       c.center[axis] = (double(cell[axis]) - 0.5 * (side - 1)) * spacing + (rng.uniform() - 0.5) * 0.1 * reach;
   }
+
+  if (o.pathologies & kOverlap)  // after placement: a sheet shares its component's centre and rotation
+    for (uint32_t i = 0; i < count; ++i)
+      components_.push_back(makeSheet(i, std::max<int64_t>(8, int64_t(sheetBudget[i]))));
 
   uint64_t vertices = 0, triangles = 0, faces = 0;
   for (Component& c : components_) {

@@ -1,0 +1,269 @@
+// Builds of scan-like meshes keep the product's promises: for every mtgen scan pathology and for
+// meshes derived from real scanned models (../shared/tools/scangen.cpp on Debian's libcgal-demo
+// models), with both codecs and both partitions, mtbuild succeeds, `mtverify --cuts 32` says OK,
+// and a cut at a middle error is written without dropping degenerate triangles and without more
+// boundary or non-manifold edges than the finest cut has.
+//
+// The builds run two (or more, on larger machines) at a time, each tool with one thread, so the
+// whole file takes about a minute and a half on two cores.
+#include <gtest/gtest.h>
+
+#include <sys/wait.h>
+
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <map>
+#include <regex>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <unordered_map>
+#include <vector>
+
+#include "tests/test_support.h"
+
+namespace {
+
+using mt::test::fileExists;
+using mt::test::readFile;
+using mt::test::runTool;
+using mt::test::TempDir;
+
+const std::string kSourceDir = MT_SOURCE_DIR;
+const std::string kBuildDir = MT_BUILD_DIR;
+
+mt::test::CommandResult runShell(const std::string& command) {
+  mt::test::CommandResult result;
+  FILE* pipe = popen((command + " 2>&1").c_str(), "r");
+  if (!pipe) return result;
+  char buf[4096];
+  size_t n;
+  while ((n = fread(buf, 1, sizeof buf, pipe)) > 0) result.output.append(buf, n);
+  int status = pclose(pipe);
+  result.exitCode = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return result;
+}
+
+// ---- the cut's topology -------------------------------------------------------------------------
+
+struct CutTopology {
+  uint64_t triangles = 0, boundaryEdges = 0, nonManifoldEdges = 0;
+  std::string error;  // why the file could not be read
+};
+
+// Binary little-endian PLY with float or double x,y,z (other vertex properties skipped) and
+// triangles as a uchar-counted int list; edges by vertex index (mtextract writes welded cuts).
+CutTopology cutTopology(const std::string& path) {
+  CutTopology t;
+  std::string bytes = readFile(path);
+  size_t end = bytes.find("end_header\n");
+  if (end == std::string::npos) return t.error = path + ": no PLY header", t;
+  std::istringstream header(bytes.substr(0, end));
+  std::string line, element;
+  uint64_t vertices = 0, faces = 0;
+  size_t vertexBytes = 0;
+  while (std::getline(header, line)) {
+    std::istringstream ls(line);
+    std::string word, type;
+    ls >> word;
+    if (word == "element") {
+      ls >> element;
+      ls >> (element == "vertex" ? vertices : faces);
+    } else if (word == "property" && element == "vertex") {
+      ls >> type;
+      vertexBytes += type == "double" ? 8 : type == "float" || type == "int" || type == "uint" ? 4 : type == "short" || type == "ushort" ? 2 : 1;
+    } else if (word == "property" && element == "face") {
+      std::string count, index;
+      ls >> type >> count >> index;
+      if (type != "list" || count != "uchar" || (index != "int" && index != "uint"))
+        return t.error = path + ": unexpected face property: " + line, t;
+    }
+  }
+  size_t at = end + std::strlen("end_header\n") + vertexBytes * vertices;
+  if (at + 13 * faces != bytes.size()) return t.error = path + ": size does not match the header", t;
+  std::unordered_map<uint64_t, uint32_t> uses;
+  uses.reserve(size_t(faces) * 2);
+  for (uint64_t f = 0; f < faces; ++f, at += 13) {
+    if (uint8_t(bytes[at]) != 3) return t.error = path + ": a face is not a triangle", t;
+    uint32_t v[3];
+    std::memcpy(v, &bytes[at + 1], 12);
+    for (int k = 0; k < 3; ++k) {
+      uint32_t a = v[k], b = v[(k + 1) % 3];
+      ++uses[(uint64_t(std::min(a, b)) << 32) | std::max(a, b)];
+    }
+  }
+  t.triangles = faces;
+  for (auto& [edge, n] : uses) t.boundaryEdges += n == 1, t.nonManifoldEdges += n > 2;
+  return t;
+}
+
+// ---- one build ----------------------------------------------------------------------------------
+
+struct Mesh {
+  std::string name, path;
+};
+
+struct Job {
+  const Mesh* mesh = nullptr;
+  std::string codec, partition;
+  // results
+  bool built = false, verified = false, extracted = false;
+  std::string log;  // the tools' outputs, for the failure message
+  std::string weld;  // mtbuild's grid-weld line, if any
+  double middleError = 0, seconds = 0;
+  CutTopology finest, middle;
+  std::string label() const { return mesh->name + " --codec " + codec + " --partition " + partition; }
+};
+
+// "errorMax": values of mtinfo --json, coarsest level last.
+std::vector<double> levelErrors(const std::string& json) {
+  std::vector<double> errors;
+  static const std::regex pattern("\"errorMax\": *([0-9.eE+-]+)");
+  for (std::sregex_iterator it(json.begin(), json.end(), pattern), end; it != end; ++it)
+    errors.push_back(std::stod((*it)[1]));
+  return errors;
+}
+
+std::string lastLine(const std::string& text) {
+  size_t end = text.find_last_not_of('\n');
+  if (end == std::string::npos) return "";
+  size_t start = text.rfind('\n', end);
+  return text.substr(start == std::string::npos ? 0 : start + 1, end + 1 - (start == std::string::npos ? 0 : start + 1));
+}
+
+void runJob(Job& job, const std::string& dir, size_t index) {
+  auto start = std::chrono::steady_clock::now();
+  const std::string mt = dir + "/build" + std::to_string(index) + ".mt";
+  auto build = runTool("mtbuild", job.mesh->path + " -o " + mt + " --codec " + job.codec + " --partition " +
+                                      job.partition + " --threads 1 --memory 256M");
+  job.log += "$ mtbuild ...\n" + build.output;
+  job.built = build.exitCode == 0;
+  std::smatch weld;
+  static const std::regex weldPattern("grid weld: [0-9]+ vertices[^\n]*");
+  if (std::regex_search(build.output, weld, weldPattern)) job.weld = weld.str();
+  if (!job.built) return;
+
+  auto verify = runTool("mtverify", mt + " --cuts 32 --quiet");
+  job.log += "$ mtverify --cuts 32\n" + verify.output;
+  job.verified = verify.exitCode == 0 && lastLine(verify.output) == "OK";
+
+  auto info = runTool("mtinfo", mt + " --json");
+  std::vector<double> errors = levelErrors(info.output);
+  if (errors.size() < 2) {
+    job.log += "$ mtinfo --json: no per-level errors\n" + info.output;
+    return;
+  }
+  job.middleError = errors[errors.size() / 2];
+  bool ok = true;
+  for (auto [error, cut, out] : {std::tuple{0.0, &job.finest, dir + "/finest" + std::to_string(index) + ".ply"},
+                                 std::tuple{job.middleError, &job.middle, dir + "/middle" + std::to_string(index) + ".ply"}}) {
+    char text[64];
+    std::snprintf(text, sizeof text, "%.9g", error);
+    auto extract = runTool("mtextract", mt + " --error " + text + " -o " + out);
+    job.log += "$ mtextract --error " + std::string(text) + "\n" + extract.output;
+    if (extract.exitCode != 0 || extract.output.find("degenerate") != std::string::npos) ok = false;
+    if (extract.exitCode == 0) *cut = cutTopology(out);
+    std::filesystem::remove(out);
+  }
+  job.extracted = ok;
+  std::filesystem::remove(mt);
+  job.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+// Every mesh with both codecs and both partitions, a few builds at a time; then the checks.
+void buildAndCheck(const std::vector<Mesh>& meshes, const TempDir& dir) {
+  std::vector<Job> jobs;
+  for (const Mesh& mesh : meshes)
+    for (const char* codec : {"meshopt", "draco"})
+      for (const char* partition : {"irregular", "regular"}) jobs.push_back(Job{&mesh, codec, partition});
+  const size_t workers = std::clamp<size_t>(std::thread::hardware_concurrency(), 2, 4);
+  std::atomic<size_t> next{0};
+  std::vector<std::thread> pool;
+  for (size_t w = 0; w < workers; ++w)
+    pool.emplace_back([&] {
+      for (size_t j; (j = next++) < jobs.size();) runJob(jobs[j], dir.path(), j);
+    });
+  for (auto& t : pool) t.join();
+
+  for (const Job& job : jobs) {
+    SCOPED_TRACE(job.label());
+    EXPECT_TRUE(job.built) << job.log;
+    if (!job.built) continue;
+    EXPECT_TRUE(job.verified) << "mtverify --cuts 32 is not OK:\n" << job.log;
+    EXPECT_TRUE(job.extracted) << "mtextract failed or dropped degenerate triangles:\n" << job.log;
+    EXPECT_EQ(job.finest.error + job.middle.error, "");
+    EXPECT_GT(job.middle.triangles, 0u);
+    EXPECT_LT(job.middle.triangles, job.finest.triangles);
+    // A cut may simplify the input's open borders and non-manifold edges, never add any.
+    EXPECT_LE(job.middle.boundaryEdges, job.finest.boundaryEdges) << job.log;
+    EXPECT_LE(job.middle.nonManifoldEdges, job.finest.nonManifoldEdges) << job.log;
+    std::printf("%-58s %5.1f s  middle cut %8llu triangles at %-10.4g %s\n", job.label().c_str(), job.seconds,
+                (unsigned long long)job.middle.triangles, job.middleError, job.weld.c_str());
+  }
+}
+
+// ---- the meshes ---------------------------------------------------------------------------------
+
+TEST(RealScans, EveryMtgenPathologyKeepsThePromises) {
+  TempDir dir;
+  std::vector<Mesh> meshes;
+  for (const std::string pathology :
+       {"close", "slivers", "anisotropic", "uneven", "overlap", "seams", "tjunctions", "noise", "all"}) {
+    Mesh m{"mtgen --pathology " + pathology, dir.file(pathology + ".ply")};
+    // Holes too: the pathologies meet open borders in real scans.
+    auto r = runTool("mtgen", "-o " + m.path + " --triangles 100k --holes 6 --seed 11 --pathology " + pathology);
+    ASSERT_EQ(r.exitCode, 0) << r.output;
+    meshes.push_back(m);
+  }
+  buildAndCheck(meshes, dir);
+}
+
+TEST(RealScans, ScanDerivedMeshesKeepThePromises) {
+  const std::string scangenSource = kSourceDir + "/../shared/tools/scangen.cpp";
+  ASSERT_TRUE(fileExists(scangenSource))
+      << scangenSource << " is missing: the scan-derived meshes are made by ../shared/tools/scangen.cpp, so the "
+      << "shared/ directory must be beside the repository (then re-run cmake to build the scangen target)";
+  ASSERT_TRUE(fileExists(mt::test::binDir() + "/scangen"))
+      << "build/bin/scangen is missing: re-run cmake (it builds the scangen target when " << scangenSource
+      << " exists) and build it";
+  const std::string bases = kBuildDir + "/scan-bases";
+  auto fetched = runShell(kSourceDir + "/scripts/scan_bases.sh " + bases);  // does nothing when complete
+  ASSERT_EQ(fetched.exitCode, 0) << "scripts/scan_bases.sh " << bases << " could not fetch the base models:\n"
+                                 << fetched.output;
+  TempDir dir;
+  struct Recipe {
+    const char* base;
+    int levels;
+    const char* options;
+  };
+  // Five real scanned models, 0.14-0.32 M triangles, with scangen's face shuffling, holes and
+  // displacement amplitude varied.
+  const Recipe recipes[] = {{"ChineseDragon-10kv", 2, "--shuffle 3"},
+                            {"camel", 2, "--holes 0.3"},
+                            {"lion-head", 2, "--amp 0.008"},
+                            {"man", 1, "--shuffle 7 --amp 0.002"},
+                            {"bull", 2, "--holes 0.25 --shuffle 5"}};
+  std::vector<Mesh> meshes;
+  for (const Recipe& r : recipes) {
+    std::string args = std::string(r.base) + " " + std::to_string(r.levels) + " " + r.options;
+    Mesh m{"scangen " + args, dir.file(std::string(r.base) + ".ply")};
+    auto made = runTool("scangen", bases + "/" + r.base + ".off " + std::to_string(r.levels) + " " + m.path + " " + r.options);
+    ASSERT_EQ(made.exitCode, 0) << made.output;
+    static const std::regex count("([0-9]+) triangles");
+    std::smatch triangles;
+    ASSERT_TRUE(std::regex_search(made.output, triangles, count)) << made.output;
+    double n = std::stod(triangles[1]);
+    EXPECT_GE(n, 1e5) << args;
+    EXPECT_LE(n, 5e5) << args;
+    meshes.push_back(m);
+  }
+  buildAndCheck(meshes, dir);
+}
+
+}  // namespace
