@@ -38,17 +38,7 @@ using mt::test::TempDir;
 const std::string kSourceDir = MT_SOURCE_DIR;
 const std::string kBuildDir = MT_BUILD_DIR;
 
-mt::test::CommandResult runShell(const std::string& command) {
-  mt::test::CommandResult result;
-  FILE* pipe = popen((command + " 2>&1").c_str(), "r");
-  if (!pipe) return result;
-  char buf[4096];
-  size_t n;
-  while ((n = fread(buf, 1, sizeof buf, pipe)) > 0) result.output.append(buf, n);
-  int status = pclose(pipe);
-  result.exitCode = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return result;
-}
+using mt::test::runShell;
 
 // ---- the cut's topology -------------------------------------------------------------------------
 
