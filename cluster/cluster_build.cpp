@@ -35,9 +35,9 @@
 #include <sstream>
 
 #include "cluster/region_messages.h"
-#include "patchstore/byte_io.h"
-#include "patchstore/error.h"
-#include "patchstore/interrupt.h"
+#include "base/byte_io.h"
+#include "base/error.h"
+#include "base/interrupt.h"
 
 namespace mt::cluster {
 

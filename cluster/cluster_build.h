@@ -7,7 +7,7 @@
 #include <string>
 
 #include "mtbuild/build.h"
-#include "patchstore/error.h"
+#include "base/error.h"
 
 namespace mt::cluster {
 

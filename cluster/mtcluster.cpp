@@ -9,7 +9,7 @@
 #include <fstream>
 
 #include "cluster/cluster_build.h"
-#include "patchstore/interrupt.h"
+#include "base/interrupt.h"
 #include "patchstore/patch_store.h"
 #include "tools/build_cli.h"
 

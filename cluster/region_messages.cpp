@@ -6,7 +6,7 @@
 
 #include <cstring>
 
-#include "patchstore/byte_io.h"
+#include "base/byte_io.h"
 
 namespace mt::cluster {
 

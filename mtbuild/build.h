@@ -15,7 +15,7 @@
 
 #include "mtbuild/mt_format.h"
 #include "mtbuild/patch_codec.h"
-#include "patchstore/error.h"
+#include "base/error.h"
 #include "patchstore/patch_store.h"
 #include "vpartition/vpartition.h"
 

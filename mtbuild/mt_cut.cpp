@@ -19,7 +19,7 @@
 #include <thread>
 #include <unordered_map>
 
-#include "patchstore/error.h"
+#include "base/error.h"
 
 namespace mt {
 

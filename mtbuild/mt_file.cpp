@@ -12,7 +12,7 @@
 #include <type_traits>
 #include <string>
 
-#include "patchstore/error.h"
+#include "base/error.h"
 
 namespace mt {
 

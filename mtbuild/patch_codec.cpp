@@ -22,7 +22,7 @@
 #include <draco/mesh/mesh.h>
 
 #include "mtbuild/fan_order.h"
-#include "patchstore/error.h"
+#include "base/error.h"
 
 namespace mt {
 

@@ -9,7 +9,7 @@
 #include <string>
 
 #include "mtbuild/surface_distance.h"
-#include "patchstore/error.h"
+#include "base/error.h"
 #include "patchstore/patch_store.h"
 
 namespace mt {

@@ -6,7 +6,7 @@
 #include <glm/gtc/matrix_transform.hpp>
 #include <sstream>
 
-#include "patchstore/error.h"
+#include "base/error.h"
 
 namespace mt::render {
 

@@ -8,7 +8,7 @@
 #include <chrono>
 #include <cstdio>
 
-#include "patchstore/error.h"
+#include "base/error.h"
 
 namespace mt::render {
 

@@ -10,7 +10,7 @@
 #include <glm/gtc/type_ptr.hpp>
 #include <string>
 
-#include "patchstore/error.h"
+#include "base/error.h"
 
 namespace mt::render {
 

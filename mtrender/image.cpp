@@ -5,8 +5,8 @@
 #include <cstdio>
 #include <cstring>
 
-#include "patchstore/error.h"
-#include "patchstore/output_path.h"
+#include "base/error.h"
+#include "base/output_path.h"
 
 namespace mt::render {
 

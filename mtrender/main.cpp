@@ -20,9 +20,9 @@
 
 #include "mtrender/engine.h"
 #include "mtrender/viewer.h"
-#include "patchstore/error.h"
-#include "patchstore/output_path.h"
-#include "patchstore/patch_store.h"
+#include "base/error.h"
+#include "base/output_path.h"
+#include "base/size.h"
 #include "tools/cli_checks.h"
 
 using namespace mt::render;

@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "patchstore/error.h"
+#include "base/error.h"
 
 namespace mt::render {
 

@@ -5,7 +5,7 @@
 #include <cstdio>
 #include <cstring>
 
-#include "patchstore/error.h"
+#include "base/error.h"
 
 namespace mt::render {
 

@@ -4,7 +4,7 @@
 #include <cmath>
 #include <limits>
 
-#include "patchstore/error.h"
+#include "base/error.h"
 
 namespace mt::render {
 

@@ -4,7 +4,7 @@
 // budget. Payloads are not read here: PatchServer reads them on demand through the readers.
 //
 // mtrender depends on mtbuild/mt_file.h (the MT file format and its reader, library mt_mtfile)
-// and patchstore/error.h only.
+// and base/error.h only.
 #pragma once
 
 #include <algorithm>

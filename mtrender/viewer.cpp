@@ -14,8 +14,8 @@
 #include <cstdio>
 #include <fstream>
 
-#include "patchstore/error.h"
-#include "patchstore/output_path.h"
+#include "base/error.h"
+#include "base/output_path.h"
 
 namespace mt::render {
 

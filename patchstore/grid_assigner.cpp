@@ -7,7 +7,7 @@
 #include <unordered_set>
 
 #include "patchstore/cell_assigner.h"
-#include "patchstore/error.h"
+#include "base/error.h"
 
 namespace mt {
 

@@ -66,14 +66,15 @@
 #include <thread>
 #include <sstream>
 
-#include "patchstore/byte_io.h"
-#include "patchstore/external_sort.h"
-#include "patchstore/file_lock.h"
-#include "patchstore/interrupt.h"
-#include "patchstore/output_path.h"
-#include "patchstore/progress.h"
+#include "base/process.h"
+#include "base/byte_io.h"
+#include "base/external_sort.h"
+#include "base/file_lock.h"
+#include "base/interrupt.h"
+#include "base/output_path.h"
+#include "base/progress.h"
 #include "patchstore/store_impl.h"
-#include "patchstore/temp_file.h"
+#include "base/temp_file.h"
 
 namespace mt {
 
@@ -734,26 +735,6 @@ uint64_t weldSoup(const std::string& scratch, const VertexRecordLayout& layout, 
 
 
 // Resident set size now (VmRSS), to size the passes that follow the resident vertex records.
-uint64_t currentRssBytes() {
-  FILE* f = std::fopen("/proc/self/statm", "r");
-  if (!f) return 0;
-  unsigned long long size = 0, resident = 0;
-  int n = std::fscanf(f, "%llu %llu", &size, &resident);
-  std::fclose(f);
-  return n == 2 ? uint64_t(resident) * uint64_t(sysconf(_SC_PAGESIZE)) : 0;
-}
-// The resident set's high-water mark so far (VmHWM).
-uint64_t peakRssSoFar() {
-  FILE* f = std::fopen("/proc/self/status", "r");
-  if (!f) return 0;
-  char line[256];
-  unsigned long long kb = 0;
-  while (std::fgets(line, sizeof line, f))
-    if (std::sscanf(line, "VmHWM: %llu kB", &kb) == 1) break;
-  std::fclose(f);
-  return uint64_t(kb) << 10;
-}
-
 // Per-stage wall and CPU seconds (all threads) on stderr with the progress lines, so that the
 // stages can be compared on a busy machine, where wall time says little (bench/ingest.sh); with
 // the resident set at the end of the stage, to see where the cap goes.
@@ -765,7 +746,7 @@ class StageClock {
     if (!enabled_) return;
     double wall = now(), cpu = cpuSeconds();
     std::fprintf(stderr, "ingest: stage %s: %.2f s wall, %.2f s cpu, rss %.0f MiB (peak %.0f)\n", stage, wall - wall_,
-                 cpu - cpu_, double(currentRssBytes()) / double(1 << 20), double(peakRssSoFar()) / double(1 << 20));
+                 cpu - cpu_, double(currentRssBytes()) / double(1 << 20), double(peakRssBytes()) / double(1 << 20));
     wall_ = wall;
     cpu_ = cpu;
   }

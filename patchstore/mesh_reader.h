@@ -17,7 +17,7 @@
 #include <memory>
 #include <string>
 
-#include "patchstore/error.h"
+#include "base/error.h"
 
 namespace mt {
 

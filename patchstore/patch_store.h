@@ -22,7 +22,7 @@
 #include <vector>
 
 #include "patchstore/cell_assigner.h"
-#include "patchstore/env.h"
+#include "base/env.h"
 #include "patchstore/mesh_reader.h"
 
 namespace mt {
@@ -256,18 +256,5 @@ class PatchStore {
   std::unique_ptr<Impl> impl_;
   std::string dir_;
 };
-
-// "256M", "4G", "512MiB", "1000000" -> bytes (units are powers of 1024). Throws mt::Error, with
-// the accepted form and range, on garbage, NaN, infinity, a sign, zero, less than one byte or
-// more than 1 PiB; the message starts with "OPTION: " when `option` is given.
-uint64_t parseSize(const std::string& text, const std::string& option = {});
-// Peak resident set size of this process so far (VmHWM), in bytes.
-uint64_t peakRssBytes();
-// glibc malloc settings for long streaming passes under a memory cap (ingest, mtbuild's level
-// loop): buffers of 1 MiB or more get their own mapping, so what a pass frees leaves the process
-// at once (glibc's dynamic threshold would keep them in the heap, resident behind live blocks);
-// and up to 8 MiB free at a heap's top is kept, so the per-patch and per-region buffers freed and
-// allocated all the time are not returned and faulted in again. Process-wide; call before a pass.
-void useStreamingAllocator();
 
 }  // namespace mt

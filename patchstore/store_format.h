@@ -12,7 +12,7 @@
 //                      BlockHeader + payload. A block is referenced from the manifest by a
 //                      BlockHandle (segment, offset, size, checksum), so it is verified twice.
 //   tmp/               scratch space for ingest and healing (deleted on success).
-//   LOCK               while a writer has the store open: its PID, flock()ed (patchstore/file_lock.h).
+//   LOCK               while a writer has the store open: its PID, flock()ed (base/file_lock.h).
 //                      Removed when it closes; one left by a killed writer is not held, so it is
 //                      simply taken by the next one.
 //

@@ -9,7 +9,7 @@
 #include <string>
 #include <vector>
 
-#include "patchstore/file_lock.h"
+#include "base/file_lock.h"
 #include "patchstore/patch_store.h"
 #include "patchstore/store_format.h"
 

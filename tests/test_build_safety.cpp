@@ -19,7 +19,7 @@
 #include <regex>
 #include <thread>
 
-#include "patchstore/file_lock.h"
+#include "base/file_lock.h"
 #include "tests/test_support.h"
 
 namespace mt::test {

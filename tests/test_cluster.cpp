@@ -10,7 +10,7 @@
 
 #include "cluster/region_messages.h"
 #include "mtbuild/build.h"
-#include "patchstore/error.h"
+#include "base/error.h"
 #include "tests/test_support.h"
 
 namespace mt::test {

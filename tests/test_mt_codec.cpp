@@ -16,7 +16,7 @@
 #include "mtbuild/patch_codec.h"
 #include "mtbuild/scan_grid.h"
 #include "mtbuild/simplify_region.h"
-#include "patchstore/error.h"
+#include "base/error.h"
 
 using namespace mt;
 

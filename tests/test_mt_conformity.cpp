@@ -16,7 +16,7 @@
 
 #include "mtbuild/mt_cut.h"
 #include "mtbuild/mt_file.h"
-#include "patchstore/error.h"
+#include "base/error.h"
 #include "tests/test_support.h"
 
 namespace mt::test {

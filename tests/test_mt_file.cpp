@@ -7,7 +7,7 @@
 
 #include "mtbuild/mt_file.h"
 #include "mtbuild/scan_grid.h"
-#include "patchstore/error.h"
+#include "base/error.h"
 #include "tests/test_support.h"
 
 using namespace mt;

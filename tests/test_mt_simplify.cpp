@@ -14,7 +14,7 @@
 #include "mtbuild/scan_grid.h"
 #include "mtbuild/simplify_region.h"
 #include "mtbuild/surface_distance.h"
-#include "patchstore/error.h"
+#include "base/error.h"
 #include "patchstore/patch_store.h"
 
 using namespace mt;

@@ -21,7 +21,7 @@
 #include "mtbuild/mt_file.h"
 #include "mtbuild/scan_grid.h"
 #include "mtbuild/simplify_region.h"
-#include "patchstore/error.h"
+#include "base/error.h"
 #include "patchstore/mesh_reader.h"
 #include "tests/test_support.h"
 

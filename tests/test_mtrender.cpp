@@ -22,7 +22,7 @@
 #include "mtrender/patch_cache.h"
 #include "mtrender/patch_server.h"
 #include "mtrender/scene.h"
-#include "patchstore/error.h"
+#include "base/error.h"
 #include "tests/test_support.h"
 
 using namespace mt::render;

@@ -8,10 +8,10 @@
 
 #include <set>
 
-#include "patchstore/error.h"
-#include "patchstore/file_lock.h"
-#include "patchstore/interrupt.h"
-#include "patchstore/output_path.h"
+#include "base/error.h"
+#include "base/file_lock.h"
+#include "base/interrupt.h"
+#include "base/output_path.h"
 #include "test_support.h"
 
 using namespace mt;

@@ -14,8 +14,9 @@
 #include <string>
 #include <vector>
 
+#include "base/size.h"
 #include "mtbuild/mt_file.h"
-#include "patchstore/error.h"
+#include "base/error.h"
 #include "patchstore/patch_store.h"
 #include "tests/test_support.h"
 

@@ -11,7 +11,7 @@
 
 #include <xxhash.h>
 
-#include "patchstore/error.h"
+#include "base/error.h"
 #include "patchstore/patch_store.h"
 #include "tests/test_support.h"
 #include "tests/test_vpartition_support.h"

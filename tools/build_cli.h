@@ -11,9 +11,10 @@
 #include <cstdio>
 #include <string>
 
+#include "base/size.h"
 #include "mtbuild/build.h"
-#include "patchstore/error.h"
-#include "patchstore/output_path.h"
+#include "base/error.h"
+#include "base/output_path.h"
 #include "patchstore/patch_store.h"
 
 namespace mt::tools {

@@ -17,8 +17,8 @@
 #include <cstdlib>
 #include <string>
 
-#include "patchstore/error.h"
-#include "patchstore/patch_store.h"
+#include "base/size.h"
+#include "base/error.h"
 
 namespace mt::cli {
 

@@ -6,7 +6,7 @@
 #include <fstream>
 
 #include "mtbuild/build.h"
-#include "patchstore/interrupt.h"
+#include "base/interrupt.h"
 #include "patchstore/patch_store.h"
 #include "tools/build_cli.h"
 

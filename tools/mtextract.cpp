@@ -22,10 +22,10 @@
 
 #include "mtbuild/mt_cut.h"
 #include "mtbuild/mt_file.h"
-#include "patchstore/error.h"
-#include "patchstore/interrupt.h"
+#include "base/error.h"
+#include "base/interrupt.h"
 #include "patchstore/io/ply_writer.h"
-#include "patchstore/output_path.h"
+#include "base/output_path.h"
 #include "tools/cli_checks.h"
 
 namespace {

@@ -31,9 +31,9 @@
 #include <thread>
 #include <vector>
 
-#include "patchstore/error.h"
+#include "base/error.h"
 #include "patchstore/io/ply_writer.h"
-#include "patchstore/output_path.h"
+#include "base/output_path.h"
 #include "tools/cli_checks.h"
 #include "tools/scan_generator.h"
 

@@ -14,8 +14,8 @@
 
 #include "mtbuild/mt_cut.h"
 #include "mtbuild/mt_file.h"
-#include "patchstore/error.h"
-#include "patchstore/output_path.h"
+#include "base/error.h"
+#include "base/output_path.h"
 #include "tools/cli_checks.h"
 
 namespace {

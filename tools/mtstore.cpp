@@ -16,9 +16,11 @@
 #include <iostream>
 #include <sstream>
 
+#include "base/size.h"
+#include "base/process.h"
 #include "patchstore/heal/heal.h"
-#include "patchstore/interrupt.h"
-#include "patchstore/output_path.h"
+#include "base/interrupt.h"
+#include "base/output_path.h"
 #include "patchstore/patch_store.h"
 #include "tools/partition_choice.h"
 

@@ -29,9 +29,9 @@
 
 #include "mtbuild/mt_cut.h"
 #include "mtbuild/mt_file.h"
-#include "patchstore/error.h"
-#include "patchstore/output_path.h"
-#include "patchstore/patch_store.h"
+#include "base/error.h"
+#include "base/output_path.h"
+#include "base/size.h"
 #include "tools/cli_checks.h"
 
 namespace {

@@ -6,7 +6,7 @@
 #include <string>
 
 #include "patchstore/cell_assigner.h"
-#include "patchstore/error.h"
+#include "base/error.h"
 #include "patchstore/patch_store.h"
 #include "vpartition/vpartition.h"
 

@@ -18,7 +18,7 @@
 
 #include <xxhash.h>
 
-#include "patchstore/error.h"
+#include "base/error.h"
 #include "vpartition/level.h"
 #include "vpartition/vpartition.h"
 

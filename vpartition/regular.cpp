@@ -21,7 +21,7 @@
 #include <string>
 #include <unordered_set>
 
-#include "patchstore/error.h"
+#include "base/error.h"
 #include "vpartition/level.h"
 #include "vpartition/vpartition.h"
 

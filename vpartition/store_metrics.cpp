@@ -2,7 +2,7 @@
 // store's "assigner" blob, the centroids are recomputed from the patches (the V*0 cells).
 #include <cmath>
 
-#include "patchstore/error.h"
+#include "base/error.h"
 #include "vpartition/vpartition.h"
 
 namespace mt {

@@ -12,9 +12,9 @@
 #include <tuple>
 #include <unordered_set>
 
-#include "patchstore/external_sort.h"
+#include "base/external_sort.h"
 #include "patchstore/heal/region.h"
-#include "patchstore/progress.h"
+#include "base/progress.h"
 
 namespace mt::heal {
 

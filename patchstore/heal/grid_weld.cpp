@@ -26,9 +26,9 @@
 
 #include <xxhash.h>
 
-#include "patchstore/external_sort.h"
+#include "base/external_sort.h"
 #include "patchstore/heal/region.h"
-#include "patchstore/progress.h"
+#include "base/progress.h"
 
 namespace mt::heal {
 

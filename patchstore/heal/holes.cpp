@@ -18,7 +18,7 @@
 #include <unordered_map>
 
 #include "patchstore/heal/region.h"
-#include "patchstore/progress.h"
+#include "base/progress.h"
 
 namespace mt::heal {
 

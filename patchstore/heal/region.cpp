@@ -9,8 +9,8 @@
 #include <set>
 #include <tuple>
 
-#include "patchstore/external_sort.h"
-#include "patchstore/progress.h"
+#include "base/external_sort.h"
+#include "base/progress.h"
 
 namespace mt::heal {
 

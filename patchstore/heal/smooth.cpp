@@ -19,10 +19,10 @@
 #include <cstdio>
 #include <tuple>
 
-#include "patchstore/external_sort.h"
+#include "base/external_sort.h"
 #include "patchstore/heal/region.h"
-#include "patchstore/interrupt.h"
-#include "patchstore/progress.h"
+#include "base/interrupt.h"
+#include "base/progress.h"
 
 namespace mt::heal {
 

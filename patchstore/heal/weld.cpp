@@ -17,9 +17,9 @@
 #include <tuple>
 #include <unordered_map>
 
-#include "patchstore/external_sort.h"
+#include "base/external_sort.h"
 #include "patchstore/heal/region.h"
-#include "patchstore/progress.h"
+#include "base/progress.h"
 
 namespace mt::heal {
 

@@ -1,6 +1,6 @@
 #include "patchstore/io/ply_writer.h"
 
-#include "patchstore/output_path.h"
+#include "base/output_path.h"
 
 #include <unistd.h>
 

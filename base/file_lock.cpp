@@ -1,4 +1,4 @@
-#include "patchstore/file_lock.h"
+#include "base/file_lock.h"
 
 #include <fcntl.h>
 #include <sys/file.h>
@@ -11,7 +11,7 @@
 #include <cstring>
 #include <string>
 
-#include "patchstore/error.h"
+#include "base/error.h"
 
 namespace mt {
 

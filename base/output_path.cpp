@@ -1,4 +1,4 @@
-#include "patchstore/output_path.h"
+#include "base/output_path.h"
 
 #include <sys/stat.h>
 #include <unistd.h>
@@ -9,7 +9,7 @@
 #include <filesystem>
 #include <random>
 
-#include "patchstore/error.h"
+#include "base/error.h"
 
 namespace mt {
 

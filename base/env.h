@@ -9,7 +9,7 @@
 #include <string>
 #include <vector>
 
-#include "patchstore/error.h"
+#include "base/error.h"
 
 namespace mt {
 

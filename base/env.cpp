@@ -1,4 +1,4 @@
-#include "patchstore/env.h"
+#include "base/env.h"
 
 #include <dirent.h>
 #include <fcntl.h>

@@ -26,7 +26,7 @@
 #include <string>
 #include <vector>
 
-#include "patchstore/temp_file.h"
+#include "base/temp_file.h"
 
 namespace mt {
 

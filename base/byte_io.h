@@ -7,7 +7,7 @@
 #include <string>
 #include <type_traits>
 
-#include "patchstore/error.h"
+#include "base/error.h"
 
 namespace mt {
 

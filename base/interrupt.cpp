@@ -1,4 +1,4 @@
-#include "patchstore/interrupt.h"
+#include "base/interrupt.h"
 
 #include <signal.h>
 #include <unistd.h>

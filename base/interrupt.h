@@ -6,7 +6,7 @@
 
 #include <string>
 
-#include "patchstore/error.h"
+#include "base/error.h"
 
 namespace mt {
 
