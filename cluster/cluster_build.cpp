@@ -34,10 +34,10 @@
 #include <thread>
 #include <sstream>
 
-#include "cluster/region_messages.h"
 #include "base/byte_io.h"
 #include "base/error.h"
 #include "base/interrupt.h"
+#include "cluster/region_messages.h"
 
 namespace mt::cluster {
 

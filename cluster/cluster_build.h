@@ -6,8 +6,8 @@
 
 #include <string>
 
-#include "mtbuild/build.h"
 #include "base/error.h"
+#include "mtbuild/build.h"
 
 namespace mt::cluster {
 

@@ -8,8 +8,8 @@
 #include <cstdlib>
 #include <fstream>
 
-#include "cluster/cluster_build.h"
 #include "base/interrupt.h"
+#include "cluster/cluster_build.h"
 #include "patchstore/patch_store.h"
 #include "tools/build_cli.h"
 

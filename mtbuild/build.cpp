@@ -29,17 +29,17 @@
 #include <sstream>
 #include <unordered_map>
 
+#include "base/byte_io.h"
+#include "base/file_lock.h"
+#include "base/interrupt.h"
+#include "base/output_path.h"
 #include "base/process.h"
+#include "base/progress.h"
 #include "mtbuild/mt_file.h"
 #include "mtbuild/patch_codec.h"
 #include "mtbuild/simplify_region.h"
-#include "base/byte_io.h"
-#include "base/file_lock.h"
 #include "patchstore/heal/heal.h"
-#include "base/interrupt.h"
-#include "base/output_path.h"
 #include "patchstore/patch_store.h"
-#include "base/progress.h"
 
 namespace mt {
 

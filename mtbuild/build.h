@@ -13,9 +13,9 @@
 #include <string>
 #include <vector>
 
+#include "base/error.h"
 #include "mtbuild/mt_format.h"
 #include "mtbuild/patch_codec.h"
-#include "base/error.h"
 #include "patchstore/patch_store.h"
 #include "vpartition/vpartition.h"
 

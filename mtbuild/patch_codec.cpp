@@ -21,8 +21,8 @@
 #include <draco/core/encoder_buffer.h>
 #include <draco/mesh/mesh.h>
 
-#include "mtbuild/fan_order.h"
 #include "base/error.h"
+#include "mtbuild/fan_order.h"
 
 namespace mt {
 

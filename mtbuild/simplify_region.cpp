@@ -8,8 +8,8 @@
 #include <cmath>
 #include <string>
 
-#include "mtbuild/surface_distance.h"
 #include "base/error.h"
+#include "mtbuild/surface_distance.h"
 #include "patchstore/patch_store.h"
 
 namespace mt {

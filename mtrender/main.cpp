@@ -18,11 +18,11 @@
 #include <thread>
 #include <vector>
 
-#include "mtrender/engine.h"
-#include "mtrender/viewer.h"
 #include "base/error.h"
 #include "base/output_path.h"
 #include "base/size.h"
+#include "mtrender/engine.h"
+#include "mtrender/viewer.h"
 #include "tools/cli_checks.h"
 
 using namespace mt::render;

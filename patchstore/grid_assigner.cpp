@@ -6,8 +6,8 @@
 #include <cstdio>
 #include <unordered_set>
 
-#include "patchstore/cell_assigner.h"
 #include "base/error.h"
+#include "patchstore/cell_assigner.h"
 
 namespace mt {
 

@@ -66,15 +66,15 @@
 #include <thread>
 #include <sstream>
 
-#include "base/process.h"
 #include "base/byte_io.h"
 #include "base/external_sort.h"
 #include "base/file_lock.h"
 #include "base/interrupt.h"
 #include "base/output_path.h"
+#include "base/process.h"
 #include "base/progress.h"
-#include "patchstore/store_impl.h"
 #include "base/temp_file.h"
+#include "patchstore/store_impl.h"
 
 namespace mt {
 

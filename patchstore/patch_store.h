@@ -21,8 +21,8 @@
 #include <tuple>
 #include <vector>
 
-#include "patchstore/cell_assigner.h"
 #include "base/env.h"
+#include "patchstore/cell_assigner.h"
 #include "patchstore/mesh_reader.h"
 
 namespace mt {

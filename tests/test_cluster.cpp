@@ -8,9 +8,9 @@
 #include <filesystem>
 #include <regex>
 
+#include "base/error.h"
 #include "cluster/region_messages.h"
 #include "mtbuild/build.h"
-#include "base/error.h"
 #include "tests/test_support.h"
 
 namespace mt::test {

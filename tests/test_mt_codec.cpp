@@ -12,11 +12,11 @@
 #include <set>
 #include <tuple>
 
+#include "base/error.h"
 #include "mtbuild/fan_order.h"
 #include "mtbuild/patch_codec.h"
 #include "mtbuild/scan_grid.h"
 #include "mtbuild/simplify_region.h"
-#include "base/error.h"
 
 using namespace mt;
 

@@ -14,9 +14,9 @@
 #include <utility>
 #include <vector>
 
+#include "base/error.h"
 #include "mtbuild/mt_cut.h"
 #include "mtbuild/mt_file.h"
-#include "base/error.h"
 #include "tests/test_support.h"
 
 namespace mt::test {

@@ -5,9 +5,9 @@
 #include <cmath>
 #include <string>
 
+#include "base/error.h"
 #include "mtbuild/mt_file.h"
 #include "mtbuild/scan_grid.h"
-#include "base/error.h"
 #include "tests/test_support.h"
 
 using namespace mt;

@@ -11,10 +11,10 @@
 #include <set>
 #include <utility>
 
+#include "base/error.h"
 #include "mtbuild/scan_grid.h"
 #include "mtbuild/simplify_region.h"
 #include "mtbuild/surface_distance.h"
-#include "base/error.h"
 #include "patchstore/patch_store.h"
 
 using namespace mt;

@@ -17,11 +17,11 @@
 #include <tuple>
 #include <vector>
 
+#include "base/error.h"
 #include "mtbuild/mt_cut.h"
 #include "mtbuild/mt_file.h"
 #include "mtbuild/scan_grid.h"
 #include "mtbuild/simplify_region.h"
-#include "base/error.h"
 #include "patchstore/mesh_reader.h"
 #include "tests/test_support.h"
 

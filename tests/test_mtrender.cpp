@@ -14,6 +14,7 @@
 #include <random>
 #include <sstream>
 
+#include "base/error.h"
 #include "mtbuild/mt_cut.h"
 #include "mtbuild/mt_file.h"
 #include "mtrender/engine.h"
@@ -22,7 +23,6 @@
 #include "mtrender/patch_cache.h"
 #include "mtrender/patch_server.h"
 #include "mtrender/scene.h"
-#include "base/error.h"
 #include "tests/test_support.h"
 
 using namespace mt::render;

@@ -11,8 +11,8 @@
 #include <set>
 #include <sstream>
 
-#include "base/size.h"
 #include "base/external_sort.h"
+#include "base/size.h"
 #include "patchstore/io/ply_writer.h"
 #include "patchstore/patch_store.h"
 #include "tests/test_support.h"

@@ -14,9 +14,9 @@
 #include <string>
 #include <vector>
 
+#include "base/error.h"
 #include "base/size.h"
 #include "mtbuild/mt_file.h"
-#include "base/error.h"
 #include "patchstore/patch_store.h"
 #include "tests/test_support.h"
 

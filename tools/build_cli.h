@@ -11,10 +11,10 @@
 #include <cstdio>
 #include <string>
 
-#include "base/size.h"
-#include "mtbuild/build.h"
 #include "base/error.h"
 #include "base/output_path.h"
+#include "base/size.h"
+#include "mtbuild/build.h"
 #include "patchstore/patch_store.h"
 
 namespace mt::tools {

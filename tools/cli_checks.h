@@ -17,8 +17,8 @@
 #include <cstdlib>
 #include <string>
 
-#include "base/size.h"
 #include "base/error.h"
+#include "base/size.h"
 
 namespace mt::cli {
 

@@ -5,8 +5,8 @@
 #include <cstdio>
 #include <fstream>
 
-#include "mtbuild/build.h"
 #include "base/interrupt.h"
+#include "mtbuild/build.h"
 #include "patchstore/patch_store.h"
 #include "tools/build_cli.h"
 

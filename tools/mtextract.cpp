@@ -20,12 +20,12 @@
 #include <string>
 #include <vector>
 
-#include "mtbuild/mt_cut.h"
-#include "mtbuild/mt_file.h"
 #include "base/error.h"
 #include "base/interrupt.h"
-#include "patchstore/io/ply_writer.h"
 #include "base/output_path.h"
+#include "mtbuild/mt_cut.h"
+#include "mtbuild/mt_file.h"
+#include "patchstore/io/ply_writer.h"
 #include "tools/cli_checks.h"
 
 namespace {

@@ -32,8 +32,8 @@
 #include <vector>
 
 #include "base/error.h"
-#include "patchstore/io/ply_writer.h"
 #include "base/output_path.h"
+#include "patchstore/io/ply_writer.h"
 #include "tools/cli_checks.h"
 #include "tools/scan_generator.h"
 

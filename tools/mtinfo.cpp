@@ -12,10 +12,10 @@
 #include <string>
 #include <vector>
 
-#include "mtbuild/mt_cut.h"
-#include "mtbuild/mt_file.h"
 #include "base/error.h"
 #include "base/output_path.h"
+#include "mtbuild/mt_cut.h"
+#include "mtbuild/mt_file.h"
 #include "tools/cli_checks.h"
 
 namespace {

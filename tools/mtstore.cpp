@@ -16,11 +16,11 @@
 #include <iostream>
 #include <sstream>
 
-#include "base/size.h"
-#include "base/process.h"
-#include "patchstore/heal/heal.h"
 #include "base/interrupt.h"
 #include "base/output_path.h"
+#include "base/process.h"
+#include "base/size.h"
+#include "patchstore/heal/heal.h"
 #include "patchstore/patch_store.h"
 #include "tools/partition_choice.h"
 

@@ -5,8 +5,8 @@
 #include <memory>
 #include <string>
 
-#include "patchstore/cell_assigner.h"
 #include "base/error.h"
+#include "patchstore/cell_assigner.h"
 #include "patchstore/patch_store.h"
 #include "vpartition/vpartition.h"
 

@@ -13,8 +13,8 @@
 #include <unordered_set>
 
 #include "base/external_sort.h"
-#include "patchstore/heal/region.h"
 #include "base/progress.h"
+#include "patchstore/heal/region.h"
 
 namespace mt::heal {
 

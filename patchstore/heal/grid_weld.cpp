@@ -27,8 +27,8 @@
 #include <xxhash.h>
 
 #include "base/external_sort.h"
-#include "patchstore/heal/region.h"
 #include "base/progress.h"
+#include "patchstore/heal/region.h"
 
 namespace mt::heal {
 

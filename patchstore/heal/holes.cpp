@@ -17,8 +17,8 @@
 #include <set>
 #include <unordered_map>
 
-#include "patchstore/heal/region.h"
 #include "base/progress.h"
+#include "patchstore/heal/region.h"
 
 namespace mt::heal {
 

@@ -20,9 +20,9 @@
 #include <tuple>
 
 #include "base/external_sort.h"
-#include "patchstore/heal/region.h"
 #include "base/interrupt.h"
 #include "base/progress.h"
+#include "patchstore/heal/region.h"
 
 namespace mt::heal {
 

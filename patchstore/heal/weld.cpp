@@ -18,8 +18,8 @@
 #include <unordered_map>
 
 #include "base/external_sort.h"
-#include "patchstore/heal/region.h"
 #include "base/progress.h"
+#include "patchstore/heal/region.h"
 
 namespace mt::heal {
 
