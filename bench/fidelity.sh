@@ -33,32 +33,10 @@ if [[ ! -f "$mt" ]]; then
 fi
 samples="${SAMPLES:-2000000}"
 
-cat > "$work/hausdorff.mlx" <<EOF
-<!DOCTYPE FilterScript>
-<FilterScript>
- <filter name="Hausdorff Distance">
-  <Param type="RichMesh" value="0" name="SampledMesh"/>
-  <Param type="RichMesh" value="1" name="TargetMesh"/>
-  <Param type="RichBool" value="false" name="SaveSample"/>
-  <Param type="RichBool" value="true" name="SampleVert"/>
-  <Param type="RichBool" value="true" name="SampleEdge"/>
-  <Param type="RichBool" value="false" name="SampleFauxEdge"/>
-  <Param type="RichBool" value="true" name="SampleFace"/>
-  <Param type="RichInt" value="$samples" name="SampleNum"/>
-  <Param type="RichAbsPerc" value="10" min="0" max="10" name="MaxDist"/>
- </filter>
-</FilterScript>
-EOF
-
+# shellcheck source=bench/hausdorff.sh
+source "$(dirname "$0")/hausdorff.sh"
 # One-sided Hausdorff (max distance from samples of $1 to the surface of $2), in object units.
-hausdorff() {
-  local log="$work/hd.log"
-  rm -f "$log"
-  xvfb-run -a meshlabserver -i "$1" -i "$2" -s "$work/hausdorff.mlx" -l "$log" >"$work/hd.out" 2>&1 ||
-    { cat "$work/hd.out" >&2; echo "fidelity: meshlabserver failed on $1 vs $2" >&2; exit 1; }
-  # The first "min : ... max X" line is in object units (the second is relative to the bbox diagonal).
-  awk '/min :/ { for (i = 1; i <= NF; i++) if ($i == "max") { print $(i + 1); exit } }' "$log"
-}
+hausdorff() { hausdorff_oneway "$@" | awk '{ print $2 }'; }
 
 json="$("$bin/mtinfo" "$mt" --json)"
 levels=$(grep -o '"levels": [0-9]*' <<<"$json" | grep -o '[0-9]*$')

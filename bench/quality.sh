@@ -35,29 +35,9 @@ if [[ ! -f "$mt" ]]; then
   "$bin/mtbuild" "$input" -o "$mt" -q ${MTBUILD_ARGS:-}
 fi
 samples="${SAMPLES:-2000000}"
-cat > "$work/h.mlx" <<EOF
-<!DOCTYPE FilterScript>
-<FilterScript>
- <filter name="Hausdorff Distance">
-  <Param type="RichMesh" value="0" name="SampledMesh"/>
-  <Param type="RichMesh" value="1" name="TargetMesh"/>
-  <Param type="RichBool" value="false" name="SaveSample"/>
-  <Param type="RichBool" value="true" name="SampleVert"/>
-  <Param type="RichBool" value="true" name="SampleEdge"/>
-  <Param type="RichBool" value="false" name="SampleFauxEdge"/>
-  <Param type="RichBool" value="true" name="SampleFace"/>
-  <Param type="RichInt" value="$samples" name="SampleNum"/>
-  <Param type="RichAbsPerc" value="10" min="0" max="10" name="MaxDist"/>
- </filter>
-</FilterScript>
-EOF
-# "mean max" of the distance from samples of $1 to the surface of $2, in object units.
-oneway() {
-  local log="$work/hd.$RANDOM.log"
-  xvfb-run -a meshlabserver -i "$1" -i "$2" -s "$work/h.mlx" -l "$log" >"$work/hd.out" 2>&1 ||
-    { tail -3 "$work/hd.out" >&2; echo "quality: meshlabserver failed on $1 vs $2" >&2; exit 1; }
-  awk '/min :/ { for (i = 1; i <= NF; i++) { if ($i == "max") mx = $(i + 1); if ($i == "mean") mn = $(i + 2) }; print mn, mx; exit }' "$log"
-}
+# shellcheck source=bench/hausdorff.sh
+source "$(dirname "$0")/hausdorff.sh"
+oneway() { hausdorff_oneway "$@"; }
 faces() { grep -a -m1 '^element face' "$1" | awk '{print $3}'; }
 row() {  # $1 tool, $2 fraction, $3 cut.ply
   local a b
