@@ -227,6 +227,16 @@ SimplifiedRegion simplifyRegion(const double* positions, size_t vertexCount, con
       if (i < indexCount && out[t] == triangles[i] && out[t + 1] == triangles[i + 1] && out[t + 2] == triangles[i + 2])
         onInput[t / 3] = 1, i += 3;
     }
+    std::vector<uint64_t> edges;  // (lower, higher) input vertex ids of the queried triangles' edges
+    edges.reserve(out.size());
+    for (size_t t = 0; t < out.size() / 3; ++t)
+      if (!onInput[t])
+        for (int e = 0; e < 3; ++e) {
+          const uint64_t a = out[t * 3 + e], b = out[t * 3 + (e + 1) % 3];
+          edges.push_back(a < b ? a << 32 | b : b << 32 | a);
+        }
+    std::sort(edges.begin(), edges.end());
+    edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
     constexpr size_t kStride = 16;
     double worst2 = 0;
     for (int pass = 0; pass < 2; ++pass) {
@@ -241,6 +251,17 @@ SimplifiedRegion simplifyRegion(const double* positions, size_t vertexCount, con
         double c[3];
         for (int a = 0; a < 3; ++a) c[a] = (p0[a] + p1[a] + p2[a]) / 3;
         worst2 = std::max(worst2, inputGrid.distance2Above(c, worst2));
+      }
+      // The midpoint of every edge of those triangles, each once: on noisy scans the farthest
+      // point of a large result triangle from the input is often near an edge, and centroids
+      // alone left the stored error up to 11% below MeshLab's Hausdorff (0.3 M dragon scan,
+      // level 1). The edges of input triangles lie on the input.
+      for (size_t k = 0; k < edges.size(); ++k) {
+        if ((k % kStride == 0) != (pass == 0)) continue;
+        const double *a0 = positions + size_t(edges[k] >> 32) * 3, *a1 = positions + size_t(edges[k] & 0xffffffffu) * 3;
+        double m[3];
+        for (int a = 0; a < 3; ++a) m[a] = 0.5 * (a0[a] + a1[a]);
+        worst2 = std::max(worst2, inputGrid.distance2Above(m, worst2));
       }
     }
     r.error = std::sqrt(worst2);

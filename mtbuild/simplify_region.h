@@ -39,9 +39,9 @@ struct SimplifiedRegion {
   std::vector<uint32_t> origin;    // 1 per vertex: its index in the input (ascending)
   // Measured symmetric deviation between the result and the input region, a sampled Hausdorff
   // estimate: max of (a) the exact distance from every removed input vertex to the result and
-  // (b) the distance from every result triangle centroid to the input; kept vertices, and the
-  // result triangles that are input triangles (a third of them; their centroids are not
-  // queried), lie on both surfaces. Sampled, so a deviation between samples can be missed. It
+  // (b) the distance from every result triangle's centroid and edge midpoints to the input; kept
+  // vertices, and the result triangles that are input triangles (a third of them; not queried),
+  // lie on both surfaces. Sampled, so a deviation between samples can be missed. It
   // bounds the distance to the region's INPUT (the previous level); the builder adds the
   // previous level's bound.
   double error = 0;

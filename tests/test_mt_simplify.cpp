@@ -220,11 +220,18 @@ double bruteForceError(const ScanGrid& g, const SimplifiedRegion& s) {
   for (uint32_t t = 0; t < s.triangleCount(); ++t) {
     if (input.count({s.origin[s.triangles[t * 3]], s.origin[s.triangles[t * 3 + 1]], s.origin[s.triangles[t * 3 + 2]]}))
       continue;
+    const double* p[3] = {&s.positions[s.triangles[t * 3] * 3], &s.positions[s.triangles[t * 3 + 1] * 3],
+                          &s.positions[s.triangles[t * 3 + 2] * 3]};
     double c[3];
-    for (int a = 0; a < 3; ++a)
-      c[a] = (s.positions[s.triangles[t * 3] * 3 + a] + s.positions[s.triangles[t * 3 + 1] * 3 + a] +
-              s.positions[s.triangles[t * 3 + 2] * 3 + a]) / 3;
+    for (int a = 0; a < 3; ++a) c[a] = (p[0][a] + p[1][a] + p[2][a]) / 3;
     worst2 = std::max(worst2, bruteDistance2(c, g.positions.data(), g.triangles.data(), g.triangleCount()));
+    // and the midpoint of every edge (each from one of its triangles: sampling it twice changes
+    // no maximum)
+    for (int e = 0; e < 3; ++e) {
+      double m[3];
+      for (int a = 0; a < 3; ++a) m[a] = 0.5 * (p[e][a] + p[(e + 1) % 3][a]);
+      worst2 = std::max(worst2, bruteDistance2(m, g.positions.data(), g.triangles.data(), g.triangleCount()));
+    }
   }
   return std::sqrt(worst2);
 }
