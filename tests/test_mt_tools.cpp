@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <dirent.h>
 #include <map>
@@ -663,7 +664,9 @@ TEST(MtVerify, NonMonotoneError) {
   Cut c = cutByError(*r, e);
   EXPECT_FALSE(c.inSet[5]);
   EXPECT_GT(c.excludedByClosure, 0u);
-  auto ex = runTool("mtextract", mt + " --error " + std::to_string(e) + " -o " + dir.file("c.ply"));
+  char eText[32];
+  std::snprintf(eText, sizeof eText, "%.17g", e);  // exact: std::to_string's 6 decimals may round below the source's error
+  auto ex = runTool("mtextract", mt + " --error " + eText + " -o " + dir.file("c.ply"));
   EXPECT_EQ(ex.exitCode, 0) << ex.output;
   EXPECT_NE(ex.output.find("not monotone"), std::string::npos) << ex.output;
 }
