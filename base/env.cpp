@@ -26,7 +26,7 @@ class PosixWritableFile : public WritableFile {
       ssize_t n = ::write(fd_, p, size);
       if (n < 0) {
         if (errno == EINTR) continue;
-        fail(path_, "write failed at byte offset " + std::to_string(size_) + ": " + errnoText());
+        failIo(path_, "write failed at byte offset " + std::to_string(size_) + ": " + errnoText());
       }
       p += n;
       size -= size_t(n);
@@ -34,12 +34,12 @@ class PosixWritableFile : public WritableFile {
     }
   }
   void sync() override {
-    if (::fdatasync(fd_) != 0) fail(path_, "fsync failed: " + errnoText());
+    if (::fdatasync(fd_) != 0) failIo(path_, "fsync failed: " + errnoText());
   }
   void close() override {
     if (fd_ >= 0 && ::close(fd_) != 0) {
       fd_ = -1;
-      fail(path_, "close failed: " + errnoText());
+      failIo(path_, "close failed: " + errnoText());
     }
     fd_ = -1;
   }
@@ -61,8 +61,8 @@ class PosixRandomAccessFile : public RandomAccessFile {
     while (size > 0) {
       ssize_t n = ::pread(fd_, p, size, off_t(at));
       if (n < 0 && errno == EINTR) continue;
-      if (n < 0) fail(path_, "read failed at byte offset " + std::to_string(at) + ": " + errnoText());
-      if (n == 0) fail(path_, "unexpected end of file at byte offset " + std::to_string(at));
+      if (n < 0) failIo(path_, "read failed at byte offset " + std::to_string(at) + ": " + errnoText());
+      if (n == 0) failIo(path_, "unexpected end of file at byte offset " + std::to_string(at));
       p += n;
       at += uint64_t(n);
       size -= size_t(n);
@@ -80,44 +80,44 @@ class PosixEnv : public Env {
  public:
   std::unique_ptr<WritableFile> newWritableFile(const std::string& path) override {
     int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-    if (fd < 0) fail(path, "cannot create: " + errnoText());
+    if (fd < 0) failIo(path, "cannot create: " + errnoText());
     return std::make_unique<PosixWritableFile>(path, fd, 0);
   }
   std::unique_ptr<WritableFile> newAppendableFile(const std::string& path) override {
     int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC, 0644);
-    if (fd < 0) fail(path, "cannot open for append: " + errnoText());
+    if (fd < 0) failIo(path, "cannot open for append: " + errnoText());
     struct stat st;
     if (::fstat(fd, &st) != 0) {
       ::close(fd);
-      fail(path, "cannot stat: " + errnoText());
+      failIo(path, "cannot stat: " + errnoText());
     }
     return std::make_unique<PosixWritableFile>(path, fd, uint64_t(st.st_size));
   }
   std::unique_ptr<RandomAccessFile> newRandomAccessFile(const std::string& path) override {
     int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
-    if (fd < 0) fail(path, "cannot open: " + errnoText());
+    if (fd < 0) failIo(path, "cannot open: " + errnoText());
     struct stat st;
     if (::fstat(fd, &st) != 0) {
       ::close(fd);
-      fail(path, "cannot stat: " + errnoText());
+      failIo(path, "cannot stat: " + errnoText());
     }
     return std::make_unique<PosixRandomAccessFile>(path, fd, uint64_t(st.st_size));
   }
   void renameFile(const std::string& from, const std::string& to) override {
-    if (::rename(from.c_str(), to.c_str()) != 0) fail(to, "cannot rename from " + from + ": " + errnoText());
+    if (::rename(from.c_str(), to.c_str()) != 0) failIo(to, "cannot rename from " + from + ": " + errnoText());
   }
   void removeFile(const std::string& path) override {
-    if (::unlink(path.c_str()) != 0 && errno != ENOENT) fail(path, "cannot remove: " + errnoText());
+    if (::unlink(path.c_str()) != 0 && errno != ENOENT) failIo(path, "cannot remove: " + errnoText());
   }
   void syncDir(const std::string& dir) override {
     int fd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-    if (fd < 0) fail(dir, "cannot open directory: " + errnoText());
+    if (fd < 0) failIo(dir, "cannot open directory: " + errnoText());
     int rc = ::fsync(fd);
     ::close(fd);
-    if (rc != 0) fail(dir, "fsync of directory failed: " + errnoText());
+    if (rc != 0) failIo(dir, "fsync of directory failed: " + errnoText());
   }
   void createDir(const std::string& dir) override {
-    if (::mkdir(dir.c_str(), 0755) != 0 && errno != EEXIST) fail(dir, "cannot create directory: " + errnoText());
+    if (::mkdir(dir.c_str(), 0755) != 0 && errno != EEXIST) failIo(dir, "cannot create directory: " + errnoText());
   }
   bool exists(const std::string& path) override {
     struct stat st;
@@ -126,7 +126,7 @@ class PosixEnv : public Env {
   std::vector<std::string> listDir(const std::string& dir) override {
     std::vector<std::string> names;
     DIR* d = ::opendir(dir.c_str());
-    if (!d) fail(dir, "cannot list directory: " + errnoText());
+    if (!d) failIo(dir, "cannot list directory: " + errnoText());
     while (dirent* e = ::readdir(d)) {
       std::string name = e->d_name;
       if (name != "." && name != "..") names.push_back(name);
@@ -136,7 +136,7 @@ class PosixEnv : public Env {
   }
   uint64_t fileSize(const std::string& path) override {
     struct stat st;
-    if (::stat(path.c_str(), &st) != 0) fail(path, "cannot stat: " + errnoText());
+    if (::stat(path.c_str(), &st) != 0) failIo(path, "cannot stat: " + errnoText());
     return uint64_t(st.st_size);
   }
 };
@@ -191,7 +191,7 @@ void FaultInjectionEnv::hit(Op op, const std::string& path) {
     remaining_ = -1;
     fired_ = true;
     const char* what = op == Op::Write ? "write" : op == Op::Sync ? "fsync" : "rename";
-    fail(path, std::string("injected ") + what + " failure");
+    failIo(path, std::string("injected ") + what + " failure");
   }
 }
 

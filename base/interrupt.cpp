@@ -27,7 +27,8 @@ extern "C" void onInterrupt(int sig) {
 }  // namespace
 
 Interrupted::Interrupted(const std::string& where, int signal)
-    : Error(where + ": interrupted by " + (signal == SIGTERM ? "SIGTERM" : signal == SIGINT ? "SIGINT" : "a signal")),
+    : Error(where + ": interrupted by " + (signal == SIGTERM ? "SIGTERM" : signal == SIGINT ? "SIGINT" : "a signal"),
+            ErrorKind::Interrupted),
       signal_(signal) {}
 
 void installInterruptHandlers() {

@@ -250,8 +250,8 @@ void preadExact(int fd, const std::string& path, uint64_t offset, size_t size, v
   while (size > 0) {
     ssize_t n = ::pread(fd, p, size, off_t(at));
     if (n < 0 && errno == EINTR) continue;
-    if (n < 0) fail(path, "read failed at byte offset " + std::to_string(at) + ": " + errnoText());
-    if (n == 0) fail(path, "unexpected end of file at byte offset " + std::to_string(at));
+    if (n < 0) failIo(path, "read failed at byte offset " + std::to_string(at) + ": " + errnoText());
+    if (n == 0) failCorrupt(path, "unexpected end of file at byte offset " + std::to_string(at));
     p += n, size -= size_t(n), at += uint64_t(n);
   }
 }
@@ -269,7 +269,7 @@ std::unique_ptr<MtFileReader> MtFileReader::open(const std::string& path) {
   std::unique_ptr<MtFileReader> r(new MtFileReader());
   r->path_ = path;
   r->fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
-  if (r->fd_ < 0) fail(path, "cannot open: " + errnoText());
+  if (r->fd_ < 0) failIo(path, "cannot open: " + errnoText());
   off_t end = ::lseek(r->fd_, 0, SEEK_END);
   if (end < 0) fail(path, "cannot seek: " + errnoText());
   r->size_ = uint64_t(end);
@@ -290,20 +290,20 @@ std::unique_ptr<MtFileReader> MtFileReader::open(const std::string& path) {
   uint64_t footerAt = size - kFooterSize;
   preadExact(r->fd_, path, footerAt, sizeof f, &f);
   if (std::memcmp(f.magic, kFooterMagic, 8) != 0)
-    fail(path, "bad footer magic at byte offset " + std::to_string(footerAt + 24) + " (truncated or damaged file)");
-  if (f.version != h.version) fail(path, "footer version mismatch at byte offset " + std::to_string(footerAt + 16));
+    failCorrupt(path, "bad footer magic at byte offset " + std::to_string(footerAt + 24) + " (truncated or damaged file)");
+  if (f.version != h.version) failCorrupt(path, "footer version mismatch at byte offset " + std::to_string(footerAt + 16));
   if (f.metaOffset != h.metaOffset || h.metaOffset < kHeaderSize || h.metaOffset > footerAt)
-    fail(path, "footer index offset " + std::to_string(f.metaOffset) + " out of range (file " + std::to_string(size) +
+    failCorrupt(path, "footer index offset " + std::to_string(f.metaOffset) + " out of range (file " + std::to_string(size) +
                    " bytes) at byte offset " + std::to_string(footerAt));
 
   // The metadata must tile [metaOffset, footer) exactly, section by section.
   uint64_t metaSize = footerAt - h.metaOffset;
   const uint64_t maxCount = metaSize;  // every record is >= 4 bytes: counts cannot exceed this
   if (h.nodeCount > maxCount || h.arcCount > maxCount || h.patchRefCount > maxCount || h.patchCount > maxCount)
-    fail(path, "header counts larger than the index section (damaged header)");
+    failCorrupt(path, "header counts larger than the index section (damaged header)");
   uint64_t expect = h.metaOffset;
   auto section = [&](uint64_t off, uint64_t bytes, const char* name) {
-    if (off != expect) fail(path, std::string("bad ") + name + " offset " + std::to_string(off) + " in header");
+    if (off != expect) failCorrupt(path, std::string("bad ") + name + " offset " + std::to_string(off) + " in header");
     expect += bytes;
   };
   section(h.nodesOffset, h.nodeCount * sizeof(NodeRecord), "node array");
@@ -312,7 +312,7 @@ std::unique_ptr<MtFileReader> MtFileReader::open(const std::string& path) {
   section(h.patchRefsOffset, h.patchRefCount * 4, "patch reference array");
   section(h.patchesOffset, h.patchCount * sizeof(PatchRecord), "patch index");
   if (expect != footerAt)
-    fail(path, "index section is " + std::to_string(metaSize) + " bytes, header describes " +
+    failCorrupt(path, "index section is " + std::to_string(metaSize) + " bytes, header describes " +
                    std::to_string(expect - h.metaOffset) + " (truncated or damaged)");
 
   std::vector<uint8_t> meta(static_cast<size_t>(metaSize));
@@ -324,7 +324,7 @@ std::unique_ptr<MtFileReader> MtFileReader::open(const std::string& path) {
   uint64_t sum = XXH64_digest(st);
   XXH64_freeState(st);
   if (sum != f.checksum)
-    fail(path, "checksum mismatch over header + DAG + index (bytes 0-" + std::to_string(kHeaderSize) + " and " +
+    failCorrupt(path, "checksum mismatch over header + DAG + index (bytes 0-" + std::to_string(kHeaderSize) + " and " +
                    std::to_string(h.metaOffset) + "-" + std::to_string(footerAt) + ")");
 
   auto take = [&](uint64_t off, auto* dst, uint64_t count) {
@@ -340,37 +340,37 @@ std::unique_ptr<MtFileReader> MtFileReader::open(const std::string& path) {
 
   // Cross-checks: a valid checksum says the writer wrote it, these say the writer was right.
   if (h.codec != uint32_t(Codec::Meshopt) && h.codec != uint32_t(Codec::Draco))
-    fail(path, "unknown codec " + std::to_string(h.codec) + " in header");
+    failCorrupt(path, "unknown codec " + std::to_string(h.codec) + " in header");
   if (h.payloadAlignment == 0 || (h.payloadAlignment & (h.payloadAlignment - 1)))
-    fail(path, "bad payload alignment in header");
-  if (!(h.gridStep > 0) || h.gridBits == 0 || h.gridBits > 31) fail(path, "bad quantization grid in header");
+    failCorrupt(path, "bad payload alignment in header");
+  if (!(h.gridStep > 0) || h.gridBits == 0 || h.gridBits > 31) failCorrupt(path, "bad quantization grid in header");
   for (size_t i = 0; i < r->patches_.size(); ++i) {
     const PatchRecord& p = r->patches_[i];
     if (p.offset < kHeaderSize || p.offset % h.payloadAlignment || p.offset + p.size > h.metaOffset ||
         p.offset + p.size < p.offset)
-      fail(path, "patch " + std::to_string(i) + ": payload at byte offset " + std::to_string(p.offset) + " size " +
+      failCorrupt(path, "patch " + std::to_string(i) + ": payload at byte offset " + std::to_string(p.offset) + " size " +
                      std::to_string(p.size) + " outside the payload area");
-    if (p.arc >= h.arcCount) fail(path, "patch " + std::to_string(i) + ": arc " + std::to_string(p.arc) + " out of range");
+    if (p.arc >= h.arcCount) failCorrupt(path, "patch " + std::to_string(i) + ": arc " + std::to_string(p.arc) + " out of range");
   }
   for (size_t i = 0; i < r->arcs_.size(); ++i) {
     const ArcRecord& a = r->arcs_[i];
     if (a.from >= h.nodeCount || a.to >= h.nodeCount || uint64_t(a.firstPatchRef) + a.patchCount > h.patchRefCount)
-      fail(path, "arc " + std::to_string(i) + " out of range");
+      failCorrupt(path, "arc " + std::to_string(i) + " out of range");
     for (uint32_t k = 0; k < a.patchCount; ++k)
       if (r->patchRefs_[a.firstPatchRef + k] >= h.patchCount)
-        fail(path, "arc " + std::to_string(i) + " names patch out of range");
+        failCorrupt(path, "arc " + std::to_string(i) + " names patch out of range");
   }
   for (uint32_t b : r->backArcs_)
-    if (b >= h.arcCount) fail(path, "backward star names arc out of range");
+    if (b >= h.arcCount) failCorrupt(path, "backward star names arc out of range");
   for (size_t i = 0; i < r->nodes_.size(); ++i) {
     const NodeRecord& n = r->nodes_[i];
     if (uint64_t(n.firstArc) + n.arcCount > h.arcCount || uint64_t(n.firstBackArc) + n.backArcCount > h.arcCount)
-      fail(path, "node " + std::to_string(i) + ": arc range out of bounds");
+      failCorrupt(path, "node " + std::to_string(i) + ": arc range out of bounds");
     for (uint32_t k = 0; k < n.arcCount; ++k)
-      if (r->arcs_[n.firstArc + k].from != i) fail(path, "node " + std::to_string(i) + ": forward star inconsistent");
+      if (r->arcs_[n.firstArc + k].from != i) failCorrupt(path, "node " + std::to_string(i) + ": forward star inconsistent");
     for (uint32_t k = 0; k < n.backArcCount; ++k)
       if (r->arcs_[r->backArcs_[n.firstBackArc + k]].to != i)
-        fail(path, "node " + std::to_string(i) + ": backward star inconsistent");
+        failCorrupt(path, "node " + std::to_string(i) + ": backward star inconsistent");
   }
   return r;
 }
@@ -394,7 +394,7 @@ std::vector<uint8_t> MtFileReader::readPayload(uint32_t patch) const {
   std::vector<uint8_t> data(p.size);
   preadExact(fd_, path_, p.offset, p.size, data.data());
   if (XXH64(data.data(), data.size(), 0) != p.checksum)
-    fail(path_, "patch " + std::to_string(patch) + " is damaged: checksum mismatch in payload at byte offset " +
+    failCorrupt(path_, "patch " + std::to_string(patch) + " is damaged: checksum mismatch in payload at byte offset " +
                     std::to_string(p.offset) + " (" + std::to_string(p.size) + " bytes)");
   return data;
 }
@@ -409,7 +409,7 @@ DecodedPatch MtFileReader::readPatch(uint32_t patch) const {
                   std::to_string(p.triangles) + ")");
     return d;
   } catch (const Error& e) {
-    fail(path_, "patch " + std::to_string(patch) + " at byte offset " + std::to_string(patches_[patch].offset) +
+    failCorrupt(path_, "patch " + std::to_string(patch) + " at byte offset " + std::to_string(patches_[patch].offset) +
                     ": " + e.what());
   }
 }

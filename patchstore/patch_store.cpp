@@ -226,10 +226,10 @@ std::string PatchStore::Impl::readBlock(const BlockHandle& h, const std::string&
   file->read(h.offset, bytes.size(), bytes.data());
   BlockHeader header;
   std::memcpy(&header, bytes.data(), sizeof header);
-  if (header.magic != kBlockMagic) fail(where, at + ": bad block magic");
-  if (header.size != h.size) fail(where, at + ": block size does not match the manifest");
+  if (header.magic != kBlockMagic) failCorrupt(where, at + ": bad block magic");
+  if (header.size != h.size) failCorrupt(where, at + ": block size does not match the manifest");
   uint64_t sum = hash(bytes.data() + sizeof header, h.size);
-  if (sum != header.checksum || sum != h.checksum) fail(where, at + ": checksum mismatch (corrupted block)");
+  if (sum != header.checksum || sum != h.checksum) failCorrupt(where, at + ": checksum mismatch (corrupted block)");
   return bytes.substr(sizeof header);
 }
 

@@ -99,12 +99,14 @@ TEST(MtFile, RoundTrip) {
   }
 }
 
-void expectOpenError(const std::string& path, const std::string& needle) {
+void expectOpenError(const std::string& path, const std::string& needle,
+                     ErrorKind kind = ErrorKind::Corruption) {
   try {
     MtFileReader::open(path);
     FAIL() << "opened a damaged file; expected: " << needle;
   } catch (const Error& e) {
     std::string m = e.what();
+    EXPECT_EQ(e.kind(), kind) << errorKindName(e.kind()) << ": " << m;
     EXPECT_EQ(m.rfind(path + ": ", 0), 0u) << m;
     EXPECT_NE(m.find(needle), std::string::npos) << m;
     EXPECT_EQ(m.find('\n'), std::string::npos) << "one line: " << m;
@@ -129,6 +131,7 @@ TEST(MtFile, CorruptedPayloadNamesThePatch) {
     FAIL();
   } catch (const Error& e) {
     std::string m = e.what();
+    EXPECT_EQ(e.kind(), ErrorKind::Corruption) << m;
     EXPECT_NE(m.find(b.path + ": patch 2 is damaged"), std::string::npos) << m;
     EXPECT_NE(m.find("byte offset"), std::string::npos) << m;
   }
@@ -142,14 +145,14 @@ TEST(MtFile, TruncatedBadMagicBadFooterBadIndex) {
   test::writeFile(b.path, good.substr(0, good.size() - 5));
   expectOpenError(b.path, "footer");
   test::writeFile(b.path, good.substr(0, 100));
-  expectOpenError(b.path, "shorter than header");
+  expectOpenError(b.path, "shorter than header", ErrorKind::InvalidInput);
   test::writeFile(b.path, "");
-  expectOpenError(b.path, "shorter than header");
+  expectOpenError(b.path, "shorter than header", ErrorKind::InvalidInput);
 
   std::string bad = good;
   bad[0] = 'X';
   test::writeFile(b.path, bad);
-  expectOpenError(b.path, "bad magic");
+  expectOpenError(b.path, "bad magic", ErrorKind::InvalidInput);  // not one of our files
 
   bad = good;
   bad[bad.size() - 3] ^= 0x20;
@@ -169,9 +172,9 @@ TEST(MtFile, TruncatedBadMagicBadFooterBadIndex) {
   bad = good;  // version
   bad[8] = 99;
   test::writeFile(b.path, bad);
-  expectOpenError(b.path, "unsupported MT version");
+  expectOpenError(b.path, "unsupported MT version", ErrorKind::InvalidInput);
 
-  expectOpenError(dir.file("missing.mt"), "cannot open");
+  expectOpenError(dir.file("missing.mt"), "cannot open", ErrorKind::Io);
 
   // Truncating in the middle of the payloads shifts the footer: detected, never a crash.
   for (size_t cut = kHeaderSize; cut < good.size(); cut += 97) {

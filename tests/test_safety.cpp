@@ -8,6 +8,7 @@
 
 #include <set>
 
+#include "base/env.h"
 #include "base/error.h"
 #include "base/file_lock.h"
 #include "base/interrupt.h"
@@ -112,4 +113,36 @@ TEST(Interrupt, SignalBecomesAnExceptionAtTheNextSafePoint) {
     EXPECT_STREQ(e.what(), "level 3: interrupted by SIGTERM");
   }
   clearInterrupt();
+}
+
+TEST(ErrorKinds, SayWhatWentWrong) {
+  TempDir tmp;
+  // The file layer: a failed write is an I/O error.
+  FaultInjectionEnv env(Env::Default());
+  env.failAfter(FaultInjectionEnv::Op::Write, 1);
+  try {
+    auto f = env.newWritableFile(tmp.file("w"));
+    f->append("x", 1);
+    FAIL() << "no injected failure";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.kind(), ErrorKind::Io) << e.what();
+  }
+  try {
+    Env::Default()->newRandomAccessFile(tmp.file("missing"));
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_EQ(e.kind(), ErrorKind::Io) << e.what();
+  }
+  // A signal.
+  clearInterrupt();
+  Interrupted stop("work", SIGINT);
+  EXPECT_EQ(stop.kind(), ErrorKind::Interrupted);
+  // The default: the user's input.
+  try {
+    fail("in.ply", "vertex 3 has a non-finite coordinate");
+  } catch (const Error& e) {
+    EXPECT_EQ(e.kind(), ErrorKind::InvalidInput);
+    EXPECT_STREQ(e.what(), "in.ply: vertex 3 has a non-finite coordinate");
+  }
+  EXPECT_STREQ(errorKindName(ErrorKind::Corruption), "corruption");
 }
