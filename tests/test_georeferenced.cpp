@@ -84,7 +84,7 @@ struct Collect : MeshSink {
 
 // Builds, verifies and extracts the finest cut; every triangle must be there and every vertex
 // within the grid step of the grid point it stands for.
-void expectFinestCutKeepsEverything(const Grid& g, const std::string& input, const TempDir& tmp, bool floatInput) {
+void expectFinestCutKeepsEverything(const Grid& g, const std::string& input, bool floatInput) {
   const std::string mt = input + ".mt", cut = input + ".cut.ply";
   auto b = runTool("mtbuild", input + " -o " + mt + " -q");
   ASSERT_EQ(b.exitCode, 0) << b.output;
@@ -110,7 +110,6 @@ void expectFinestCutKeepsEverything(const Grid& g, const std::string& input, con
     for (int a = 0; a < 3; ++a) worst = std::max(worst, std::abs(c.positions[k + a] - p[a]));
   }
   EXPECT_LE(worst, step) << input << ": a vertex moved by " << worst << ", the grid step is " << step;
-  (void)tmp;
 }
 
 TEST(Georeferenced, CentimetreGridAtUtmCoordinatesKeepsEveryTriangleInEveryFormat) {
@@ -120,10 +119,10 @@ TEST(Georeferenced, CentimetreGridAtUtmCoordinatesKeepsEveryTriangleInEveryForma
   for (const std::string format : {"off", "obj", "ply"}) {
     const std::string in = tmp.file("utm." + format);
     writeText(g, in, format);
-    expectFinestCutKeepsEverything(g, in, tmp, false);
+    expectFinestCutKeepsEverything(g, in, false);
   }
   writeBinary(g, tmp.file("utm-double.ply"), true);
-  expectFinestCutKeepsEverything(g, tmp.file("utm-double.ply"), tmp, false);
+  expectFinestCutKeepsEverything(g, tmp.file("utm-double.ply"), false);
 }
 
 TEST(Georeferenced, FloatPlyAtUtmCoordinatesKeepsWhatFloatCanHold) {
@@ -132,7 +131,7 @@ TEST(Georeferenced, FloatPlyAtUtmCoordinatesKeepsWhatFloatCanHold) {
   TempDir tmp;
   const Grid g{150, 500000.0, 4000000.0, 80.0, 0.5};
   writeBinary(g, tmp.file("utm-float.ply"), false);
-  expectFinestCutKeepsEverything(g, tmp.file("utm-float.ply"), tmp, true);
+  expectFinestCutKeepsEverything(g, tmp.file("utm-float.ply"), true);
 }
 
 }  // namespace
