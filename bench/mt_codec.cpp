@@ -5,8 +5,8 @@
 #include <benchmark/benchmark.h>
 
 #include "mtbuild/patch_codec.h"
-#include "mtbuild/scan_grid.h"
 #include "mtbuild/simplify_region.h"
+#include "testing/scan_grid.h"
 
 using namespace mt;
 

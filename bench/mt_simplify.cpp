@@ -2,8 +2,8 @@
 // 20k-triangle scan-like region with ~5% locked vertices and holes, halved as in the level loop.
 #include <benchmark/benchmark.h>
 
-#include "mtbuild/scan_grid.h"
 #include "mtbuild/simplify_region.h"
+#include "testing/scan_grid.h"
 
 using namespace mt;
 

@@ -10,9 +10,8 @@
 #include <numeric>
 #include <unordered_map>
 
-#include "tools/scan_generator.h"
-
-#include "tests/test_vpartition_support.h"
+#include "testing/memory_centroids.h"
+#include "testing/scan_generator.h"
 #include "vpartition/vpartition.h"
 
 namespace {

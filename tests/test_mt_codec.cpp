@@ -15,8 +15,8 @@
 #include "base/error.h"
 #include "mtbuild/fan_order.h"
 #include "mtbuild/patch_codec.h"
-#include "mtbuild/scan_grid.h"
 #include "mtbuild/simplify_region.h"
+#include "testing/scan_grid.h"
 
 using namespace mt;
 

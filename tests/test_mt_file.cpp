@@ -7,7 +7,7 @@
 
 #include "base/error.h"
 #include "mtbuild/mt_file.h"
-#include "mtbuild/scan_grid.h"
+#include "testing/scan_grid.h"
 #include "tests/test_support.h"
 
 using namespace mt;

@@ -12,10 +12,10 @@
 #include <utility>
 
 #include "base/error.h"
-#include "mtbuild/scan_grid.h"
 #include "mtbuild/simplify_region.h"
 #include "mtbuild/surface_distance.h"
 #include "patchstore/patch_store.h"
+#include "testing/scan_grid.h"
 
 using namespace mt;
 

@@ -21,9 +21,9 @@
 #include "base/error.h"
 #include "mtbuild/mt_cut.h"
 #include "mtbuild/mt_file.h"
-#include "mtbuild/scan_grid.h"
 #include "mtbuild/simplify_region.h"
 #include "patchstore/mesh_reader.h"
+#include "testing/scan_grid.h"
 #include "tests/test_support.h"
 
 using namespace mt;

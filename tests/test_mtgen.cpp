@@ -18,7 +18,7 @@
 #include <vector>
 
 #include "tests/test_support.h"
-#include "tools/scan_generator.h"
+#include "testing/scan_generator.h"
 
 namespace {
 

@@ -14,7 +14,7 @@
 #include "base/error.h"
 #include "patchstore/patch_store.h"
 #include "tests/test_support.h"
-#include "tests/test_vpartition_support.h"
+#include "testing/memory_centroids.h"
 #include "vpartition/vpartition.h"
 
 namespace mt {

@@ -1,5 +1,5 @@
 // mtgen: streams a procedurally generated, scan-like mesh of any size to a mesh file, with memory
-// O(rows) in the output size. The surface itself is defined in tools/scan_generator.h; this file is
+// O(rows) in the output size. The surface itself is defined in testing/scan_generator.h; this file is
 // the command line, the output formats and the parallel streaming pipeline.
 //
 // Streaming: vertices are produced in chunks of grid rows and faces in chunks of rows (grid order)
@@ -35,7 +35,7 @@
 #include "base/output_path.h"
 #include "patchstore/io/ply_writer.h"
 #include "tools/cli_checks.h"
-#include "tools/scan_generator.h"
+#include "testing/scan_generator.h"
 
 namespace {
 

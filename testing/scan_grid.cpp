@@ -1,4 +1,4 @@
-#include "mtbuild/scan_grid.h"
+#include "testing/scan_grid.h"
 
 #include <cmath>
 
