@@ -382,228 +382,261 @@ FrameStats ExtractRender::requestAhead(uint64_t frame, const View& view) {
   return st;
 }
 
+// ---- The cut update (Extract + Apply, then Prefetch) ----
+
+// The state of one cut update: the view, the heaps of feasible moves (BMT 5, figure 8), the
+// deadline, the render budget and the frame's figures.
+struct ExtractRender::Pass {
+  struct Entry {
+    double err;
+    uint32_t node;
+  };
+  struct LargestFirst {
+    bool operator()(const Entry& a, const Entry& b) const { return a.err < b.err; }
+  };
+  struct SmallestFirst {
+    bool operator()(const Entry& a, const Entry& b) const { return a.err > b.err; }
+  };
+
+  const View& view;
+  FrameStats& st;
+  Clock::time_point t0, deadline;
+  double tau = 0;       // the tolerance times the LOD scale (pixels)
+  double budget = 0;    // the render budget (triangles); a probe may raise it
+  double pinLimit = 0;  // place holders the cut may pin
+  std::priority_queue<Entry, std::vector<Entry>, LargestFirst> refine;
+  std::priority_queue<Entry, std::vector<Entry>, SmallestFirst> coarse;
+  double maxErr = 0;         // the largest screen error left on the visible cut
+  uint32_t ops = 0;
+  uint32_t urgentLeft = 4;   // the first misses at the top of the heap are urgent (3.3.2)
+  bool memoryFull = false;   // the cut would crowd the cache: the global LOD scale grows
+
+  Pass(const View& v, FrameStats& s) : view(v), st(s) {}
+  // The deadline, looked at every 8th move; once passed, the update stops where it is.
+  bool timeUp() {
+    if ((++ops & 7) != 0) return false;
+    if (Clock::now() < deadline) return false;
+    st.interrupted = true;
+    return true;
+  }
+};
+
+void ExtractRender::fillHeaps(Pass& p) const {
+  const auto& nodes = scene_.nodes();
+  for (uint32_t n = 0; n < nodes.size(); ++n) {
+    if (isRefineCandidate(n))
+      p.refine.push({screenError(n, p.view), n});
+    else if (isCoarsenCandidate(n))
+      p.coarse.push({screenError(n, p.view), n});
+    else if (nodes[n].source && succIn_[n] == 0)
+      p.maxErr = std::max(p.maxErr, screenError(n, p.view));
+  }
+}
+
+// After a move on n, n and its neighbours may have become feasible moves (BMT 5, figure 8).
+void ExtractRender::pushAround(Pass& p, uint32_t n) const {
+  const SceneNode& s = scene_.nodes()[n];
+  if (isRefineCandidate(n)) p.refine.push({screenError(n, p.view), n});
+  if (isCoarsenCandidate(n)) p.coarse.push({screenError(n, p.view), n});
+  for (uint32_t k = 0; k < s.inArcCount; ++k) {
+    uint32_t m = scene_.arcs()[scene_.inArcs()[s.firstInArc + k]].from;
+    if (isRefineCandidate(m)) p.refine.push({screenError(m, p.view), m});
+  }
+  for (uint32_t k = 0; k < s.arcCount; ++k) {
+    uint32_t m = scene_.arcs()[s.firstArc + k].to;
+    if (isCoarsenCandidate(m)) p.coarse.push({screenError(m, p.view), m});
+  }
+}
+
+// Drops heap entries that are no longer feasible coarsenings or lead into a damaged patch.
+void ExtractRender::popStaleCoarse(Pass& p) const {
+  while (!p.coarse.empty() && (!isCoarsenCandidate(p.coarse.top().node) || (badNode_[p.coarse.top().node] & 2)))
+    p.coarse.pop();
+}
+
+// Takes the cheapest coarsening off the heap and applies it when its patches are resident;
+// otherwise asks for them with urgency `u` (or marks the node when one of them is damaged).
+void ExtractRender::coarsenTop(Pass& p, Urgency u) {
+  const Pass::Entry c = p.coarse.top();
+  p.coarse.pop();
+  const int64_t dc = visibleDelta(c.node, false, p.view);
+  if (tryCoarsen(c.node)) {
+    visibleTriangles_ = uint64_t(int64_t(visibleTriangles_) + dc);
+    ++p.st.coarsenings;
+    pushAround(p, c.node);
+    return;
+  }
+  collectOut(c.node, scratch_);
+  if (patchesBad(scratch_)) badNode_[c.node] |= 2;
+  else want(scratch_, u);
+}
+
+// Step 1. Over the render budget: coarsen, the smallest error first (a "switch up", always urgent).
+void ExtractRender::coarsenOverBudget(Pass& p) {
+  while (double(visibleTriangles_) > p.budget && !p.st.interrupted) {
+    popStaleCoarse(p);
+    if (p.coarse.empty() || p.timeUp()) break;
+    coarsenTop(p, Urgency::UrgentUp);
+  }
+}
+
+// Probe: with a steady cut the time model cannot tell the per-triangle cost from the fixed cost
+// and may stay pessimistic for ever. When frames have averaged under 60% of the budget and 30
+// frames passed since the last probe, one refinement beyond the model's budget is taken (if it
+// fits in twice the budget); the measurement corrects the model, and step 1 undoes it next frame
+// if it was too much. Not right after a slow frame (the budget has just been cut for a reason).
+bool ExtractRender::probeAllowed(double after, double budget) const {
+  return after > budget && !options_.fixedTriangles && budgetScale_ == 1 && slackFrames_ >= 30 &&
+         frameMsAvg_ < 0.6 * options_.budgetMs && lastFrameMs_ < 0.6 * options_.budgetMs && after <= 2 * budget;
+}
+
+// Step 2. Refine the largest screen error while CheckBudget allows; beyond the budget, trade the
+// cheapest coarsening for it when that drops detail where it matters much less.
+void ExtractRender::refineWithinBudget(Pass& p) {
+  while (!p.refine.empty() && !p.st.interrupted) {
+    const Pass::Entry e = p.refine.top();
+    if (!isRefineCandidate(e.node) || (badNode_[e.node] & 1)) {
+      p.refine.pop();
+      continue;
+    }
+    if (e.err <= p.tau || p.timeUp()) break;
+    const int64_t dv = visibleDelta(e.node, true, p.view);
+    const double after = double(visibleTriangles_) + double(dv);
+    if (probeAllowed(after, p.budget)) {  // the frame's budget is the probe's
+      slackFrames_ = 0;
+      p.budget = after;
+      p.st.budgetTriangles = uint64_t(p.budget);
+    }
+    if (after > p.budget) {
+      // Trade: drop detail where it matters much less, to spend it where it matters most.
+      popStaleCoarse(p);
+      const bool trade = !p.coarse.empty() && p.coarse.top().err * 2 < e.err;
+      if (!trade) break;  // the budget is spent
+      coarsenTop(p, Urgency::Needed);
+      continue;
+    }
+    collectIn(e.node, scratch_);
+    if (double(cutPatchCount_) + double(scratch_.size()) > p.pinLimit) {
+      p.memoryFull = true;
+      break;
+    }
+    p.refine.pop();
+    refineOrRequest(p, e.node, e.err, dv);
+  }
+}
+
+// Applies the refinement of `node` (screen error `err`) when its patches are resident; otherwise asks for them (the first few
+// misses urgently) and counts its error as left on screen, or marks a damaged node.
+void ExtractRender::refineOrRequest(Pass& p, uint32_t node, double err, int64_t dv) {
+  if (tryRefine(node)) {
+    visibleTriangles_ = uint64_t(int64_t(visibleTriangles_) + dv);
+    ++p.st.refinements;
+    pushAround(p, node);
+    return;
+  }
+  collectIn(node, scratch_);
+  if (patchesBad(scratch_)) {
+    badNode_[node] |= 1;  // never refine into a damaged patch
+    return;
+  }
+  want(scratch_, p.urgentLeft > 0 ? Urgency::UrgentDown : Urgency::Needed);
+  if (p.urgentLeft > 0) --p.urgentLeft;
+  p.maxErr = std::max(p.maxErr, err);
+}
+
+// Step 3. Coarsen detail far below the tolerance (frees triangles and memory; hysteresis 2x).
+void ExtractRender::coarsenFarBelow(Pass& p) {
+  while (!p.st.interrupted) {
+    popStaleCoarse(p);
+    if (p.coarse.empty() || p.coarse.top().err >= p.tau * 0.5 || p.timeUp()) break;
+    coarsenTop(p, Urgency::Needed);
+  }
+}
+
+// Step 4. Prefetch (BMT 5: "the operations in the heaps"; Derzapf 4.3: children and the view
+// extrapolated 10 frames ahead), at low priority so it only uses spare load capacity.
+void ExtractRender::prefetch(Pass& p, const View& predicted) {
+  const auto& nodes = scene_.nodes();
+  for (int k = 0; !p.refine.empty() && k < 24;) {
+    const Pass::Entry e = p.refine.top();
+    p.refine.pop();
+    if (!isRefineCandidate(e.node) || badNode_[e.node] || e.err <= p.tau * 0.5) continue;
+    collectIn(e.node, scratch_);
+    want(scratch_, Urgency::Prefetch);
+    // Children: the next refinements after this one.
+    const SceneNode& s = nodes[e.node];
+    for (uint32_t j = 0; j < s.inArcCount && k < 8; ++j) {
+      uint32_t m = scene_.arcs()[scene_.inArcs()[s.firstInArc + j]].from;
+      if (!nodes[m].source && screenError(m, p.view) > p.tau) {
+        collectIn(m, scratch_);
+        want(scratch_, Urgency::Prefetch);
+      }
+    }
+    ++k;
+  }
+  for (int k = 0; !p.coarse.empty() && k < 16;) {
+    const Pass::Entry c = p.coarse.top();
+    p.coarse.pop();
+    if (!isCoarsenCandidate(c.node) || badNode_[c.node]) continue;
+    collectOut(c.node, scratch_);
+    want(scratch_, Urgency::Prefetch);
+    ++k;
+  }
+  // The extrapolated view: refinements it will want that the current view does not.
+  std::vector<Pass::Entry> ahead;
+  for (uint32_t n = 0; n < nodes.size(); ++n)
+    if (isRefineCandidate(n) && !badNode_[n]) {
+      double e = screenError(n, predicted);
+      if (e > p.tau) ahead.push_back({e, n});
+    }
+  std::sort(ahead.begin(), ahead.end(), [](const Pass::Entry& a, const Pass::Entry& b) { return a.err > b.err; });
+  for (size_t i = 0; i < ahead.size() && i < 32; ++i) {
+    collectIn(ahead[i].node, scratch_);
+    want(scratch_, Urgency::Prefetch);
+  }
+}
+
 FrameStats ExtractRender::update(uint64_t frame, const View& view, const View& predicted) {
-  const auto t0 = Clock::now();
   FrameStats st;
+  Pass p(view, st);
+  p.t0 = Clock::now();
   frame_ = frame;
   wanted_.clear();
   const double extractMs = options_.extractMs > 0 ? options_.extractMs : std::min(2.0, options_.budgetMs / 20);
-  const auto deadline = t0 + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double, std::milli>(extractMs));
-  const double tau = options_.pixelTolerance * lodScale_;
-  const auto& nodes = scene_.nodes();
-
-  double budget = nextBudget(extractMs);
-  st.budgetTriangles = uint64_t(budget);
+  p.deadline = p.t0 + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double, std::milli>(extractMs));
+  p.tau = options_.pixelTolerance * lodScale_;
+  p.budget = nextBudget(extractMs);
+  st.budgetTriangles = uint64_t(p.budget);
   st.modelA = time_.a();
   st.modelB = time_.b() * 1e6;
   visibleTriangles_ = 0;
   for (uint32_t a : cutArcs_)
     if (arcVisible(a, view)) visibleTriangles_ += scene_.arcs()[a].triangles;
   const uint32_t slots = cache_ ? cache_->stats().slots : UINT32_MAX;
-  const double pinLimit = cache_ ? options_.memoryFraction * slots : 1e18;
-
-  struct Entry {
-    double err;
-    uint32_t node;
-  };
-  auto maxFirst = [](const Entry& a, const Entry& b) { return a.err < b.err; };
-  auto minFirst = [](const Entry& a, const Entry& b) { return a.err > b.err; };
-  std::priority_queue<Entry, std::vector<Entry>, decltype(maxFirst)> refine(maxFirst);
-  std::priority_queue<Entry, std::vector<Entry>, decltype(minFirst)> coarse(minFirst);
-  double maxErr = 0;
-  for (uint32_t n = 0; n < nodes.size(); ++n) {
-    if (isRefineCandidate(n))
-      refine.push({screenError(n, view), n});
-    else if (isCoarsenCandidate(n))
-      coarse.push({screenError(n, view), n});
-    else if (nodes[n].source && succIn_[n] == 0)
-      maxErr = std::max(maxErr, screenError(n, view));
-  }
-  auto pushAround = [&](uint32_t n) {
-    // After a move on n, n and its neighbours may have become feasible moves (BMT 5, figure 8).
-    const SceneNode& s = nodes[n];
-    if (isRefineCandidate(n)) refine.push({screenError(n, view), n});
-    if (isCoarsenCandidate(n)) coarse.push({screenError(n, view), n});
-    for (uint32_t k = 0; k < s.inArcCount; ++k) {
-      uint32_t p = scene_.arcs()[scene_.inArcs()[s.firstInArc + k]].from;
-      if (isRefineCandidate(p)) refine.push({screenError(p, view), p});
-    }
-    for (uint32_t k = 0; k < s.arcCount; ++k) {
-      uint32_t m = scene_.arcs()[s.firstArc + k].to;
-      if (isCoarsenCandidate(m)) coarse.push({screenError(m, view), m});
-    }
-  };
-  uint32_t ops = 0;
-  auto timeUp = [&] {
-    if ((++ops & 7) != 0) return false;
-    if (Clock::now() < deadline) return false;
-    st.interrupted = true;
-    return true;
-  };
-  auto popStaleCoarse = [&] {
-    while (!coarse.empty() && (!isCoarsenCandidate(coarse.top().node) || (badNode_[coarse.top().node] & 2))) coarse.pop();
-  };
-  bool memoryFull = false;
-  uint32_t urgentLeft = 4;  // the first misses at the top of the heap are urgent (3.3.2)
+  p.pinLimit = cache_ ? options_.memoryFraction * slots : 1e18;
+  fillHeaps(p);
 
   if (!frozen_) {
-    // 1. Over the render budget: coarsen, the smallest error first (a "switch up", always urgent).
-    while (double(visibleTriangles_) > budget && !st.interrupted) {
-      popStaleCoarse();
-      if (coarse.empty() || timeUp()) break;
-      Entry e = coarse.top();
-      coarse.pop();
-      const int64_t dv = visibleDelta(e.node, false, view);
-      if (tryCoarsen(e.node)) {
-        visibleTriangles_ = uint64_t(int64_t(visibleTriangles_) + dv);
-        ++st.coarsenings;
-        pushAround(e.node);
-      } else {
-        collectOut(e.node, scratch_);
-        if (patchesBad(scratch_)) badNode_[e.node] |= 2;
-        else want(scratch_, Urgency::UrgentUp);
-      }
-    }
-    // 2. Refine the largest screen error while CheckBudget allows.
-    while (!refine.empty() && !st.interrupted) {
-      Entry e = refine.top();
-      if (!isRefineCandidate(e.node) || (badNode_[e.node] & 1)) {
-        refine.pop();
-        continue;
-      }
-      if (e.err <= tau || timeUp()) break;
-      const int64_t dv = visibleDelta(e.node, true, view);
-      const double after = double(visibleTriangles_) + double(dv);
-      // Probe: with a steady cut the time model cannot tell the per-triangle cost from the fixed
-      // cost and may stay pessimistic for ever. When frames have averaged under 60% of the
-      // budget and 30 frames passed since the last probe, take one refinement beyond the
-      // model's budget (if it fits in twice the budget); the measurement corrects the model,
-      // and step 1 undoes it next frame if it was too much. Not right after a slow frame (the
-      // budget has just been cut for a reason), and the frame's budget is the probe's.
-      if (after > budget && !options_.fixedTriangles && budgetScale_ == 1 && slackFrames_ >= 30 &&
-          frameMsAvg_ < 0.6 * options_.budgetMs && lastFrameMs_ < 0.6 * options_.budgetMs && after <= 2 * budget) {
-        slackFrames_ = 0;
-        budget = after;
-        st.budgetTriangles = uint64_t(budget);
-      }
-      if (after > budget) {
-        // Trade: drop detail where it matters much less, to spend it where it matters most.
-        popStaleCoarse();
-        if (!coarse.empty() && coarse.top().err * 2 < e.err) {
-          Entry c = coarse.top();
-          coarse.pop();
-          const int64_t dc = visibleDelta(c.node, false, view);
-          if (tryCoarsen(c.node)) {
-            visibleTriangles_ = uint64_t(int64_t(visibleTriangles_) + dc);
-            ++st.coarsenings;
-            pushAround(c.node);
-          } else {
-            collectOut(c.node, scratch_);
-            if (patchesBad(scratch_)) badNode_[c.node] |= 2;
-            else want(scratch_, Urgency::Needed);
-          }
-          continue;
-        }
-        break;  // the budget is spent
-      }
-      collectIn(e.node, scratch_);
-      if (double(cutPatchCount_) + double(scratch_.size()) > pinLimit) {
-        memoryFull = true;  // the cut would crowd the cache: the global LOD scale grows
-        break;
-      }
-      refine.pop();
-      if (tryRefine(e.node)) {
-        visibleTriangles_ = uint64_t(int64_t(visibleTriangles_) + dv);
-        ++st.refinements;
-        pushAround(e.node);
-      } else {
-        collectIn(e.node, scratch_);
-        if (patchesBad(scratch_)) {
-          badNode_[e.node] |= 1;  // never refine into a damaged patch
-        } else {
-          want(scratch_, urgentLeft > 0 ? Urgency::UrgentDown : Urgency::Needed);
-          if (urgentLeft > 0) --urgentLeft;
-          maxErr = std::max(maxErr, e.err);
-        }
-      }
-    }
-    // 3. Coarsen detail far below the tolerance (frees triangles and memory; hysteresis 2x).
-    while (!st.interrupted) {
-      popStaleCoarse();
-      if (coarse.empty() || coarse.top().err >= tau * 0.5 || timeUp()) break;
-      Entry c = coarse.top();
-      coarse.pop();
-      const int64_t dc = visibleDelta(c.node, false, view);
-      if (tryCoarsen(c.node)) {
-        visibleTriangles_ = uint64_t(int64_t(visibleTriangles_) + dc);
-        ++st.coarsenings;
-        pushAround(c.node);
-      } else {
-        collectOut(c.node, scratch_);
-        if (patchesBad(scratch_)) badNode_[c.node] |= 2;
-        else want(scratch_, Urgency::Needed);
-      }
-    }
+    coarsenOverBudget(p);
+    refineWithinBudget(p);
+    coarsenFarBelow(p);
   }
   // The cut's largest visible screen error: the worst refinement left undone.
-  while (!refine.empty() && !isRefineCandidate(refine.top().node)) refine.pop();
-  if (!refine.empty()) maxErr = std::max(maxErr, refine.top().err);
-  st.maxScreenError = maxErr;
-
-  // 4. Prefetch (BMT 5: "the operations in the heaps"; Derzapf 4.3: children and the view
-  //    extrapolated 10 frames ahead), at low priority so it only uses spare load capacity.
-  if (cache_ && options_.prefetch && !frozen_ && Clock::now() < deadline + (deadline - t0)) {
-    int k = 0;
-    while (!refine.empty() && k < 24) {
-      Entry e = refine.top();
-      refine.pop();
-      if (!isRefineCandidate(e.node) || badNode_[e.node] || e.err <= tau * 0.5) continue;
-      collectIn(e.node, scratch_);
-      want(scratch_, Urgency::Prefetch);
-      // Children: the next refinements after this one.
-      const SceneNode& s = nodes[e.node];
-      for (uint32_t j = 0; j < s.inArcCount && k < 8; ++j) {
-        uint32_t p = scene_.arcs()[scene_.inArcs()[s.firstInArc + j]].from;
-        if (!nodes[p].source && screenError(p, view) > tau) {
-          collectIn(p, scratch_);
-          want(scratch_, Urgency::Prefetch);
-        }
-      }
-      ++k;
-    }
-    k = 0;
-    while (!coarse.empty() && k < 16) {
-      Entry c = coarse.top();
-      coarse.pop();
-      if (!isCoarsenCandidate(c.node) || badNode_[c.node]) continue;
-      collectOut(c.node, scratch_);
-      want(scratch_, Urgency::Prefetch);
-      ++k;
-    }
-    // The extrapolated view: refinements it will want that the current view does not.
-    std::vector<Entry> ahead;
-    for (uint32_t n = 0; n < nodes.size(); ++n)
-      if (isRefineCandidate(n) && !badNode_[n]) {
-        double e = screenError(n, predicted);
-        if (e > tau) ahead.push_back({e, n});
-      }
-    std::sort(ahead.begin(), ahead.end(), [](const Entry& a, const Entry& b) { return a.err > b.err; });
-    for (size_t i = 0; i < ahead.size() && i < 32; ++i) {
-      collectIn(ahead[i].node, scratch_);
-      want(scratch_, Urgency::Prefetch);
-    }
-  }
+  while (!p.refine.empty() && !isRefineCandidate(p.refine.top().node)) p.refine.pop();
+  if (!p.refine.empty()) p.maxErr = std::max(p.maxErr, p.refine.top().err);
+  st.maxScreenError = p.maxErr;
+  if (cache_ && options_.prefetch && !frozen_ && Clock::now() < p.deadline + (p.deadline - p.t0)) prefetch(p, predicted);
 
   submitRequests(frame, st);
 
   // Global LOD scale (Derzapf 4.1): coarsen everything while memory is full, relax gradually.
-  if (memoryFull) lodScale_ = std::min(lodScale_ * 1.1, 64.0);
-  else if (lodScale_ > 1 && double(cutPatchCount_) < 0.8 * pinLimit) lodScale_ = std::max(1.0, lodScale_ * 0.97);
-  st.memoryFull = memoryFull;
+  if (p.memoryFull) lodScale_ = std::min(lodScale_ * 1.1, 64.0);
+  else if (lodScale_ > 1 && double(cutPatchCount_) < 0.8 * p.pinLimit) lodScale_ = std::max(1.0, lodScale_ * 0.97);
+  st.memoryFull = p.memoryFull;
   st.lodScale = lodScale_;
   st.triangles = triangles_;
   st.patches = cutPatchCount_;
-  st.extractMs = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+  st.extractMs = std::chrono::duration<double, std::milli>(Clock::now() - p.t0).count();
   return st;
 }
 

@@ -137,6 +137,18 @@ class ExtractRender {
   double nextBudget(double extractMs);
   // Sends wanted_ to the PatchServer (urgent first, then by consecutive frames), within the load budget.
   void submitRequests(uint64_t frame, FrameStats& st);
+  // The steps of update(), on the state of one update (extract.cpp).
+  struct Pass;
+  void fillHeaps(Pass& p) const;
+  void pushAround(Pass& p, uint32_t n) const;
+  void popStaleCoarse(Pass& p) const;
+  void coarsenTop(Pass& p, Urgency u);
+  void coarsenOverBudget(Pass& p);
+  bool probeAllowed(double after, double budget) const;
+  void refineWithinBudget(Pass& p);
+  void refineOrRequest(Pass& p, uint32_t node, double err, int64_t dv);
+  void coarsenFarBelow(Pass& p);
+  void prefetch(Pass& p, const View& predicted);
 
   const Scene& scene_;
   PatchCache* cache_;
