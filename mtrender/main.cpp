@@ -13,6 +13,7 @@
 #include <filesystem>
 #include <future>
 #include <fstream>
+#include <memory>
 #include <numeric>
 #include <string>
 #include <thread>
@@ -29,10 +30,6 @@ using namespace mt::render;
 using Clock = std::chrono::steady_clock;
 
 namespace {
-
-struct Summary {
-  std::vector<FrameRecord> frames;
-};
 
 // Removes a temporary file unless it was renamed over its final name.
 struct TemporaryFile {
@@ -137,265 +134,330 @@ double median(std::vector<double> v) {
   return v[v.size() / 2];
 }
 
+// The command line, as parsed.
+struct CliOptions {
+  std::vector<std::string> files;
+  bool headless = false, baseline = false, noPrefetch = false, noCull = false, quiet = false, wireframe = false;
+  bool cold = false;
+  std::string cameraPath, statsPath, screenshotDir, plotDir, cacheText = "256M", gpuCacheText, colorMode = "shaded";
+  std::string screenshotPath, recordPath = "mtrender-path.txt";
+  bool recordGiven = false;
+  int frames = 0, width = 1280, height = 720, screenshotEvery = 1, maxFrames = 0;
+  double budgetMs = 0, tolerance = 0, readDelayMs = 0, extractMs = 0, frameInterval = 0;
+  uint64_t fixedTriangles = 0;
+  uint32_t loadBudget = 0, stillFrames = 0;
+  std::vector<int> background;
+};
+
+constexpr uint64_t kMaxFrames = 10'000'000;
+
+// The options of the cut, the budgets and the cache, with their ranges (checked as the command
+// line is parsed, shown by --help) and the engine's own defaults.
+void addRenderOptions(CLI::App& app, CliOptions& o) {
+  const EngineOptions engineDefaults;
+  o.budgetMs = engineDefaults.extract.budgetMs;
+  o.tolerance = engineDefaults.extract.pixelTolerance;
+  o.stillFrames = engineDefaults.stillFrames;
+  const mt::cli::Interval kBudgetMs{0, 60000, true, false, "ms"}, kTolerance{0, 10000, true, false, "pixels"},
+      kExtractMs{0, 60000, true, false, "ms"};
+  app.add_option("files", o.files, "MT files to show together (they share one cache and one budget)")->required();
+  app.add_flag("--headless", o.headless, "render offscreen on EGL surfaceless (no X), for tests and benchmarks");
+  app.add_option("--camera-path", o.cameraPath,
+                 "camera path: a path file (docs/mtrender.md) or a built-in: orbit, flythrough, fixed "
+                 "(headless default: fixed; in the viewer the path is replayed)");
+  app.add_option("--frames", o.frames, "frames to render (headless; default: the path's length, or 100)")
+      ->check(mt::cli::countIn(1, kMaxFrames));
+  app.add_option("--budget-ms", o.budgetMs, "frame-time budget in ms")->check(mt::cli::numberIn(kBudgetMs))->capture_default_str();
+  app.add_option("--cache", o.cacheText, "RAM patch cache cap, from 1M to 1024T, e.g. 64M, 1G (K, M, G, T: powers of 1024)")
+      ->capture_default_str();
+  app.add_option("--gpu-cache", o.gpuCacheText, "GPU buffer cache cap, from 1M to 1024T (default: same as --cache)");
+  app.add_option("--width", o.width, "image width in pixels")->check(mt::cli::countIn(16, 16384))->capture_default_str();
+  app.add_option("--height", o.height, "image height in pixels")->check(mt::cli::countIn(16, 16384))->capture_default_str();
+  app.add_option("--stats", o.statsPath, "write one CSV row per frame (columns in docs/mtrender.md); not an input file");
+  app.add_option("--screenshots", o.screenshotDir, "headless: write frame_NNNNN.png into this directory");
+  app.add_option("--screenshot-every", o.screenshotEvery, "headless: a screenshot every K frames (and the last one)")
+      ->check(mt::cli::countIn(1, kMaxFrames))
+      ->capture_default_str();
+  app.add_option("--plot", o.plotDir, "write PNG charts of the per-frame series with gnuplot into this directory");
+  app.add_flag("--baseline-mmap", o.baseline,
+               "baseline: map the files and render the same kind of cut with no RAM cache, no PatchServer "
+               "thread and no prefetch (patches decoded inside the frame)");
+  app.add_option("--tolerance", o.tolerance, "target screen-space error in pixels")
+      ->check(mt::cli::numberIn(kTolerance))
+      ->capture_default_str();
+  app.add_option("--fixed-triangles", o.fixedTriangles,
+                 "a fixed render budget (triangles per frame) instead of the time model (default: the time model)")
+      ->check(mt::cli::countIn(1, 1'000'000'000'000ull));
+  app.add_option("--extract-ms", o.extractMs, "deadline of the cut update per frame (default min(2, budget/20))")
+      ->check(mt::cli::numberIn(kExtractMs));
+  app.add_option("--load-budget", o.loadBudget, "patches requested per frame (default: from the measured load time)")
+      ->check(mt::cli::countIn(1, 1'000'000));
+  app.add_option("--still-frames", o.stillFrames,
+                 "progressive refinement of a still view: once the camera stops, a finer cut is drawn over up to "
+                 "this many frames (each within --budget-ms) and shown when complete; 1 turns it off")
+      ->check(mt::cli::countIn(1, 64))
+      ->capture_default_str();
+  app.add_flag("--no-prefetch", o.noPrefetch, "no prefetching");
+  app.add_flag("--no-cull", o.noCull, "no frustum / normal-cone culling");
+}
+
+// Drawing, pacing, test hooks and the viewer's options.
+void addDisplayOptions(CLI::App& app, CliOptions& o, CLI::Option*& recordOption) {
+  const mt::cli::Interval kDelayMs{0, 60000, false, false, "ms"};
+  app.add_option("--color", o.colorMode, "shaded, patch or lod colours")
+      ->check(CLI::IsMember({"shaded", "patch", "lod"}))
+      ->capture_default_str();
+  app.add_flag("--wireframe", o.wireframe, "draw edges only");
+  app.add_option("--background", o.background, "background colour R G B, each 0-255 (default 20 23 28)")
+      ->expected(3)
+      ->check(mt::cli::countIn(0, 255));
+  app.add_option("--frame-interval-ms", o.frameInterval,
+                 "headless: start frames at this interval, like a display refresh (0: back to back, the default); "
+                 "frame_ms does not include the wait")
+      ->check(mt::cli::numberIn(kDelayMs));
+  app.add_option("--test-read-delay-ms", o.readDelayMs, "test hook: add this latency to every patch read (a slow disk)")
+      ->check(mt::cli::numberIn(kDelayMs))
+      ->capture_default_str();
+  app.add_flag("--cold", o.cold,
+               "drop the MT files from the OS page cache first (posix_fadvise DONTNEED), for cold-start figures");
+  app.add_flag("--quiet", o.quiet, "no progress or warnings on stderr");
+  app.add_option("--max-frames", o.maxFrames, "viewer: close after this many frames (for tests; default: when closed)")
+      ->check(mt::cli::countIn(1, 1'000'000'000));
+  app.add_option("--screenshot", o.screenshotPath, "viewer: write the last frame to this PNG (.png) when closing");
+  recordOption = app.add_option("--record", o.recordPath, "viewer: where key R records the camera path")->capture_default_str();
+}
+
+// Every input a regular file (a FIFO would block the reader, a device or folder mislead it),
+// every output none of them, before anything is opened.
+void checkFiles(const CliOptions& o) {
+  for (const std::string& f : o.files) mt::requireRegularFile(f, "an MT file");
+  if (!o.cameraPath.empty() && o.cameraPath != "orbit" && o.cameraPath != "flythrough" && o.cameraPath != "fixed")
+    mt::requireRegularFile(o.cameraPath, "a camera path file");
+  checkOutputs(o.files, o.statsPath, o.screenshotPath, o.recordPath, o.recordGiven, o.screenshotDir, o.plotDir);
+}
+
+void dropFromPageCache(const std::vector<std::string>& files) {
+  for (const auto& f : files) {
+    int fd = ::open(f.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd >= 0) {
+      ::fdatasync(fd);
+      ::posix_fadvise(fd, 0, 0, POSIX_FADV_DONTNEED);
+      ::close(fd);
+    }
+  }
+}
+
+EngineOptions engineOptions(const CliOptions& o) {
+  EngineOptions eo;
+  eo.files = o.files;
+  // Below 1M no useful cut fits; the cache is sized by what the files need, so a large cap
+  // costs nothing.
+  constexpr uint64_t kMinCache = uint64_t(1) << 20, kMaxCache = uint64_t(1) << 50;
+  eo.cacheBytes = mt::cli::sizeOption(o.cacheText, "--cache", kMinCache, kMaxCache, "1M", "1024T");
+  eo.gpuCacheBytes =
+      o.gpuCacheText.empty() ? 0 : mt::cli::sizeOption(o.gpuCacheText, "--gpu-cache", kMinCache, kMaxCache, "1M", "1024T");
+  eo.baseline = o.baseline;
+  eo.readDelayMs = o.readDelayMs;
+  eo.quiet = o.quiet;
+  eo.stillFrames = o.stillFrames;
+  eo.extract.budgetMs = o.budgetMs;
+  eo.extract.pixelTolerance = o.tolerance;
+  eo.extract.fixedTriangles = o.fixedTriangles;
+  eo.extract.extractMs = o.extractMs;
+  eo.extract.loadBudget = o.loadBudget;
+  eo.extract.prefetch = !o.noPrefetch && !o.baseline;
+  eo.extract.cull = !o.noCull;
+  return eo;
+}
+
+DrawSettings drawSettings(const CliOptions& o) {
+  DrawSettings ds;
+  ds.wireframe = o.wireframe;
+  if (o.colorMode == "shaded") ds.mode = ColorMode::Shaded;
+  else if (o.colorMode == "patch") ds.mode = ColorMode::Patch;
+  else ds.mode = ColorMode::Lod;  // CLI11 checked the name
+  if (o.background.size() == 3)
+    ds.background = glm::vec3(float(o.background[0]), float(o.background[1]), float(o.background[2])) / 255.0f;
+  return ds;
+}
+
+int runViewerFor(const CliOptions& o, const EngineOptions& eo, const DrawSettings& ds) {
+  ViewerOptions vo;
+  vo.engine = eo;
+  vo.width = o.width;
+  vo.height = o.height;
+  vo.cameraPath = o.cameraPath;
+  vo.maxFrames = o.maxFrames;
+  vo.screenshotPath = o.screenshotPath;
+  vo.recordPath = o.recordPath;
+  vo.statsPath = o.statsPath;
+  vo.draw = ds;
+  return runViewer(vo);
+}
+
+double msSince(Clock::time_point t) { return std::chrono::duration<double, std::milli>(Clock::now() - t).count(); }
+
+// The headless run's engine and GL context, and how long bringing them up took.
+struct Headless {
+  std::unique_ptr<EglContext> egl;
+  std::unique_ptr<GlRenderer> gl;
+  std::unique_ptr<Engine> engine;  // destroyed first, before the GL context
+  double eglMs = 0, openMs = 0, startMs = 0;
+};
+
+// Opening the files and loading the coarsest cut overlap with bringing up GL (loading the Mesa
+// driver dominates a cold start).
+Headless startHeadless(const EngineOptions& eo, const DrawSettings& ds, int width, int height) {
+  Headless h;
+  auto pending = std::async(std::launch::async, [&] {
+    auto t = Clock::now();
+    auto e = std::make_unique<Engine>(eo);
+    h.openMs = msSince(t);
+    t = Clock::now();
+    e->start();
+    h.startMs = msSince(t);
+    return e;
+  });
+  auto t0 = Clock::now();
+  h.egl = std::make_unique<EglContext>();
+  h.gl = std::make_unique<GlRenderer>(eo.gpuCacheBytes ? eo.gpuCacheBytes : eo.cacheBytes);
+  h.gl->useOffscreen(width, height);
+  h.gl->warmUp(ds);
+  h.eglMs = msSince(t0);
+  h.engine = pending.get();
+  return h;
+}
+
+// Renders `frames` frames along `path`, with the screenshots and progress lines asked for.
+std::vector<FrameRecord> renderFrames(const CliOptions& o, int frames, const CameraPath& path, Headless& h,
+                                      const DrawSettings& ds, Clock::time_point programStart, double& firstFrameMs) {
+  std::vector<FrameRecord> recs;
+  recs.reserve(size_t(frames));
+  auto nextFrame = Clock::now();
+  for (int f = 0; f < frames; ++f) {
+    if (o.frameInterval > 0) {
+      std::this_thread::sleep_until(nextFrame);
+      nextFrame += std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double, std::milli>(o.frameInterval));
+    }
+    const CameraPose& pose = path.at(size_t(f));
+    const CameraPose& prev = path.at(size_t(f > 0 ? f - 1 : 0));
+    FrameRecord r = h.engine->frame(pose, prev, *h.gl, ds, o.width, o.height);
+    if (f == 0) firstFrameMs = msSince(programStart);
+    recs.push_back(r);
+    if (!o.screenshotDir.empty() && (f % o.screenshotEvery == 0 || f + 1 == frames)) {
+      char name[64];
+      std::snprintf(name, sizeof name, "/frame_%05d.png", f);
+      writePng(o.screenshotDir + name, h.gl->readPixels());
+    }
+    if (!o.quiet && (f + 1) % 100 == 0)
+      std::fprintf(stderr, "mtrender: frame %d/%d, %.1f ms, %llu triangles, %.2f px\n", f + 1, frames, r.frameMs,
+                   (unsigned long long)r.triangles, r.maxScreenError);
+  }
+  return recs;
+}
+
+// Prints the run's summary (bench/render.sh parses these lines).
+void printSummary(const CliOptions& o, const EngineOptions& eo, const std::vector<FrameRecord>& recs, Headless& h,
+                  double firstFrameMs) {
+  const int frames = int(recs.size());
+  size_t within = 0;
+  uint64_t maxCache = 0, maxGpu = 0;
+  double wantedSum = 0, missSum = 0;
+  std::vector<double> extract, frameMs;
+  for (const auto& r : recs) {
+    within += r.frameMs <= o.budgetMs;
+    maxCache = std::max(maxCache, r.cacheBytes);
+    maxGpu = std::max(maxGpu, r.gpuBytes);
+    extract.push_back(r.extractMs);
+    frameMs.push_back(r.frameMs);
+    missSum += r.misses;
+    wantedSum += r.misses + r.drawnPatches;
+  }
+  const double missRate = wantedSum > 0 ? missSum / wantedSum : 0;
+  // After the camera stops: from the first frame of the final still stretch to the first frame
+  // whose visible screen error is within the tolerance.
+  int stop = frames;
+  while (stop > 0 && !recs[size_t(stop - 1)].moving) --stop;
+  double settleMs = -1, acc = 0;
+  for (int f = stop; f < frames; ++f) {
+    if (recs[size_t(f)].maxScreenError <= o.tolerance) {
+      settleMs = acc;
+      break;
+    }
+    acc += recs[size_t(f)].frameMs;
+  }
+  Engine& engine = *h.engine;
+  auto cs = engine.cache() ? engine.cache()->stats() : CacheStats{};
+  std::printf("frames %d\n", frames);
+  std::printf("within_budget_pct %.2f\n", 100.0 * double(within) / double(std::max(1, frames)));
+  std::printf("frame_ms_median %.3f\n", median(frameMs));
+  std::printf("frame_ms_max %.3f\n", frameMs.empty() ? 0 : *std::max_element(frameMs.begin(), frameMs.end()));
+  std::printf("extract_ms_median %.4f\n", median(extract));
+  std::printf("first_frame_ms %.1f\n", firstFrameMs);
+  std::printf("startup_ms gl %.1f open %.1f coarsest_cut %.1f first_frame %.1f\n", h.eglMs, h.openMs, h.startMs,
+              recs.empty() ? 0.0 : recs[0].frameMs);
+  std::printf("cache_cap_bytes %llu\n", (unsigned long long)eo.cacheBytes);
+  std::printf("cache_max_bytes %llu\n", (unsigned long long)maxCache);
+  std::printf("cache_slots %u classes %u largest_slot_bytes %llu arena_bytes %llu\n", cs.slots, cs.classes,
+              (unsigned long long)cs.slotBytes, (unsigned long long)cs.arenaBytes);
+  std::printf("gpu_max_bytes %llu\n", (unsigned long long)maxGpu);
+  std::printf("miss_rate %.4f\n", missRate);
+  std::printf("misses_total %.0f\n", missSum);
+  std::printf("second_chance %llu evictions %llu urgent_evictions %llu given_up %llu\n",
+              (unsigned long long)cs.secondChance, (unsigned long long)cs.evictions,
+              (unsigned long long)cs.urgentEvictions, (unsigned long long)cs.givenUp);
+  std::printf("bad_patches %llu\n", (unsigned long long)engine.badPatches());
+  std::printf("undrawn_files %zu\n", engine.warnUndrawnFiles());
+  std::printf("stop_frame %d\n", stop);
+  if (stop >= frames) std::printf("settle_ms none (the camera never stops)\n");
+  else if (settleMs < 0) std::printf("settle_ms not_reached (final error %.2f px)\n", recs.back().maxScreenError);
+  else std::printf("settle_ms %.1f\n", settleMs);
+}
+
+int runHeadless(CliOptions o, const EngineOptions& eo, const DrawSettings& ds, Clock::time_point programStart) {
+  Headless h = startHeadless(eo, ds, o.width, o.height);
+  CameraPath path;
+  const int pathFrames = o.frames > 0 ? o.frames : 100;
+  if (o.cameraPath.empty()) o.cameraPath = "fixed";
+  if (!builtinCameraPath(o.cameraPath, pathFrames, h.engine->center(), h.engine->radius(), path))
+    path = loadCameraPath(o.cameraPath, h.engine->center(), h.engine->radius());
+  const int frames = o.frames > 0 ? o.frames : int(path.poses.size());
+  if (!o.screenshotDir.empty()) std::filesystem::create_directories(o.screenshotDir);
+  double firstFrameMs = 0;
+  const std::vector<FrameRecord> recs = renderFrames(o, frames, path, h, ds, programStart, firstFrameMs);
+  if (!o.statsPath.empty()) writeCsv(o.statsPath, recs);
+  if (!o.plotDir.empty()) {
+    std::string csv = o.statsPath;
+    if (csv.empty()) {
+      csv = o.plotDir + "/frames.csv";
+      std::filesystem::create_directories(o.plotDir);
+      writeCsv(csv, recs);
+    }
+    writePlots(o.plotDir, std::filesystem::absolute(csv).string(), o.budgetMs, eo.cacheBytes);
+  }
+  printSummary(o, eo, recs, h, firstFrameMs);
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   const auto programStart = Clock::now();
   CLI::App app{"mtrender: view MT files with a guaranteed frame-time budget, loading patches out of core.\n"
                "Without --headless it opens the interactive viewer (GLFW window; see docs/mtrender.md for keys)."};
-  std::vector<std::string> files;
-  bool headless = false, baseline = false, noPrefetch = false, noCull = false, quiet = false, wireframe = false;
-  std::string cameraPath, statsPath, screenshotDir, plotDir, cacheText = "256M", gpuCacheText, colorMode = "shaded";
-  std::string screenshotPath, recordPath = "mtrender-path.txt";
-  int frames = 0, width = 1280, height = 720, screenshotEvery = 1, maxFrames = 0;
-  // The engine's own defaults, shown by --help (capture_default_str).
-  const EngineOptions engineDefaults;
-  double budgetMs = engineDefaults.extract.budgetMs, tolerance = engineDefaults.extract.pixelTolerance;
-  double readDelayMs = 0, extractMs = 0;
-  uint64_t fixedTriangles = 0;
-  uint32_t loadBudget = 0;
-  // Ranges of the numeric options: checked as the command line is parsed, shown by --help.
-  const mt::cli::Interval kBudgetMs{0, 60000, true, false, "ms"}, kTolerance{0, 10000, true, false, "pixels"},
-      kExtractMs{0, 60000, true, false, "ms"}, kDelayMs{0, 60000, false, false, "ms"};
-  constexpr uint64_t kMaxFrames = 10'000'000;
-  app.add_option("files", files, "MT files to show together (they share one cache and one budget)")->required();
-  app.add_flag("--headless", headless, "render offscreen on EGL surfaceless (no X), for tests and benchmarks");
-  app.add_option("--camera-path", cameraPath,
-                 "camera path: a path file (docs/mtrender.md) or a built-in: orbit, flythrough, fixed "
-                 "(headless default: fixed; in the viewer the path is replayed)");
-  app.add_option("--frames", frames, "frames to render (headless; default: the path's length, or 100)")
-      ->check(mt::cli::countIn(1, kMaxFrames));
-  app.add_option("--budget-ms", budgetMs, "frame-time budget in ms")->check(mt::cli::numberIn(kBudgetMs))->capture_default_str();
-  app.add_option("--cache", cacheText, "RAM patch cache cap, from 1M to 1024T, e.g. 64M, 1G (K, M, G, T: powers of 1024)")
-      ->capture_default_str();
-  app.add_option("--gpu-cache", gpuCacheText, "GPU buffer cache cap, from 1M to 1024T (default: same as --cache)");
-  app.add_option("--width", width, "image width in pixels")->check(mt::cli::countIn(16, 16384))->capture_default_str();
-  app.add_option("--height", height, "image height in pixels")->check(mt::cli::countIn(16, 16384))->capture_default_str();
-  app.add_option("--stats", statsPath, "write one CSV row per frame (columns in docs/mtrender.md); not an input file");
-  app.add_option("--screenshots", screenshotDir, "headless: write frame_NNNNN.png into this directory");
-  app.add_option("--screenshot-every", screenshotEvery, "headless: a screenshot every K frames (and the last one)")
-      ->check(mt::cli::countIn(1, kMaxFrames))
-      ->capture_default_str();
-  app.add_option("--plot", plotDir, "write PNG charts of the per-frame series with gnuplot into this directory");
-  app.add_flag("--baseline-mmap", baseline,
-               "baseline: map the files and render the same kind of cut with no RAM cache, no PatchServer "
-               "thread and no prefetch (patches decoded inside the frame)");
-  app.add_option("--tolerance", tolerance, "target screen-space error in pixels")
-      ->check(mt::cli::numberIn(kTolerance))
-      ->capture_default_str();
-  app.add_option("--fixed-triangles", fixedTriangles,
-                 "a fixed render budget (triangles per frame) instead of the time model (default: the time model)")
-      ->check(mt::cli::countIn(1, 1'000'000'000'000ull));
-  app.add_option("--extract-ms", extractMs, "deadline of the cut update per frame (default min(2, budget/20))")
-      ->check(mt::cli::numberIn(kExtractMs));
-  app.add_option("--load-budget", loadBudget, "patches requested per frame (default: from the measured load time)")
-      ->check(mt::cli::countIn(1, 1'000'000));
-  uint32_t stillFrames = engineDefaults.stillFrames;
-  app.add_option("--still-frames", stillFrames,
-                 "progressive refinement of a still view: once the camera stops, a finer cut is drawn over up to "
-                 "this many frames (each within --budget-ms) and shown when complete; 1 turns it off")
-      ->check(mt::cli::countIn(1, 64))
-      ->capture_default_str();
-  app.add_flag("--no-prefetch", noPrefetch, "no prefetching");
-  app.add_flag("--no-cull", noCull, "no frustum / normal-cone culling");
-  app.add_option("--color", colorMode, "shaded, patch or lod colours")
-      ->check(CLI::IsMember({"shaded", "patch", "lod"}))
-      ->capture_default_str();
-  app.add_flag("--wireframe", wireframe, "draw edges only");
-  std::vector<int> background;
-  app.add_option("--background", background, "background colour R G B, each 0-255 (default 20 23 28)")
-      ->expected(3)
-      ->check(mt::cli::countIn(0, 255));
-  double frameInterval = 0;
-  app.add_option("--frame-interval-ms", frameInterval,
-                 "headless: start frames at this interval, like a display refresh (0: back to back, the default); "
-                 "frame_ms does not include the wait")
-      ->check(mt::cli::numberIn(kDelayMs));
-  app.add_option("--test-read-delay-ms", readDelayMs, "test hook: add this latency to every patch read (a slow disk)")
-      ->check(mt::cli::numberIn(kDelayMs))
-      ->capture_default_str();
-  bool cold = false;
-  app.add_flag("--cold", cold,
-               "drop the MT files from the OS page cache first (posix_fadvise DONTNEED), for cold-start figures");
-  app.add_flag("--quiet", quiet, "no progress or warnings on stderr");
-  app.add_option("--max-frames", maxFrames, "viewer: close after this many frames (for tests; default: when closed)")
-      ->check(mt::cli::countIn(1, 1'000'000'000));
-  app.add_option("--screenshot", screenshotPath, "viewer: write the last frame to this PNG (.png) when closing");
-  auto* recordOption =
-      app.add_option("--record", recordPath, "viewer: where key R records the camera path")->capture_default_str();
+  CliOptions o;
+  CLI::Option* recordOption = nullptr;
+  addRenderOptions(app, o);
+  addDisplayOptions(app, o, recordOption);
   if (int code = mt::cli::parse(app, argc, argv, "mtrender"); code >= 0) return code;
-
+  o.recordGiven = recordOption->count() > 0;
   try {
-    // Every input a regular file (a FIFO would block the reader, a device or folder mislead it),
-    // every output none of them, before anything is opened.
-    for (const std::string& f : files) mt::requireRegularFile(f, "an MT file");
-    if (!cameraPath.empty() && cameraPath != "orbit" && cameraPath != "flythrough" && cameraPath != "fixed")
-      mt::requireRegularFile(cameraPath, "a camera path file");
-    checkOutputs(files, statsPath, screenshotPath, recordPath, recordOption->count() > 0, screenshotDir, plotDir);
-    if (cold)
-      for (const auto& f : files) {
-        int fd = ::open(f.c_str(), O_RDONLY | O_CLOEXEC);
-        if (fd >= 0) {
-          ::fdatasync(fd);
-          ::posix_fadvise(fd, 0, 0, POSIX_FADV_DONTNEED);
-          ::close(fd);
-        }
-      }
-    EngineOptions eo;
-    eo.files = files;
-    // Below 1M no useful cut fits; the cache is sized by what the files need, so a large cap
-    // costs nothing.
-    constexpr uint64_t kMinCache = uint64_t(1) << 20, kMaxCache = uint64_t(1) << 50;
-    eo.cacheBytes = mt::cli::sizeOption(cacheText, "--cache", kMinCache, kMaxCache, "1M", "1024T");
-    eo.gpuCacheBytes =
-        gpuCacheText.empty() ? 0 : mt::cli::sizeOption(gpuCacheText, "--gpu-cache", kMinCache, kMaxCache, "1M", "1024T");
-    eo.baseline = baseline;
-    eo.readDelayMs = readDelayMs;
-    eo.quiet = quiet;
-    eo.stillFrames = stillFrames;
-    eo.extract.budgetMs = budgetMs;
-    eo.extract.pixelTolerance = tolerance;
-    eo.extract.fixedTriangles = fixedTriangles;
-    eo.extract.extractMs = extractMs;
-    eo.extract.loadBudget = loadBudget;
-    eo.extract.prefetch = !noPrefetch && !baseline;
-    eo.extract.cull = !noCull;
-    DrawSettings ds;
-    ds.wireframe = wireframe;
-    if (colorMode == "shaded") ds.mode = ColorMode::Shaded;
-    else if (colorMode == "patch") ds.mode = ColorMode::Patch;
-    else ds.mode = ColorMode::Lod;  // CLI11 checked the name
-    if (background.size() == 3)
-      ds.background = glm::vec3(float(background[0]), float(background[1]), float(background[2])) / 255.0f;
-
-    if (!headless) {
-      ViewerOptions vo;
-      vo.engine = eo;
-      vo.width = width;
-      vo.height = height;
-      vo.cameraPath = cameraPath;
-      vo.maxFrames = maxFrames;
-      vo.screenshotPath = screenshotPath;
-      vo.recordPath = recordPath;
-      vo.statsPath = statsPath;
-      vo.draw = ds;
-      return runViewer(vo);
-    }
-
-    auto msSince = [](Clock::time_point t) { return std::chrono::duration<double, std::milli>(Clock::now() - t).count(); };
-    // Opening the files and loading the coarsest cut overlap with bringing up GL (loading the
-    // Mesa driver dominates a cold start).
-    double openMs = 0, startMs = 0;
-    auto pending = std::async(std::launch::async, [&] {
-      auto t = Clock::now();
-      auto e = std::make_unique<Engine>(eo);
-      openMs = msSince(t);
-      t = Clock::now();
-      e->start();
-      startMs = msSince(t);
-      return e;
-    });
-    auto t0 = Clock::now();
-    EglContext egl;
-    GlRenderer gl(eo.gpuCacheBytes ? eo.gpuCacheBytes : eo.cacheBytes);
-    gl.useOffscreen(width, height);
-    gl.warmUp(ds);
-    const double eglMs = msSince(t0);
-    std::unique_ptr<Engine> enginePtr = pending.get();
-    Engine& engine = *enginePtr;
-    CameraPath path;
-    const int pathFrames = frames > 0 ? frames : 100;
-    if (cameraPath.empty()) cameraPath = "fixed";
-    if (!builtinCameraPath(cameraPath, pathFrames, engine.center(), engine.radius(), path))
-      path = loadCameraPath(cameraPath, engine.center(), engine.radius());
-    if (frames <= 0) frames = int(path.poses.size());
-    if (!screenshotDir.empty()) std::filesystem::create_directories(screenshotDir);
-
-    std::vector<FrameRecord> recs;
-    recs.reserve(size_t(frames));
-    double firstFrameMs = 0;
-    auto nextFrame = Clock::now();
-    for (int f = 0; f < frames; ++f) {
-      if (frameInterval > 0) {
-        std::this_thread::sleep_until(nextFrame);
-        nextFrame += std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double, std::milli>(frameInterval));
-      }
-      const CameraPose& pose = path.at(size_t(f));
-      const CameraPose& prev = path.at(size_t(f > 0 ? f - 1 : 0));
-      FrameRecord r = engine.frame(pose, prev, gl, ds, width, height);
-      if (f == 0) firstFrameMs = std::chrono::duration<double, std::milli>(Clock::now() - programStart).count();
-      recs.push_back(r);
-      if (!screenshotDir.empty() && (f % screenshotEvery == 0 || f + 1 == frames)) {
-        char name[64];
-        std::snprintf(name, sizeof name, "/frame_%05d.png", f);
-        writePng(screenshotDir + name, gl.readPixels());
-      }
-      if (!quiet && (f + 1) % 100 == 0)
-        std::fprintf(stderr, "mtrender: frame %d/%d, %.1f ms, %llu triangles, %.2f px\n", f + 1, frames, r.frameMs,
-                     (unsigned long long)r.triangles, r.maxScreenError);
-    }
-    if (!statsPath.empty()) writeCsv(statsPath, recs);
-    if (!plotDir.empty()) {
-      if (statsPath.empty()) {
-        statsPath = plotDir + "/frames.csv";
-        std::filesystem::create_directories(plotDir);
-        writeCsv(statsPath, recs);
-      }
-      writePlots(plotDir, std::filesystem::absolute(statsPath).string(), budgetMs, eo.cacheBytes);
-    }
-    // Summary (bench/render.sh parses these lines).
-    size_t within = 0;
-    uint64_t maxCache = 0, maxGpu = 0;
-    double missRate = 0, wantedSum = 0, missSum = 0;
-    std::vector<double> extract, frameMs;
-    for (const auto& r : recs) {
-      within += r.frameMs <= budgetMs;
-      maxCache = std::max(maxCache, r.cacheBytes);
-      maxGpu = std::max(maxGpu, r.gpuBytes);
-      extract.push_back(r.extractMs);
-      frameMs.push_back(r.frameMs);
-      missSum += r.misses;
-      wantedSum += r.misses + r.drawnPatches;
-    }
-    missRate = wantedSum > 0 ? missSum / wantedSum : 0;
-    // After the camera stops: from the first frame of the final still stretch to the first frame
-    // whose visible screen error is within the tolerance.
-    int stop = frames;
-    while (stop > 0 && !recs[size_t(stop - 1)].moving) --stop;
-    double settleMs = -1, acc = 0;
-    for (int f = stop; f < frames; ++f) {
-      if (recs[size_t(f)].maxScreenError <= tolerance) {
-        settleMs = acc;
-        break;
-      }
-      acc += recs[size_t(f)].frameMs;
-    }
-    auto cs = engine.cache() ? engine.cache()->stats() : CacheStats{};
-    std::printf("frames %d\n", frames);
-    std::printf("within_budget_pct %.2f\n", 100.0 * double(within) / double(std::max(1, frames)));
-    std::printf("frame_ms_median %.3f\n", median(frameMs));
-    std::printf("frame_ms_max %.3f\n", frameMs.empty() ? 0 : *std::max_element(frameMs.begin(), frameMs.end()));
-    std::printf("extract_ms_median %.4f\n", median(extract));
-    std::printf("first_frame_ms %.1f\n", firstFrameMs);
-    std::printf("startup_ms gl %.1f open %.1f coarsest_cut %.1f first_frame %.1f\n", eglMs, openMs, startMs,
-                recs.empty() ? 0.0 : recs[0].frameMs);
-    std::printf("cache_cap_bytes %llu\n", (unsigned long long)eo.cacheBytes);
-    std::printf("cache_max_bytes %llu\n", (unsigned long long)maxCache);
-    std::printf("cache_slots %u classes %u largest_slot_bytes %llu arena_bytes %llu\n", cs.slots, cs.classes,
-                (unsigned long long)cs.slotBytes, (unsigned long long)cs.arenaBytes);
-    std::printf("gpu_max_bytes %llu\n", (unsigned long long)maxGpu);
-    std::printf("miss_rate %.4f\n", missRate);
-    std::printf("misses_total %.0f\n", missSum);
-    std::printf("second_chance %llu evictions %llu urgent_evictions %llu given_up %llu\n",
-                (unsigned long long)cs.secondChance, (unsigned long long)cs.evictions,
-                (unsigned long long)cs.urgentEvictions, (unsigned long long)cs.givenUp);
-    std::printf("bad_patches %llu\n", (unsigned long long)engine.badPatches());
-    std::printf("undrawn_files %zu\n", engine.warnUndrawnFiles());
-    std::printf("stop_frame %d\n", stop);
-    if (stop >= frames) std::printf("settle_ms none (the camera never stops)\n");
-    else if (settleMs < 0) std::printf("settle_ms not_reached (final error %.2f px)\n", recs.back().maxScreenError);
-    else std::printf("settle_ms %.1f\n", settleMs);
-    return 0;
+    checkFiles(o);
+    if (o.cold) dropFromPageCache(o.files);
+    const EngineOptions eo = engineOptions(o);
+    const DrawSettings ds = drawSettings(o);
+    if (!o.headless) return runViewerFor(o, eo, ds);
+    return runHeadless(o, eo, ds, programStart);
   } catch (const std::exception& e) {
     // One line "mtrender: MESSAGE"; some layers already name the tool.
     const std::string message = e.what();
