@@ -83,28 +83,26 @@ double secondsSince(std::chrono::steady_clock::time_point start) {
 // Each random cut is welded and counted in full: a million is days on a large file, more a typo.
 constexpr uint32_t kMaxCuts = 1'000'000;
 
-int run(const std::string& path, uint32_t randomCuts, uint64_t seed, uint64_t memoryBytes, bool quiet) {
-  const auto started = std::chrono::steady_clock::now();
-  mt::requireRegularFile(path, "an MT file");  // a FIFO would block the reader, a device mislead it
-  auto reader = mt::MtFileReader::open(path);
-  const mt::MtFileReader& r = *reader;
-  const auto& nodes = r.nodes();
-  Problems problems(path);
-  if (nodes.size() < 2) mt::fail(path, "the DAG has fewer than 2 nodes (no source and sink)");
-  const uint32_t sink = uint32_t(nodes.size() - 1);
-  const double qErr = r.header().quantizationError;
-  // Radii are floats: allow their rounding (2^-24 relative, with margin) plus one quantization
-  // step, since a builder may bound the input's positions rather than the quantized ones.
-  auto slack = [&](double radius) { return 1e-6 * std::abs(radius) + qErr; };
+// Radii are floats: allow their rounding (2^-24 relative, with margin) plus one quantization
+// step, since a builder may bound the input's positions rather than the quantized ones.
+double sphereSlack(double radius, double quantizationError) { return 1e-6 * std::abs(radius) + quantizationError; }
 
-  // 2. DAG shape.
+// 2. DAG shape: the source has no predecessors, the sink no successors, every other node an
+// outgoing arc, and no cycle (topologicalOrder throws on one: nothing else can be checked then).
+void checkDagShape(const mt::MtFileReader& r, const std::string& path, Problems& problems) {
+  const auto& nodes = r.nodes();
+  const uint32_t sink = uint32_t(nodes.size() - 1);
   if (nodes[0].backArcCount) problems.add("dag", path + ": the source (node 0) has predecessors");
   if (nodes[sink].arcCount) problems.add("dag", path + ": the sink (node " + std::to_string(sink) + ") has successors");
   for (uint32_t v = 0; v < sink; ++v)
     if (!nodes[v].arcCount) problems.add("dag", path + ": " + nodeName(r, v) + " has no outgoing arc (not connected to the sink)");
-  mt::topologicalOrder(r);  // throws on a cycle: nothing else can be checked then
+  mt::topologicalOrder(r);
+}
 
-  // 3. Monotone errors.
+// 3. Monotone errors: a node's error >= each predecessor's, the sink's +inf.
+void checkMonotoneErrors(const mt::MtFileReader& r, const std::string& path, Problems& problems) {
+  const auto& nodes = r.nodes();
+  const uint32_t sink = uint32_t(nodes.size() - 1);
   if (!std::isinf(nodes[sink].error) || nodes[sink].error < 0)
     problems.add("error", path + ": the sink's error is " + std::to_string(nodes[sink].error) + ", not +inf");
   for (uint32_t v = 0; v < nodes.size(); ++v) {
@@ -121,17 +119,22 @@ int run(const std::string& path, uint32_t randomCuts, uint64_t seed, uint64_t me
       }
     }
   }
+}
 
-  // 4a. Spheres nested. The source is left out as a predecessor: it is never refined past and its
-  // sphere means nothing; what a node must contain of it is its floor, the patches on the arc
-  // source -> node (checked with the payloads below). The sink's sphere means nothing either.
+// 4a. Spheres nested. The source is left out as a predecessor: it is never refined past and its
+// sphere means nothing; what a node must contain of it is its floor, the patches on the arc
+// source -> node (checked with the payloads). The sink's sphere means nothing either.
+void checkNestedSpheres(const mt::MtFileReader& r, const std::string& path, Problems& problems) {
+  const auto& nodes = r.nodes();
+  const uint32_t sink = uint32_t(nodes.size() - 1);
+  const double qErr = r.header().quantizationError;
   for (uint32_t v = 1; v < sink; ++v) {
     const NodeRecord& n = nodes[v];
     for (uint32_t k = 0; k < n.backArcCount; ++k) {
       uint32_t u = r.arcs()[r.backArcs()[n.firstBackArc + k]].from;
       if (u == 0) continue;
       double reach = distance(n.center, nodes[u].center) + double(nodes[u].radius);
-      if (reach > double(n.radius) + slack(n.radius)) {
+      if (reach > double(n.radius) + sphereSlack(n.radius, qErr)) {
         char buf[256];
         std::snprintf(buf, sizeof buf, "%s: sphere of %s (radius %.9g) does not contain predecessor node %u's (reaches %.9g)",
                       path.c_str(), nodeName(r, v).c_str(), double(n.radius), u, reach);
@@ -139,25 +142,38 @@ int run(const std::string& path, uint32_t randomCuts, uint64_t seed, uint64_t me
       }
     }
   }
+}
 
-  // 1 + 4b. Every payload: checksum, decode, and its vertices inside the sphere of the node whose
-  // fragment it is (arc.from) and of the node whose floor it is (arc.to); source and sink skipped.
-  // The grid boxes are kept for planning the crack check's parts (a damaged patch keeps
-  // `everything`; cuts holding one are skipped anyway).
-  const mt::QuantizationGrid grid = r.grid();
-  std::vector<double> worstOutside(nodes.size(), 0.0);  // per node: max distance beyond the sphere
-  std::mutex worstLock;
-  std::vector<mt::GridBox> patchBoxes(r.patches().size(), mt::GridBox::everything());
-  const bool progress = !quiet && r.header().inputTriangles >= 1000000;
+// What the payload pass gathers.
+struct PayloadScan {
+  std::vector<mt::GridBox> patchBoxes;  // for planning the crack check's parts
+  std::vector<mt::PatchDamage> damage;
+  std::vector<uint8_t> isDamaged;       // per patch
   // Triangles with two corners at one grid point, per patch: a cut drops them when it welds, so
   // a build must have removed them (the grid weld) and counted them in the header.
-  std::vector<uint32_t> degenerate(r.patches().size(), 0);
+  std::vector<uint32_t> degenerate;
+  std::vector<double> worstOutside;     // per node: max distance of its patches beyond its sphere
+};
+
+// 1 + 4b. Every payload: checksum, decode, and its vertices inside the sphere of the node whose
+// fragment it is (arc.from) and of the node whose floor it is (arc.to); source and sink skipped.
+// A damaged patch keeps the box `everything` (cuts holding one are skipped anyway).
+PayloadScan scanPayloads(const mt::MtFileReader& r) {
+  const auto& nodes = r.nodes();
+  const uint32_t sink = uint32_t(nodes.size() - 1);
+  const double qErr = r.header().quantizationError;
+  const mt::QuantizationGrid grid = r.grid();
+  PayloadScan scan;
+  scan.patchBoxes.assign(r.patches().size(), mt::GridBox::everything());
+  scan.degenerate.assign(r.patches().size(), 0);
+  scan.worstOutside.assign(nodes.size(), 0.0);
+  std::mutex worstLock;
   std::vector<mt::PatchDamage> damaged = mt::checkAllPatches(r, [&](uint32_t p, const mt::DecodedPatch& d) {
-    patchBoxes[p] = mt::patchBox(d);
+    scan.patchBoxes[p] = mt::patchBox(d);
     for (uint32_t t = 0; t < d.triangleCount(); ++t) {
       const uint32_t* q[3] = {&d.q[3 * d.triangles[3 * t]], &d.q[3 * d.triangles[3 * t + 1]], &d.q[3 * d.triangles[3 * t + 2]]};
       auto same = [](const uint32_t* a, const uint32_t* b) { return a[0] == b[0] && a[1] == b[1] && a[2] == b[2]; };
-      degenerate[p] += same(q[0], q[1]) || same(q[1], q[2]) || same(q[0], q[2]);
+      scan.degenerate[p] += same(q[0], q[1]) || same(q[1], q[2]) || same(q[0], q[2]);
     }
     const mt::format::ArcRecord& arc = r.arcs()[r.patches()[p].arc];
     for (uint32_t v : {arc.from, arc.to}) {
@@ -165,7 +181,7 @@ int run(const std::string& path, uint32_t randomCuts, uint64_t seed, uint64_t me
       const NodeRecord& n = nodes[v];
       // The floor may stick out of a sphere fitted to the fragment by up to the node's error
       // (the fragment is within that of its floor).
-      const double allowed = double(n.radius) + slack(n.radius) + (v == arc.to ? double(n.error) : 0.0);
+      const double allowed = double(n.radius) + sphereSlack(n.radius, qErr) + (v == arc.to ? double(n.error) : 0.0);
       double worst = 0;
       for (uint32_t i = 0; i < d.vertexCount(); ++i) {
         double pos[3];
@@ -174,44 +190,71 @@ int run(const std::string& path, uint32_t randomCuts, uint64_t seed, uint64_t me
       }
       if (worst > 0) {
         std::lock_guard<std::mutex> g(worstLock);
-        worstOutside[v] = std::max(worstOutside[v], worst);
+        scan.worstOutside[v] = std::max(scan.worstOutside[v], worst);
       }
     }
   });
-  if (progress)
-    std::fprintf(stderr, "mtverify: payloads: %zu patches read and checked, %.1f s\n", r.patches().size(), secondsSince(started));
-  std::vector<uint8_t> isDamaged(r.patches().size(), 0);
-  for (const auto& d : damaged) {
-    isDamaged[d.patch] = 1;
+  scan.damage = std::move(damaged);
+  return scan;
+}
+
+// The damaged payloads, one problem each, named with the node whose fragment they are.
+void reportDamage(const mt::MtFileReader& r, PayloadScan& scan, Problems& problems) {
+  scan.isDamaged.assign(r.patches().size(), 0);
+  for (const auto& d : scan.damage) {
+    scan.isDamaged[d.patch] = 1;
     uint32_t v = r.arcs()[r.patches()[d.patch].arc].from;
     problems.add("checksum", d.message + " [" + nodeName(r, v) + "]");
   }
-  {
-    // The finest cut holds every input triangle but those the build recorded as welded away.
-    const mt::format::FileHeader& h = r.header();
-    uint64_t finest = 0, finestDegenerate = 0, anyDegenerate = 0;
-    for (uint32_t p = 0; p < r.patches().size(); ++p) {
-      anyDegenerate += degenerate[p];
-      if (r.arcs()[r.patches()[p].arc].from == 0) finest += r.patches()[p].triangles - degenerate[p], finestDegenerate += degenerate[p];
-    }
-    if (finest + h.weldedTriangles != h.inputTriangles)
-      problems.add("lost", path + ": the finest cut has " + std::to_string(finest) + " triangles (" +
-                               std::to_string(finestDegenerate) + " degenerate ones dropped); the input had " +
-                               std::to_string(h.inputTriangles) + " and the build recorded " +
-                               std::to_string(h.weldedTriangles) + " as welded away");
-    else if (anyDegenerate)
-      problems.add("lost", path + ": " + std::to_string(anyDegenerate) +
-                               " stored triangles have two corners at one grid point (cuts drop them)");
+}
+
+// The finest cut holds every input triangle but those the build recorded as welded away; then
+// the nodes whose patches reach outside their spheres.
+void checkInputKeptAndReach(const mt::MtFileReader& r, const std::string& path, const PayloadScan& scan,
+                            Problems& problems) {
+  const mt::format::FileHeader& h = r.header();
+  uint64_t finest = 0, finestDegenerate = 0, anyDegenerate = 0;
+  for (uint32_t p = 0; p < r.patches().size(); ++p) {
+    anyDegenerate += scan.degenerate[p];
+    if (r.arcs()[r.patches()[p].arc].from == 0)
+      finest += r.patches()[p].triangles - scan.degenerate[p], finestDegenerate += scan.degenerate[p];
   }
-  for (uint32_t v = 0; v < nodes.size(); ++v)
-    if (worstOutside[v] > 0) {
+  if (finest + h.weldedTriangles != h.inputTriangles)
+    problems.add("lost", path + ": the finest cut has " + std::to_string(finest) + " triangles (" +
+                             std::to_string(finestDegenerate) + " degenerate ones dropped); the input had " +
+                             std::to_string(h.inputTriangles) + " and the build recorded " +
+                             std::to_string(h.weldedTriangles) + " as welded away");
+  else if (anyDegenerate)
+    problems.add("lost", path + ": " + std::to_string(anyDegenerate) +
+                             " stored triangles have two corners at one grid point (cuts drop them)");
+  for (uint32_t v = 0; v < r.nodes().size(); ++v)
+    if (scan.worstOutside[v] > 0) {
       char buf[256];
       std::snprintf(buf, sizeof buf, "%s: %s has vertices of its fragment or floor up to %.9g outside its sphere", path.c_str(),
-                    nodeName(r, v).c_str(), worstOutside[v]);
+                    nodeName(r, v).c_str(), scan.worstOutside[v]);
       problems.add("sphere", buf);
     }
+}
 
-  // 5. Crack-free cuts. Cuts touching a damaged patch cannot be assembled: reported and skipped.
+struct CutCheck {
+  uint32_t checked = 0, conforming = 0;
+  size_t cuts = 0;
+  bool haveReference = false;
+  mt::ConformityReference reference;
+};
+
+// Whether a cut's arcs hold a damaged patch.
+bool touchesDamage(const mt::MtFileReader& r, const std::vector<uint32_t>& arcs, const std::vector<uint8_t>& isDamaged) {
+  bool touches = false;
+  for (uint32_t a : arcs)
+    for (uint32_t k = 0; k < r.arcs()[a].patchCount; ++k) touches |= isDamaged[r.patchRefs()[r.arcs()[a].firstPatchRef + k]] != 0;
+  return touches;
+}
+
+// 5. Crack-free cuts: the finest (the reference), the coarsest and `randomCuts` random ones.
+// Cuts touching a damaged patch cannot be assembled: reported and skipped.
+CutCheck checkCuts(const mt::MtFileReader& r, const std::string& path, uint32_t randomCuts, uint64_t seed,
+                   uint64_t memoryBytes, bool progress, const PayloadScan& scan, Problems& problems) {
   std::vector<std::pair<std::string, mt::Cut>> cuts;
   cuts.push_back({"finest cut", mt::finestCut(r)});
   cuts.push_back({"coarsest cut", mt::coarsestCut(r)});
@@ -219,10 +262,9 @@ int run(const std::string& path, uint32_t randomCuts, uint64_t seed, uint64_t me
   for (uint32_t k = 0; k < randomCuts; ++k) cuts.push_back({"random cut " + std::to_string(k), mt::randomCut(r, rng)});
   mt::EdgeCountOptions countOptions;
   countOptions.memoryBytes = memoryBytes;
-  countOptions.patchBoxes = &patchBoxes;
-  mt::ConformityReference reference;
-  bool haveReference = false;
-  uint32_t cutsChecked = 0, cutsConforming = 0;
+  countOptions.patchBoxes = &scan.patchBoxes;
+  CutCheck c;
+  c.cuts = cuts.size();
   for (size_t i = 0; i < cuts.size(); ++i) {
     const auto& [name, cut] = cuts[i];
     std::string why;
@@ -232,34 +274,31 @@ int run(const std::string& path, uint32_t randomCuts, uint64_t seed, uint64_t me
     }
     mt::CutStats stats = mt::cutStats(r, cut.inSet);
     const std::vector<uint32_t> arcs = mt::cutArcs(r, cut.inSet);
-    bool touchesDamage = false;
-    for (uint32_t a : arcs)
-      for (uint32_t k = 0; k < r.arcs()[a].patchCount; ++k) touchesDamage |= isDamaged[r.patchRefs()[r.arcs()[a].firstPatchRef + k]] != 0;
-    if (touchesDamage) {
+    if (touchesDamage(r, arcs, scan.isDamaged)) {
       // The damaged payloads are reported above, each once.
       if (i == 0) problems.add("cut", path + ": crack-free check skipped: the finest cut (the reference) has a damaged patch");
       continue;
     }
-    if (i > 0 && !haveReference) continue;  // nothing to compare with
+    if (i > 0 && !c.haveReference) continue;  // nothing to compare with
     mt::EdgeCountStats counted;
     mt::ConformityReport rep;
     if (i == 0) {
       // The finest cut against the reference made from it conforms by construction (every edge
       // the rule looks at is one the reference was made from): one pass instead of two.
-      reference = mt::makeConformityReference(r, arcs, countOptions, &counted);
-      haveReference = true;
-      rep.edges = reference.edges;
+      c.reference = mt::makeConformityReference(r, arcs, countOptions, &counted);
+      c.haveReference = true;
+      rep.edges = c.reference.edges;
     } else {
-      rep = mt::checkConforming(r, arcs, reference, countOptions, &counted);
+      rep = mt::checkConforming(r, arcs, c.reference, countOptions, &counted);
     }
     if (progress)
       std::fprintf(stderr, "mtverify: %s: %" PRIu64 " triangles, %u parts%s, %.2f patch reads per patch, %.1f s\n",
                    name.c_str(), counted.triangles, counted.parts,
                    counted.splitParts ? (" (" + std::to_string(counted.splitParts) + " split)").c_str() : "",
                    counted.patches ? double(counted.patchReads) / double(counted.patches) : 0.0, counted.seconds);
-    ++cutsChecked;
+    ++c.checked;
     if (rep.conforming()) {
-      ++cutsConforming;
+      ++c.conforming;
     } else {
       problems.add("crack", path + ": crack in " + name + " (" + std::to_string(stats.nodes) + " nodes, " +
                                 std::to_string(stats.triangles) + " triangles): " + std::to_string(rep.newBoundaryEdges) +
@@ -267,23 +306,47 @@ int run(const std::string& path, uint32_t randomCuts, uint64_t seed, uint64_t me
                                 " non-manifold edges the input does not have; first: " + rep.firstProblem);
     }
   }
+  return c;
+}
 
-  problems.flushCaps();
-  std::fflush(stderr);
-  std::printf("%s: %zu nodes, %zu arcs, %zu patches\n", path.c_str(), nodes.size(), r.arcs().size(), r.patches().size());
-  std::printf("  payloads         %zu checked, %zu damaged\n", r.patches().size(), damaged.size());
+void printSummary(const mt::MtFileReader& r, const std::string& path, const Problems& problems, size_t damaged,
+                  const CutCheck& c, uint32_t randomCuts, uint64_t seed) {
+  std::printf("%s: %zu nodes, %zu arcs, %zu patches\n", path.c_str(), r.nodes().size(), r.arcs().size(), r.patches().size());
+  std::printf("  payloads         %zu checked, %zu damaged\n", r.patches().size(), damaged);
   std::printf("  input kept       %s (%" PRIu64 " triangles, %" PRIu64 " welded away by the build)\n",
               problems.count("lost") ? "PROBLEMS" : "ok", r.header().inputTriangles, r.header().weldedTriangles);
   std::printf("  DAG shape        %s\n", problems.count("dag") ? "PROBLEMS" : "ok");
   std::printf("  monotone errors  %s\n", problems.count("error") ? "PROBLEMS" : "ok");
   std::printf("  nested spheres   %s\n", problems.count("sphere") ? "PROBLEMS" : "ok");
-  std::printf("  crack-free cuts  %u of %u conforming (finest, coarsest, %u random; seed %" PRIu64 ")", cutsConforming,
-              cutsChecked, randomCuts, seed);
-  if (cutsChecked < cuts.size()) std::printf(", %zu not checked (damaged patches)", cuts.size() - cutsChecked);
-  if (haveReference)
-    std::printf(", input has %" PRIu64 " boundary and %" PRIu64 " non-manifold edges", reference.edges.boundaryEdges,
-                reference.edges.nonManifoldEdges);
+  std::printf("  crack-free cuts  %u of %u conforming (finest, coarsest, %u random; seed %" PRIu64 ")", c.conforming,
+              c.checked, randomCuts, seed);
+  if (c.checked < c.cuts) std::printf(", %zu not checked (damaged patches)", c.cuts - c.checked);
+  if (c.haveReference)
+    std::printf(", input has %" PRIu64 " boundary and %" PRIu64 " non-manifold edges", c.reference.edges.boundaryEdges,
+                c.reference.edges.nonManifoldEdges);
   std::printf("\n%s\n", problems.total() ? "FAILED" : "OK");
+}
+
+int run(const std::string& path, uint32_t randomCuts, uint64_t seed, uint64_t memoryBytes, bool quiet) {
+  const auto started = std::chrono::steady_clock::now();
+  mt::requireRegularFile(path, "an MT file");  // a FIFO would block the reader, a device mislead it
+  auto reader = mt::MtFileReader::open(path);
+  const mt::MtFileReader& r = *reader;
+  Problems problems(path);
+  if (r.nodes().size() < 2) mt::fail(path, "the DAG has fewer than 2 nodes (no source and sink)");
+  checkDagShape(r, path, problems);
+  checkMonotoneErrors(r, path, problems);
+  checkNestedSpheres(r, path, problems);
+  const bool progress = !quiet && r.header().inputTriangles >= 1000000;
+  PayloadScan scan = scanPayloads(r);
+  if (progress)
+    std::fprintf(stderr, "mtverify: payloads: %zu patches read and checked, %.1f s\n", r.patches().size(), secondsSince(started));
+  reportDamage(r, scan, problems);
+  checkInputKeptAndReach(r, path, scan, problems);
+  const CutCheck cuts = checkCuts(r, path, randomCuts, seed, memoryBytes, progress, scan, problems);
+  problems.flushCaps();
+  std::fflush(stderr);
+  printSummary(r, path, problems, scan.damage.size(), cuts, randomCuts, seed);
   return problems.total() ? 1 : 0;
 }
 
