@@ -522,6 +522,149 @@ uint64_t parseCount(const std::string& text) {
   return uint64_t(count);
 }
 
+// The command line, as parsed.
+struct Cli {
+  OutputSettings settings;
+  std::string trianglesText = "1M", formatText = "ply", densityText = "uniform", pathologyText;
+  mtgen::GeneratorOptions gen;
+  bool shuffle = false;
+  unsigned threads = 0;
+  CLI::Option* formatOption = nullptr;
+};
+
+// The surface's options: size, seed, holes, components, density, pathologies, face order.
+void addSurfaceOptions(CLI::App& app, Cli& c) {
+  app.add_option("-t,--triangles", c.trianglesText,
+                 "Number of triangles, with optional suffix k (1e3), M (1e6), G (1e9): 2.5k, 1M, 53M. "
+                 "The output has this count within 1% (exactly, in most cases); from 18 per component to 4G")
+      ->default_str("1M");
+  app.add_option("-s,--seed", c.gen.seed, "Seed of every random choice (shape, holes, layout, shuffle)")
+      ->check(mt::cli::countIn(0, UINT64_MAX))
+      ->default_str("1");
+  app.add_option("--holes", c.gen.holes,
+                 "Number of holes (open boundaries like scanner occlusions): roughly round, sizes from a few "
+                 "edges around to about half the tube radius, never touching each other, so the mesh has "
+                 "exactly this many boundary loops; fails if they cannot fit. At most one per 100 triangles "
+                 "(placing them takes time quadratic in their number)")
+      ->check(mt::cli::countIn(0, kMaxHoles))
+      ->default_str("0");
+  app.add_option("--components", c.gen.components,
+                 "Number of separate closed components of different sizes, placed apart on a lattice; the "
+                 "triangle budget is split by surface area")
+      ->default_str("1")
+      ->check(mt::cli::countIn(1, 1000000));
+  app.add_option("--density", c.densityText,
+                 "uniform: near-uniform triangle size; varying: the parameterization is warped so the edge "
+                 "length varies smoothly by 10x around the major circle (3x around the minor one)")
+      ->check(CLI::IsMember({"uniform", "varying"}))
+      ->default_str("uniform");
+  std::string pathologyHelp =
+      "Scan pathologies to add, comma-separated, or all (none by default; each is a pure function of the grid "
+      "position, so the bytes still do not depend on the thread count):";
+  for (const mtgen::PathologyInfo& p : mtgen::kPathologies) pathologyHelp += std::string("\n  ") + p.name + ": " + p.help;
+  app.add_option("--pathology", c.pathologyText, pathologyHelp)->default_str("none");
+  app.add_flag("--shuffle", c.shuffle,
+               "Emit faces in a pseudo-random order (a keyed bijection of the face indices, O(1) memory); "
+               "vertices stay in grid order and the set of triangles is unchanged");
+}
+
+// The output's options: name, format, vertex attributes; and the thread count.
+void addOutputOptions(CLI::App& app, Cli& c) {
+  app.add_flag("--normals", c.settings.normals,
+               "Write unit per-vertex normals (central differences of the grid) [ply, ply-ascii, obj]");
+  app.add_flag("--colors", c.settings.colors,
+               "Write per-vertex RGBA colours (stone-like shading by displacement) [ply, ply-ascii]");
+  c.formatOption =
+      app.add_option("--format", c.formatText,
+                     "ply (binary little-endian), ply-ascii, obj, off, stl (ASCII triangle soup); it must agree with "
+                     "the output's extension (.ply for both PLY forms). Text formats are meant for small meshes; "
+                     "their coordinates are the float32 values printed with %.9g")
+          ->check(CLI::IsMember({"ply", "ply-ascii", "obj", "off", "stl"}))
+          ->default_str("from the extension");
+  app.add_flag("--double", c.settings.doublePrecision,
+               "Binary PLY with double x,y,z (the full-precision generated values) [ply only]");
+  app.add_option("--threads", c.threads, "Worker threads (0 = all cores); the output does not depend on it")
+      ->check(mt::cli::countIn(0, 4096))
+      ->default_str("0");
+}
+
+// Prints "mtgen: error: ..." and returns false.
+bool refuse(const char* format, ...) __attribute__((format(printf, 1, 2)));
+bool refuse(const char* format, ...) {
+  std::fprintf(stderr, "mtgen: error: ");
+  va_list args;
+  va_start(args, format);
+  std::vfprintf(stderr, format, args);
+  va_end(args);
+  std::fprintf(stderr, "\n");
+  return false;
+}
+
+// The triangle count, the pathologies and the hole count; false (with the message) when refused.
+bool checkSurface(Cli& c) {
+  c.gen.triangles = parseCount(c.trianglesText);
+  if (c.gen.triangles == 0)
+    return refuse("--triangles must be a positive count like 1000, 2.5k, 1M, at most 4G (got '%s')", c.trianglesText.c_str());
+  std::string badPathology;
+  if (!mtgen::parsePathologies(c.pathologyText, c.gen.pathologies, badPathology)) {
+    std::string names;
+    for (const mtgen::PathologyInfo& p : mtgen::kPathologies) names += std::string(names.empty() ? "" : ", ") + p.name;
+    return refuse("--pathology: unknown '%s' (a comma-separated list of %s, or all)", badPathology.c_str(), names.c_str());
+  }
+  if (c.gen.holes > c.gen.triangles / 100)
+    return refuse("--holes %u: at most one hole per 100 triangles (%llu for --triangles %s)", c.gen.holes,
+                  (unsigned long long)(c.gen.triangles / 100), c.trianglesText.c_str());
+  c.gen.varyingDensity = c.densityText == "varying";
+  return true;
+}
+
+// The format: from the extension, and --format (if given) must agree with it, so that no file
+// gets bytes its name does not announce; then the attributes the format can hold.
+bool chooseFormat(Cli& c) {
+  OutputSettings& settings = c.settings;
+  std::string ext = std::filesystem::path(settings.path).extension().string();
+  for (auto& ch : ext) ch = char(std::tolower(static_cast<unsigned char>(ch)));
+  const char* byExtension = ext == ".ply" ? "ply" : ext == ".obj" ? "obj" : ext == ".off" ? "off" : ext == ".stl" ? "stl" : nullptr;
+  if (!byExtension)
+    return refuse("%s: %s (supported: .ply, .obj, .off, .stl)", settings.path.c_str(),
+                  ext.empty() ? "the output name has no extension: cannot choose its format" : ("cannot write the format " + ext).c_str());
+  if (c.formatOption->count() == 0) c.formatText = byExtension;
+  else if (c.formatText.rfind(byExtension, 0) != 0)
+    return refuse("--format %s does not match the output's extension %s", c.formatText.c_str(), ext.c_str());
+  const std::string& f = c.formatText;
+  settings.format = f == "ply" ? Format::PlyBinary : f == "ply-ascii" ? Format::PlyAscii : f == "obj" ? Format::Obj
+                  : f == "off" ? Format::Off : Format::Stl;
+  bool anyPly = settings.format == Format::PlyBinary || settings.format == Format::PlyAscii;
+  if (settings.doublePrecision && settings.format != Format::PlyBinary) return refuse("--double needs --format ply");
+  if (settings.colors && !anyPly) return refuse("--colors needs --format ply or ply-ascii");
+  if (settings.normals && !anyPly && settings.format != Format::Obj)
+    return refuse("--normals needs --format ply, ply-ascii or obj");
+  return true;
+}
+
+// Streams the mesh to the temporary name, renames it over the output and prints the summary line.
+void writeMesh(const OutputSettings& settings, const ScanGenerator& generator, bool shuffle) {
+  std::unique_ptr<MeshOutput> out;
+  if (settings.format == Format::PlyBinary)
+    out = std::make_unique<BinaryPlyOutput>(settings);
+  else
+    out = std::make_unique<TextOutput>(settings, generator.vertexCount(), generator.triangleCount());
+  const uint64_t triangles = generator.triangleCount();
+  const uint64_t vertices = out->wantsVertices() ? generator.vertexCount() : 0;
+  Progress progress(vertices + triangles, triangles, triangles > 5'000'000);
+  if (out->wantsVertices()) streamVertices(generator, settings, *out, progress);
+  streamFaces(generator, shuffle, *out, progress);
+  out->finish();
+  gTemporaryPath[0] = 0;
+
+  struct stat st {};
+  stat(settings.path.c_str(), &st);
+  double seconds = progress.elapsed();
+  std::fprintf(stderr, "mtgen: wrote %s: %llu triangles, %llu vertices, %lld bytes, %.2f s (%.1f M triangles/s)\n",
+               settings.path.c_str(), (unsigned long long)triangles, (unsigned long long)generator.vertexCount(),
+               (long long)st.st_size, seconds, double(triangles) / std::max(seconds, 1e-9) / 1e6);
+}
+
 int run(int argc, char** argv) {
   CLI::App app{
       "mtgen: streams a procedurally generated, scan-like closed mesh of any size to a mesh file.\n"
@@ -529,167 +672,27 @@ int run(int argc, char** argv) {
       "scan), sampled on a grid: vertices in grid order, faces in grid order unless --shuffle.\n"
       "Memory is O(grid rows), never O(triangles). Same options -> identical bytes (any thread count).",
       "mtgen"};
-  OutputSettings settings;
-  std::string trianglesText = "1M", formatText = "ply", densityText = "uniform";
-  mtgen::GeneratorOptions gen;
-  bool shuffle = false;
-  unsigned threads = 0;
-  app.add_option("-o,--output", settings.path,
+  Cli c;
+  app.add_option("-o,--output", c.settings.path,
                  "Output file; its extension gives the format unless --format does (.ply, .obj, .off, .stl). "
                  "Written as OUT.tmp.PID.RANDOM, renamed when complete")
       ->required();
-  app.add_option("-t,--triangles", trianglesText,
-                 "Number of triangles, with optional suffix k (1e3), M (1e6), G (1e9): 2.5k, 1M, 53M. "
-                 "The output has this count within 1% (exactly, in most cases); from 18 per component to 4G")
-      ->default_str("1M");
-  app.add_option("-s,--seed", gen.seed, "Seed of every random choice (shape, holes, layout, shuffle)")
-      ->check(mt::cli::countIn(0, UINT64_MAX))
-      ->default_str("1");
-  app.add_option("--holes", gen.holes,
-                 "Number of holes (open boundaries like scanner occlusions): roughly round, sizes from a few "
-                 "edges around to about half the tube radius, never touching each other, so the mesh has "
-                 "exactly this many boundary loops; fails if they cannot fit. At most one per 100 triangles "
-                 "(placing them takes time quadratic in their number)")
-      ->check(mt::cli::countIn(0, kMaxHoles))
-      ->default_str("0");
-  app.add_option("--components", gen.components,
-                 "Number of separate closed components of different sizes, placed apart on a lattice; the "
-                 "triangle budget is split by surface area")
-      ->default_str("1")
-      ->check(mt::cli::countIn(1, 1000000));
-  app.add_option("--density", densityText,
-                 "uniform: near-uniform triangle size; varying: the parameterization is warped so the edge "
-                 "length varies smoothly by 10x around the major circle (3x around the minor one)")
-      ->check(CLI::IsMember({"uniform", "varying"}))
-      ->default_str("uniform");
-  std::string pathologyText;
-  std::string pathologyHelp =
-      "Scan pathologies to add, comma-separated, or all (none by default; each is a pure function of the grid "
-      "position, so the bytes still do not depend on the thread count):";
-  for (const mtgen::PathologyInfo& p : mtgen::kPathologies) pathologyHelp += std::string("\n  ") + p.name + ": " + p.help;
-  app.add_option("--pathology", pathologyText, pathologyHelp)->default_str("none");
-  app.add_flag("--shuffle", shuffle,
-               "Emit faces in a pseudo-random order (a keyed bijection of the face indices, O(1) memory); "
-               "vertices stay in grid order and the set of triangles is unchanged");
-  app.add_flag("--normals", settings.normals,
-               "Write unit per-vertex normals (central differences of the grid) [ply, ply-ascii, obj]");
-  app.add_flag("--colors", settings.colors,
-               "Write per-vertex RGBA colours (stone-like shading by displacement) [ply, ply-ascii]");
-  auto* formatOption =
-      app.add_option("--format", formatText,
-                     "ply (binary little-endian), ply-ascii, obj, off, stl (ASCII triangle soup); it must agree with "
-                     "the output's extension (.ply for both PLY forms). Text formats are meant for small meshes; "
-                     "their coordinates are the float32 values printed with %.9g")
-          ->check(CLI::IsMember({"ply", "ply-ascii", "obj", "off", "stl"}))
-          ->default_str("from the extension");
-  app.add_flag("--double", settings.doublePrecision,
-               "Binary PLY with double x,y,z (the full-precision generated values) [ply only]");
-  app.add_option("--threads", threads, "Worker threads (0 = all cores); the output does not depend on it")
-      ->check(mt::cli::countIn(0, 4096))
-      ->default_str("0");
-
+  addSurfaceOptions(app, c);
+  addOutputOptions(app, c);
   if (int code = mt::cli::parse(app, argc, argv, "mtgen: error"); code >= 0) return code;
-
-  gen.triangles = parseCount(trianglesText);
-  if (gen.triangles == 0) {
-    std::fprintf(stderr, "mtgen: error: --triangles must be a positive count like 1000, 2.5k, 1M, at most 4G (got '%s')\n",
-                 trianglesText.c_str());
-    return 1;
-  }
-  std::string badPathology;
-  if (!mtgen::parsePathologies(pathologyText, gen.pathologies, badPathology)) {
-    std::string names;
-    for (const mtgen::PathologyInfo& p : mtgen::kPathologies) names += std::string(names.empty() ? "" : ", ") + p.name;
-    std::fprintf(stderr, "mtgen: error: --pathology: unknown '%s' (a comma-separated list of %s, or all)\n",
-                 badPathology.c_str(), names.c_str());
-    return 1;
-  }
-  if (gen.holes > gen.triangles / 100) {
-    std::fprintf(stderr, "mtgen: error: --holes %u: at most one hole per 100 triangles (%llu for --triangles %s)\n",
-                 gen.holes, (unsigned long long)(gen.triangles / 100), trianglesText.c_str());
-    return 1;
-  }
-  // The format: from the extension, and --format (if given) must agree with it, so that no file
-  // gets bytes its name does not announce.
-  std::string ext = std::filesystem::path(settings.path).extension().string();
-  for (auto& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
-  const char* byExtension = ext == ".ply" ? "ply" : ext == ".obj" ? "obj" : ext == ".off" ? "off" : ext == ".stl" ? "stl" : nullptr;
-  if (!byExtension) {
-    std::fprintf(stderr, "mtgen: error: %s: %s (supported: .ply, .obj, .off, .stl)\n", settings.path.c_str(),
-                 ext.empty() ? "the output name has no extension: cannot choose its format" : ("cannot write the format " + ext).c_str());
-    return 1;
-  }
-  if (formatOption->count() == 0) formatText = byExtension;
-  else if (formatText.rfind(byExtension, 0) != 0) {
-    std::fprintf(stderr, "mtgen: error: --format %s does not match the output's extension %s\n", formatText.c_str(), ext.c_str());
-    return 1;
-  }
-  gen.varyingDensity = densityText == "varying";
-  if (formatText == "ply") settings.format = Format::PlyBinary;
-  else if (formatText == "ply-ascii") settings.format = Format::PlyAscii;
-  else if (formatText == "obj") settings.format = Format::Obj;
-  else if (formatText == "off") settings.format = Format::Off;
-  else settings.format = Format::Stl;
-  bool anyPly = settings.format == Format::PlyBinary || settings.format == Format::PlyAscii;
-  if (settings.doublePrecision && settings.format != Format::PlyBinary) {
-    std::fprintf(stderr, "mtgen: error: --double needs --format ply\n");
-    return 1;
-  }
-  if (settings.colors && !anyPly) {
-    std::fprintf(stderr, "mtgen: error: --colors needs --format ply or ply-ascii\n");
-    return 1;
-  }
-  if (settings.normals && !anyPly && settings.format != Format::Obj) {
-    std::fprintf(stderr, "mtgen: error: --normals needs --format ply, ply-ascii or obj\n");
-    return 1;
-  }
+  if (!checkSurface(c) || !chooseFormat(c)) return 1;
 
   std::unique_ptr<tbb::global_control> threadLimit;
-  if (threads > 0)
-    threadLimit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, threads);
-
-  std::unique_ptr<ScanGenerator> generator;
+  if (c.threads > 0)
+    threadLimit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, c.threads);
   try {
-    generator = std::make_unique<ScanGenerator>(gen);
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "mtgen: error: %s\n", e.what());
-    return 1;
-  }
-
-  try {
-    mt::checkOutputPath(settings.path, {});  // not a directory, and its folder exists
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "mtgen: error: %s\n", e.what());
-    return 1;
-  }
-  settings.tmpPath = mt::uniqueTempName(settings.path);
-  if (settings.tmpPath.size() < sizeof gTemporaryPath)
-    std::memcpy(gTemporaryPath, settings.tmpPath.c_str(), settings.tmpPath.size() + 1);
-  for (int sig : {SIGINT, SIGTERM, SIGHUP}) signal(sig, removeTemporaryAndExit);
-
-  try {
-    std::unique_ptr<MeshOutput> out;
-    if (settings.format == Format::PlyBinary)
-      out = std::make_unique<BinaryPlyOutput>(settings);
-    else
-      out = std::make_unique<TextOutput>(settings, generator->vertexCount(), generator->triangleCount());
-
-    const uint64_t triangles = generator->triangleCount();
-    const uint64_t vertices = out->wantsVertices() ? generator->vertexCount() : 0;
-    Progress progress(vertices + triangles, triangles, triangles > 5'000'000);
-    if (out->wantsVertices()) streamVertices(*generator, settings, *out, progress);
-    streamFaces(*generator, shuffle, *out, progress);
-    out->finish();
-    gTemporaryPath[0] = 0;
-
-    struct stat st {};
-    stat(settings.path.c_str(), &st);
-    double seconds = progress.elapsed();
-    std::fprintf(stderr,
-                 "mtgen: wrote %s: %llu triangles, %llu vertices, %lld bytes, %.2f s (%.1f M triangles/s)\n",
-                 settings.path.c_str(), (unsigned long long)triangles,
-                 (unsigned long long)generator->vertexCount(), (long long)st.st_size, seconds,
-                 double(triangles) / std::max(seconds, 1e-9) / 1e6);
+    const ScanGenerator generator(c.gen);
+    mt::checkOutputPath(c.settings.path, {});  // not a directory, and its folder exists
+    c.settings.tmpPath = mt::uniqueTempName(c.settings.path);
+    if (c.settings.tmpPath.size() < sizeof gTemporaryPath)
+      std::memcpy(gTemporaryPath, c.settings.tmpPath.c_str(), c.settings.tmpPath.size() + 1);
+    for (int sig : {SIGINT, SIGTERM, SIGHUP}) signal(sig, removeTemporaryAndExit);
+    writeMesh(c.settings, generator, c.shuffle);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "mtgen: error: %s\n", e.what());
     return 1;
