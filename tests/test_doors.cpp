@@ -26,5 +26,20 @@ TEST(Doors, MtFileReadersLinkNeitherThePatchStoreNorThePartitions) {
   EXPECT_NE(b.output, "0\n") << b.output;
 }
 
+// testing/ (generators and test surfaces) is linked by mtgen, the tests and the benchmarks only:
+// no production binary carries a symbol of it.
+TEST(Doors, ProductionBinariesCarryNothingOfTesting) {
+  ASSERT_EQ(runShell("command -v nm").exitCode, 0) << "nm (binutils) is needed for this check";
+  const std::string pattern = "' (mtgen::ScanGenerator|mt::makeScanGrid|mt::test::)'";
+  for (const std::string tool : {"mtinfo", "mtverify", "mtextract", "mtrender", "mtbuild", "mtstore"}) {
+    CommandResult r = runShell("nm -C " + binDir() + "/" + tool + " | grep -E " + pattern + " | head -5");
+    EXPECT_EQ(r.exitCode, 0) << r.output;
+    EXPECT_EQ(r.output, "") << tool << " links testing/:\n" << r.output;
+  }
+  // The check can fail: mtgen does carry the generator.
+  CommandResult g = runShell("nm -C " + binDir() + "/mtgen | grep -cE " + pattern);
+  EXPECT_NE(g.output, "0\n") << g.output;
+}
+
 }  // namespace
 }  // namespace mt::test
