@@ -34,25 +34,26 @@ bool entryLess(const BoundaryEntry& a, const BoundaryEntry& b) {
 bool sameHandle(const BlockHandle& a, const BlockHandle& b) {
   return a.segment == b.segment && a.offset == b.offset && a.size == b.size && a.checksum == b.checksum;
 }
-constexpr uint64_t kPendingCommitBytes = 32ull << 20;  // as writeBack: auto-commit big batches
 
-}  // namespace
-
-void PatchStore::rewritePatches(const std::vector<PatchRewrite>& rewrites, bool syncNow) {
-  auto bad = [&](const std::string& what) { fail(dir_, "rewrite: " + what); };
-  std::lock_guard<std::mutex> writer(impl_->writeMutex);
-  if (!impl_->failedCommit.empty()) fail(dir_, "store refuses updates after a failed commit; reopen it");
-  impl_->lockForWriting();
-
-  // The patches as they will be (rewritten ones) and as they are (their outside neighbours, old
-  // and new): every entry between the two groups is checked in both directions.
-  std::map<PatchId, Patch> after;        // rewritten, new content (geometry read for boundaryOnly)
+// The rewrites as the patches will be (`after`: rewritten, new content, geometry read for
+// boundaryOnly) and as they are (`outside`: their outside neighbours, old and new), validated.
+struct RewriteSet {
+  std::map<PatchId, Patch> after;
   std::map<PatchId, bool> onlyBoundary;
+  std::map<PatchId, Patch> outside;
+};
+
+[[noreturn]] void badRewrite(const std::string& dir, const std::string& what) { fail(dir, "rewrite: " + what); }
+
+RewriteSet readRewrites(const PatchStore& store, const std::vector<PatchRewrite>& rewrites) {
+  const std::string& dir = store.dir();
+  auto bad = [&](const std::string& what) { badRewrite(dir, what); };
+  RewriteSet set;
   std::set<PatchId> outsideIds;
   for (const PatchRewrite& rw : rewrites) {
     PatchId id = rw.patch.id;
-    if (after.count(id)) bad("patch " + std::to_string(id) + " rewritten twice");
-    Patch old = patch(id);  // throws for a patch that does not exist
+    if (set.after.count(id)) bad("patch " + std::to_string(id) + " rewritten twice");
+    Patch old = store.patch(id);  // throws for a patch that does not exist
     for (const BoundaryEntry& e : old.boundary) outsideIds.insert(e.neighbour);
     Patch next;
     if (rw.boundaryOnly) {
@@ -62,7 +63,7 @@ void PatchStore::rewritePatches(const std::vector<PatchRewrite>& rewrites, bool 
       next = rw.patch;
       next.cell = old.cell;
       next.level = old.level;
-      const VertexLayout& l = impl_->layout;
+      const VertexLayout& l = store.layout();
       if ((l.normals && next.normals.size() != next.positions.size()) ||
           (l.colors && next.colors.size() != next.positions.size() / 3 * 4))
         bad("patch " + std::to_string(id) + ": normals or colours missing");
@@ -77,37 +78,53 @@ void PatchStore::rewritePatches(const std::vector<PatchRewrite>& rewrites, bool 
       if (i > 0 && !entryLess(next.boundary[i - 1], e)) bad("patch " + std::to_string(id) + ": repeated boundary entry");
       outsideIds.insert(e.neighbour);
     }
-    onlyBoundary[id] = rw.boundaryOnly;
-    after.emplace(id, std::move(next));
+    set.onlyBoundary[id] = rw.boundaryOnly;
+    set.after.emplace(id, std::move(next));
   }
-  std::map<PatchId, Patch> outside;
   for (PatchId q : outsideIds)
-    if (!after.count(q)) outside.emplace(q, patch(q));  // throws when a neighbour does not exist
+    if (!set.after.count(q)) set.outside.emplace(q, store.patch(q));  // throws when a neighbour does not exist
+  return set;
+}
 
+// Every entry between the two groups, in both directions: it names a kept patch, within its
+// vertices, is mirrored there, and the two copies of the vertex have one position.
+void checkMirrors(const RewriteSet& set, const std::string& dir) {
   auto find = [&](PatchId q) -> const Patch* {
-    auto a = after.find(q);
-    if (a != after.end()) return a->second.triangles.empty() ? nullptr : &a->second;
-    auto o = outside.find(q);
-    return o == outside.end() ? nullptr : &o->second;
+    auto a = set.after.find(q);
+    if (a != set.after.end()) return a->second.triangles.empty() ? nullptr : &a->second;
+    auto o = set.outside.find(q);
+    return o == set.outside.end() ? nullptr : &o->second;
   };
   auto checkEntry = [&](const Patch& p, const BoundaryEntry& e) {
     std::string name = "patch " + std::to_string(p.id) + " entry (" + std::to_string(e.local) + ", " +
                        std::to_string(e.neighbour) + ", " + std::to_string(e.remote) + ")";
     const Patch* q = find(e.neighbour);
-    if (!q) bad(name + " names a patch that is removed or was not read");
-    if (e.remote >= q->vertexCount()) bad(name + " points past the neighbour's vertices");
+    if (!q) badRewrite(dir, name + " names a patch that is removed or was not read");
+    if (e.remote >= q->vertexCount()) badRewrite(dir, name + " points past the neighbour's vertices");
     if (!std::binary_search(q->boundary.begin(), q->boundary.end(), BoundaryEntry{e.remote, p.id, e.local}, entryLess))
-      bad(name + " is not mirrored");
+      badRewrite(dir, name + " is not mirrored");
     for (int a = 0; a < 3; ++a)
-      if (p.positions[3 * e.local + a] != q->positions[3 * e.remote + a]) bad(name + ": the copies differ in position");
+      if (p.positions[3 * e.local + a] != q->positions[3 * e.remote + a]) badRewrite(dir, name + ": the copies differ in position");
   };
-  for (auto& [id, p] : after) {
-    if (p.triangles.empty() && !p.boundary.empty()) bad("patch " + std::to_string(id) + " is emptied but still shares vertices");
+  for (auto& [id, p] : set.after) {
+    if (p.triangles.empty() && !p.boundary.empty())
+      badRewrite(dir, "patch " + std::to_string(id) + " is emptied but still shares vertices");
     for (const BoundaryEntry& e : p.boundary) checkEntry(p, e);
   }
-  for (auto& [id, q] : outside)
+  for (auto& [id, q] : set.outside)
     for (const BoundaryEntry& e : q.boundary)
-      if (after.count(e.neighbour)) checkEntry(q, e);
+      if (set.after.count(e.neighbour)) checkEntry(q, e);
+}
+
+}  // namespace
+
+void PatchStore::rewritePatches(const std::vector<PatchRewrite>& rewrites, bool syncNow) {
+  std::lock_guard<std::mutex> writer(impl_->writeMutex);
+  impl_->startUpdate(dir_);
+  RewriteSet set = readRewrites(*this, rewrites);
+  checkMirrors(set, dir_);
+  std::map<PatchId, Patch>& after = set.after;
+  std::map<PatchId, bool>& onlyBoundary = set.onlyBoundary;
 
   // Blocks first, then the records: the commit (now, or with the next sync) is the edit.
   std::vector<PatchRecord> updated;
@@ -134,28 +151,16 @@ void PatchStore::rewritePatches(const std::vector<PatchRewrite>& rewrites, bool 
   }
   {
     std::unique_lock lock(impl_->stateMutex);
-    for (PatchId id : removed) {
-      auto it = impl_->patches.find(id);
-      impl_->addLive(it->second, -1);
-      impl_->patches.erase(it);
-      impl_->pendingUpserted.erase(id);
-      impl_->pendingRemoved.push_back(id);
-    }
-    for (const PatchRecord& rec : updated) {
-      impl_->addLive(impl_->patches[rec.meta.id], -1);
-      impl_->patches[rec.meta.id] = rec;
-      impl_->addLive(rec, +1);
-      impl_->pendingUpserted[rec.meta.id] = rec;
-    }
+    for (PatchId id : removed) impl_->removeRecord(impl_->patches.find(id));
+    for (const PatchRecord& rec : updated) impl_->replaceRecord(rec);
     impl_->pendingDirty = true;
-    if (syncNow || impl_->pendingUpserted.size() * 128 > kPendingCommitBytes) impl_->commitPending();
+    if (syncNow || impl_->pendingIsLarge()) impl_->commitPending();
   }
 }
 
 void PatchStore::stageGeometry(StagedUpdate& staged, const Patch& p) {
   std::lock_guard<std::mutex> writer(impl_->writeMutex);
-  if (!impl_->failedCommit.empty()) fail(dir_, "store refuses updates after a failed commit; reopen it");
-  impl_->lockForWriting();
+  impl_->startUpdate(dir_);
   PatchRecord rec;
   {
     std::shared_lock lock(impl_->stateMutex);

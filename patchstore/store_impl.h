@@ -1,6 +1,15 @@
-// Internal to patchstore: the state behind PatchStore, shared by the store (patch_store.cpp) and
-// ingest (ingest.cpp), which writes a new store's blocks and first snapshot directly.
+// Internal to patchstore: the state behind PatchStore, shared by the store's files and ingest
+// (ingest.cpp), which writes a new store's blocks and first snapshot directly. The store is one
+// class in several files, one job each:
+//   patch_store.cpp     opening, blocks and segments, the read API (patch, load, assemble)
+//   store_manifest.cpp  the manifest log: snapshot, commit, compaction, recovery, the write lock
+//   store_write.cpp     writeBack (a simplified region back as new patches), putBlob
+//   heal_support.cpp    in-place rewrites and staged position updates (healing)
+//   store_export.cpp    exportPly and check, each a pass over every patch
+//   patch_codec.cpp     the geometry and boundary payloads (encode/decode)
 #pragma once
+
+#include <xxhash.h>
 
 #include <map>
 #include <memory>
@@ -14,6 +23,17 @@
 #include "patchstore/store_format.h"
 
 namespace mt {
+
+// A write-back or rewrite commits by itself once its pending records reach this size.
+constexpr uint64_t kPendingCommitBytes = 32ull << 20;
+
+// The checksum of blocks and manifest records (store_format.h).
+inline uint64_t blockChecksum(const void* data, size_t size) { return XXH64(data, size, 0); }
+
+inline uint32_t layoutFlags(const VertexLayout& l) {
+  return (l.doublePrecision ? store_format::kGeomDouble : 0) | (l.normals ? store_format::kGeomNormals : 0) |
+         (l.colors ? store_format::kGeomColors : 0);
+}
 
 struct PatchRecord {
   PatchMeta meta;
@@ -92,6 +112,16 @@ struct PatchStore::Impl {
   void compact();           // relocates live blocks out of mostly-dead segments
 
   void addLive(const PatchRecord& r, int sign);
+
+  // ---- updates (callers hold writeMutex) ----
+  // Refuses after a failed commit, then takes the write lock (`where` names the store in errors).
+  void startUpdate(const std::string& where);
+  // The in-memory side of an update, to be committed by the next commitPending (callers hold
+  // stateMutex exclusively): a live record dropped, replaced, or a new one added.
+  void removeRecord(std::map<PatchId, PatchRecord>::iterator it);
+  void replaceRecord(const PatchRecord& rec);
+  void insertRecord(const PatchRecord& rec);
+  bool pendingIsLarge() const { return pendingUpserted.size() * 128 > kPendingCommitBytes; }
 };
 
 // Patch payload coding, shared by ingest and write-back.

@@ -10,11 +10,12 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
-#include <unordered_map>
+#include <cassert>
 #include <cerrno>
 #include <cmath>
 #include <cstring>
 #include <sstream>
+#include <unordered_map>
 
 #include <xxhash.h>
 
@@ -305,7 +306,142 @@ void VPartitionAssigner::buildKeyTable() {
 // not over the input; memory is per piece, not per triangle.
 namespace {
 constexpr int kSlabShift = 56;  // V0 cell ids stay below 2^24 (checked); slab index above them
+constexpr int kBins = 256;      // histogram bins along a piece's cut axis
+
+// A V*0 piece as the sample sees it: sampled triangles and the box of their centroids.
+struct Piece {
+  uint32_t count = 0;
+  float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+};
+using PieceList = std::vector<std::pair<uint64_t, Piece>>;  // ascending key
+using KeyMap = std::unordered_map<uint64_t, uint64_t>;
+
+PieceList countPieces(const vp::CentroidSample& sample, const std::vector<uint64_t>& crossKeys) {
+  std::unordered_map<uint64_t, Piece> pieces;
+  for (size_t i = 0; i < crossKeys.size(); ++i) {
+    const float* c = &sample.xyza[4 * i];
+    Piece& p = pieces[crossKeys[i]];
+    ++p.count;
+    for (int a = 0; a < 3; ++a) {
+      p.lo[a] = std::min(p.lo[a], c[a]);
+      p.hi[a] = std::max(p.hi[a], c[a]);
+    }
+  }
+  PieceList sorted(pieces.begin(), pieces.end());
+  std::sort(sorted.begin(), sorted.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  return sorted;
 }
+
+// Piece `from` joins piece `into` (which is not itself joined: joins are one step).
+void joinPiece(PieceList& sorted, size_t from, size_t into, KeyMap& remap) {
+  assert(from != into && !remap.count(sorted[into].first));
+  remap[sorted[from].first] = sorted[into].first;
+  Piece& big = sorted[into].second;
+  big.count += sorted[from].second.count;
+  for (int a = 0; a < 3; ++a) {
+    big.lo[a] = std::min(big.lo[a], sorted[from].second.lo[a]);
+    big.hi[a] = std::max(big.hi[a], sorted[from].second.hi[a]);
+  }
+}
+
+// Step 1: slivers join the largest piece of their V0 cell. Returns the small pieces that are
+// their V0 cell's largest; `largest` (sampled inputs only) gets each V0 cell's largest piece.
+std::vector<size_t> joinSlivers(PieceList& sorted, double small, KeyMap& remap,
+                                std::unordered_map<uint32_t, uint64_t>* largestOf) {
+  std::vector<size_t> lonely;
+  for (size_t i = 0; i < sorted.size();) {  // grouped by V0 cell (the high half)
+    const uint32_t cell = PartitionSequence::crossHigh(sorted[i].first);
+    size_t j = i, largest = i;
+    while (j < sorted.size() && PartitionSequence::crossHigh(sorted[j].first) == cell) {
+      if (sorted[j].second.count > sorted[largest].second.count) largest = j;
+      ++j;
+    }
+    for (size_t k = i; k < j; ++k)
+      if (k != largest && sorted[k].second.count < small) joinPiece(sorted, k, largest, remap);
+    if (sorted[largest].second.count < small) lonely.push_back(largest);
+    if (largestOf) (*largestOf)[cell] = sorted[largest].first;
+    i = j;
+  }
+  return lonely;
+}
+
+// Step 2: a whole V0 cell that is still tiny (debris, a thin strip) joins the piece of the same
+// V1 region whose V0 seed is nearest, so the region is unchanged.
+void joinLonelyCells(PieceList& sorted, const std::vector<size_t>& lonely, double small,
+                     const PartitionSequence& sequence, KeyMap& remap) {
+  std::unordered_map<uint32_t, std::vector<size_t>> byRegion;
+  for (size_t k = 0; k < sorted.size(); ++k)
+    if (!remap.count(sorted[k].first)) byRegion[PartitionSequence::crossLow(sorted[k].first)].push_back(k);
+  for (size_t k : lonely) {
+    float a[3], b[3];
+    sequence.seedOf(0, PartitionSequence::crossHigh(sorted[k].first), a);
+    size_t best = k;
+    double bestD = INFINITY;
+    for (size_t o : byRegion[PartitionSequence::crossLow(sorted[k].first)]) {
+      if (o == k || remap.count(sorted[o].first) || sorted[o].second.count < small) continue;
+      sequence.seedOf(0, PartitionSequence::crossHigh(sorted[o].first), b);
+      double d = double(a[0] - b[0]) * (a[0] - b[0]) + double(a[1] - b[1]) * (a[1] - b[1]) + double(a[2] - b[2]) * (a[2] - b[2]);
+      if (d < bestD) bestD = d, best = o;
+    }
+    if (best != k) joinPiece(sorted, k, best, remap);
+  }
+}
+
+// A piece to cut: its longest axis and the histogram of its centroids along it.
+struct Cut {
+  int axis;
+  float lo, width;
+  std::vector<uint32_t> histogram;
+};
+
+// Step 3's candidates: the unjoined pieces above the slab limit, with an empty histogram.
+std::unordered_map<uint64_t, Cut> oversizedPieces(const PieceList& sorted, const KeyMap& remap, uint32_t target,
+                                                  double w, bool sampled) {
+  std::unordered_map<uint64_t, Cut> cuts;
+  for (const auto& [key, p] : sorted) {
+    // A sampled count is off by ~1/sqrt(count): cut earlier, so that no piece ends up above
+    // 2x the target (measured on the 53 M scan: max 2.14x without this margin).
+    const double limit = sampled ? target * 1.6 / (1 + 3 / std::sqrt(std::max(1.0, double(p.count)))) : target * 8 / 5;
+    if (remap.count(key) || p.count * w <= limit) continue;
+    int axis = 0;
+    for (int a = 1; a < 3; ++a)
+      if (p.hi[a] - p.lo[a] > p.hi[axis] - p.lo[axis]) axis = a;
+    if (!(p.hi[axis] > p.lo[axis])) continue;
+    cuts[key] = {axis, p.lo[axis], (p.hi[axis] - p.lo[axis]) / kBins, std::vector<uint32_t>(kBins, 0)};
+  }
+  return cuts;
+}
+
+// The second pass over the sample: each cut piece's histogram (joined keys count as their piece).
+void fillHistograms(std::unordered_map<uint64_t, Cut>& cuts, const vp::CentroidSample& sample,
+                    const std::vector<uint64_t>& crossKeys, const KeyMap& remap) {
+  for (size_t i = 0; i < crossKeys.size(); ++i) {
+    const float* c = &sample.xyza[4 * i];
+    uint64_t key = crossKeys[i];
+    auto r = remap.find(key);
+    if (r != remap.end()) key = r->second;
+    auto it = cuts.find(key);
+    if (it == cuts.end()) continue;
+    Cut& cut = it->second;
+    int bin = int(std::clamp((c[cut.axis] - cut.lo) / cut.width, 0.0f, float(kBins - 1)));
+    ++cut.histogram[bin];
+  }
+}
+
+// The slab walls of a cut into `slabs` pieces, at quantiles of its histogram (ascending, at
+// most slabs - 1 of them).
+std::vector<float> slabBounds(const Cut& cut, uint32_t slabs, uint64_t total) {
+  std::vector<float> bounds;
+  uint64_t run = 0;
+  for (int b = 0; b < kBins && bounds.size() + 1 < slabs; ++b) {
+    run += cut.histogram[b];
+    if (run * slabs >= total * (bounds.size() + 1)) bounds.push_back(cut.lo + cut.width * float(b + 1));
+  }
+  assert(bounds.size() < slabs);
+  return bounds;
+}
+
+}  // namespace
 
 void VPartitionAssigner::mergeSlivers(const vp::CentroidSample& sample) {
   // Counts below are of sampled triangles; thresholds in input triangles are divided by w.
@@ -317,10 +453,6 @@ void VPartitionAssigner::mergeSlivers(const vp::CentroidSample& sample) {
   sampleKeys_.clear();
   sampled_ = sample.stride > 1;
   if (sequence_.levels() < 2 || sequence_.cellCount(0) >= (1u << 24)) return;
-  struct Piece {
-    uint32_t count = 0;
-    float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
-  };
   // The V*0 key of every sampled centroid, once (the lookups are independent: in parallel); both
   // passes below read them in sample order.
   const size_t ns = size_t(sample.count());
@@ -328,62 +460,12 @@ void VPartitionAssigner::mergeSlivers(const vp::CentroidSample& sample) {
   tbb::parallel_for(tbb::blocked_range<size_t>(0, ns, 4096), [&](const tbb::blocked_range<size_t>& r) {
     for (size_t i = r.begin(); i < r.end(); ++i) crossKeys[i] = sequence_.crossKey(0, &sample.xyza[4 * i]);
   });
-  std::unordered_map<uint64_t, Piece> pieces;
-  for (size_t i = 0; i < ns; ++i) {
-    const float* c = &sample.xyza[4 * i];
-    Piece& p = pieces[crossKeys[i]];
-    ++p.count;
-    for (int a = 0; a < 3; ++a) {
-      p.lo[a] = std::min(p.lo[a], c[a]);
-      p.hi[a] = std::max(p.hi[a], c[a]);
-    }
-  }
+  PieceList sorted = countPieces(sample, crossKeys);
+  for (const auto& [key, piece] : sorted) sampleKeys_.push_back(key);
   const uint32_t target = options_.patchTriangles ? options_.patchTriangles : kDefaultPatchTriangles;
   const double small = std::max(1.0, target / 4.0 / w);
-  std::vector<std::pair<uint64_t, Piece>> sorted(pieces.begin(), pieces.end());
-  std::sort(sorted.begin(), sorted.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
-  for (const auto& [key, piece] : sorted) sampleKeys_.push_back(key);
-  auto join = [&](size_t from, size_t into) {
-    remap_[sorted[from].first] = sorted[into].first;
-    Piece& big = sorted[into].second;
-    big.count += sorted[from].second.count;
-    for (int a = 0; a < 3; ++a) {
-      big.lo[a] = std::min(big.lo[a], sorted[from].second.lo[a]);
-      big.hi[a] = std::max(big.hi[a], sorted[from].second.hi[a]);
-    }
-  };
-  // 1. Slivers join the largest piece of their V0 cell.
-  std::vector<size_t> lonely;  // small pieces that are their V0 cell's largest
-  for (size_t i = 0; i < sorted.size();) {  // grouped by V0 cell (the high half)
-    size_t j = i, largest = i;
-    while (j < sorted.size() && PartitionSequence::crossHigh(sorted[j].first) == PartitionSequence::crossHigh(sorted[i].first)) {
-      if (sorted[j].second.count > sorted[largest].second.count) largest = j;
-      ++j;
-    }
-    for (size_t k = i; k < j; ++k)
-      if (k != largest && sorted[k].second.count < small) join(k, largest);
-    if (sorted[largest].second.count < small) lonely.push_back(largest);
-    if (sampled_) largest_[PartitionSequence::crossHigh(sorted[largest].first)] = sorted[largest].first;
-    i = j;
-  }
-  // 2. A whole V0 cell that is still tiny (debris, a thin strip) joins the piece of the same V1
-  //    region whose V0 seed is nearest, so the region is unchanged.
-  std::unordered_map<uint32_t, std::vector<size_t>> byRegion;
-  for (size_t k = 0; k < sorted.size(); ++k)
-    if (!remap_.count(sorted[k].first)) byRegion[PartitionSequence::crossLow(sorted[k].first)].push_back(k);
-  for (size_t k : lonely) {
-    float a[3], b[3];
-    sequence_.seedOf(0, PartitionSequence::crossHigh(sorted[k].first), a);
-    size_t best = k;
-    double bestD = INFINITY;
-    for (size_t o : byRegion[PartitionSequence::crossLow(sorted[k].first)]) {
-      if (o == k || remap_.count(sorted[o].first) || sorted[o].second.count < small) continue;
-      sequence_.seedOf(0, PartitionSequence::crossHigh(sorted[o].first), b);
-      double d = double(a[0] - b[0]) * (a[0] - b[0]) + double(a[1] - b[1]) * (a[1] - b[1]) + double(a[2] - b[2]) * (a[2] - b[2]);
-      if (d < bestD) bestD = d, best = o;
-    }
-    if (best != k) join(k, best);
-  }
+  std::vector<size_t> lonely = joinSlivers(sorted, small, remap_, sampled_ ? &largest_ : nullptr);
+  joinLonelyCells(sorted, lonely, small, sequence_, remap_);
   if (sampled_) {
     // Final keys (joins are one step: a piece joins a piece that is not itself joined).
     auto final = [&](uint64_t key) {
@@ -395,36 +477,9 @@ void VPartitionAssigner::mergeSlivers(const vp::CentroidSample& sample) {
   }
   // 3. Oversized pieces are cut into slabs of about `target` triangles along their longest axis,
   //    at quantiles of a histogram gathered in one more pass.
-  constexpr int kBins = 256;
-  struct Cut {
-    int axis;
-    float lo, width;
-    std::vector<uint32_t> histogram;
-  };
-  std::unordered_map<uint64_t, Cut> cuts;
-  for (auto& [key, p] : sorted) {
-    // A sampled count is off by ~1/sqrt(count): cut earlier, so that no piece ends up above
-    // 2x the target (measured on the 53 M scan: max 2.14x without this margin).
-    const double limit = sampled_ ? target * 1.6 / (1 + 3 / std::sqrt(std::max(1.0, double(p.count)))) : target * 8 / 5;
-    if (remap_.count(key) || p.count * w <= limit) continue;
-    int axis = 0;
-    for (int a = 1; a < 3; ++a)
-      if (p.hi[a] - p.lo[a] > p.hi[axis] - p.lo[axis]) axis = a;
-    if (!(p.hi[axis] > p.lo[axis])) continue;
-    cuts[key] = {axis, p.lo[axis], (p.hi[axis] - p.lo[axis]) / kBins, std::vector<uint32_t>(kBins, 0)};
-  }
+  std::unordered_map<uint64_t, Cut> cuts = oversizedPieces(sorted, remap_, target, w, sampled_);
   if (cuts.empty()) return;
-  for (size_t i = 0; i < ns; ++i) {
-    const float* c = &sample.xyza[4 * i];
-    uint64_t key = crossKeys[i];
-    auto r = remap_.find(key);
-    if (r != remap_.end()) key = r->second;
-    auto it = cuts.find(key);
-    if (it == cuts.end()) continue;
-    Cut& cut = it->second;
-    int bin = int(std::clamp((c[cut.axis] - cut.lo) / cut.width, 0.0f, float(kBins - 1)));
-    ++cut.histogram[bin];
-  }
+  fillHistograms(cuts, sample, crossKeys, remap_);
   for (auto& [key, cut] : cuts) {
     uint64_t total = 0;
     for (uint32_t h : cut.histogram) total += h;
@@ -433,11 +488,7 @@ void VPartitionAssigner::mergeSlivers(const vp::CentroidSample& sample) {
     if (slabs < 2) continue;
     Slabs s;
     s.axis = cut.axis;
-    uint64_t run = 0;
-    for (int b = 0; b < kBins && s.bounds.size() + 1 < slabs; ++b) {
-      run += cut.histogram[b];
-      if (run * slabs >= total * (s.bounds.size() + 1)) s.bounds.push_back(cut.lo + cut.width * float(b + 1));
-    }
+    s.bounds = slabBounds(cut, slabs, total);
     slabs_[key] = std::move(s);
   }
 }

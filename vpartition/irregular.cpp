@@ -11,22 +11,27 @@
 // r_i. T0 = patchTriangles * kCrossPerCell because the patches are the V*0 cells, and each V0 cell
 // is cut into ~kCrossPerCell pieces by the V1 cells (measured, docs/vpartition.md).
 //
-// Passes (each one sequential scan of the centroid stream):
-//   1. total area (the area channel) -> r_i from the mean area per cell, and a coarse density
-//      grid (mean triangle area per diag/256 cell) so the radius follows the local density;
-//   2. Poisson-disk seeding of every level; if a level's seed count misses its target by more
-//      than kCalibrationTolerance, r_i is rescaled (counts go as 1/r^2) and this pass is repeated
-//      (at most kMaxCalibrations times; typically 1, since the packing density of the stream
-//      order is not known in advance);
-//   3. nearest-seed assignment: drop seeds whose cells are below kMinCellFraction of the mean
-//      (their triangles go to the next nearest seed), move the others to their cell's
-//      centroid (one Lloyd step, in the triangle-count measure);
-//   4. recount with the moved seeds and drop the cells that became too small or empty, so every
-//      cell is non-empty and no smaller than kMinCellFraction of the mean.
+// Passes (each one sequential scan of the centroid sample, each one function below):
+//   1. surfaceArea: total area (the area channel) -> r_i from the mean area per cell, and a
+//      coarse density grid (mean triangle area per diag/256 cell) so the radius follows the
+//      local density;
+//   2. seedLevels: Poisson-disk seeding of every level; if a level's seed count misses its
+//      target by more than kCalibrationTolerance, r_i is rescaled (counts go as 1/r^2) and this
+//      pass is repeated (at most kMaxCalibrations times; typically 1, since the packing density
+//      of the stream order is not known in advance);
+//   3. relaxSeeds: nearest-seed assignment: drop seeds whose cells are below kMinCellFraction of
+//      the mean (their triangles go to the next nearest seed), split the biggest cells above
+//      kSplitFactor times the mean, move the others to their cell's centroid (one Lloyd step, in
+//      the triangle-count measure);
+//   4. trimSeeds: recount with the moved seeds, drop the cells that became too small or empty
+//      and the smallest ones above the level's limit, split cells still above kFinalSplitFactor;
+//   5. dropSmallCells, only after such a split: recount and drop the too small cells again, so
+//      every cell is non-empty and no smaller than kMinCellFraction of the mean.
 // Memory: seeds + one hash grid per level (~1 seed per kCrossPerCell * patchTriangles triangles,
 // times 2 for all levels), independent of the mesh size otherwise. Every pass is sequential per
 // level (levels run on separate threads), so the seeds are the same whatever the thread count.
 #include <algorithm>
+#include <cassert>
 #include <chrono>
 #include <cmath>
 #include <iterator>
@@ -49,7 +54,7 @@ constexpr double kMinCellFraction = 0.35;  // "remove small patches": below this
 constexpr double kCalibrationTolerance = 0.05;
 constexpr int kMaxCalibrations = 2;
 constexpr double kCalibrationAim = 1.05;   // seed a bit over the target, then trim (pass 4)
-constexpr double kTrimTolerance = 0.12;
+constexpr double kTrimTolerance = 0.12;      // pass 4 trims levels above target * (1 + this)
 constexpr double kSplitFactor = 1.6;       // pass 3 splits cells above this multiple of the mean
 constexpr double kFinalSplitFactor = 1.9;  // pass 4 splits cells above this (then pass 5)
 // The sample the passes run on (BMT 4.2.2 seeds ~1 per 1000 triangles, so a few hundred sampled
@@ -58,7 +63,7 @@ constexpr double kFinalSplitFactor = 1.9;  // pass 4 splits cells above this (th
 constexpr uint64_t kMinSample = 512u << 10;  // inputs up to 512 K triangles are used whole
 constexpr double kSamplePerCell = 128;    // above that, at least this many per V0 cell target
 constexpr double kLevelSamplePerCell = 1024;  // coarser levels thin the stream down to this
-constexpr double kCountTolerance = 0.15;   // a level's final count stays within this of target    // pass 4 trims levels above target * (1 + this)
+constexpr double kCountTolerance = 0.15;   // a level's final count stays within this of target
 
 // Runs fn(level) for every level, levels spread over threads; each level stays on one thread and
 // sees the batches in order, which keeps the result independent of the thread count.
@@ -297,6 +302,321 @@ bool splitCell(const CellSums& s, uint32_t i, const float* seed, float out[6]) {
   return off > 0;
 }
 
+// What every pass over the sample shares: the sample, its box, and per level the cell count aimed
+// for and the thinning of the stream. Counts are in sample units, except the targets, which come
+// from the whole input.
+struct LevelPlan {
+  const CentroidSource& src;
+  Box3 box;
+  uint64_t N = 0;                 // sampled centroids
+  uint32_t levels = 0;
+  uint32_t threads = 0;
+  uint32_t maxCoarsestCells = 0;
+  std::vector<double> target;     // cells aimed for, per level
+  // Coarser levels have fewer, bigger cells: each level looks at every thin[l]-th centroid of
+  // the stream, enough for kLevelSamplePerCell per target cell, so a pass costs about two
+  // finest levels rather than `levels` of them. Nl[l]: the centroids level l sees.
+  std::vector<uint64_t> thin, Nl;
+
+  // The most cells level l may keep: target * (1 + tolerance), and maxCoarsestCells for the
+  // coarsest level (which bounds the root's backward star).
+  uint64_t limit(uint32_t l, double tolerance) const {
+    uint64_t n = uint64_t(std::floor(target[l] * (1 + tolerance)));
+    if (l + 1 == levels) n = std::min<uint64_t>(n, maxCoarsestCells);
+    return n;
+  }
+};
+
+// "Remove small patches": an empty cell, or one below kMinCellFraction of the level's mean (a
+// level of one cell keeps it).
+bool tooSmall(uint32_t count, uint32_t cells, double mean) {
+  return count == 0 || (cells > 1 && count < kMinCellFraction * mean);
+}
+
+// Level targets: N / (T0 2^i) cells, down to the first level with <= maxCoarsestCells.
+std::vector<double> levelTargets(uint64_t Ntotal, uint32_t P, const VPartitionOptions& o) {
+  const double T0 = P * kCrossPerCell;
+  std::vector<double> target;
+  for (uint32_t l = 0; l < o.maxLevels; ++l) {
+    double t = std::max(1.0, std::round(double(Ntotal) / (T0 * std::ldexp(1.0, int(l)))));
+    target.push_back(t);
+    if (t <= o.maxCoarsestCells) break;
+  }
+  return target;
+}
+
+void planThinning(LevelPlan& plan) {
+  plan.thin.resize(plan.levels);
+  plan.Nl.resize(plan.levels);
+  for (uint32_t l = 0; l < plan.levels; ++l) {
+    plan.thin[l] = std::max<uint64_t>(1, uint64_t(double(plan.N) / (kLevelSamplePerCell * plan.target[l])));
+    plan.Nl[l] = (plan.N + plan.thin[l] - 1) / plan.thin[l];
+  }
+}
+
+// Pass 1: the surface area, globally for the radii and locally for the density grid.
+double surfaceArea(const CentroidSource& src, DensityGrid& density) {
+  double area = 0;
+  src.forEach([&](const float* xyza, size_t count) {
+    for (size_t t = 0; t < count; ++t) area += std::max(0.0f, xyza[4 * t + 3]);
+    density.add(xyza, count);
+  });
+  return area;
+}
+
+// One seeding scan of every level at the given radii (pass 2).
+std::vector<StreamSeeder> seedOnce(const LevelPlan& plan, const DensityGrid& density, double meanArea,
+                                   const std::vector<double>& radius) {
+  std::vector<StreamSeeder> seeders;
+  for (uint32_t l = 0; l < plan.levels; ++l)
+    seeders.emplace_back(2 * radius[l], plan.box);  // cells of 2r: the own cell usually covers
+  std::vector<float> local;  // sqrt(meanArea(p) / meanArea) per triangle of the batch
+  uint64_t base = 0;
+  plan.src.forEach([&](const float* xyza, size_t count) {
+    local.resize(count);
+    for (size_t t = 0; t < count; ++t) local[t] = float(std::sqrt(density.meanArea(xyza + 4 * t) / meanArea));
+    forLevels(plan.threads, plan.levels, [&](uint32_t l) {
+      float r = float(radius[l]);
+      for (size_t t = size_t((plan.thin[l] - base % plan.thin[l]) % plan.thin[l]); t < count; t += size_t(plan.thin[l]))
+        seeders[l].offer(xyza + 4 * t, r * local[t]);
+    });
+    base += count;
+  });
+  return seeders;
+}
+
+// Pass 2 (+ calibration repeats): stream seeding of all levels. `radius` is rescaled by the
+// calibrations; indexCell gets each level's nearest-seed index cell.
+std::vector<std::vector<float>> seedLevels(const LevelPlan& plan, const DensityGrid& density, double meanArea,
+                                           std::vector<double>& radius, std::vector<double>& indexCell,
+                                           PartitionBuildStats& stats) {
+  for (int attempt = 0;; ++attempt) {
+    std::vector<StreamSeeder> seeders = seedOnce(plan, density, meanArea, radius);
+    ++stats.samplePasses;
+    uint64_t bytes = density.bytes();
+    bool off = false;
+    for (uint32_t l = 0; l < plan.levels; ++l) {
+      bytes += seeders[l].bytes();
+      // Only levels with room to be off by a cell are worth another pass.
+      // A level of n cells cannot be closer than ~1/n, and its count fluctuates by ~1/sqrt(n)
+      // from one radius to the next, so small levels get a wider tolerance.
+      double ratio = seeders[l].viable(plan.Nl[l]) / (plan.target[l] * kCalibrationAim);
+      double tolerance = std::max(kCalibrationTolerance, 1.0 / std::sqrt(plan.target[l]));
+      if (plan.target[l] >= 8 && std::fabs(ratio - 1) > tolerance) off = true;
+    }
+    stats.seedBytes = std::max(stats.seedBytes, bytes);
+    if (off && attempt < kMaxCalibrations) {
+      for (uint32_t l = 0; l < plan.levels; ++l)
+        radius[l] *= std::sqrt(double(seeders[l].viable(plan.Nl[l])) / (plan.target[l] * kCalibrationAim));
+      ++stats.calibrationPasses;
+      continue;
+    }
+    std::vector<std::vector<float>> seeds(plan.levels);
+    for (uint32_t l = 0; l < plan.levels; ++l) {
+      // The nearest-seed index works best with grid cells about the seed spacing of the denser
+      // parts (candidate lists stay short there, where most triangles are).
+      std::vector<float> r = seeders[l].radii();
+      assert(!r.empty());  // the first centroid a level sees always becomes a seed
+      std::nth_element(r.begin(), r.begin() + r.size() / 5, r.end());
+      indexCell[l] = std::max(double(r[r.size() / 5]), radius[l] * 1e-3);
+      seeds[l] = std::move(seeders[l].seeds());
+    }
+    return seeds;
+  }
+}
+
+// Pass 3's split budget: the biggest cells above kSplitFactor * mean, as many as keep the level
+// under the trim limit of pass 4 (trimming would otherwise drop small separate components,
+// dumping them into a neighbour's cell).
+std::vector<uint8_t> cellsToSplit(const CellSums& s, double mean, uint64_t limit) {
+  const uint32_t n = uint32_t(s.count.size());
+  std::vector<uint8_t> split(n, 0);
+  uint64_t kept = 0;
+  std::vector<uint32_t> big;
+  for (uint32_t i = 0; i < n; ++i) {
+    if (tooSmall(s.count[i], n, mean)) continue;
+    ++kept;
+    if (s.count[i] > kSplitFactor * mean) big.push_back(i);
+  }
+  std::stable_sort(big.begin(), big.end(), [&](uint32_t a, uint32_t b) { return s.count[a] > s.count[b]; });
+  for (uint32_t i : big) {
+    if (kept + 1 > limit) break;
+    split[i] = 1;
+    ++kept;
+  }
+  return split;
+}
+
+// Pass 3 on one level: the new seeds, without the small cells, with the chosen big ones split.
+std::vector<float> relaxLevel(const CellSums& s, const std::vector<float>& seeds, double mean, uint64_t limit,
+                              PartitionBuildStats& stats) {
+  const uint32_t n = uint32_t(s.count.size());
+  const std::vector<uint8_t> split = cellsToSplit(s, mean, limit);
+  std::vector<float> moved;
+  moved.reserve(seeds.size());
+  for (uint32_t i = 0; i < n; ++i) {
+    if (tooSmall(s.count[i], n, mean)) {
+      ++stats.removedSeeds;
+      continue;
+    }
+    // Lloyd step in the triangle-count measure (plain centroid of the centroids, not the
+    // area-weighted one): it pulls seeds towards denser parts, which evens out triangle
+    // counts per cell, the quantity BMT wants constant.
+    double k = s.count[i];
+    double mu[3];
+    for (int a = 0; a < 3; ++a) mu[a] = s.plain[3 * size_t(i) + a] / k;
+    if (!split[i]) {
+      for (int a = 0; a < 3; ++a) moved.push_back(float(mu[a]));
+      continue;
+    }
+    // Too big a cell (a thin part whose both sides one ball covered, a region the stream
+    // order packed loosely): split it along its principal axis. Pass 4 checks the result.
+    float two[6];
+    if (splitCell(s, i, &seeds[3 * size_t(i)], two)) {
+      moved.insert(moved.end(), two, two + 6);
+      ++stats.splitSeeds;
+    } else {
+      for (int a = 0; a < 3; ++a) moved.push_back(float(mu[a]));
+    }
+  }
+  assert(!moved.empty());
+  return moved;
+}
+
+// Pass 3: remove small cells, split big ones, one Lloyd step.
+void relaxSeeds(const LevelPlan& plan, const std::vector<double>& indexCell,
+                std::vector<std::vector<float>>& seeds, PartitionBuildStats& stats) {
+  std::vector<CellSums> sums =
+      assignAll(plan.src, seeds, indexCell, plan.box, plan.thin, plan.threads, stats.samplePasses);
+  for (uint32_t l = 0; l < plan.levels; ++l) {
+    const double mean = double(plan.Nl[l]) / uint32_t(sums[l].count.size());
+    seeds[l] = relaxLevel(sums[l], seeds[l], mean, plan.limit(l, kTrimTolerance), stats);
+  }
+}
+
+// Pass 4's kept cells of one level: the non-small ones, then, above `limit`, without the
+// smallest (stable: equal counts keep the lower index). Ascending.
+std::vector<uint32_t> keptCells(const CellSums& s, double mean, uint64_t limit) {
+  const uint32_t n = uint32_t(s.count.size());
+  std::vector<uint32_t> keep;
+  for (uint32_t i = 0; i < n; ++i)
+    if (!tooSmall(s.count[i], n, mean)) keep.push_back(i);
+  if (keep.size() > limit) {
+    std::vector<uint32_t> bySize = keep;
+    std::stable_sort(bySize.begin(), bySize.end(), [&](uint32_t a, uint32_t b) { return s.count[a] < s.count[b]; });
+    bySize.resize(keep.size() - limit);
+    std::sort(bySize.begin(), bySize.end());
+    std::vector<uint32_t> rest;
+    std::set_difference(keep.begin(), keep.end(), bySize.begin(), bySize.end(), std::back_inserter(rest));
+    keep.swap(rest);
+  }
+  assert(keep.size() <= limit);
+  return keep;
+}
+
+// Pass 4 on one level; true when a cell was split (pass 5 must recount).
+bool trimLevel(const LevelPlan& plan, uint32_t l, const CellSums& s, std::vector<float>& seeds,
+               PartitionBuildStats& stats) {
+  const uint32_t n = uint32_t(s.count.size());
+  const double mean = double(plan.Nl[l]) / n;
+  const std::vector<uint32_t> keep = keptCells(s, mean, std::max<uint64_t>(1, plan.limit(l, kTrimTolerance)));
+  stats.removedSeeds += n - keep.size();
+  // Cells still far above the mean (a Lloyd step can move a seed off a curved part, e.g.
+  // into a small torus' hole, where it captures the whole ring) are split once more; pass 5
+  // then recounts. Budget: the count may reach target * (1 + kCountTolerance).
+  const double keptMean = double(plan.N) / keep.size();
+  uint64_t room = plan.limit(l, kCountTolerance);
+  room = room > keep.size() ? room - keep.size() : 0;
+  bool split = false;
+  std::vector<float> kept;
+  kept.reserve(3 * keep.size());
+  for (uint32_t i : keep) {
+    float two[6];
+    if (room > 0 && s.count[i] > kFinalSplitFactor * keptMean && splitCell(s, i, &seeds[3 * size_t(i)], two)) {
+      kept.insert(kept.end(), two, two + 6);
+      --room;
+      ++stats.splitSeeds;
+      split = true;
+      continue;
+    }
+    kept.insert(kept.end(), &seeds[3 * size_t(i)], &seeds[3 * size_t(i)] + 3);
+  }
+  assert(!kept.empty());
+  seeds = std::move(kept);
+  return split;
+}
+
+// Pass 4: recount with the moved seeds; drop empty and too small cells, then, where a level
+// still has more cells than aimed for (thin parts and separate components hold more seeds than
+// their area predicts), the smallest cells down to the target. Removing a seed only grows its
+// neighbours, so every kept cell stays non-empty; the coarsest level is cut to
+// maxCoarsestCells, which bounds the root's backward star. Also gathers the query cells the
+// mesh touches, for the shared candidate table of the final index (same frame: origin box.lo,
+// cell indexCell[l]), so random-order lookups stay fast. True when pass 5 must run.
+bool trimSeeds(const LevelPlan& plan, const std::vector<double>& indexCell, std::vector<std::vector<float>>& seeds,
+               std::vector<std::vector<uint64_t>>& queryCells, PartitionBuildStats& stats) {
+  std::vector<CellSums> sums =
+      assignAll(plan.src, seeds, indexCell, plan.box, plan.thin, plan.threads, stats.samplePasses, &queryCells);
+  bool recount = false;
+  for (uint32_t l = 0; l < plan.levels; ++l) recount |= trimLevel(plan, l, sums[l], seeds[l], stats);
+  return recount;
+}
+
+// Pass 5, only after a late split: drop the cells that became empty or too small.
+void dropSmallCells(const LevelPlan& plan, const std::vector<double>& indexCell,
+                    std::vector<std::vector<float>>& seeds, PartitionBuildStats& stats) {
+  std::vector<CellSums> sums =
+      assignAll(plan.src, seeds, indexCell, plan.box, plan.thin, plan.threads, stats.samplePasses);
+  for (uint32_t l = 0; l < plan.levels; ++l) {
+    const CellSums& s = sums[l];
+    const uint32_t n = uint32_t(s.count.size());
+    const double mean = double(plan.Nl[l]) / n;
+    std::vector<float> kept;
+    for (uint32_t i = 0; i < n; ++i) {
+      if (tooSmall(s.count[i], n, mean)) {
+        ++stats.removedSeeds;
+        continue;
+      }
+      kept.insert(kept.end(), &seeds[l][3 * size_t(i)], &seeds[l][3 * size_t(i)] + 3);
+    }
+    assert(!kept.empty());
+    seeds[l] = std::move(kept);
+  }
+}
+
+// The finished levels, with the candidate tables of the finest levels that fit the budget
+// (~64 bytes per query cell: slot + candidates; ingest asks V0 and V1).
+void addLevels(PartitionSequence& seq, const LevelPlan& plan, const std::vector<double>& indexCell,
+               std::vector<std::vector<float>>& seeds, std::vector<std::vector<uint64_t>>& queryCells,
+               uint64_t tableBudget) {
+  assert(queryCells.size() == plan.levels);
+  for (uint32_t l = 0; l < plan.levels; ++l) {
+    auto L = std::make_unique<PartitionLevel>();
+    L->type = PartitionLevel::Seeds;
+    L->scale = indexCell[l];
+    L->target = uint64_t(plan.target[l]);
+    L->seeds = std::move(seeds[l]);
+    for (int a = 0; a < 3; ++a) L->origin[a] = plan.box.lo[a];
+    uint64_t tableBytes = 64 * queryCells[l].size();
+    if (tableBytes <= tableBudget) {
+      tableBudget -= tableBytes;
+      L->queryCells = std::move(queryCells[l]);
+    } else {
+      tableBudget = 0;
+    }
+    seq.addLevel(std::move(L));
+  }
+}
+
+// Nothing to partition: one cell, seeded at the box centre, so cellOf() still works.
+void addSingleCell(PartitionSequence& seq, const Box3& box) {
+  auto L = std::make_unique<PartitionLevel>();
+  L->scale = 1;
+  L->target = 1;
+  for (int a = 0; a < 3; ++a) L->seeds.push_back(float(0.5 * (box.lo[a] + box.hi[a])));
+  seq.addLevel(std::move(L));
+}
+
 }  // namespace
 
 namespace vp {
@@ -334,275 +654,50 @@ PartitionSequence buildIrregularFromSample(const vp::CentroidSample& sample, con
   stats.passes = 1;  // the one pass over the input that took the sample
   stats.sampleStride = sample.stride;
   const uint32_t P = o.patchTriangles ? o.patchTriangles : kDefaultPatchTriangles;
-  // Every pass below runs over the in-memory sample; counts are in sample units, except the
-  // level targets, which come from the whole input.
+  // Every pass below runs over the in-memory sample.
   vp::SampleSource src(sample);
-  const uint64_t N = src.count();
+  LevelPlan plan{src, src.bounds()};
+  plan.N = src.count();
+  plan.threads = o.threads;
+  plan.maxCoarsestCells = o.maxCoarsestCells;
   const uint64_t Ntotal = sample.total;
-  const Box3 box = src.bounds();
-  const uint32_t threads = o.threads;
 
-  // Pass 1: the surface area, globally for the radii and locally for the density grid.
-  double area = 0;
-  DensityGrid density(box);
-  src.forEach([&](const float* xyza, size_t count) {
-    for (size_t t = 0; t < count; ++t) area += std::max(0.0f, xyza[4 * t + 3]);
-    density.add(xyza, count);
-  });
+  DensityGrid density(plan.box);
+  double area = surfaceArea(src, density);
   ++stats.samplePasses;
 
   PartitionSequence seq;
   seq.setKind(PartitionKind::Irregular);
-  if (N == 0) {
-    // Nothing to partition: one cell, seeded at the box centre, so cellOf() still works.
-    auto L = std::make_unique<PartitionLevel>();
-    L->scale = 1;
-    L->target = 1;
-    for (int a = 0; a < 3; ++a) L->seeds.push_back(float(0.5 * (box.lo[a] + box.hi[a])));
-    seq.addLevel(std::move(L));
+  if (plan.N == 0) {
+    addSingleCell(seq, plan.box);
     seq.mutableStats() = stats;
     return seq;
   }
   if (!(area > 0)) {
     // Degenerate input (all triangles zero-area): use the bounding box faces as the area.
     double e[3];
-    for (int a = 0; a < 3; ++a) e[a] = std::max(1e-30, box.hi[a] - box.lo[a]);
-    area = 2 * (e[0] * e[1] + e[1] * e[2] + e[0] * e[2]) * double(N) / double(Ntotal);
+    for (int a = 0; a < 3; ++a) e[a] = std::max(1e-30, plan.box.hi[a] - plan.box.lo[a]);
+    area = 2 * (e[0] * e[1] + e[1] * e[2] + e[0] * e[2]) * double(plan.N) / double(Ntotal);
   }
   // Input triangles per sampled one: the sample's area stands for weight times as much surface.
-  const double weight = double(Ntotal) / double(N);
-
-  // Level targets: N / (T0 2^i) cells, down to the first level with <= maxCoarsestCells.
-  const double T0 = P * kCrossPerCell;
-  std::vector<double> target;
-  for (uint32_t l = 0; l < o.maxLevels; ++l) {
-    double t = std::max(1.0, std::round(double(Ntotal) / (T0 * std::ldexp(1.0, int(l)))));
-    target.push_back(t);
-    if (t <= o.maxCoarsestCells) break;
-  }
-  const uint32_t levels = uint32_t(target.size());
-  // Coarser levels have fewer, bigger cells: each level looks at every thin[l]-th centroid of
-  // the stream, enough for kLevelSamplePerCell per target cell, so a pass costs about two
-  // finest levels rather than `levels` of them. Nl[l]: the centroids level l sees.
-  std::vector<uint64_t> thin(levels), Nl(levels);
-  for (uint32_t l = 0; l < levels; ++l) {
-    thin[l] = std::max<uint64_t>(1, uint64_t(double(N) / (kLevelSamplePerCell * target[l])));
-    Nl[l] = (N + thin[l] - 1) / thin[l];
-  }
+  const double weight = double(Ntotal) / double(plan.N);
+  plan.target = levelTargets(Ntotal, P, o);
+  plan.levels = uint32_t(plan.target.size());
+  planThinning(plan);
   // Level radius at the mean density; locally r_l(p) = radius[l] * sqrt(meanArea(p) / meanArea).
-  const double meanArea = area / double(N);
+  const double meanArea = area / double(plan.N);
   density.finish(meanArea);
   stats.seedBytes = density.bytes();
-  std::vector<double> radius(levels);
-  for (uint32_t l = 0; l < levels; ++l) radius[l] = std::sqrt(area * weight / (target[l] * kAreaPerSeed));
-  std::vector<double> indexCell(levels);
+  std::vector<double> radius(plan.levels);
+  for (uint32_t l = 0; l < plan.levels; ++l) radius[l] = std::sqrt(area * weight / (plan.target[l] * kAreaPerSeed));
+  std::vector<double> indexCell(plan.levels);
 
-  // Pass 2 (+ calibration repeats): stream seeding of all levels.
-  std::vector<std::vector<float>> seeds(levels);
-  for (int attempt = 0;; ++attempt) {
-    std::vector<StreamSeeder> seeders;
-    for (uint32_t l = 0; l < levels; ++l) seeders.emplace_back(2 * radius[l], box);  // cells of 2r: the own cell usually covers
-    std::vector<float> local;  // sqrt(meanArea(p) / meanArea) per triangle of the batch
-    uint64_t base = 0;
-    src.forEach([&](const float* xyza, size_t count) {
-      local.resize(count);
-      for (size_t t = 0; t < count; ++t)
-        local[t] = float(std::sqrt(density.meanArea(xyza + 4 * t) / meanArea));
-      forLevels(threads, levels, [&](uint32_t l) {
-        float r = float(radius[l]);
-        for (size_t t = size_t((thin[l] - base % thin[l]) % thin[l]); t < count; t += size_t(thin[l]))
-          seeders[l].offer(xyza + 4 * t, r * local[t]);
-      });
-      base += count;
-    });
-    ++stats.samplePasses;
-    uint64_t bytes = density.bytes();
-    bool off = false;
-    for (uint32_t l = 0; l < levels; ++l) {
-      bytes += seeders[l].bytes();
-      // Only levels with room to be off by a cell are worth another pass.
-      // A level of n cells cannot be closer than ~1/n, and its count fluctuates by ~1/sqrt(n)
-      // from one radius to the next, so small levels get a wider tolerance.
-      double ratio = seeders[l].viable(Nl[l]) / (target[l] * kCalibrationAim);
-      double tolerance = std::max(kCalibrationTolerance, 1.0 / std::sqrt(target[l]));
-      if (target[l] >= 8 && std::fabs(ratio - 1) > tolerance) off = true;
-    }
-    stats.seedBytes = std::max(stats.seedBytes, bytes);
-    if (off && attempt < kMaxCalibrations) {
-      for (uint32_t l = 0; l < levels; ++l)
-        radius[l] *= std::sqrt(double(seeders[l].viable(Nl[l])) / (target[l] * kCalibrationAim));
-      ++stats.calibrationPasses;
-      continue;
-    }
-    for (uint32_t l = 0; l < levels; ++l) {
-      // The nearest-seed index works best with grid cells about the seed spacing of the denser
-      // parts (candidate lists stay short there, where most triangles are).
-      std::vector<float> r = seeders[l].radii();
-      std::nth_element(r.begin(), r.begin() + r.size() / 5, r.end());
-      indexCell[l] = std::max(double(r[r.size() / 5]), radius[l] * 1e-3);
-      seeds[l] = std::move(seeders[l].seeds());
-    }
-    break;
-  }
-
-  // Pass 3: remove small cells, split big ones, one Lloyd step.
-  {
-    std::vector<CellSums> sums = assignAll(src, seeds, indexCell, box, thin, o.threads, stats.samplePasses);
-    for (uint32_t l = 0; l < levels; ++l) {
-      const CellSums& s = sums[l];
-      uint32_t n = uint32_t(s.count.size());
-      double mean = double(Nl[l]) / n;
-      std::vector<float> moved;
-      moved.reserve(seeds[l].size());
-      // Splits are budgeted so the level stays under the trim limit of pass 4 (trimming would
-      // otherwise drop small separate components, dumping them into a neighbour's cell).
-      std::vector<uint8_t> split(n, 0);
-      {
-        uint64_t kept = 0;
-        std::vector<uint32_t> big;
-        for (uint32_t i = 0; i < n; ++i) {
-          if (s.count[i] == 0 || (n > 1 && s.count[i] < kMinCellFraction * mean)) continue;
-          ++kept;
-          if (s.count[i] > kSplitFactor * mean) big.push_back(i);
-        }
-        std::stable_sort(big.begin(), big.end(),
-                         [&](uint32_t a, uint32_t b) { return s.count[a] > s.count[b]; });
-        uint64_t limit = uint64_t(std::floor(target[l] * (1 + kTrimTolerance)));
-        if (l + 1 == levels) limit = std::min<uint64_t>(limit, o.maxCoarsestCells);
-        for (uint32_t i : big) {
-          if (kept + 1 > limit) break;
-          split[i] = 1;
-          ++kept;
-        }
-      }
-      for (uint32_t i = 0; i < n; ++i) {
-        if (s.count[i] == 0 || (n > 1 && s.count[i] < kMinCellFraction * mean)) {
-          ++stats.removedSeeds;
-          continue;
-        }
-        // Lloyd step in the triangle-count measure (plain centroid of the centroids, not the
-        // area-weighted one): it pulls seeds towards denser parts, which evens out triangle
-        // counts per cell, the quantity BMT wants constant.
-        double k = s.count[i];
-        double mu[3];
-        for (int a = 0; a < 3; ++a) mu[a] = s.plain[3 * size_t(i) + a] / k;
-        if (!split[i]) {
-          for (int a = 0; a < 3; ++a) moved.push_back(float(mu[a]));
-          continue;
-        }
-        // Too big a cell (a thin part whose both sides one ball covered, a region the stream
-        // order packed loosely): split it along its principal axis. Pass 4 checks the result.
-        float two[6];
-        if (splitCell(s, i, &seeds[l][3 * size_t(i)], two)) {
-          moved.insert(moved.end(), two, two + 6);
-          ++stats.splitSeeds;
-        } else {
-          for (int a = 0; a < 3; ++a) moved.push_back(float(mu[a]));
-        }
-      }
-      assert(!moved.empty());
-      seeds[l] = std::move(moved);
-    }
-  }
-
+  std::vector<std::vector<float>> seeds = seedLevels(plan, density, meanArea, radius, indexCell, stats);
+  relaxSeeds(plan, indexCell, seeds, stats);
   std::vector<std::vector<uint64_t>> queryCells;
-  bool recount = false;
-  // Pass 4: recount with the moved seeds; drop empty and too small cells, then, where a level
-  // still has more cells than aimed for (thin parts and separate components hold more seeds than
-  // their area predicts), the smallest cells down to the target. Removing a seed only grows its
-  // neighbours, so every kept cell stays non-empty; the coarsest level is cut to
-  // maxCoarsestCells, which bounds the root's backward star.
-  {
-    // The query cells the mesh touches, for the shared candidate table of the final index
-    // (same frame: origin box.lo, cell indexCell[l]), so random-order lookups stay fast.
-    std::vector<CellSums> sums =
-        assignAll(src, seeds, indexCell, box, thin, o.threads, stats.samplePasses, &queryCells);
-    for (uint32_t l = 0; l < levels; ++l) {
-      const CellSums& s = sums[l];
-      uint32_t n = uint32_t(s.count.size());
-      double mean = double(Nl[l]) / n;
-      std::vector<uint32_t> keep;
-      for (uint32_t i = 0; i < n; ++i)
-        if (s.count[i] > 0 && (n == 1 || s.count[i] >= kMinCellFraction * mean)) keep.push_back(i);
-      uint64_t limit = uint64_t(std::floor(target[l] * (1 + kTrimTolerance)));
-      if (l + 1 == levels) limit = std::min<uint64_t>(limit, o.maxCoarsestCells);
-      limit = std::max<uint64_t>(1, limit);
-      if (keep.size() > limit) {
-        std::vector<uint32_t> bySize = keep;
-        std::stable_sort(bySize.begin(), bySize.end(),
-                         [&](uint32_t a, uint32_t b) { return s.count[a] < s.count[b]; });
-        bySize.resize(keep.size() - limit);
-        std::sort(bySize.begin(), bySize.end());
-        std::vector<uint32_t> rest;
-        std::set_difference(keep.begin(), keep.end(), bySize.begin(), bySize.end(),
-                            std::back_inserter(rest));
-        keep.swap(rest);
-      }
-      stats.removedSeeds += n - keep.size();
-      // Cells still far above the mean (a Lloyd step can move a seed off a curved part, e.g.
-      // into a small torus' hole, where it captures the whole ring) are split once more; pass 5
-      // then recounts. Budget: the count may reach target * (1 + kCountTolerance).
-      double keptMean = double(N) / keep.size();
-      uint64_t room = uint64_t(std::floor(target[l] * (1 + kCountTolerance)));
-      if (l + 1 == levels) room = std::min<uint64_t>(room, o.maxCoarsestCells);
-      room = room > keep.size() ? room - keep.size() : 0;
-      std::vector<float> kept;
-      kept.reserve(3 * keep.size());
-      for (uint32_t i : keep) {
-        float two[6];
-        if (room > 0 && s.count[i] > kFinalSplitFactor * keptMean &&
-            splitCell(s, i, &seeds[l][3 * size_t(i)], two)) {
-          kept.insert(kept.end(), two, two + 6);
-          --room;
-          ++stats.splitSeeds;
-          recount = true;
-          continue;
-        }
-        kept.insert(kept.end(), &seeds[l][3 * size_t(i)], &seeds[l][3 * size_t(i)] + 3);
-      }
-      assert(!kept.empty());
-      seeds[l] = std::move(kept);
-    }
-  }
+  if (trimSeeds(plan, indexCell, seeds, queryCells, stats)) dropSmallCells(plan, indexCell, seeds, stats);
+  addLevels(seq, plan, indexCell, seeds, queryCells, o.lookupTableBytes);
 
-  // Pass 5, only after a late split: drop the cells that became empty or too small.
-  if (recount) {
-    std::vector<CellSums> sums = assignAll(src, seeds, indexCell, box, thin, o.threads, stats.samplePasses);
-    for (uint32_t l = 0; l < levels; ++l) {
-      const CellSums& s = sums[l];
-      uint32_t n = uint32_t(s.count.size());
-      double mean = double(Nl[l]) / n;
-      std::vector<float> kept;
-      for (uint32_t i = 0; i < n; ++i) {
-        if (s.count[i] == 0 || (n > 1 && s.count[i] < kMinCellFraction * mean)) {
-          ++stats.removedSeeds;
-          continue;
-        }
-        kept.insert(kept.end(), &seeds[l][3 * size_t(i)], &seeds[l][3 * size_t(i)] + 3);
-      }
-      assert(!kept.empty());
-      seeds[l] = std::move(kept);
-    }
-  }
-
-  uint64_t tableBudget = o.lookupTableBytes;
-  for (uint32_t l = 0; l < levels; ++l) {
-    auto L = std::make_unique<PartitionLevel>();
-    L->type = PartitionLevel::Seeds;
-    L->scale = indexCell[l];
-    L->target = uint64_t(target[l]);
-    L->seeds = std::move(seeds[l]);
-    for (int a = 0; a < 3; ++a) L->origin[a] = box.lo[a];
-    // ~64 bytes per query cell (slot + candidates); finest levels first: ingest asks V0 and V1.
-    uint64_t tableBytes = 64 * queryCells[l].size();
-    if (tableBytes <= tableBudget) {
-      tableBudget -= tableBytes;
-      L->queryCells = std::move(queryCells[l]);
-    } else {
-      tableBudget = 0;
-    }
-    seq.addLevel(std::move(L));
-  }
   stats.seedBytes = std::max(stats.seedBytes, seq.memoryBytes() + density.bytes());
   stats.sampleBytes = sample.bytes();
   stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

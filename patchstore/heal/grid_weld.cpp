@@ -51,30 +51,28 @@ Cell cellOf(const GridCells& g, const double* p) {
   return c;
 }
 
-}  // namespace
-
-PassReport weldToGrid(PatchStore& store, const GridCells& grid, const HealOptions& options) {
-  auto start = std::chrono::steady_clock::now();
-  if (!(grid.step > 0) || !std::isfinite(grid.step)) fail(store.dir(), "grid weld: the step must be a finite number > 0");
-  // Cells of the store's box, relative to its lowest cell: packed exactly when 3 x bits <= 64.
-  const StoreInfo info = store.info();
-  Cell lo = cellOf(grid, info.bounds.lo), hi = cellOf(grid, info.bounds.hi);
+// Cell keys over the store's box, relative to its lowest cell: packed exactly when 3 x bits <= 64,
+// else hashed (then equal keys may be different cells: step 3 regroups by exact cell).
+struct CellKeys {
+  Cell lo;
   unsigned bits = 1;
-  for (int a = 0; a < 3; ++a)
-    while (bits < 63 && (uint64_t(hi[a] - lo[a]) >> bits) != 0) ++bits;
-  const bool packed = 3 * bits <= 64;
-  auto keyOf = [&](const Cell& c) {
+  bool packed = false;
+  uint64_t operator()(const Cell& c) const {
     if (!packed) return uint64_t(XXH64(c.data(), sizeof c, 0));
     uint64_t k = 0;
     for (int a = 0; a < 3; ++a) k = (k << bits) | uint64_t(c[a] - lo[a]);
     return k;
-  };
+  }
+};
 
-  // 1. One record per vertex, read in parallel, added in patch order (deterministic runs).
+using CellSorter = StableKeySorter<CellRecord, CellKey>;
+
+// Step 1: one record per vertex, read in parallel, added in patch order (deterministic runs).
+// Returns the patches that have a triangle with a repeated vertex.
+std::vector<PatchId> scanVertices(const PatchStore& store, const GridCells& grid, const CellKeys& keyOf,
+                                  uint64_t vertices, bool progressOn, CellSorter& sorter) {
   std::vector<PatchId> ids = store.patchIds();
-  StableKeySorter<CellRecord, CellKey> sorter(scratchPrefix(store, options, "gridweld"), options.memoryBytes, CellKey{},
-                                              packed ? 3 * bits : 64);
-  Progress progress(options.progress, "grid weld: scan", info.vertices, "vertices");
+  Progress progress(progressOn, "grid weld: scan", vertices, "vertices");
   uint64_t scanned = 0;
   constexpr size_t kBatch = 256;
   std::vector<std::vector<CellRecord>> batch(kBatch);
@@ -103,40 +101,46 @@ PassReport weldToGrid(PatchStore& store, const GridCells& grid, const HealOption
     }
     progress.update(scanned);
   }
-  std::vector<std::vector<CellRecord>>().swap(batch);
   progress.finish(scanned);
+  return withRepeated;
+}
 
-  // 2. Equal keys: candidate clusters (ascending key, members in patch order).
+// Step 2: equal keys are candidate clusters (ascending key, members in patch order); the sorter
+// is consumed.
+std::vector<std::vector<uint64_t>> candidateClusters(CellSorter& sorter) {
   sorter.finish();
   std::vector<std::vector<uint64_t>> candidates;
-  {
-    CellRecord r{}, prev{};
-    bool have = false, open = false;
-    while (sorter.next(r)) {
-      if (have && r.key == prev.key) {
-        if (!open) candidates.push_back({prev.gid}), open = true;
-        candidates.back().push_back(r.gid);
-      } else {
-        open = false;
-      }
-      prev = r, have = true;
+  CellRecord r{}, prev{};
+  bool have = false, open = false;
+  while (sorter.next(r)) {
+    if (have && r.key == prev.key) {
+      if (!open) candidates.push_back({prev.gid}), open = true;
+      candidates.back().push_back(r.gid);
+    } else {
+      open = false;
     }
+    prev = r, have = true;
   }
   sorter.release();
+  return candidates;
+}
 
-  // 3. The clusters' exact cells and targets, read before anything is committed (commits move
-  // patch-local indices, so a member's gid is only good until then). A hashed key may join
-  // vertices of different cells: members are regrouped by their exact cell.
+struct Cluster {
+  Cell cell;
+  Pos target;  // the member with the smallest position
+  uint32_t members = 0;
+  std::set<PatchId> patches;  // the members' owners
+};
+
+// Step 3: the clusters' exact cells and targets, read before anything is committed (commits move
+// patch-local indices, so a member's gid is only good until then). A hashed key may join
+// vertices of different cells: members are regrouped by their exact cell.
+std::vector<Cluster> exactClusters(const PatchStore& store, const GridCells& grid,
+                                   std::vector<std::vector<uint64_t>>& candidates) {
   std::sort(candidates.begin(), candidates.end());
   std::map<PatchId, std::vector<std::pair<uint32_t, size_t>>> byPatch;  // owner -> (local, candidate)
   for (size_t c = 0; c < candidates.size(); ++c)
     for (uint64_t m : candidates[c]) byPatch[gidPatch(m)].push_back({gidLocal(m), c});
-  struct Cluster {
-    Cell cell;
-    Pos target;  // the member with the smallest position
-    uint32_t members = 0;
-    std::set<PatchId> patches;  // the members' owners
-  };
   std::map<std::pair<size_t, Cell>, Cluster> found;  // (candidate, cell) -> cluster
   for (auto& [id, list] : byPatch) {
     Patch p = store.patch(id);
@@ -153,11 +157,62 @@ PassReport weldToGrid(PatchStore& store, const GridCells& grid, const HealOption
   std::vector<Cluster> list;
   for (auto& [key, cluster] : found)
     if (cluster.members >= 2) list.push_back(std::move(cluster));
+  return list;
+}
 
-  // 4. Apply in groups of clusters that need few patches; every vertex in a cluster's cell is
-  // that cluster's, which stays true as groups are committed.
+struct WeldCounts {
   uint64_t merged = 0, degenerate = 0, dropped = 0;
-  Progress apply(options.progress, "grid weld: merge", list.size(), "clusters");
+};
+
+// The edit of a region with its vertices renamed by `to`, less the triangles that become
+// degenerate (counted).
+RegionEdit withoutDegenerate(const Region& r, const std::vector<uint32_t>& to, uint64_t& degenerate) {
+  RegionEdit e = identityEdit(r);
+  RegionEdit out = e;
+  out.triangles.clear();
+  out.trianglePatch.clear();
+  for (size_t t = 0; t < e.triangles.size() / 3; ++t) {
+    uint32_t a = to[e.triangles[3 * t]], b = to[e.triangles[3 * t + 1]], c = to[e.triangles[3 * t + 2]];
+    if (a == b || b == c || a == c) {
+      ++degenerate;
+      continue;
+    }
+    out.triangles.insert(out.triangles.end(), {a, b, c});
+    out.trianglePatch.push_back(e.trianglePatch[t]);
+  }
+  return out;
+}
+
+// Step 4 for one group: every region vertex in a cluster's cell becomes the cluster's target
+// vertex (the member copies of one store vertex, shared between loaded patches, are one region
+// vertex already).
+void mergeGroup(PatchStore& store, const GridCells& grid, const std::set<PatchId>& patches,
+                const std::map<Cell, Pos>& target, WeldCounts& counts) {
+  auto wanted = [&](const Region& r, uint32_t u) { return target.count(cellOf(grid, &r.positions[3 * size_t(u)])) != 0; };
+  Region r = loadUnlocked(store, {patches.begin(), patches.end()}, wanted);
+  std::map<Cell, uint32_t> targetVertex;
+  std::vector<uint32_t> to(r.vertexCount());
+  for (uint32_t u = 0; u < r.vertexCount(); ++u) {
+    to[u] = u;
+    const double* q = &r.positions[3 * size_t(u)];
+    auto it = target.find(cellOf(grid, q));
+    if (it == target.end()) continue;
+    if (r.locked[u]) fail(store.dir(), "grid weld: a cluster spans too many patches to load together");
+    if (Pos{q[0], q[1], q[2]} == it->second && !targetVertex.count(it->first)) targetVertex[it->first] = u;
+  }
+  for (uint32_t u = 0; u < r.vertexCount(); ++u) {
+    auto it = target.find(cellOf(grid, &r.positions[3 * size_t(u)]));
+    if (it != target.end()) to[u] = targetVertex.at(it->first);
+    counts.merged += it != target.end() && to[u] != u;
+  }
+  counts.dropped += commitRegion(store, r, withoutDegenerate(r, to, counts.degenerate)).droppedVertices;
+}
+
+// Step 4: apply in groups of clusters that need few patches; every vertex in a cluster's cell is
+// that cluster's, which stays true as groups are committed.
+void mergeClusters(PatchStore& store, const GridCells& grid, const std::vector<Cluster>& list, bool progressOn,
+                   WeldCounts& counts) {
+  Progress apply(progressOn, "grid weld: merge", list.size(), "clusters");
   for (size_t i = 0; i < list.size();) {
     std::set<PatchId> patches;
     std::map<Cell, Pos> target;
@@ -167,68 +222,54 @@ PassReport weldToGrid(PatchStore& store, const GridCells& grid, const HealOption
       target[list[j].cell] = list[j].target;
       ++j;
     }
-    if (!target.empty()) {
-      auto wanted = [&](const Region& r, uint32_t u) { return target.count(cellOf(grid, &r.positions[3 * size_t(u)])) != 0; };
-      Region r = loadUnlocked(store, {patches.begin(), patches.end()}, wanted);
-      // Every region vertex in a cluster's cell is that cluster's: the member copies of one store
-      // vertex (shared between loaded patches) are one region vertex already.
-      std::map<Cell, uint32_t> targetVertex;
-      std::vector<uint32_t> to(r.vertexCount());
-      for (uint32_t u = 0; u < r.vertexCount(); ++u) {
-        to[u] = u;
-        const double* q = &r.positions[3 * size_t(u)];
-        auto it = target.find(cellOf(grid, q));
-        if (it == target.end()) continue;
-        if (r.locked[u]) fail(store.dir(), "grid weld: a cluster spans too many patches to load together");
-        if (Pos{q[0], q[1], q[2]} == it->second && !targetVertex.count(it->first)) targetVertex[it->first] = u;
-      }
-      for (uint32_t u = 0; u < r.vertexCount(); ++u) {
-        auto it = target.find(cellOf(grid, &r.positions[3 * size_t(u)]));
-        if (it != target.end()) to[u] = targetVertex.at(it->first);
-        merged += it != target.end() && to[u] != u;
-      }
-      RegionEdit e = identityEdit(r);
-      RegionEdit out = e;
-      out.triangles.clear();
-      out.trianglePatch.clear();
-      for (size_t t = 0; t < e.triangles.size() / 3; ++t) {
-        uint32_t a = to[e.triangles[3 * t]], b = to[e.triangles[3 * t + 1]], c = to[e.triangles[3 * t + 2]];
-        if (a == b || b == c || a == c) {
-          ++degenerate;
-          continue;
-        }
-        out.triangles.insert(out.triangles.end(), {a, b, c});
-        out.trianglePatch.push_back(e.trianglePatch[t]);
-      }
-      dropped += commitRegion(store, r, out).droppedVertices;
-    }
+    if (!target.empty()) mergeGroup(store, grid, patches, target, counts);
     apply.update(j);
     i = j;
   }
   apply.finish(list.size());
-  // 5. Triangles the input itself had with a repeated vertex, in patches no cluster touched:
-  // removed too, so that the finest cut has exactly the store's triangles less those counted.
+}
+
+// Step 5: triangles the input itself had with a repeated vertex, in patches no cluster touched:
+// removed too, so that the finest cut has exactly the store's triangles less those counted.
+void dropRepeated(PatchStore& store, const std::vector<PatchId>& withRepeated, WeldCounts& counts) {
   for (PatchId id : withRepeated) {
     Region r = loadRegion(store, {id});
-    RegionEdit e = identityEdit(r);
-    RegionEdit out = e;
-    out.triangles.clear();
-    out.trianglePatch.clear();
-    for (size_t t = 0; t < e.triangles.size() / 3; ++t) {
-      const uint32_t* f = &e.triangles[3 * t];
-      if (f[0] == f[1] || f[1] == f[2] || f[0] == f[2]) {
-        ++degenerate;
-        continue;
-      }
-      out.triangles.insert(out.triangles.end(), f, f + 3);
-      out.trianglePatch.push_back(e.trianglePatch[t]);
-    }
-    if (out.triangles.size() != e.triangles.size()) dropped += commitRegion(store, r, out).droppedVertices;
+    std::vector<uint32_t> to(r.vertexCount());
+    for (uint32_t u = 0; u < r.vertexCount(); ++u) to[u] = u;
+    RegionEdit out = withoutDegenerate(r, to, counts.degenerate);
+    if (out.triangles.size() != r.triangles.size()) counts.dropped += commitRegion(store, r, out).droppedVertices;
   }
+}
+
+}  // namespace
+
+PassReport weldToGrid(PatchStore& store, const GridCells& grid, const HealOptions& options) {
+  auto start = std::chrono::steady_clock::now();
+  if (!(grid.step > 0) || !std::isfinite(grid.step)) fail(store.dir(), "grid weld: the step must be a finite number > 0");
+  const StoreInfo info = store.info();
+  CellKeys keyOf;
+  keyOf.lo = cellOf(grid, info.bounds.lo);
+  const Cell hi = cellOf(grid, info.bounds.hi);
+  unsigned bits = 1;
+  for (int a = 0; a < 3; ++a)
+    while (bits < 63 && (uint64_t(hi[a] - keyOf.lo[a]) >> bits) != 0) ++bits;
+  const bool packed = 3 * bits <= 64;
+  keyOf.bits = bits;
+  keyOf.packed = packed;
+
+  StableKeySorter<CellRecord, CellKey> sorter(scratchPrefix(store, options, "gridweld"), options.memoryBytes, CellKey{},
+                                              packed ? 3 * bits : 64);
+  const std::vector<PatchId> withRepeated = scanVertices(store, grid, keyOf, info.vertices, options.progress, sorter);
+  std::vector<std::vector<uint64_t>> candidates = candidateClusters(sorter);
+  const std::vector<Cluster> list = exactClusters(store, grid, candidates);
+  WeldCounts counts;
+  mergeClusters(store, grid, list, options.progress, counts);
+  dropRepeated(store, withRepeated, counts);
   store.sync();
   double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return {"grid-weld",
-          {{"merged", merged}, {"clusters", uint64_t(list.size())}, {"degenerate", degenerate}, {"vertices", dropped}},
+          {{"merged", counts.merged}, {"clusters", uint64_t(list.size())}, {"degenerate", counts.degenerate},
+           {"vertices", counts.dropped}},
           seconds};
 }
 

@@ -2,6 +2,7 @@
 #include "patchstore/heal/region.h"
 
 #include <algorithm>
+#include <cassert>
 #include <cinttypes>
 #include <cstdio>
 #include <filesystem>
@@ -142,76 +143,83 @@ bool sameBoundary(const std::vector<BoundaryEntry>& a, const std::vector<Boundar
     if (entryLess(a[i], b[i]) || entryLess(b[i], a[i])) return false;
   return true;
 }
-}  // namespace
-
-CommitStats commitRegion(PatchStore& store, const Region& r, const RegionEdit& e) {
-  const size_t np = r.patches.size();
-  const uint32_t nv = e.vertexCount();
-  const bool normals = store.layout().normals, colors = store.layout().colors;
-  CommitStats stats;
+// Where each region vertex went in the edit (kNoVertex: dropped).
+std::vector<uint32_t> editVertexOf(const PatchStore& store, const Region& r, const RegionEdit& e) {
   std::vector<uint32_t> newOf(r.vertexCount(), kNoVertex);
-  for (uint32_t v = 0; v < nv; ++v)
+  for (uint32_t v = 0; v < e.vertexCount(); ++v)
     if (e.origin[v] != kNoVertex) {
       if (newOf[e.origin[v]] != kNoVertex) fail(store.dir(), "heal: region vertex kept twice (internal error)");
       newOf[e.origin[v]] = v;
     }
-  // Each patch's vertex list: its surviving original vertices in their old order, then the
-  // vertices it newly uses in edit order.
-  std::vector<std::vector<uint32_t>> tris(np);
-  for (size_t t = 0; t < e.trianglePatch.size(); ++t) tris[e.trianglePatch[t]].push_back(uint32_t(t));
-  std::vector<uint8_t> used(nv, 0);
-  std::vector<std::vector<uint32_t>> verts(np);
-  std::vector<std::pair<uint32_t, uint32_t>> holders;  // (edit vertex, patch index)
-  std::vector<uint32_t> localOf(nv, kNoVertex);         // scratch, per patch
-  std::vector<std::vector<std::pair<uint32_t, uint32_t>>> localPairs(np);  // (edit vertex, local), sorted
+  return newOf;
+}
+
+// Which loaded patch holds which edit vertex, and at which local index.
+struct PatchVertices {
+  std::vector<std::vector<uint32_t>> tris;   // per patch: its edit triangles
+  std::vector<std::vector<uint32_t>> verts;  // per patch: edit vertex of each local index
+  std::vector<std::pair<uint32_t, uint32_t>> holders;  // (edit vertex, patch index), sorted
+  std::vector<std::vector<std::pair<uint32_t, uint32_t>>> localPairs;  // per patch: (edit vertex, local), sorted
+  std::vector<uint8_t> used;                 // per edit vertex: some triangle uses it
+  uint32_t localIn(size_t k, uint32_t v) const {
+    auto it = std::lower_bound(localPairs[k].begin(), localPairs[k].end(), std::make_pair(v, 0u));
+    assert(it != localPairs[k].end() && it->first == v);  // patch k holds v
+    return it->second;
+  }
+};
+
+// Each patch's vertex list: its surviving original vertices in their old order, then the
+// vertices it newly uses in edit order (so an unchanged patch comes out identical).
+PatchVertices patchVertices(const Region& r, const RegionEdit& e, const std::vector<uint32_t>& newOf) {
+  const size_t np = r.patches.size();
+  const uint32_t nv = e.vertexCount();
+  PatchVertices pv;
+  pv.tris.resize(np);
+  for (size_t t = 0; t < e.trianglePatch.size(); ++t) pv.tris[e.trianglePatch[t]].push_back(uint32_t(t));
+  pv.used.assign(nv, 0);
+  pv.verts.resize(np);
+  pv.localPairs.resize(np);
   for (size_t k = 0; k < np; ++k) {
     std::vector<uint8_t> mine(nv, 0);
-    for (uint32_t t : tris[k])
+    for (uint32_t t : pv.tris[k])
       for (int c = 0; c < 3; ++c) mine[e.triangles[3 * t + c]] = 1;
     for (uint32_t u : r.unifiedOf[k]) {
       uint32_t v = newOf[u];
       if (v != kNoVertex && mine[v]) {
-        verts[k].push_back(v);
+        pv.verts[k].push_back(v);
         mine[v] = 0;
       }
     }
     for (uint32_t v = 0; v < nv; ++v)
-      if (mine[v]) verts[k].push_back(v);
-    for (uint32_t l = 0; l < verts[k].size(); ++l) {
-      holders.push_back({verts[k][l], uint32_t(k)});
-      localPairs[k].push_back({verts[k][l], l});
-      used[verts[k][l]] = 1;
+      if (mine[v]) pv.verts[k].push_back(v);
+    for (uint32_t l = 0; l < pv.verts[k].size(); ++l) {
+      pv.holders.push_back({pv.verts[k][l], uint32_t(k)});
+      pv.localPairs[k].push_back({pv.verts[k][l], l});
+      pv.used[pv.verts[k][l]] = 1;
     }
-    std::sort(localPairs[k].begin(), localPairs[k].end());
+    std::sort(pv.localPairs[k].begin(), pv.localPairs[k].end());
   }
-  std::sort(holders.begin(), holders.end());
-  auto localIn = [&](size_t k, uint32_t v) {
-    auto it = std::lower_bound(localPairs[k].begin(), localPairs[k].end(), std::make_pair(v, 0u));
-    return it->second;
-  };
-  // The crack-free rule: a vertex unloaded patches hold keeps its position while it is used.
-  for (const auto& x : r.external) {
-    uint32_t v = newOf[x.vertex];
-    if (v == kNoVertex || !used[v]) continue;
-    for (int a = 0; a < 3; ++a)
-      if (e.positions[3 * v + a] != r.positions[3 * x.vertex + a])
-        fail(store.dir(), "heal: a vertex shared with an unloaded patch was moved (internal error)");
-  }
-  for (uint32_t u = 0; u < r.vertexCount(); ++u)
-    if (!r.locked[u] && (newOf[u] == kNoVertex || !used[newOf[u]])) ++stats.droppedVertices;
+  std::sort(pv.holders.begin(), pv.holders.end());
+  return pv;
+}
 
-  std::vector<Patch> out(np);
-  for (size_t k = 0; k < np; ++k) {
+// The loaded patches as they will be: vertices, attributes, triangles, and the boundary entries
+// between the loaded patches (every pair of holders of a vertex).
+std::vector<Patch> editedPatches(const PatchStore& store, const Region& r, const RegionEdit& e, const PatchVertices& pv) {
+  const bool normals = store.layout().normals, colors = store.layout().colors;
+  std::vector<Patch> out(r.patches.size());
+  for (size_t k = 0; k < out.size(); ++k) {
     Patch& p = out[k];
     p.id = r.patches[k];
-    for (uint32_t v : verts[k]) {
+    for (uint32_t v : pv.verts[k]) {
       p.positions.insert(p.positions.end(), &e.positions[3 * v], &e.positions[3 * v] + 3);
       if (normals) p.normals.insert(p.normals.end(), &e.normals[3 * v], &e.normals[3 * v] + 3);
       if (colors) p.colors.insert(p.colors.end(), &e.colors[4 * v], &e.colors[4 * v] + 4);
     }
-    for (uint32_t t : tris[k])
-      for (int c = 0; c < 3; ++c) p.triangles.push_back(localIn(k, e.triangles[3 * t + c]));
+    for (uint32_t t : pv.tris[k])
+      for (int c = 0; c < 3; ++c) p.triangles.push_back(pv.localIn(k, e.triangles[3 * t + c]));
   }
+  const auto& holders = pv.holders;
   for (size_t i = 0; i < holders.size();) {
     size_t j = i;
     while (j < holders.size() && holders[j].first == holders[i].first) ++j;
@@ -219,25 +227,43 @@ CommitStats commitRegion(PatchStore& store, const Region& r, const RegionEdit& e
       for (size_t b = i; b < j; ++b)
         if (a != b) {
           uint32_t ka = holders[a].second, kb = holders[b].second;
-          out[ka].boundary.push_back({localIn(ka, holders[a].first), r.patches[kb], localIn(kb, holders[b].first)});
+          out[ka].boundary.push_back({pv.localIn(ka, holders[a].first), r.patches[kb], pv.localIn(kb, holders[b].first)});
         }
     i = j;
   }
-  std::map<PatchId, std::vector<BoundaryEntry>> outsideAdds;
-  std::set<PatchId> outsideIds;
+  return out;
+}
+
+// The unloaded patches the region shared vertices with, and the entries they get into it.
+struct OutsideLinks {
+  std::set<PatchId> ids;
+  std::map<PatchId, std::vector<BoundaryEntry>> adds;
+};
+
+// Entries between the loaded patches that still use a shared vertex and its unloaded holders.
+OutsideLinks linkOutside(const Region& r, const std::vector<uint32_t>& newOf, const PatchVertices& pv,
+                         std::vector<Patch>& out) {
+  OutsideLinks links;
   for (const auto& x : r.external) {
-    outsideIds.insert(x.patch);
+    links.ids.insert(x.patch);
     uint32_t v = newOf[x.vertex];
-    if (v == kNoVertex || !used[v]) continue;
-    auto lo = std::lower_bound(holders.begin(), holders.end(), std::make_pair(v, 0u));
-    for (auto it = lo; it != holders.end() && it->first == v; ++it) {
-      uint32_t local = localIn(it->second, v);
+    if (v == kNoVertex || !pv.used[v]) continue;
+    auto lo = std::lower_bound(pv.holders.begin(), pv.holders.end(), std::make_pair(v, 0u));
+    for (auto it = lo; it != pv.holders.end() && it->first == v; ++it) {
+      uint32_t local = pv.localIn(it->second, v);
       out[it->second].boundary.push_back({local, x.patch, x.remote});
-      outsideAdds[x.patch].push_back({x.remote, r.patches[it->second], local});
+      links.adds[x.patch].push_back({x.remote, r.patches[it->second], local});
     }
   }
+  return links;
+}
+
+// The patches that changed: loaded ones (geometry, or only their lists), and unloaded ones whose
+// entries into the region are rebuilt.
+std::vector<PatchRewrite> changedPatches(const PatchStore& store, const Region& r, std::vector<Patch>& out,
+                                         OutsideLinks& links) {
   std::vector<PatchRewrite> rewrites;
-  for (size_t k = 0; k < np; ++k) {
+  for (size_t k = 0; k < out.size(); ++k) {
     std::sort(out[k].boundary.begin(), out[k].boundary.end(), entryLess);
     const Patch& old = r.original[k];
     bool geometry = !samePatch(out[k], old);
@@ -245,12 +271,12 @@ CommitStats commitRegion(PatchStore& store, const Region& r, const RegionEdit& e
     if (!geometry && !boundary) continue;
     rewrites.push_back({std::move(out[k]), !geometry});
   }
-  for (PatchId q : outsideIds) {
+  for (PatchId q : links.ids) {
     Patch old = store.patch(q);
     std::vector<BoundaryEntry> list;
     for (const BoundaryEntry& b : old.boundary)
       if (r.indexOf(b.neighbour) < 0) list.push_back(b);
-    auto& adds = outsideAdds[q];
+    auto& adds = links.adds[q];
     list.insert(list.end(), adds.begin(), adds.end());
     std::sort(list.begin(), list.end(), entryLess);
     if (sameBoundary(list, old.boundary)) continue;
@@ -259,6 +285,29 @@ CommitStats commitRegion(PatchStore& store, const Region& r, const RegionEdit& e
     p.boundary = std::move(list);
     rewrites.push_back({std::move(p), true});
   }
+  return rewrites;
+}
+
+}  // namespace
+
+CommitStats commitRegion(PatchStore& store, const Region& r, const RegionEdit& e) {
+  CommitStats stats;
+  const std::vector<uint32_t> newOf = editVertexOf(store, r, e);
+  const PatchVertices pv = patchVertices(r, e, newOf);
+  // The crack-free rule: a vertex unloaded patches hold keeps its position while it is used.
+  for (const auto& x : r.external) {
+    uint32_t v = newOf[x.vertex];
+    if (v == kNoVertex || !pv.used[v]) continue;
+    for (int a = 0; a < 3; ++a)
+      if (e.positions[3 * v + a] != r.positions[3 * x.vertex + a])
+        fail(store.dir(), "heal: a vertex shared with an unloaded patch was moved (internal error)");
+  }
+  for (uint32_t u = 0; u < r.vertexCount(); ++u)
+    if (!r.locked[u] && (newOf[u] == kNoVertex || !pv.used[newOf[u]])) ++stats.droppedVertices;
+
+  std::vector<Patch> out = editedPatches(store, r, e, pv);
+  OutsideLinks links = linkOutside(r, newOf, pv, out);
+  std::vector<PatchRewrite> rewrites = changedPatches(store, r, out, links);
   stats.changedPatches = rewrites.size();
   if (!rewrites.empty()) store.rewritePatches(rewrites);
   return stats;
