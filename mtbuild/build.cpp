@@ -1,17 +1,24 @@
 // mtbuild's level loop on threads (BMT section 4, "the i-th simplification step"): LevelBuilder
 // (level_builder.cpp) plans each level and commits its regions in order; here the regions are
-// loaded and processed on threads. See build.h.
+// loaded and processed on threads, as many in flight as RegionWindow admits. See build.h.
 #include "mtbuild/build.h"
 
 #include <tbb/global_control.h>
-#include <tbb/parallel_pipeline.h>
 #include <tbb/task_arena.h>
 
+#include <algorithm>
+#include <cassert>
+#include <condition_variable>
+#include <exception>
 #include <memory>
+#include <mutex>
 #include <sstream>
+#include <thread>
+#include <vector>
 
 #include "base/interrupt.h"
 #include "mtbuild/level_state.h"
+#include "mtbuild/region_window.h"
 
 namespace mt {
 
@@ -27,7 +34,9 @@ std::string BuildReport::toJson() const {
     << ",\n  \"total_seconds\": " << totalSeconds << ",\n  \"input_triangles_per_second\": "
     << (totalSeconds > 0 ? double(inputTriangles) / totalSeconds : 0) << ",\n  \"peak_rss_bytes\": " << peakRssBytes
     << ",\n  \"resumed_at_level\": " << resumedAtLevel << ",\n  \"peak_temp_bytes\": " << peakTempBytes
-    << ",\n  \"checkpoint_bytes\": " << checkpointBytes
+    << ",\n  \"checkpoint_bytes\": " << checkpointBytes << ",\n  \"level_loop_bytes\": " << levelLoopBytes
+    << ",\n  \"level_loop_peak_bytes\": " << levelLoopPeakBytes << ",\n  \"level_loop_peak_regions\": " << levelLoopPeakRegions
+    << ",\n  \"level_loop_largest_region_bytes\": " << levelLoopLargestRegionBytes
     << extraJson << ",\n  \"levels\": [";
   for (size_t i = 0; i < levels.size(); ++i) {
     const LevelReport& l = levels[i];
@@ -41,8 +50,145 @@ std::string BuildReport::toJson() const {
 
 // ---- mtbuild: the regions on threads ----------------------------------------------------------
 
+namespace {
+
+// One level's regions on `threads` threads (the caller's among them). Each thread commits the
+// oldest processed region when no one else is committing (commits run in region order, one at a
+// time, beside loads and processing: LevelBuilder allows that), else starts the next region when
+// the window admits it, else waits. A signal starts no more regions; the next commit then throws
+// Interrupted (the level is redone from its checkpoint on --resume). The first exception of any
+// thread stops the others and is rethrown by run().
+class ThreadedLevel {
+ public:
+  ThreadedLevel(LevelBuilder& builder, const BuildOptions& options, RegionWindow& window)
+      : builder_(builder), options_(options), window_(window), regions_(builder.regionCount()),
+        jobs_(regions_), ready_(regions_, 0) {
+    for (size_t i = 0; i < regions_; ++i)
+      bytes_.push_back(estimateRegionBytes(builder.regionTriangles(i), builder.regionVertices(i)));
+  }
+
+  void run(unsigned threads) {
+    std::vector<std::thread> helpers;
+    for (unsigned t = 1; t < threads; ++t) helpers.emplace_back([this] { work(); });
+    work();
+    for (std::thread& t : helpers) t.join();
+    if (error_) std::rethrow_exception(error_);
+    assert(window_.regions() == 0 && "every started region was committed");
+  }
+
+ private:
+  struct Job {
+    RegionTask task;
+    RegionResult result;
+  };
+
+  void work() {
+    std::unique_lock<std::mutex> lock(mutex_);
+    while (!error_ && nextCommit_ < regions_) {
+      if (!committing_ && ready_[nextCommit_]) {
+        commitNext(lock);
+      } else if (nextStart_ < regions_ && !stopping_ && window_.admits(bytes_[nextStart_].working)) {
+        if (interruptRequested()) {
+          stopping_ = true;
+          continue;
+        }
+        startNext(lock);
+      } else if (nextStart_ == nextCommit_ && (stopping_ || nextStart_ == regions_)) {
+        break;  // nothing in flight and nothing more to start
+      } else {
+        changed_.wait(lock);
+      }
+    }
+    changed_.notify_all();
+  }
+
+  // Called and returns with the lock held; runs the region unlocked.
+  void startNext(std::unique_lock<std::mutex>& lock) {
+    const size_t i = nextStart_++;
+    window_.start(bytes_[i]);
+    lock.unlock();
+    Job job;
+    std::exception_ptr error;
+    try {
+      job.task = builder_.loadRegion(i);
+      job.result = processRegion(job.task, builder_.context());
+    } catch (...) {
+      error = std::current_exception();
+    }
+    lock.lock();
+    if (error) return fail(error);
+    jobs_[i] = std::move(job);
+    ready_[i] = 1;
+    window_.processed(bytes_[i]);
+    changed_.notify_all();
+  }
+
+  void commitNext(std::unique_lock<std::mutex>& lock) {
+    const size_t i = nextCommit_;
+    committing_ = true;
+    Job job = std::move(jobs_[i]);
+    lock.unlock();
+    std::exception_ptr error;
+    try {
+      checkInterrupt(options_.toolName);  // a safe point: between region commits
+      builder_.commitRegion(i, std::move(job.task), std::move(job.result));
+    } catch (...) {
+      error = std::current_exception();
+    }
+    job = Job();  // free the region's memory before it leaves the window
+    lock.lock();
+    committing_ = false;
+    if (error) return fail(error);
+    window_.committed(bytes_[i]);
+    ++nextCommit_;
+    changed_.notify_all();
+  }
+
+  void fail(std::exception_ptr error) {
+    if (!error_) error_ = error;
+    changed_.notify_all();
+  }
+
+  LevelBuilder& builder_;
+  const BuildOptions& options_;
+  RegionWindow& window_;
+  const size_t regions_;
+  std::vector<RegionBytes> bytes_;
+  std::mutex mutex_;
+  std::condition_variable changed_;
+  std::vector<Job> jobs_;
+  std::vector<uint8_t> ready_;
+  size_t nextStart_ = 0, nextCommit_ = 0;
+  bool committing_ = false, stopping_ = false;
+  std::exception_ptr error_;
+};
+
 // The level loop on threads; checks for SIGINT/SIGTERM between region commits and levels.
-static BuildReport buildLevels(LevelBuilder& builder, const BuildOptions& options);
+BuildReport buildLevels(LevelBuilder& builder, const BuildOptions& options) {
+  checkInterrupt(options.toolName);
+  const unsigned threads = options.threads ? options.threads : unsigned(tbb::this_task_arena::max_concurrency());
+  uint64_t peakBytes = 0, largest = 0;
+  size_t peakRegions = 0;
+  while (builder.beginLevel()) {
+    // 2 x threads regions at most: one processed, one loaded or waiting for its commit per thread.
+    RegionWindow window(options.levelLoopBytes, 2 * size_t(threads));
+    ThreadedLevel(builder, options, window).run(threads);
+    peakBytes = std::max(peakBytes, window.peakBytes());
+    peakRegions = std::max(peakRegions, window.peakRegions());
+    largest = std::max(largest, window.largestRegion());
+    checkInterrupt(options.toolName);
+    builder.endLevel();
+    checkInterrupt(options.toolName);  // after the level's checkpoint
+  }
+  BuildReport report = builder.finish();
+  report.levelLoopBytes = options.levelLoopBytes;
+  report.levelLoopPeakBytes = peakBytes;
+  report.levelLoopPeakRegions = uint32_t(peakRegions);
+  report.levelLoopLargestRegionBytes = largest;
+  return report;
+}
+
+}  // namespace
 
 BuildReport buildMt(const std::string& input, const std::string& output, const BuildOptions& options) {
   std::unique_ptr<tbb::global_control> threadLimit;
@@ -57,50 +203,6 @@ BuildReport buildMt(const std::string& input, const std::string& output, const B
     owned.reset();
     throw BuildInterrupted(note, e.signal());
   }
-}
-
-BuildReport buildLevels(LevelBuilder& builder, const BuildOptions& options) {
-  const RegionContext& ctx = builder.context();
-  checkInterrupt(options.toolName);
-  struct Job {
-    size_t index = 0;
-    RegionTask task;
-    RegionResult result;
-  };
-  while (builder.beginLevel()) {
-    const size_t regions = builder.regionCount();
-    std::vector<Job> jobs(regions);
-    size_t next = 0;
-    const size_t tokens = 2 * size_t(options.threads ? options.threads : tbb::this_task_arena::max_concurrency());
-    tbb::parallel_pipeline(
-        tokens,
-        tbb::make_filter<void, Job*>(tbb::filter_mode::serial_in_order,
-                                     [&](tbb::flow_control& fc) -> Job* {
-                                       // A signal: start no more regions (the level is redone
-                                       // from its checkpoint on --resume).
-                                       if (next == regions || interruptRequested()) {
-                                         fc.stop();
-                                         return nullptr;
-                                       }
-                                       jobs[next].index = next;
-                                       return &jobs[next++];
-                                     }) &
-            tbb::make_filter<Job*, Job*>(tbb::filter_mode::parallel,
-                                         [&](Job* job) {
-                                           job->task = builder.loadRegion(job->index);
-                                           job->result = processRegion(job->task, ctx);
-                                           return job;
-                                         }) &
-            tbb::make_filter<Job*, void>(tbb::filter_mode::serial_in_order, [&](Job* job) {
-              checkInterrupt(options.toolName);  // a safe point: between region commits
-              builder.commitRegion(job->index, std::move(job->task), std::move(job->result));
-              *job = Job();  // free the region's memory now
-            }));
-    checkInterrupt(options.toolName);
-    builder.endLevel();
-    checkInterrupt(options.toolName);  // after the level's checkpoint
-  }
-  return builder.finish();
 }
 
 }  // namespace mt

@@ -301,6 +301,7 @@ const std::string& LevelBuilder::tempPath() const { return s_->tempPath; }
 uint32_t LevelBuilder::level() const { return s_->builtLevels + 1; }
 size_t LevelBuilder::regionCount() const { return s_->regionIds.size(); }
 uint64_t LevelBuilder::regionTriangles(size_t i) const { return s_->floorTriangles.at(i); }
+uint64_t LevelBuilder::regionVertices(size_t i) const { return s_->floorVertices.at(i); }
 
 bool LevelBuilder::beginLevel() {
   State& s = *s_;
@@ -308,11 +309,12 @@ bool LevelBuilder::beginLevel() {
   const uint32_t level = s.builtLevels;  // building level + 1 from V*level
   // Regions of V(level+1): patches grouped by the low half of their V*level key.
   std::map<uint32_t, std::vector<PatchId>> regions;
-  std::map<uint32_t, uint64_t> triangles;
+  std::map<uint32_t, std::pair<uint64_t, uint64_t>> counts;  // triangles, vertices
   for (PatchId id : s.store->patchIds()) {
     PatchMeta m = s.store->meta(id);
     regions[PartitionSequence::crossLow(m.cell)].push_back(id);
-    triangles[PartitionSequence::crossLow(m.cell)] += m.triangles;
+    counts[PartitionSequence::crossLow(m.cell)].first += m.triangles;
+    counts[PartitionSequence::crossLow(m.cell)].second += m.vertices;
   }
   s.root = level + 1 >= s.ctx.partitionLevels;
   if (s.liveTriangles <= s.ctx.rootTriangles && level > 0) {
@@ -322,10 +324,12 @@ bool LevelBuilder::beginLevel() {
   s.regionIds.clear();
   s.floors.clear();
   s.floorTriangles.clear();
+  s.floorVertices.clear();
   for (auto& [r, ids] : regions) {
     s.regionIds.push_back(r);
     s.floors.push_back(std::move(ids));
-    s.floorTriangles.push_back(triangles[r]);
+    s.floorTriangles.push_back(counts[r].first);
+    s.floorVertices.push_back(counts[r].second);
   }
   s.levelStart = Clock::now();
   s.lr = LevelReport{};

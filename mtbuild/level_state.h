@@ -68,7 +68,7 @@ struct LevelBuilder::State {
   // The level in progress.
   std::vector<uint32_t> regionIds;
   std::vector<std::vector<PatchId>> floors;
-  std::vector<uint64_t> floorTriangles;
+  std::vector<uint64_t> floorTriangles, floorVertices;
   bool root = false;
   size_t nextCommit = 0;
   LevelReport lr;
