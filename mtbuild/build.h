@@ -41,6 +41,11 @@ constexpr char kWorkMarker[] = ".mtbuild-work";
 
 struct BuildOptions {
   uint64_t memoryBytes = 1ull << 30;  // --memory: the cap for the whole build (ingest included)
+  // The level loop's share: regions in flight (loaded, processed, waiting for their commit) are
+  // admitted in region order while the sum of their estimateRegionBytes() fits; one region is
+  // always admitted, alone if it is larger. 0: no byte bound (2 x threads regions in flight).
+  // Does not change the bytes of the file.
+  uint64_t levelLoopBytes = 0;
   uint32_t threads = 0;               // 0: all cores
   PartitionKind partition = PartitionKind::Irregular;
   uint32_t patchTriangles = 0;        // 0: kDefaultMtPatchTriangles (ignored for a store input)
@@ -82,6 +87,11 @@ struct BuildReport {
   uint32_t resumedAtLevel = 0;        // 0: built from the start; k: continued after level k
   uint64_t peakTempBytes = 0;         // largest OUT.work + OUT.mt.tmp seen (sampled in the level loop)
   uint64_t checkpointBytes = 0;       // largest checkpoint record kept in the store (RAM while built)
+  // The level loop's regions in flight (this run's levels): the byte bound it had, the largest sum
+  // of estimateRegionBytes() and the most regions in flight at once, and the largest region's
+  // estimate (the bound is max(levelLoopBytes, that) when levelLoopBytes is not 0).
+  uint64_t levelLoopBytes = 0, levelLoopPeakBytes = 0, levelLoopLargestRegionBytes = 0;
+  uint32_t levelLoopPeakRegions = 0;
   std::vector<LevelReport> levels;
   std::string extraJson;              // more members (",\n  \"name\": value" ...), e.g. cluster stats
   std::string toJson() const;
@@ -107,6 +117,16 @@ class BuildInterrupted : public Error {
 // first one's PID. Throws mt::Error; BuildInterrupted after SIGINT/SIGTERM (when
 // installInterruptHandlers() was called).
 BuildReport buildMt(const std::string& input, const std::string& output, const BuildOptions& options);
+
+// The bytes a region of the level loop holds, estimated from its floor's counts (known from the
+// store's manifest before it is loaded): `working` while it is loaded and processed (the floor
+// patches as read and assembled, the simplifier's working set: meshoptimizer's tables, the error
+// measurement's triangle grid; the result), `held` from then until its commit (the assembled floor
+// and the result). Conservative fits of measured heap peaks (docs/mtbuild.md, "Regions in flight").
+struct RegionBytes {
+  uint64_t working = 0, held = 0;
+};
+RegionBytes estimateRegionBytes(uint64_t triangles, uint64_t vertices);
 
 // ---- The per-region work, as one pure function (BMT section 4, "the i-th simplification step") --
 // mtbuild runs it on threads, mtcluster on MPI ranks; both commit the results in region order with
@@ -180,6 +200,7 @@ class LevelBuilder {
   uint32_t level() const;                    // the level being built (1-based)
   size_t regionCount() const;
   uint64_t regionTriangles(size_t i) const;  // floor triangles of region i (from the manifest)
+  uint64_t regionVertices(size_t i) const;   // floor vertices of region i (shared ones once per patch)
   // Reads region i's floor patches and assembles them. Thread-safe between commits.
   RegionTask loadRegion(size_t i) const;
   // Commits region i; must be called for i = 0, 1, ... in order. `moveBytes`: what a cluster

@@ -2,13 +2,18 @@
 // invariants (monotone errors, nested spheres, every patch on one arc), holes still simplify.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <deque>
 #include <filesystem>
+#include <random>
 
+#include "mtbuild/build.h"
 #include "mtbuild/mt_file.h"
+#include "mtbuild/region_window.h"
 #include "tests/test_support.h"
 
 namespace mt::test {
@@ -40,6 +45,81 @@ TEST(Mtbuild, SameBytesWhateverTheThreadsAndTheMemoryCap) {
   EXPECT_TRUE(a == readFile(tmp.file("m.mt"))) << "--memory 1G and 24M differ";
   for (auto& e : fs::directory_iterator(tmp.path()))
     EXPECT_EQ(e.path().string().find(".work"), std::string::npos) << "work directory left behind: " << e.path();
+}
+
+// The level loop's window, driven through random schedules as the threads drive it (start in
+// order, process out of order, commit in order): the bytes in flight stay within
+// max(budget, the largest region), the count bound holds, and every level empties.
+TEST(MtbuildWindow, BytesInFlightStayWithinTheBudgetOrOneRegion) {
+  std::mt19937 rng(7);
+  for (int round = 0; round < 200; ++round) {
+    const size_t regions = 1 + rng() % 40, maxRegions = 1 + rng() % 6;
+    std::vector<RegionBytes> bytes(regions);
+    uint64_t largest = 0;
+    for (RegionBytes& b : bytes) {
+      b = estimateRegionBytes(1 + rng() % 200000, rng() % 120000);
+      largest = std::max(largest, b.working);
+    }
+    const uint64_t budget = round % 4 == 0 ? 0 : round % 4 == 1 ? 1 : largest / 2 + rng() % (3 * largest);
+    RegionWindow w(budget, maxRegions);
+    size_t started = 0, committed = 0;
+    std::vector<bool> processed(regions, false);
+    for (int steps = 0; committed < regions; ++steps) {
+      ASSERT_LT(steps, 100000) << "the window does not empty";
+      const int move = int(rng() % 3);
+      if (move == 0 && started < regions && w.admits(bytes[started].working)) {
+        w.start(bytes[started++]);
+      } else if (move == 1 && committed < started) {
+        size_t i = committed + rng() % (started - committed);
+        if (!processed[i]) w.processed(bytes[i]), processed[i] = true;
+      } else if (move == 2 && committed < started && processed[committed]) {
+        w.committed(bytes[committed++]);
+      } else if (started == committed) {
+        ASSERT_TRUE(w.admits(bytes[started].working)) << "an empty window must admit the next region";
+      }
+      ASSERT_LE(w.bytes(), std::max(budget == 0 ? UINT64_MAX : budget, largest));
+      ASSERT_LE(w.regions(), maxRegions);
+    }
+    EXPECT_EQ(w.bytes(), 0u);
+    EXPECT_EQ(w.regions(), 0u);
+    if (budget == 1) {
+      EXPECT_EQ(w.peakRegions(), 1u) << "a budget below every region runs them one at a time";
+    }
+  }
+}
+
+// The byte bound in the real level loop: the same bytes whatever the budget and the threads; at a
+// budget below every region one region is in flight, at a large one the count bound rules, in
+// between the bytes in flight stay within it.
+TEST(MtbuildWindow, TheLevelLoopHonoursItsByteBudgetAndKeepsTheBytes) {
+  TempDir tmp;
+  std::string in = makeScan(tmp, "scan.ply", "--triangles 60k --holes 6 --seed 21");
+  auto buildWith = [&](const std::string& name, uint32_t threads, uint64_t budget) {
+    BuildOptions o;
+    o.threads = threads;
+    o.progress = false;
+    o.patchTriangles = 400;
+    o.levelLoopBytes = budget;
+    return buildMt(in, tmp.file(name), o);
+  };
+  BuildReport tiny1 = buildWith("tiny1.mt", 1, 1), tiny2 = buildWith("tiny2.mt", 2, 1);
+  BuildReport large1 = buildWith("large1.mt", 1, 1ull << 40), large2 = buildWith("large2.mt", 2, 1ull << 40);
+  const uint64_t largest = tiny2.levelLoopLargestRegionBytes;
+  ASSERT_GT(largest, 0u);
+  BuildReport mid = buildWith("mid.mt", 2, 2 * largest + largest / 2);
+  const std::string bytes = readFile(tmp.file("tiny1.mt"));
+  ASSERT_GT(bytes.size(), 10000u);
+  for (const char* name : {"tiny2.mt", "large1.mt", "large2.mt", "mid.mt"})
+    EXPECT_TRUE(readFile(tmp.file(name)) == bytes) << name << " differs from tiny1.mt";
+  for (const BuildReport* r : {&tiny1, &tiny2}) {
+    EXPECT_EQ(r->levelLoopPeakRegions, 1u);
+    EXPECT_EQ(r->levelLoopPeakBytes, r->levelLoopLargestRegionBytes);
+  }
+  EXPECT_LE(mid.levelLoopPeakBytes, mid.levelLoopBytes);
+  EXPECT_EQ(mid.levelLoopLargestRegionBytes, largest);
+  EXPECT_LE(large1.levelLoopPeakRegions, 2u) << "one thread: one region processed, one waiting at most";
+  EXPECT_GE(large2.levelLoopPeakRegions, 2u) << "two threads and no byte bound keep two regions in flight";
+  EXPECT_LE(large2.levelLoopPeakRegions, 4u) << "the count bound: 2 x threads";
 }
 
 TEST(Mtbuild, DagInvariantsHold) {

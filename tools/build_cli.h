@@ -120,6 +120,7 @@ struct BuildCli {
     if (normals && noNormals) throw Error("--normals and --no-normals contradict each other");
     BuildOptions o;
     o.memoryBytes = parseBuildMemory(memory);
+    o.levelLoopBytes = o.memoryBytes / 2;
     const bool threadsGiven = threadsOption && threadsOption->count() > 0;
     const bool patchGiven = patchTrianglesOption && patchTrianglesOption->count() > 0;
     if ((threadsGiven || threads != 0) && (threads < 1 || threads > kMaxBuildThreads))
