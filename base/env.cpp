@@ -5,6 +5,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <cassert>
 #include <cerrno>
 #include <cstring>
 
@@ -16,7 +17,8 @@ std::string errnoText() { return std::strerror(errno); }
 
 class PosixWritableFile : public WritableFile {
  public:
-  PosixWritableFile(std::string path, int fd, uint64_t size) : path_(std::move(path)), fd_(fd), size_(size) {}
+  PosixWritableFile(std::string path, int fd, uint64_t size, bool appendMode = false)
+      : path_(std::move(path)), fd_(fd), size_(size), appendMode_(appendMode) {}
   ~PosixWritableFile() override {
     if (fd_ >= 0) ::close(fd_);
   }
@@ -44,11 +46,28 @@ class PosixWritableFile : public WritableFile {
     fd_ = -1;
   }
   uint64_t size() const override { return size_; }
+  void writeAt(uint64_t offset, const void* data, size_t size) override {
+    assert(!appendMode_ && "writeAt on a file opened for append");
+    assert(offset <= size_ && size <= size_ - offset && "writeAt past the end");
+    const char* p = static_cast<const char*>(data);
+    uint64_t at = offset;
+    while (size > 0) {
+      ssize_t n = ::pwrite(fd_, p, size, off_t(at));
+      if (n < 0) {
+        if (errno == EINTR) continue;
+        failIo(path_, "write failed at byte offset " + std::to_string(at) + ": " + errnoText());
+      }
+      p += n;
+      size -= size_t(n);
+      at += uint64_t(n);
+    }
+  }
 
  private:
   std::string path_;
   int fd_;
   uint64_t size_;
+  bool appendMode_;
 };
 
 class PosixRandomAccessFile : public RandomAccessFile {
@@ -91,7 +110,28 @@ class PosixEnv : public Env {
       ::close(fd);
       failIo(path, "cannot stat: " + errnoText());
     }
-    return std::make_unique<PosixWritableFile>(path, fd, uint64_t(st.st_size));
+    return std::make_unique<PosixWritableFile>(path, fd, uint64_t(st.st_size), true);
+  }
+  std::unique_ptr<WritableFile> newWritableFileAt(const std::string& path, uint64_t length) override {
+    int fd = ::open(path.c_str(), O_WRONLY | (length == 0 ? O_CREAT : 0) | O_CLOEXEC, 0644);
+    if (fd < 0) failIo(path, "cannot open to continue: " + errnoText());
+    struct stat st;
+    if (::fstat(fd, &st) != 0) {
+      std::string why = errnoText();
+      ::close(fd);
+      failIo(path, "cannot stat: " + why);
+    }
+    if (uint64_t(st.st_size) < length) {
+      ::close(fd);
+      failCorrupt(path, "cannot continue at byte offset " + std::to_string(length) + ": the file has only " +
+                            std::to_string(st.st_size) + " bytes");
+    }
+    if (::ftruncate(fd, off_t(length)) != 0 || ::lseek(fd, off_t(length), SEEK_SET) != off_t(length)) {
+      std::string why = errnoText();
+      ::close(fd);
+      failIo(path, "cannot cut back to byte offset " + std::to_string(length) + ": " + why);
+    }
+    return std::make_unique<PosixWritableFile>(path, fd, length);
   }
   std::unique_ptr<RandomAccessFile> newRandomAccessFile(const std::string& path) override {
     int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
@@ -156,11 +196,32 @@ class FaultyWritableFile : public WritableFile {
   }
   void close() override { base_->close(); }
   uint64_t size() const override { return base_->size(); }
+  void writeAt(uint64_t offset, const void* data, size_t size) override {
+    env_->hit(FaultInjectionEnv::Op::Write, path_);
+    base_->writeAt(offset, data, size);
+  }
 
  private:
   FaultInjectionEnv* env_;
   std::string path_;
   std::unique_ptr<WritableFile> base_;
+};
+
+// Passes reads through to the real file, consulting the FaultInjectionEnv first.
+class FaultyRandomAccessFile : public RandomAccessFile {
+ public:
+  FaultyRandomAccessFile(FaultInjectionEnv* env, std::string path, std::unique_ptr<RandomAccessFile> base)
+      : env_(env), path_(std::move(path)), base_(std::move(base)) {}
+  void read(uint64_t offset, size_t size, void* out) const override {
+    env_->hit(FaultInjectionEnv::Op::Read, path_, " at byte offset " + std::to_string(offset));
+    base_->read(offset, size, out);
+  }
+  uint64_t size() const override { return base_->size(); }
+
+ private:
+  FaultInjectionEnv* env_;
+  std::string path_;
+  std::unique_ptr<RandomAccessFile> base_;
 };
 
 }  // namespace
@@ -178,20 +239,29 @@ std::unique_ptr<WritableFile> FaultInjectionEnv::newAppendableFile(const std::st
   return std::make_unique<FaultyWritableFile>(this, path, base_->newAppendableFile(path));
 }
 
+std::unique_ptr<WritableFile> FaultInjectionEnv::newWritableFileAt(const std::string& path, uint64_t length) {
+  return std::make_unique<FaultyWritableFile>(this, path, base_->newWritableFileAt(path, length));
+}
+
+std::unique_ptr<RandomAccessFile> FaultInjectionEnv::newRandomAccessFile(const std::string& path) {
+  return std::make_unique<FaultyRandomAccessFile>(this, path, base_->newRandomAccessFile(path));
+}
+
 void FaultInjectionEnv::renameFile(const std::string& from, const std::string& to) {
   hit(Op::Rename, to);
   base_->renameFile(from, to);
 }
 
-void FaultInjectionEnv::hit(Op op, const std::string& path) {
-  int64_t& counter = op == Op::Write ? writes : op == Op::Sync ? syncs : renames;
+void FaultInjectionEnv::hit(Op op, const std::string& path, const std::string& where) {
+  static const char* const kNames[] = {"write", "fsync", "rename", "read"};
+  std::lock_guard<std::mutex> guard(mutex_);
+  int64_t& counter = op == Op::Write ? writes : op == Op::Sync ? syncs : op == Op::Rename ? renames : reads;
   ++counter;
   if (remaining_ < 0 || op != op_) return;
   if (--remaining_ == 0) {
     remaining_ = -1;
     fired_ = true;
-    const char* what = op == Op::Write ? "write" : op == Op::Sync ? "fsync" : "rename";
-    failIo(path, std::string("injected ") + what + " failure");
+    failIo(path, std::string("injected ") + kNames[int(op)] + " failure" + where);
   }
 }
 

@@ -1,11 +1,13 @@
-// The file layer under the patch store (after LevelDB's Env): every write, fsync, rename and
-// remove the store does goes through here, so tests can inject failures and check that the store
-// is wholly the old one or wholly the new one afterwards.
+// The file layer (after LevelDB's Env): every open, write, fsync, rename and remove of the patch
+// store, the MT file's writer and reader and the builder's checkpoint files goes through here, so
+// tests can inject failures and check that what is left is wholly the old file or wholly the new
+// one, and that the error names the file and the byte offset.
 #pragma once
 
 #include <cstddef>
 #include <cstdint>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <vector>
 
@@ -20,6 +22,10 @@ class WritableFile {
   virtual void sync() = 0;                                  // fdatasync; throws mt::Error
   virtual void close() = 0;
   virtual uint64_t size() const = 0;
+  // Overwrites bytes already written (offset + size <= size()) without moving the end: a header
+  // filled in once the rest is known. Not for files from newAppendableFile (O_APPEND would put
+  // the bytes at the end). Throws mt::Error naming the file and offset.
+  virtual void writeAt(uint64_t offset, const void* data, size_t size) = 0;
 };
 
 class RandomAccessFile {
@@ -37,6 +43,10 @@ class Env {
 
   virtual std::unique_ptr<WritableFile> newWritableFile(const std::string& path) = 0;  // truncates
   virtual std::unique_ptr<WritableFile> newAppendableFile(const std::string& path) = 0;
+  // Continues a file at byte `length`, cutting off whatever follows (a file written up to a
+  // checkpoint that recorded its length; what came later is discarded). Creates the file when it
+  // is missing and `length` is 0; a file shorter than `length` is damaged (Corruption).
+  virtual std::unique_ptr<WritableFile> newWritableFileAt(const std::string& path, uint64_t length) = 0;
   virtual std::unique_ptr<RandomAccessFile> newRandomAccessFile(const std::string& path) = 0;
   virtual void renameFile(const std::string& from, const std::string& to) = 0;  // atomic
   virtual void removeFile(const std::string& path) = 0;
@@ -47,23 +57,23 @@ class Env {
   virtual uint64_t fileSize(const std::string& path) = 0;
 };
 
-// Wraps another Env and fails the N-th write, fsync or rename from now on (counting from 1),
-// by throwing mt::Error as a real failure would. Used by the crash-safety tests.
+// Wraps another Env and fails the N-th write, fsync, rename or read from now on (counting from
+// 1), by throwing mt::Error (Io) as a real failure would. Used by the crash-safety tests.
 class FaultInjectionEnv : public Env {
  public:
-  enum class Op { Write, Sync, Rename };
+  enum class Op { Write, Sync, Rename, Read };
   explicit FaultInjectionEnv(Env* base) : base_(base) {}
   void failAfter(Op op, int64_t count) { op_ = op; remaining_ = count; }
   void disarm() { remaining_ = -1; }
   bool fired() const { return fired_; }
-  // Counts of each operation so far (to enumerate every failure point in a test).
-  int64_t writes = 0, syncs = 0, renames = 0;
+  // Counts of each operation so far (to enumerate every failure point in a test). Reads may come
+  // from several threads at once (the MT reader's): hit() counts under a lock.
+  int64_t writes = 0, syncs = 0, renames = 0, reads = 0;
 
   std::unique_ptr<WritableFile> newWritableFile(const std::string& path) override;
   std::unique_ptr<WritableFile> newAppendableFile(const std::string& path) override;
-  std::unique_ptr<RandomAccessFile> newRandomAccessFile(const std::string& path) override {
-    return base_->newRandomAccessFile(path);
-  }
+  std::unique_ptr<WritableFile> newWritableFileAt(const std::string& path, uint64_t length) override;
+  std::unique_ptr<RandomAccessFile> newRandomAccessFile(const std::string& path) override;
   void renameFile(const std::string& from, const std::string& to) override;
   void removeFile(const std::string& path) override { base_->removeFile(path); }
   void syncDir(const std::string& dir) override { base_->syncDir(dir); }
@@ -72,11 +82,13 @@ class FaultInjectionEnv : public Env {
   std::vector<std::string> listDir(const std::string& dir) override { return base_->listDir(dir); }
   uint64_t fileSize(const std::string& path) override { return base_->fileSize(path); }
 
-  // Called by the wrapped files; throws when the armed failure is due.
-  void hit(Op op, const std::string& path);
+  // Called by the wrapped files; throws "PATH: injected OP failure WHERE" when the armed failure
+  // is due (`where`: " at byte offset N" for a read).
+  void hit(Op op, const std::string& path, const std::string& where = {});
 
  private:
   Env* base_;
+  std::mutex mutex_;
   Op op_ = Op::Write;
   int64_t remaining_ = -1;
   bool fired_ = false;

@@ -14,6 +14,7 @@
 #include <sstream>
 
 #include "base/byte_io.h"
+#include "base/env.h"
 #include "mtbuild/level_state.h"
 #include "mtbuild/work_dir.h"
 
@@ -192,22 +193,12 @@ void LevelBuilder::State::appendSideChunk() {
   chunk.put<uint64_t>(w.bytes().size());
   chunk.putRaw(w.bytes().data(), w.bytes().size());
   const std::string path = work + "/checkpoint.dat";
-  int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_CLOEXEC, 0644);
-  if (fd < 0) fail(path, std::string("cannot open: ") + std::strerror(errno));
-  // Cut off a chunk of a level that was never committed, then append.
-  bool ok = ::ftruncate(fd, off_t(sideLength)) == 0 && ::lseek(fd, off_t(sideLength), SEEK_SET) == off_t(sideLength);
-  const char* p = chunk.bytes().data();
-  size_t left = chunk.bytes().size();
-  while (ok && left > 0) {
-    ssize_t n = ::write(fd, p, left);
-    if (n < 0 && errno == EINTR) continue;
-    ok = n > 0;
-    if (ok) p += n, left -= size_t(n);
-  }
-  ok = ok && ::fdatasync(fd) == 0;
-  std::string why = ok ? "" : std::strerror(errno);
-  ::close(fd);
-  if (!ok) fail(path, "cannot write the checkpoint at byte offset " + std::to_string(sideLength) + ": " + why);
+  // Cut off a chunk of a level that was never committed, then append; Io errors name the file and
+  // the byte offset.
+  std::unique_ptr<WritableFile> file = Env::Default()->newWritableFileAt(path, sideLength);
+  file->append(chunk.bytes().data(), chunk.bytes().size());
+  file->sync();
+  file->close();
   sideHash = XXH64(chunk.bytes().data(), chunk.bytes().size(), sideHash);
   sideLength += chunk.bytes().size();
   ckPatches = records.size();
@@ -218,22 +209,22 @@ void LevelBuilder::State::appendSideChunk() {
 std::vector<format::PatchRecord> LevelBuilder::State::readSideFile(uint64_t length, uint64_t hash) {
   const std::string path = work + "/checkpoint.dat";
   std::vector<format::PatchRecord> records;
-  FILE* f = std::fopen(path.c_str(), "rb");
-  if (!f) fail(path, "cannot --resume: missing (rerun without --resume to start over)");
-  uint64_t at = 0, h = 0;
+  Env* env = Env::Default();
+  if (!env->exists(path)) fail(path, "cannot --resume: missing (rerun without --resume to start over)");
+  std::unique_ptr<RandomAccessFile> f = env->newRandomAccessFile(path);
+  const uint64_t fileBytes = f->size();
+  uint64_t at = 0, h = 0;  // at <= fileBytes: only whole chunks are passed
   std::string chunk;
   while (at < length) {
+    const std::string truncated = "cannot --resume: chunk at byte offset " + std::to_string(at) + " is truncated";
     uint64_t size = 0;
-    if (length - at < 8 || std::fread(&size, 8, 1, f) != 1 || size > length - at - 8) {
-      std::fclose(f);
-      fail(path, "cannot --resume: chunk at byte offset " + std::to_string(at) + " is truncated (rerun without --resume to start over)");
-    }
+    if (length - at < 8 || fileBytes - at < 8) fail(path, truncated + " (rerun without --resume to start over)");
+    f->read(at, 8, &size);
+    if (size > length - at - 8) fail(path, truncated + " (rerun without --resume to start over)");
+    if (size > fileBytes - at - 8) fail(path, truncated);
     chunk.resize(size_t(size) + 8);
     std::memcpy(chunk.data(), &size, 8);
-    if (size && std::fread(chunk.data() + 8, 1, size_t(size), f) != size) {
-      std::fclose(f);
-      fail(path, "cannot --resume: chunk at byte offset " + std::to_string(at) + " is truncated");
-    }
+    if (size) f->read(at + 8, size_t(size), chunk.data() + 8);
     h = XXH64(chunk.data(), chunk.size(), h);
     ByteReader r(chunk.data() + 8, size_t(size), path, at + 8);
     for (auto& rec : getVector<format::PatchRecord>(r)) records.push_back(rec);
@@ -246,7 +237,6 @@ std::vector<format::PatchRecord> LevelBuilder::State::readSideFile(uint64_t leng
     }
     at += chunk.size();
   }
-  std::fclose(f);
   if (h != hash) fail(path, "cannot --resume: checksum mismatch before byte offset " + std::to_string(length) + " (rerun without --resume to start over)");
   sideLength = length;
   sideHash = hash;

@@ -11,7 +11,9 @@
 // Payloads are verified when read (their own checksum). Every error is a one-line mt::Error of the
 // form "PATH: what, where (patch N / byte offset X)".
 //
-// Both use plain POSIX file calls: mtrender links this library without the patch store.
+// Both reach the file system only through an Env (base/env.h; Env::Default() unless a test passes
+// a fault-injecting one): failures are Io errors naming the file and the byte offset, damage is
+// Corruption. mtrender links this library without the patch store.
 #pragma once
 
 #include <cstdint>
@@ -19,6 +21,7 @@
 #include <string>
 #include <vector>
 
+#include "base/env.h"
 #include "mtbuild/mt_format.h"
 #include "mtbuild/patch_codec.h"
 
@@ -36,7 +39,8 @@ class MtFileWriter {
   // `header` gives codec, vertexFlags, levelCount, input counts, bounds and grid; the writer fills
   // magic, version, sizes, counts and offsets. Creates (truncates) `tempPath` (empty: PATH.tmp),
   // which must be beside PATH (renamed over it). Throws mt::Error.
-  MtFileWriter(const std::string& path, const format::FileHeader& header, const std::string& tempPath = {});
+  MtFileWriter(const std::string& path, const format::FileHeader& header, const std::string& tempPath = {},
+               Env* env = Env::Default());
   ~MtFileWriter();  // removes the temporary file unless finish() completed
   MtFileWriter(const MtFileWriter&) = delete;
   MtFileWriter& operator=(const MtFileWriter&) = delete;
@@ -53,7 +57,8 @@ class MtFileWriter {
   const std::string& tempPath() const { return tmp_; }
 
   // Writes the DAG, the index and the footer, syncs, renames the temporary file to PATH and syncs the
-  // directory. nodes: every field except firstArc/arcCount/firstBackArc/backArcCount/triangles,
+  // directory (best effort: the file is complete and in place by then). nodes: every field except
+  // firstArc/arcCount/firstBackArc/backArcCount/triangles,
   // which are derived from `arcs`. Every patch must be on exactly one arc. Throws mt::Error.
   void finish(std::vector<format::NodeRecord> nodes, std::vector<DagArc> arcs);
 
@@ -66,7 +71,7 @@ class MtFileWriter {
   // checkpoint was taken (after syncPayloads()). Bytes past `length` (payloads of an unfinished
   // level) are cut off. Throws mt::Error when the file is missing or shorter than `length`.
   MtFileWriter(const std::string& path, const format::FileHeader& header, uint64_t length,
-               std::vector<format::PatchRecord> patches, const std::string& tempPath = {});
+               std::vector<format::PatchRecord> patches, const std::string& tempPath = {}, Env* env = Env::Default());
   // Makes every payload appended so far durable (fdatasync), so a checkpoint may refer to them.
   void syncPayloads();
   const std::vector<format::PatchRecord>& patchRecords() const { return patches_; }
@@ -75,8 +80,18 @@ class MtFileWriter {
 
  private:
   void write(const void* data, size_t size);
+  // finish()'s steps: the arc, backward-star and patch-reference arrays from `arcs` (filling the
+  // nodes' star ranges and triangle counts); the header's counts and offsets; the file's end.
+  struct Stars {
+    std::vector<format::ArcRecord> arcs;
+    std::vector<uint32_t> backArcs, patchRefs;
+  };
+  Stars linkArcs(std::vector<format::NodeRecord>& nodes, std::vector<DagArc>& arcs);
+  void fillHeader(size_t nodeCount, const Stars& stars);
+  void writeTail(const std::vector<uint8_t>& meta);
   std::string path_, tmp_;
-  int fd_ = -1;
+  Env* env_;
+  std::unique_ptr<WritableFile> file_;  // null once finished, abandoned or detached
   uint64_t offset_ = 0;
   format::FileHeader header_;
   std::vector<format::PatchRecord> patches_;
@@ -84,7 +99,7 @@ class MtFileWriter {
 
 class MtFileReader {
  public:
-  static std::unique_ptr<MtFileReader> open(const std::string& path);
+  static std::unique_ptr<MtFileReader> open(const std::string& path, Env* env = Env::Default());
   ~MtFileReader();
 
   const std::string& path() const { return path_; }
@@ -99,15 +114,21 @@ class MtFileReader {
   const std::vector<uint32_t>& patchRefs() const { return patchRefs_; }
   const std::vector<format::PatchRecord>& patches() const { return patches_; }
 
-  // The payload bytes of patch i, checksum verified. Thread-safe (pread).
+  // The payload bytes of patch i, checksum verified. Thread-safe (positional reads).
   std::vector<uint8_t> readPayload(uint32_t patch) const;
   // readPayload + decodePatch; a damaged payload throws "PATH: patch N: ...".
   DecodedPatch readPatch(uint32_t patch) const;
 
  private:
   MtFileReader() = default;
+  // open()'s steps: the footer (after the header's magic and version); the index section, checked
+  // to tile [metaOffset, footer) and against the footer's checksum; the cross-checks of the
+  // records against the header and each other.
+  format::Footer readHeaderAndFooter();
+  void readIndex(const format::Footer& footer);
+  void checkIndex() const;
   std::string path_;
-  int fd_ = -1;
+  std::unique_ptr<RandomAccessFile> file_;
   uint64_t size_ = 0;
   format::FileHeader header_{};
   std::vector<format::NodeRecord> nodes_;

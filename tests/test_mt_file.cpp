@@ -3,8 +3,10 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <string>
 
+#include "base/env.h"
 #include "base/error.h"
 #include "mtbuild/mt_file.h"
 #include "testing/scan_grid.h"
@@ -22,7 +24,7 @@ struct Built {
 };
 
 // A tiny DAG: source -> {A, B} -> sink, four patches (source has 2, A and B one each).
-Built writeSmall(const std::string& path, Codec codec) {
+Built writeSmall(const std::string& path, Codec codec, Env* env = Env::Default()) {
   Built b;
   b.path = path;
   FileHeader h{};
@@ -35,7 +37,7 @@ Built writeSmall(const std::string& path, Codec codec) {
   h.gridStep = grid.step;
   h.gridBits = grid.bits;
   h.quantizationError = grid.maxError();
-  MtFileWriter w(path, h);
+  MtFileWriter w(path, h, {}, env);
   EXPECT_FALSE(test::fileExists(path)) << "nothing under the final name before finish()";
   for (int i = 0; i < 4; ++i) {
     ScanGridOptions o;
@@ -203,6 +205,116 @@ TEST(MtFile, AbandonedWriterLeavesNothing) {
   w.appendPatch(junk, sizeof junk, 1, 3);
   EXPECT_THROW(w.finish(std::vector<NodeRecord>(2), {}), Error) << "patch on no arc";
   EXPECT_FALSE(test::fileExists(path));
+}
+
+// Every write, fsync and rename of a build, failed in turn: each failure is an Io error naming
+// the file, and leaves no file under the final name and no temporary file beside it.
+TEST(MtFile, FailingWriteSyncOrRenameLeavesNothing) {
+  test::TempDir dir;
+  const std::string path = dir.file("x.mt");
+  FaultInjectionEnv counting(Env::Default());
+  writeSmall(path, Codec::Meshopt, &counting);
+  const std::string good = test::readFile(path);
+  ASSERT_GT(counting.writes, 5);
+  ASSERT_EQ(counting.syncs, 1);
+  ASSERT_EQ(counting.renames, 1);
+  const std::pair<FaultInjectionEnv::Op, int64_t> ops[] = {{FaultInjectionEnv::Op::Write, counting.writes},
+                                                           {FaultInjectionEnv::Op::Sync, counting.syncs},
+                                                           {FaultInjectionEnv::Op::Rename, counting.renames}};
+  for (auto [op, count] : ops)
+    for (int64_t n = 1; n <= count; ++n) {
+      std::remove(path.c_str());
+      FaultInjectionEnv env(Env::Default());
+      env.failAfter(op, n);
+      try {
+        writeSmall(path, Codec::Meshopt, &env);
+        ADD_FAILURE() << "no error at op " << int(op) << " call " << n;
+      } catch (const Error& e) {
+        EXPECT_EQ(e.kind(), ErrorKind::Io) << e.what();
+        EXPECT_EQ(std::string(e.what()).rfind(path, 0), 0u) << "names the file: " << e.what();
+        EXPECT_NE(std::string(e.what()).find("injected"), std::string::npos) << e.what();
+      }
+      EXPECT_TRUE(env.fired());
+      EXPECT_FALSE(test::fileExists(path)) << "op " << int(op) << " call " << n;
+      EXPECT_TRUE(Env::Default()->listDir(dir.path()).empty()) << "a temporary file is left, op " << int(op) << " call " << n;
+    }
+  // Unarmed, the Env changes nothing: the same bytes as the default Env.
+  writeSmall(dir.file("plain.mt"), Codec::Meshopt);
+  EXPECT_EQ(test::readFile(dir.file("plain.mt")), good);
+}
+
+// A failing read is an Io error naming the file and the byte offset, in open() and in readPayload().
+TEST(MtFile, FailingReadNamesTheOffset) {
+  test::TempDir dir;
+  Built b = writeSmall(dir.file("x.mt"), Codec::Meshopt);
+  FaultInjectionEnv counting(Env::Default());
+  auto r = MtFileReader::open(b.path, &counting);
+  const int64_t openReads = counting.reads;
+  ASSERT_EQ(openReads, 3) << "header, footer, index";
+  const std::string offsets[] = {"at byte offset 0", "at byte offset " + std::to_string(r->fileSize() - kFooterSize),
+                                 "at byte offset " + std::to_string(r->header().metaOffset)};
+  for (int64_t n = 1; n <= openReads; ++n) {
+    FaultInjectionEnv env(Env::Default());
+    env.failAfter(FaultInjectionEnv::Op::Read, n);
+    try {
+      MtFileReader::open(b.path, &env);
+      ADD_FAILURE() << "read " << n << " did not fail";
+    } catch (const Error& e) {
+      EXPECT_EQ(e.kind(), ErrorKind::Io) << e.what();
+      EXPECT_EQ(std::string(e.what()), b.path + ": injected read failure " + offsets[n - 1]);
+    }
+  }
+  counting.failAfter(FaultInjectionEnv::Op::Read, 1);
+  try {
+    r->readPayload(2);
+    ADD_FAILURE() << "readPayload did not fail";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.kind(), ErrorKind::Io) << e.what();
+    EXPECT_EQ(std::string(e.what()), b.path + ": injected read failure at byte offset " + std::to_string(r->patches()[2].offset));
+  }
+  EXPECT_EQ(r->readPayload(2), b.payloads[2]) << "the next read succeeds";
+}
+
+// The resume constructor continues the temporary file at the checkpoint's length: bytes written
+// after it are cut off, and a file missing or shorter than the checkpoint is refused and kept.
+TEST(MtFile, ResumedWriterContinuesAtTheCheckpoint) {
+  test::TempDir dir;
+  const std::string path = dir.file("r.mt"), tmp = dir.file("r.mt.partial");
+  Built whole = writeSmall(dir.file("whole.mt"), Codec::Meshopt);
+  auto ref = MtFileReader::open(whole.path);
+  FileHeader h = ref->header();
+  uint64_t length = 0;
+  std::vector<PatchRecord> records;
+  {
+    MtFileWriter w(path, h, tmp);
+    for (int i = 0; i < 2; ++i) w.appendPatch(whole.payloads[i].data(), whole.payloads[i].size(), whole.triangles[i], 0);
+    w.syncPayloads();
+    length = w.bytesWritten();
+    records = w.patchRecords();
+    w.appendPatch(whole.payloads[3].data(), whole.payloads[3].size(), whole.triangles[3], 0);  // not checkpointed
+    w.detach();
+  }
+  ASSERT_TRUE(test::fileExists(tmp)) << "detach keeps the file";
+  ASSERT_GT(Env::Default()->fileSize(tmp), length);
+  EXPECT_THROW(MtFileWriter(path, h, length + 1 + Env::Default()->fileSize(tmp), records, tmp), Error);
+  EXPECT_TRUE(test::fileExists(tmp)) << "a refused resume keeps the killed build's file";
+  try {
+    MtFileWriter(path, h, 0, {}, dir.file("missing.partial"));
+    ADD_FAILURE() << "resumed a missing file";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.kind(), ErrorKind::Io) << e.what();
+  }
+  MtFileWriter w(path, h, length, records, tmp);
+  EXPECT_EQ(w.bytesWritten(), length);
+  EXPECT_EQ(Env::Default()->fileSize(tmp), length) << "cut back to the checkpoint";
+  for (int i = 2; i < 4; ++i) w.appendPatch(whole.payloads[i].data(), whole.payloads[i].size(), whole.triangles[i], 0);
+  std::vector<NodeRecord> nodes(ref->nodes());
+  std::vector<DagArc> arcs = {{2, 3, {3}}, {0, 1, {0}}, {0, 2, {1}}, {1, 3, {2}}};
+  w.finish(nodes, arcs);
+  EXPECT_FALSE(test::fileExists(tmp));
+  auto r = MtFileReader::open(path);
+  ASSERT_EQ(r->patches().size(), 4u);
+  for (uint32_t i = 0; i < 4; ++i) EXPECT_EQ(r->readPayload(i), whole.payloads[i]) << "patch " << i;
 }
 
 }  // namespace

@@ -146,3 +146,80 @@ TEST(ErrorKinds, SayWhatWentWrong) {
   }
   EXPECT_STREQ(errorKindName(ErrorKind::Corruption), "corruption");
 }
+
+// The Env calls the MT writer and the checkpoint files use: a positional overwrite, and
+// continuing a file at a recorded length.
+TEST(Env, WriteAtAndContinueAt) {
+  TempDir tmp;
+  Env* env = Env::Default();
+  const std::string path = tmp.file("f");
+  {
+    auto f = env->newWritableFile(path);
+    f->append("abcdef", 6);
+    f->writeAt(0, "XY", 2);
+    EXPECT_EQ(f->size(), 6u) << "writeAt does not move the end";
+    f->sync();
+    f->close();
+  }
+  EXPECT_EQ(mt::test::readFile(path), "XYcdef");
+  {
+    auto f = env->newWritableFileAt(path, 3);
+    EXPECT_EQ(f->size(), 3u);
+    f->append("Z", 1);
+    f->close();
+  }
+  EXPECT_EQ(mt::test::readFile(path), "XYcZ") << "what followed the length is cut off";
+  try {
+    env->newWritableFileAt(path, 5);
+    FAIL() << "continued past the end";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.kind(), ErrorKind::Corruption) << e.what();
+    EXPECT_EQ(std::string(e.what()), path + ": cannot continue at byte offset 5: the file has only 4 bytes");
+  }
+  EXPECT_EQ(mt::test::readFile(path), "XYcZ") << "a refused continue changes nothing";
+  auto fresh = env->newWritableFileAt(tmp.file("new"), 0);
+  EXPECT_TRUE(env->exists(tmp.file("new"))) << "length 0 creates the file";
+  try {
+    env->newWritableFileAt(tmp.file("missing"), 1);
+    FAIL() << "continued a missing file";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.kind(), ErrorKind::Io) << e.what();
+    EXPECT_FALSE(env->exists(tmp.file("missing")));
+  }
+}
+
+TEST(Env, FaultInjectionFailsTheNthReadWithItsOffset) {
+  TempDir tmp;
+  const std::string path = tmp.file("r");
+  {
+    auto f = Env::Default()->newWritableFile(path);
+    f->append("0123456789", 10);
+    f->close();
+  }
+  FaultInjectionEnv env(Env::Default());
+  auto f = env.newRandomAccessFile(path);
+  EXPECT_EQ(f->size(), 10u);
+  env.failAfter(FaultInjectionEnv::Op::Read, 2);
+  char buf[4] = {};
+  f->read(1, 3, buf);
+  EXPECT_EQ(std::string(buf, 3), "123");
+  try {
+    f->read(6, 4, buf);
+    FAIL() << "no injected failure";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.kind(), ErrorKind::Io);
+    EXPECT_EQ(std::string(e.what()), path + ": injected read failure at byte offset 6");
+  }
+  EXPECT_TRUE(env.fired());
+  EXPECT_EQ(env.reads, 2);
+  f->read(6, 4, buf);
+  EXPECT_EQ(std::string(buf, 4), "6789");
+  // A read past the end is an Io error naming the offset.
+  try {
+    f->read(8, 4, buf);
+    FAIL() << "read past the end";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.kind(), ErrorKind::Io);
+    EXPECT_NE(std::string(e.what()).find("byte offset 10"), std::string::npos) << e.what();
+  }
+}
