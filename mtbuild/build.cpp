@@ -381,6 +381,7 @@ std::string fingerprint(const std::string& input, const BuildOptions& o, bool st
   s << "partition=" << (o.partition == PartitionKind::Regular ? "regular" : "irregular") << "\n";
   s << "patch_triangles=" << o.patchTriangles << "\n";
   s << "codec=" << (o.codec == format::Codec::Draco ? "draco" : "meshopt") << "\n";
+  s << "index_order=" << (o.strips ? "strip" : "list") << "\n";
   s << "normals=" << (o.normals ? 1 : 0) << "\n";
   s << "root_triangles=" << o.rootTriangles << "\n";
   return s.str();
@@ -921,6 +922,7 @@ LevelBuilder::LevelBuilder(const std::string& input, const std::string& output, 
   for (int a = 0; a < 3; ++a) s.ctx.grid.origin[a] = s.header.gridOrigin[a];
   s.ctx.codec.codec = options.codec;
   s.ctx.codec.normals = options.normals;
+  s.ctx.codec.strips = options.strips;
   s.ctx.sequence = &s.sequence;
   s.ctx.partitionLevels = s.sequence.levels();
   s.ctx.rootTriangles = options.rootTriangles ? options.rootTriangles : 2ull * patchTriangles;

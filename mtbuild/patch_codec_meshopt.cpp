@@ -10,6 +10,7 @@
 #include <zstd.h>
 
 #include <algorithm>
+#include <cassert>
 #include <cstring>
 #include <memory>
 #include <mutex>
@@ -286,8 +287,11 @@ std::vector<uint8_t> encodeMeshoptWith(const Prepared& p, const std::vector<uint
   for (size_t i = 0; i < n * 3; ++i) q[i] = p.q[i];
   std::vector<uint32_t> res(n * 3, 0);
   std::vector<uint8_t> kind(n, 0);
-  // res in first-use order (the decoder's order): vertices are numbered by first use already.
+  // res in first-use order (the decoder's order): vertices are numbered by first use already, so
+  // the walk meets them as 0, 1, 2, ... and the residuals are written in vertex order.
+  [[maybe_unused]] uint32_t visited = 0;
   parallelogramWalk(tri.data(), tri.size(), n, q.data(), range, [&](uint32_t v, const int64_t pred[3], const Prediction& how) {
+    assert(v == visited++);
     for (int x = 0; x < 3; ++x) res[v * 3 + x] = zigzag(q[v * 3 + x] - pred[x]);
     kind[v] = uint8_t(how.kind);
   });
@@ -355,6 +359,39 @@ std::vector<uint8_t> encodeMeshoptWith(const Prepared& p, const std::vector<uint
     for (uint32_t x = 0; x < 3; ++x) encodeResidual(rc, *model, kind[v], x, res[v * 3 + x]);
   rc.finish();
   return out;
+}
+
+// The patch as one tri-strip (BMT section 6 stores "optimized triangle strips"): meshopt_stripify
+// of the coded list with restarts (~0u), coded by meshopt_encodeIndexSequence inside the zstd
+// frame. The vertices are renumbered by first use in the strip, the order in which the decoder's
+// walk meets them (and that keeps the sequence's deltas small). Empty when the strip does not give
+// back every triangle (stripify drops degenerate ones): the caller then codes the list.
+std::vector<uint8_t> encodeMeshoptStrip(const Prepared& p, const PatchCodecOptions& options) {
+  size_t n = p.header.vertexCount;
+  std::vector<uint32_t> s(meshopt_stripifyBound(p.indices.size()));
+  s.resize(meshopt_stripify(s.data(), p.indices.data(), p.indices.size(), n, ~0u));
+  std::vector<uint32_t> tri(meshopt_unstripifyBound(s.size()));
+  tri.resize(meshopt_unstripify(tri.data(), s.data(), s.size(), ~0u));
+  if (tri.size() != p.indices.size()) return {};
+  std::vector<uint32_t> remap(n);
+  size_t used = meshopt_optimizeVertexFetchRemap(remap.data(), tri.data(), tri.size(), n);
+  if (used != n) return {};
+  Prepared r;
+  r.header = p.header;
+  r.q.resize(n * 3);
+  r.oct.resize(p.oct.size());
+  r.colors.resize(p.colors.size());
+  for (size_t v = 0; v < n; ++v) {
+    std::memcpy(&r.q[remap[v] * 3], &p.q[v * 3], 12);
+    if (!p.oct.empty()) std::memcpy(&r.oct[remap[v] * 2], &p.oct[v * 2], 2);
+    if (!p.colors.empty()) std::memcpy(&r.colors[remap[v] * 4], &p.colors[v * 4], 4);
+  }
+  for (uint32_t& i : s)
+    if (i != ~0u) i = remap[i];
+  for (uint32_t& i : tri) i = remap[i];
+  std::vector<uint8_t> sbuf(meshopt_encodeIndexSequenceBound(s.size(), n));
+  sbuf.resize(meshopt_encodeIndexSequence(sbuf.data(), sbuf.size(), s.data(), s.size()));
+  return encodeMeshoptWith(r, tri, sbuf, uint32_t(s.size()), true, options);
 }
 
 // The zstd frame (or stored bytes) after the payload header, decompressed: the three sizes and the
@@ -516,24 +553,11 @@ void decodeLegacyPositions(RangeDecoder& rc, bool ranged, size_t planes, const u
 
 std::vector<uint8_t> encodeMeshopt(const Prepared& p, const PatchCodecOptions& options) {
   setMeshoptVersions();
-  size_t n = p.header.vertexCount;
-  std::vector<uint8_t> best =
-      encodeMeshoptWith(p, p.indices, p.indexCode, uint32_t(p.indices.size()), false, options);
   if (options.strips && !p.indices.empty()) {
-    // Strips (BMT 6 stores strips): on regular grids (level 0 of a range scan) a strip codes in
-    // far fewer bytes than the list; on simplified patches the list wins. Keep the smaller.
-    std::vector<uint32_t> s(meshopt_stripifyBound(p.indices.size()));
-    s.resize(meshopt_stripify(s.data(), p.indices.data(), p.indices.size(), n, ~0u));
-    std::vector<uint8_t> sbuf(meshopt_encodeIndexSequenceBound(s.size(), n));
-    sbuf.resize(meshopt_encodeIndexSequence(sbuf.data(), sbuf.size(), s.data(), s.size()));
-    std::vector<uint32_t> tri(meshopt_unstripifyBound(s.size()));
-    tri.resize(meshopt_unstripify(tri.data(), s.data(), s.size(), ~0u));
-    if (tri.size() == p.indices.size()) {  // stripify drops nothing on valid input; be safe
-      std::vector<uint8_t> alt = encodeMeshoptWith(p, tri, sbuf, uint32_t(s.size()), true, options);
-      if (alt.size() < best.size()) best.swap(alt);
-    }
+    std::vector<uint8_t> strip = encodeMeshoptStrip(p, options);
+    if (!strip.empty()) return strip;
   }
-  return best;
+  return encodeMeshoptWith(p, p.indices, p.indexCode, uint32_t(p.indices.size()), false, options);
 }
 
 void decodeMeshopt(const uint8_t* data, size_t size, const PayloadHeader& h, DecodedPatch& out,
