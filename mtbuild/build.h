@@ -50,6 +50,7 @@ struct BuildOptions {
   PartitionKind partition = PartitionKind::Irregular;
   uint32_t patchTriangles = 0;        // 0: kDefaultMtPatchTriangles (ignored for a store input)
   format::Codec codec = format::Codec::Meshopt;
+  bool strips = false;                // meshopt patches as tri-strips (--index-order strip)
   bool normals = false;               // store normals (else the renderer computes them)
   // Continue a killed build from the checkpoint in its work directory (the last finished level).
   bool resume = false;

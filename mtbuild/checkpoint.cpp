@@ -119,6 +119,7 @@ std::string fingerprint(const std::string& input, const BuildOptions& o, bool st
   s << "partition=" << (o.partition == PartitionKind::Regular ? "regular" : "irregular") << "\n";
   s << "patch_triangles=" << o.patchTriangles << "\n";
   s << "codec=" << (o.codec == format::Codec::Draco ? "draco" : "meshopt") << "\n";
+  s << "index_order=" << (o.strips ? "strip" : "list") << "\n";
   s << "normals=" << (o.normals ? 1 : 0) << "\n";
   s << "root_triangles=" << o.rootTriangles << "\n";
   return s.str();

@@ -260,6 +260,7 @@ LevelBuilder::LevelBuilder(const std::string& input, const std::string& output, 
   for (int a = 0; a < 3; ++a) s.ctx.grid.origin[a] = s.header.gridOrigin[a];
   s.ctx.codec.codec = options.codec;
   s.ctx.codec.normals = options.normals;
+  s.ctx.codec.strips = options.strips;
   s.ctx.sequence = &s.sequence;
   s.ctx.partitionLevels = s.sequence.levels();
   s.ctx.rootTriangles = options.rootTriangles ? options.rootTriangles : 2ull * patchTriangles;

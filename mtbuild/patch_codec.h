@@ -9,7 +9,8 @@
 //      and vertices in first-use (fetch) order;
 //   3. normals (given, or computed from the quantized geometry) are stored octahedral 2x8 bit,
 //      colours RGBA8;
-//   4. Codec::Meshopt: meshopt_encodeIndexBuffer (or a strip with meshopt_encodeIndexSequence),
+//   4. Codec::Meshopt: meshopt_encodeIndexBuffer (or, as an option, a strip with
+//      meshopt_encodeIndexSequence),
 //      positions by parallelogram prediction, normals/colours by meshopt_encodeVertexBuffer, then
 //      zstd over all (the meshopt codecs are designed to be followed by a general-purpose one);
 //      Codec::Draco: edgebreaker with the grid coordinates as a lossless INT32 attribute.
@@ -52,9 +53,9 @@ struct PatchCodecOptions {
   bool colors = true;        // store colours when PatchInput::colors is given
   int zstdLevel = 3;         // Codec::Meshopt: zstd level over the streams (9: -3% bytes, 1.6x slower encode)
   int dracoSpeed = 1;        // Codec::Draco: encoder speed 0 (smallest) .. 10 (fastest)
-  // Codec::Meshopt: also try a strip (meshopt_stripify of the cache-ordered list) and keep the
-  // smaller payload. Measured: the list wins on every scan-like patch tried (regular level-0 grids
-  // and simplified levels), so it is off by default and costs a second encode when on.
+  // Codec::Meshopt: code every patch's triangles as one tri-strip with restarts (BMT section 6;
+  // mtbuild --index-order strip) instead of the triangle list (the default). The decoder gives the
+  // same triangles either way; docs/mt-format.md has the measured size and decode speed.
   bool strips = false;
   // The triangles come out of simplification (the survivors keep their input order, which is not
   // coherent any more: measured 1.91 B/tri of raw index code on a 2M scan's simplified patches):

@@ -59,7 +59,7 @@ inline uint64_t parseBuildMemory(const std::string& text) {
 }
 
 struct BuildCli {
-  std::string input, output, memory = "1G", partition = "irregular", codec = "meshopt", statsJson, workDir, taskTimes;
+  std::string input, output, memory = "1G", partition = "irregular", codec = "meshopt", indexOrder = "list", statsJson, workDir, taskTimes;
   int64_t threads = 0, patchTriangles = 0;  // signed, so that -1 is refused with the range, not wrapped
   bool normals = false, noNormals = false, resume = false, quiet = false;
   CLI::Option *threadsOption = nullptr, *patchTrianglesOption = nullptr;  // given explicitly: 0 is refused
@@ -91,6 +91,9 @@ struct BuildCli {
                        "memory cap and a level has too few regions to share out; ignored for a store input, which keeps "
                        "its own)");
     app.add_option("--codec", codec, "Patch coding: meshopt (default, fast decode) or draco (smallest files)");
+    app.add_option("--index-order", indexOrder,
+                   "Meshopt triangle coding: list (default: the triangle list, in its own order when coherent, else in\n"
+                   "fans) or strip (tri-strips, BMT 6; larger files, see docs/mt-format.md)");
     app.add_flag("--normals", normals, "Store per-vertex normals (2x8 bit) instead of letting the renderer compute them");
     app.add_flag("--no-normals", noNormals, "Store no normals (the default; kept for scripts that say so explicitly)");
     app.add_flag("--resume", resume,
@@ -136,6 +139,11 @@ struct BuildCli {
     if (codec == "meshopt") o.codec = format::Codec::Meshopt;
     else if (codec == "draco") o.codec = format::Codec::Draco;
     else throw Error("unknown --codec '" + codec + "' (expected meshopt or draco)");
+    if (indexOrder != "list" && indexOrder != "strip")
+      throw Error("unknown --index-order '" + indexOrder + "' (expected list or strip)");
+    if (indexOrder == "strip" && o.codec != format::Codec::Meshopt)
+      throw Error("--index-order strip needs --codec meshopt (Draco's edgebreaker chooses its own order)");
+    o.strips = indexOrder == "strip";
     // The output may not be the input (by inode, whatever the spelling): said first, as it matters
     // most. The MT tools know a file by its contents, but a build's output named .ply or .glb
     // would be taken for one by everything else.

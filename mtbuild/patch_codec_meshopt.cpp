@@ -1,0 +1,633 @@
+// Codec::Meshopt (patch_codec.h; byte layouts in mt_format.h).
+//
+// Indices: meshopt_encodeIndexBuffer (list) or meshopt_encodeIndexSequence (strip). Positions:
+// parallelogram prediction (Touma-Gotsman) along the decoded triangle order, residuals range-coded
+// by prediction kind; normals/colours: meshopt vertex codec. The sizes and the attributes (and the
+// index code when zstd finds its repeats) go into one zstd frame. Measured on scan-like patches the
+// parallelogram residuals take ~40% fewer bytes than meshopt_encodeVertexBuffer on the raw grid
+// coordinates (docs/mt-format.md).
+#include <meshoptimizer.h>
+#include <zstd.h>
+
+#include <algorithm>
+#include <cassert>
+#include <cstring>
+#include <memory>
+#include <mutex>
+#include <string>
+
+#include "base/error.h"
+#include "mtbuild/patch_codec_detail.h"
+#include "mtbuild/range_coder.h"
+
+namespace mt::codec_detail {
+
+using format::Codec;
+using format::PayloadHeader;
+
+void setMeshoptVersions() {
+  static std::once_flag once;
+  // Index codec v1 (0.14+) codes triangle lists ~10% smaller than v0; vertex codec v0 is the
+  // only one 0.18 has. Set once: these are process-wide settings in meshoptimizer.
+  std::call_once(once, [] {
+    meshopt_encodeIndexVersion(1);
+    meshopt_encodeVertexVersion(0);
+  });
+}
+
+namespace {
+
+// Directed edge -> opposite vertex, for the parallelogram rule. Open addressing, no deletes.
+class EdgeMap {
+ public:
+  explicit EdgeMap(size_t edges) {
+    size_t n = 16;
+    while (n < edges * 2) n *= 2;
+    keys_.assign(n, ~0ull);
+    vals_.resize(n);
+    mask_ = n - 1;
+  }
+  void put(uint32_t a, uint32_t b, uint32_t c) {
+    uint64_t k = (uint64_t(a) << 32) | b;
+    for (uint64_t i = hash(k);; i = (i + 1) & mask_)
+      if (keys_[i] == ~0ull || keys_[i] == k) {
+        keys_[i] = k, vals_[i] = c;
+        return;
+      }
+  }
+  bool get(uint32_t a, uint32_t b, uint32_t* c) const {
+    uint64_t k = (uint64_t(a) << 32) | b;
+    for (uint64_t i = hash(k);; i = (i + 1) & mask_) {
+      if (keys_[i] == ~0ull) return false;
+      if (keys_[i] == k) return *c = vals_[i], true;
+    }
+  }
+
+ private:
+  uint64_t hash(uint64_t k) const { return ((k * 0x9E3779B97F4A7C15ull) >> 20) & mask_; }
+  std::vector<uint64_t> keys_;
+  std::vector<uint32_t> vals_;
+  uint64_t mask_;
+};
+
+// How a vertex was predicted (the parallelogramWalk cases, mt_format.h), and from which corners:
+// the context of its residual in the version-3 position model.
+enum PredictionKind : uint32_t { kParallelogram = 0, kMidpoint = 1, kOneKnown = 2, kNoneKnown = 3 };
+struct Prediction {
+  uint32_t kind;
+  uint32_t a, b, c;  // kParallelogram: a + b - c; kMidpoint: a, b; kOneKnown: a; kNoneKnown: a = last or ~0u
+};
+
+// Visits the vertices in first-use order of `indices` and calls f(v, pred, how) with the prediction
+// of v from already visited vertices; f must make q[v] known before returning (the encoder already
+// has it, the decoder computes it from the residual). Predictions are clamped to [0, range].
+template <typename F>
+void parallelogramWalk(const uint32_t* indices, size_t indexCount, size_t vertexCount, const int64_t* q,
+                       const int64_t range[3], F&& f) {
+  std::vector<uint8_t> known(vertexCount, 0);
+  EdgeMap edges(indexCount);
+  uint32_t last = ~0u;
+  for (size_t t = 0; t < indexCount; t += 3) {
+    for (int k = 0; k < 3; ++k) {
+      uint32_t v = indices[t + k];
+      if (known[v]) continue;
+      uint32_t a = indices[t + (k + 1) % 3], b = indices[t + (k + 2) % 3], c;
+      int64_t pred[3] = {0, 0, 0};
+      Prediction how{kNoneKnown, last, ~0u, ~0u};
+      if (known[a] && known[b]) {
+        if (edges.get(b, a, &c) || edges.get(a, b, &c)) {
+          for (int x = 0; x < 3; ++x) pred[x] = q[a * 3 + x] + q[b * 3 + x] - q[c * 3 + x];
+          how = {kParallelogram, a, b, c};
+        } else {
+          for (int x = 0; x < 3; ++x) pred[x] = (q[a * 3 + x] + q[b * 3 + x]) >> 1;
+          how = {kMidpoint, a, b, ~0u};
+        }
+      } else if (known[a] || known[b]) {
+        uint32_t s = known[a] ? a : b;
+        for (int x = 0; x < 3; ++x) pred[x] = q[s * 3 + x];
+        how = {kOneKnown, s, ~0u, ~0u};
+      } else if (last != ~0u) {
+        for (int x = 0; x < 3; ++x) pred[x] = q[last * 3 + x];
+      }
+      for (int x = 0; x < 3; ++x) pred[x] = std::clamp<int64_t>(pred[x], 0, range[x]);
+      f(v, pred, how);
+      known[v] = 1;
+      last = v;
+    }
+    uint32_t a = indices[t], b = indices[t + 1], c = indices[t + 2];
+    edges.put(a, b, c), edges.put(b, c, a), edges.put(c, a, b);
+  }
+}
+
+// Predictions are clamped to [0, kMaxQ] (the same on both sides), so |residual| < 2^31 and its
+// zigzag code fits 32 bits.
+constexpr int64_t kMaxQ = 0x7FFFFFFF;
+
+inline uint32_t zigzag(int64_t r) { return uint32_t((uint64_t(r) << 1) ^ uint64_t(r >> 63)); }
+inline int64_t unzigzag(uint32_t z) { return int64_t(z >> 1) ^ -int64_t(z & 1); }
+
+// The residual model (mt_format.h, kPayloadRangePositions): per axis, the bit length k (0..32)
+// of zigzag(r) as a 6-bit binary tree, then the k-1 bits below its leading one, most significant
+// first, each with its own probability per (axis, k, bit).
+struct ResidualModel {
+  uint16_t length[3][64];
+  uint16_t mantissa[3][33][32];
+  ResidualModel() {
+    std::fill(&length[0][0], &length[0][0] + sizeof length / 2, uint16_t(1024));
+    std::fill(&mantissa[0][0][0], &mantissa[0][0][0] + sizeof mantissa / 2, uint16_t(1024));
+  }
+  void encode(RangeEncoder& rc, int axis, uint32_t z) {
+    uint32_t k = z ? 32 - uint32_t(__builtin_clz(z)) : 0;
+    for (uint32_t i = 6, m = 1; i-- > 0;) {
+      uint32_t b = (k >> i) & 1;
+      rc.bit(length[axis][m], b);
+      m = (m << 1) | b;
+    }
+    for (uint32_t i = k >= 2 ? k - 1 : 0; i-- > 0;) rc.bit(mantissa[axis][k][i], (z >> i) & 1);
+  }
+  // False when the stream names a length above 32 (damaged payload).
+  bool decode(RangeDecoder& rc, int axis, uint32_t& z) {
+    uint32_t m = 1;
+    for (int i = 0; i < 6; ++i) m = (m << 1) | rc.bit(length[axis][m]);
+    uint32_t k = m - 64;
+    if (k > 32) return false;
+    if (k == 0) return z = 0, true;
+    z = 1;
+    for (uint32_t i = k - 1; i-- > 0;) z = (z << 1) | rc.bit(mantissa[axis][k][i]);
+    return true;
+  }
+};
+
+// meshopt_encodeIndexBuffer, version 1, lays out a header byte (0xe1), one code byte per triangle,
+// the data bytes (varint vertex deltas of the codes that need them), then its 16-byte auxiliary
+// code table, which version 1 always writes as these bytes (meshoptimizer 0.18 indexcodec.cpp,
+// kCodeAuxEncodingTable).
+constexpr uint8_t kIndexHeaderV1 = 0xe1;
+constexpr uint8_t kCodeAuxTableV1[16] = {0x00, 0x76, 0x87, 0x56, 0x67, 0x78, 0xa9, 0x86,
+                                         0x65, 0x89, 0x68, 0x98, 0x01, 0x69, 0x00, 0x00};
+
+// The index code's bytes, range-coded. A code byte's high nibble is the edge-FIFO slot the
+// triangle reuses (15: none), its low nibble how the third vertex comes (0: the next new one);
+// both depend on the triangle before (in fan order a fan's triangles repeat one code, a new fan
+// starts with another). Measured on the patches of a 0.8M scan-derived build, bytes per input
+// triangle for the index code: zstd 1.101, this model 0.924 (a static order-1 table 0.90).
+struct IndexModel {
+  CountedBit standard;
+  CountedBit hi[32][16], lo[32][16];  // [previous high nibble, previous low nibble == 0][tree node]
+  CountedBit data[2][256];            // [previous data byte continues a varint][tree node]
+};
+
+// The position residual model: zigzag(r)'s bit length k (0..32) as a 6-bit tree, then the k-1
+// bits below its leading one, with probabilities per (prediction kind, axis): parallelogram
+// residuals are several times smaller than midpoint, one-known and first-vertex ones (mean k 2.2
+// against 3.2, 3.4 and 7.6 per axis on a 0.8M scan-derived build), and mixing them in one context
+// cost bits. Measured, position bytes per input triangle (0.8M scan-derived / 1M mtgen builds):
+// version 2 (axis contexts, LZMA rate) 1.566 / 1.363; counted probabilities 1.530 / 1.316; and
+// kind contexts 1.533 / 1.264. Also tried, all larger because a patch is too short to learn
+// more contexts: the predicting edge's length in grid steps (bit length; as context 1.571 /
+// 1.290, as the offset of k 1.636 / 1.352), the axis' share of the predicting triangle's normal
+// (1.550 / 1.272), the mantissa by that share (1.558 / 1.272).
+struct ContextModel {
+  CountedBit length[4][3][64];     // [kind][axis][tree node]
+  CountedBit mantissa[3][33][32];  // [axis][k][bit]
+};
+
+// The index code (meshopt_encodeIndexBuffer bytes, `bytes` of them, for `triangles` triangles;
+// bytes >= 1 + triangles + 16 as version 1 always writes).
+void encodeIndexCode(RangeEncoder& rc, const uint8_t* code, size_t bytes, uint32_t triangles) {
+  IndexModel m;
+  const uint8_t* tail = code + bytes - 16;
+  bool standard = code[0] == kIndexHeaderV1 && std::memcmp(tail, kCodeAuxTableV1, 16) == 0;
+  rc.bit(m.standard, standard ? 0 : 1);
+  if (!standard) {
+    rc.tree(m.data[0], code[0], 8);
+    for (int i = 0; i < 16; ++i) rc.tree(m.data[0], tail[i], 8);
+  }
+  uint32_t ctx = 0;
+  for (uint32_t t = 0; t < triangles; ++t) {
+    uint32_t c = code[1 + t], h = c >> 4;
+    rc.tree(m.hi[ctx], h, 4);
+    rc.tree(m.lo[(h << 1) | (ctx & 1)], c & 15, 4);
+    ctx = (h << 1) | ((c & 15) == 0);
+  }
+  uint32_t cont = 0;
+  for (size_t i = 1 + triangles; i < bytes - 16; ++i) {
+    rc.tree(m.data[cont], code[i], 8);
+    cont = code[i] >> 7;
+  }
+}
+
+void decodeIndexCode(RangeDecoder& rc, uint8_t* code, size_t bytes, uint32_t triangles) {
+  IndexModel m;
+  uint8_t* tail = code + bytes - 16;
+  if (rc.bit(m.standard) == 0) {
+    code[0] = kIndexHeaderV1;
+    std::memcpy(tail, kCodeAuxTableV1, 16);
+  } else {
+    code[0] = uint8_t(rc.tree(m.data[0], 8));
+    for (int i = 0; i < 16; ++i) tail[i] = uint8_t(rc.tree(m.data[0], 8));
+  }
+  uint32_t ctx = 0;
+  for (uint32_t t = 0; t < triangles; ++t) {
+    uint32_t h = rc.tree(m.hi[ctx], 4);
+    uint32_t l = rc.tree(m.lo[(h << 1) | (ctx & 1)], 4);
+    code[1 + t] = uint8_t((h << 4) | l);
+    ctx = (h << 1) | (l == 0);
+  }
+  uint32_t cont = 0;
+  for (size_t i = 1 + triangles; i < bytes - 16; ++i) {
+    code[i] = uint8_t(rc.tree(m.data[cont], 8));
+    cont = code[i] >> 7;
+  }
+}
+
+void encodeResidual(RangeEncoder& rc, ContextModel& m, uint32_t kind, uint32_t axis, uint32_t z) {
+  uint32_t k = z ? 32 - uint32_t(__builtin_clz(z)) : 0;
+  rc.tree(m.length[kind][axis], k, 6);
+  CountedBit* man = m.mantissa[axis][k];
+  for (uint32_t i = k >= 2 ? k - 1 : 0; i-- > 0;) rc.bit(man[i], (z >> i) & 1);
+}
+
+// False when the stream names a length above 32 (damaged payload).
+bool decodeResidual(RangeDecoder& rc, ContextModel& m, uint32_t kind, uint32_t axis, uint32_t& z) {
+  uint32_t k = rc.tree(m.length[kind][axis], 6);
+  if (k > 32) return false;
+  if (k <= 1) return z = k, true;
+  CountedBit* man = m.mantissa[axis][k];
+  z = 1;
+  for (uint32_t i = k - 1; i-- > 0;) z = (z << 1) | rc.bit(man[i]);
+  return true;
+}
+
+// zstd over `raw` with one compression context per thread, reused: ZSTD_compress would allocate
+// and clear a new one for every ~1 KB patch (its table set-up cost more than the compression
+// itself). Same bytes.
+std::vector<uint8_t> zstdFrame(const std::vector<uint8_t>& raw, int level) {
+  std::vector<uint8_t> z(ZSTD_compressBound(raw.size()));
+  thread_local std::unique_ptr<ZSTD_CCtx, size_t (*)(ZSTD_CCtx*)> cctx(ZSTD_createCCtx(), ZSTD_freeCCtx);
+  if (!cctx) throw Error("encodePatch: zstd: cannot create a compression context");
+  size_t zs = ZSTD_compressCCtx(cctx.get(), z.data(), z.size(), raw.data(), raw.size(), level);
+  if (ZSTD_isError(zs)) throw Error(std::string("encodePatch: zstd: ") + ZSTD_getErrorName(zs));
+  z.resize(zs);
+  return z;
+}
+
+// One candidate encoding of the patch with the given triangle list (already in final order).
+// Version 3: the index code goes either into the zstd frame (as in version 2: zstd finds the
+// repeats of a regular grid's codes, 0.15 B/triangle on mtgen's level-0 patches) or, when that is
+// smaller, range-coded ahead of the positions (kPayloadRangeIndices: 0.92 against 1.10 B/input
+// triangle on the patches of a 0.8M scan-derived build, whose codes do not repeat).
+std::vector<uint8_t> encodeMeshoptWith(const Prepared& p, const std::vector<uint32_t>& tri,
+                                       const std::vector<uint8_t>& ibuf, uint32_t indexCount, bool strip,
+                                       const PatchCodecOptions& options) {
+  const PayloadHeader& h = p.header;
+  size_t n = h.vertexCount;
+  const int64_t range[3] = {kMaxQ, kMaxQ, kMaxQ};
+  std::vector<int64_t> q(n * 3);
+  for (size_t i = 0; i < n * 3; ++i) q[i] = p.q[i];
+  std::vector<uint32_t> res(n * 3, 0);
+  std::vector<uint8_t> kind(n, 0);
+  // res in first-use order (the decoder's order): vertices are numbered by first use already, so
+  // the walk meets them as 0, 1, 2, ... and the residuals are written in vertex order.
+  [[maybe_unused]] uint32_t visited = 0;
+  parallelogramWalk(tri.data(), tri.size(), n, q.data(), range, [&](uint32_t v, const int64_t pred[3], const Prediction& how) {
+    assert(v == visited++);
+    for (int x = 0; x < 3; ++x) res[v * 3 + x] = zigzag(q[v * 3 + x] - pred[x]);
+    kind[v] = uint8_t(how.kind);
+  });
+  uint8_t flags = uint8_t((h.flags & (format::kPayloadNormals | format::kPayloadColors)) |
+                          format::kPayloadRangePositions | format::kPayloadPositionContexts |
+                          (strip ? format::kPayloadStrip : 0));
+  uint32_t attrStride = format::attributeStride(flags);
+  std::vector<uint8_t> abuf;
+  if (attrStride > 0) {
+    std::vector<uint8_t> attrs(n * attrStride, 0);
+    for (size_t v = 0; v < n; ++v) {
+      uint8_t* d = &attrs[v * attrStride];
+      if (!p.oct.empty()) std::memcpy(d, &p.oct[v * 2], 2), d += 2;
+      if (!p.colors.empty()) std::memcpy(d, &p.colors[v * 4], 4);
+    }
+    abuf.resize(meshopt_encodeVertexBufferBound(n, attrStride));
+    abuf.resize(meshopt_encodeVertexBuffer(abuf.data(), abuf.size(), attrs.data(), n, attrStride));
+  }
+
+  // Candidate A: sizes, index code and attributes in the frame.
+  std::vector<uint8_t> raw;
+  uint32_t sizes[3] = {uint32_t(ibuf.size()), indexCount, uint32_t(abuf.size())};
+  appendBytes(raw, sizes, sizeof sizes);
+  appendBytes(raw, ibuf.data(), ibuf.size());
+  appendBytes(raw, abuf.data(), abuf.size());
+  std::vector<uint8_t> frame = zstdFrame(raw, options.zstdLevel);
+  // Candidate B: sizes and attributes in the frame (stored as they are when zstd does not make
+  // them smaller: zSize 0), the index code range-coded.
+  const bool rangeable = !strip && ibuf.size() >= 1 + size_t(h.triangleCount) + 16;
+  if (rangeable) {
+    std::vector<uint8_t> rawB;
+    appendBytes(rawB, sizes, sizeof sizes);
+    appendBytes(rawB, abuf.data(), abuf.size());
+    std::vector<uint8_t> frameB = abuf.empty() ? std::vector<uint8_t>() : zstdFrame(rawB, options.zstdLevel);
+    bool stored = frameB.empty() || frameB.size() >= rawB.size();
+    std::vector<uint8_t> idx;
+    {
+      RangeEncoder rc(idx);
+      encodeIndexCode(rc, ibuf.data(), ibuf.size(), h.triangleCount);
+      rc.finish();
+    }
+    if ((stored ? rawB.size() : frameB.size()) + idx.size() < frame.size()) {
+      flags |= format::kPayloadRangeIndices;
+      raw.swap(rawB);
+      if (stored) frame.clear();
+      else frame.swap(frameB);
+    }
+  }
+
+  PayloadHeader hh = h;
+  hh.flags = flags;
+  std::vector<uint8_t> out;
+  appendBytes(out, &hh, sizeof hh);
+  uint32_t rawSize = uint32_t(raw.size()), zSize = uint32_t(frame.size());
+  appendBytes(out, &rawSize, 4);
+  appendBytes(out, &zSize, 4);
+  if (zSize) appendBytes(out, frame.data(), frame.size());
+  else appendBytes(out, raw.data(), raw.size());
+  // After the frame one range-coded stream: the index code (kPayloadRangeIndices), then the
+  // position residuals in vertex order, x y z per vertex.
+  RangeEncoder rc(out);
+  if (flags & format::kPayloadRangeIndices) encodeIndexCode(rc, ibuf.data(), ibuf.size(), h.triangleCount);
+  auto model = std::make_unique<ContextModel>();
+  for (size_t v = 0; v < n; ++v)
+    for (uint32_t x = 0; x < 3; ++x) encodeResidual(rc, *model, kind[v], x, res[v * 3 + x]);
+  rc.finish();
+  return out;
+}
+
+// The patch as one tri-strip (BMT section 6 stores "optimized triangle strips"): meshopt_stripify
+// of the coded list with restarts (~0u), coded by meshopt_encodeIndexSequence inside the zstd
+// frame. The vertices are renumbered by first use in the strip, the order in which the decoder's
+// walk meets them (and that keeps the sequence's deltas small). Empty when the strip does not give
+// back every triangle (stripify drops degenerate ones): the caller then codes the list.
+std::vector<uint8_t> encodeMeshoptStrip(const Prepared& p, const PatchCodecOptions& options) {
+  size_t n = p.header.vertexCount;
+  std::vector<uint32_t> s(meshopt_stripifyBound(p.indices.size()));
+  s.resize(meshopt_stripify(s.data(), p.indices.data(), p.indices.size(), n, ~0u));
+  std::vector<uint32_t> tri(meshopt_unstripifyBound(s.size()));
+  tri.resize(meshopt_unstripify(tri.data(), s.data(), s.size(), ~0u));
+  if (tri.size() != p.indices.size()) return {};
+  std::vector<uint32_t> remap(n);
+  size_t used = meshopt_optimizeVertexFetchRemap(remap.data(), tri.data(), tri.size(), n);
+  if (used != n) return {};
+  Prepared r;
+  r.header = p.header;
+  r.q.resize(n * 3);
+  r.oct.resize(p.oct.size());
+  r.colors.resize(p.colors.size());
+  for (size_t v = 0; v < n; ++v) {
+    std::memcpy(&r.q[remap[v] * 3], &p.q[v * 3], 12);
+    if (!p.oct.empty()) std::memcpy(&r.oct[remap[v] * 2], &p.oct[v * 2], 2);
+    if (!p.colors.empty()) std::memcpy(&r.colors[remap[v] * 4], &p.colors[v * 4], 4);
+  }
+  for (uint32_t& i : s)
+    if (i != ~0u) i = remap[i];
+  for (uint32_t& i : tri) i = remap[i];
+  std::vector<uint8_t> sbuf(meshopt_encodeIndexSequenceBound(s.size(), n));
+  sbuf.resize(meshopt_encodeIndexSequence(sbuf.data(), sbuf.size(), s.data(), s.size()));
+  return encodeMeshoptWith(r, tri, sbuf, uint32_t(s.size()), true, options);
+}
+
+// The zstd frame (or stored bytes) after the payload header, decompressed: the three sizes and the
+// streams the frame holds. rangeBegin is where the range-coded stream starts.
+struct MeshoptFrame {
+  std::vector<uint8_t> raw;
+  uint32_t sizes[3];  // indexBytes, indexCount, attributeBytes
+  const uint8_t* rangeBegin;
+};
+
+MeshoptFrame readMeshoptFrame(const uint8_t* data, size_t size, const PayloadHeader& h) {
+  size_t pos = sizeof(PayloadHeader);
+  uint32_t rawSize, zSize;
+  if (size < pos + 8) bad("truncated before the zstd frame");
+  std::memcpy(&rawSize, data + pos, 4);
+  std::memcpy(&zSize, data + pos + 4, 4);
+  pos += 8;
+  const bool ranged = h.flags & format::kPayloadRangePositions;
+  const bool rangeIndices = h.flags & format::kPayloadRangeIndices;
+  const bool contextual = h.flags & format::kPayloadPositionContexts;
+  if ((rangeIndices || contextual) && !ranged) bad("version-3 flags without range-coded positions");
+  if (rangeIndices && (h.flags & format::kPayloadStrip)) bad("range-coded indices cannot be a strip");
+  // Version 3 with range-coded indices may store the raw bytes as they are (zSize 0).
+  const bool stored = rangeIndices && zSize == 0;
+  const size_t frameBytes = stored ? rawSize : zSize;
+  // Version 1 payloads end with the zstd frame; range-coded streams follow it.
+  if (ranged ? frameBytes > size - pos : size - pos != zSize)
+    bad("zstd frame size " + std::to_string(zSize) + " does not match payload");
+  // rawSize is bounded by what the counts allow, so a damaged header cannot make us allocate GBs
+  size_t n = h.vertexCount;
+  uint64_t tri3 = uint64_t(h.triangleCount) * 3;
+  uint64_t maxRaw = 12 + meshopt_encodeIndexSequenceBound(tri3 + h.triangleCount, n) +
+                    meshopt_encodeIndexBufferBound(tri3, n) + meshopt_encodeVertexBufferBound(n, 8) + n * 12;
+  if (rawSize > maxRaw) bad("raw size " + std::to_string(rawSize) + " too large for its counts");
+  MeshoptFrame f;
+  f.raw.resize(rawSize);
+  if (stored) {
+    std::memcpy(f.raw.data(), data + pos, rawSize);
+  } else {
+    thread_local std::unique_ptr<ZSTD_DCtx, size_t (*)(ZSTD_DCtx*)> dctx(ZSTD_createDCtx(), ZSTD_freeDCtx);
+    if (!dctx) bad("cannot create a zstd decompression context");
+    size_t got = ZSTD_decompressDCtx(dctx.get(), f.raw.data(), f.raw.size(), data + pos, zSize);
+    if (ZSTD_isError(got) || got != rawSize) bad("zstd frame does not decompress");
+  }
+  if (rawSize < 12) bad("raw stream too short");
+  std::memcpy(f.sizes, f.raw.data(), 12);
+  f.rangeBegin = data + pos + frameBytes;
+  return f;
+}
+
+// The triangle list from the index code `ib` (a list, or a strip with kPayloadStrip).
+void decodeMeshoptTriangles(const PayloadHeader& h, const uint8_t* ib, const uint32_t sizes[3], DecodedPatch& out) {
+  size_t n = h.vertexCount;
+  uint64_t tri3 = uint64_t(h.triangleCount) * 3;
+  uint32_t indexCount = sizes[1];
+  if (h.flags & format::kPayloadStrip) {
+    if (indexCount > tri3 + h.triangleCount + 3) bad("strip too long");
+    std::vector<uint32_t> s(indexCount);
+    if (indexCount && meshopt_decodeIndexSequence(s.data(), indexCount, 4, ib, sizes[0]) != 0)
+      bad("index sequence does not decode");
+    for (uint32_t i : s)
+      if (i != ~0u && i >= n) bad("strip index out of range");
+    out.triangles.resize(meshopt_unstripifyBound(indexCount));
+    out.triangles.resize(meshopt_unstripify(out.triangles.data(), s.data(), indexCount, ~0u));
+  } else {
+    if (indexCount != tri3) bad("index count does not match triangle count");
+    out.triangles.resize(indexCount);
+    if (indexCount && meshopt_decodeIndexBuffer(out.triangles.data(), indexCount, 4, ib, sizes[0]) != 0)
+      bad("index stream does not decode");
+  }
+  if (out.triangles.size() != tri3) bad("triangle count mismatch");
+  for (uint32_t i : out.triangles)
+    if (i >= n) bad("triangle index " + std::to_string(i) + " out of range");
+}
+
+// Normals and colours from the meshopt vertex code `ab` of `bytes` bytes.
+void decodeMeshoptAttributes(const PayloadHeader& h, const uint8_t* ab, uint32_t bytes, DecodedPatch& out) {
+  size_t n = h.vertexCount;
+  uint32_t attrStride = format::attributeStride(h.flags);
+  if (attrStride == 0) {
+    if (bytes != 0) bad("attribute stream present without attributes");
+    return;
+  }
+  std::vector<uint8_t> attrs(n * attrStride);
+  if (n && meshopt_decodeVertexBuffer(attrs.data(), n, attrStride, ab, bytes) != 0)
+    bad("attribute stream does not decode");
+  if (h.flags & format::kPayloadNormals) out.normals.resize(n * 3);
+  if (h.flags & format::kPayloadColors) out.colors.resize(n * 4);
+  for (size_t v = 0; v < n; ++v) {
+    const uint8_t* d = &attrs[v * attrStride];
+    if (h.flags & format::kPayloadNormals) decodeOctahedral8(d, &out.normals[v * 3]), d += 2;
+    if (h.flags & format::kPayloadColors) std::memcpy(&out.colors[v * 4], d, 4);
+  }
+}
+
+// Checks the decoded grid coordinates and stores them as qRel.
+void storeDecodedPositions(const std::vector<int64_t>& q, size_t seenCount, size_t n, std::vector<uint32_t>& qRel) {
+  if (seenCount != n) bad("vertices not referenced by any triangle");
+  qRel.resize(n * 3);
+  for (size_t i = 0; i < n * 3; ++i) {
+    if (q[i] < 0 || q[i] > kMaxQ) bad("decoded grid coordinate out of range");
+    qRel[i] = uint32_t(q[i]);
+  }
+}
+
+// Positions with kPayloadPositionContexts: the encoder's walk replayed, each residual decoded with
+// the context of its prediction kind, plus its prediction, gives q.
+void decodeContextPositions(RangeDecoder& rc, const std::vector<uint32_t>& triangles, size_t n,
+                            std::vector<uint32_t>& qRel) {
+  std::vector<int64_t> q(n * 3, 0);
+  const int64_t range[3] = {kMaxQ, kMaxQ, kMaxQ};
+  size_t seenCount = 0;
+  bool tooWide = false;
+  auto model = std::make_unique<ContextModel>();
+  parallelogramWalk(triangles.data(), triangles.size(), n, q.data(), range,
+                    [&](uint32_t v, const int64_t pred[3], const Prediction& how) {
+                      for (uint32_t x = 0; x < 3; ++x) {
+                        uint32_t z = 0;
+                        if (!decodeResidual(rc, *model, how.kind, x, z)) tooWide = true;
+                        q[v * 3 + x] = pred[x] + unzigzag(z);
+                      }
+                      ++seenCount;
+                    });
+  if (tooWide) bad("position stream names a residual wider than 32 bits");
+  if (rc.overrun() > 0) bad("position stream truncated");
+  storeDecodedPositions(q, seenCount, n, qRel);
+}
+
+// Positions of version 1 (byte planes `pb` in the frame) and version 2 (range-coded, one context
+// per axis): all residuals first, then the walk.
+void decodeLegacyPositions(RangeDecoder& rc, bool ranged, size_t planes, const uint8_t* pb,
+                           const std::vector<uint32_t>& triangles, size_t n, std::vector<uint32_t>& qRel) {
+  std::vector<uint32_t> res;
+  if (ranged) {
+    res.resize(n * 3);
+    ResidualModel model;
+    for (size_t i = 0; i < n * 3; ++i)
+      if (!model.decode(rc, int(i % 3), res[i])) bad("position stream names a residual wider than 32 bits");
+    if (rc.overrun() > 0) bad("position stream truncated");
+  }
+  std::vector<int64_t> q(n * 3, 0);
+  const int64_t range[3] = {kMaxQ, kMaxQ, kMaxQ};
+  size_t seenCount = 0;
+  parallelogramWalk(triangles.data(), triangles.size(), n, q.data(), range,
+                    [&](uint32_t v, const int64_t pred[3], const Prediction&) {
+                      for (int x = 0; x < 3; ++x) {
+                        uint32_t z = 0;
+                        if (ranged) z = res[v * 3 + x];
+                        else
+                          for (size_t b = 0; b < planes; ++b) z |= uint32_t(pb[(x * planes + b) * n + v]) << (8 * b);
+                        q[v * 3 + x] = pred[x] + unzigzag(z);
+                      }
+                      ++seenCount;
+                    });
+  storeDecodedPositions(q, seenCount, n, qRel);
+}
+
+}  // namespace
+
+std::vector<uint8_t> encodeMeshopt(const Prepared& p, const PatchCodecOptions& options) {
+  setMeshoptVersions();
+  if (options.strips && !p.indices.empty()) {
+    std::vector<uint8_t> strip = encodeMeshoptStrip(p, options);
+    if (!strip.empty()) return strip;
+  }
+  return encodeMeshoptWith(p, p.indices, p.indexCode, uint32_t(p.indices.size()), false, options);
+}
+
+void decodeMeshopt(const uint8_t* data, size_t size, const PayloadHeader& h, DecodedPatch& out,
+                   std::vector<uint32_t>& qRel) {
+  MeshoptFrame f = readMeshoptFrame(data, size, h);
+  const bool ranged = h.flags & format::kPayloadRangePositions;
+  const bool rangeIndices = h.flags & format::kPayloadRangeIndices;
+  size_t n = h.vertexCount;
+  size_t planes = ranged ? 0 : (h.flags & format::kPayloadWide) ? 4 : 2;
+  const uint32_t* sizes = f.sizes;
+  // The range-coded stream (positions, and first the index code with kPayloadRangeIndices).
+  RangeDecoder rc(f.rangeBegin, data + size);
+  std::vector<uint8_t> rangedIndex;
+  const uint8_t* ib = f.raw.data() + 12;
+  const uint8_t* ab = ib + sizes[0];
+  if (rangeIndices) {
+    if (uint64_t(sizes[2]) + 12 != f.raw.size()) bad("stream sizes do not add up");
+    if (sizes[0] < 1 + uint64_t(h.triangleCount) + 16 ||
+        sizes[0] > meshopt_encodeIndexBufferBound(uint64_t(h.triangleCount) * 3, n))
+      bad("index code size " + std::to_string(sizes[0]) + " does not fit the triangle count");
+    rangedIndex.resize(sizes[0]);
+    decodeIndexCode(rc, rangedIndex.data(), rangedIndex.size(), h.triangleCount);
+    if (rc.overrun() > 0) bad("index stream truncated");
+    ib = rangedIndex.data();
+    ab = f.raw.data() + 12;
+  } else if (uint64_t(sizes[0]) + sizes[2] + 12 + n * 3 * planes != f.raw.size()) {
+    bad("stream sizes do not add up");
+  }
+  decodeMeshoptTriangles(h, ib, sizes, out);
+  decodeMeshoptAttributes(h, ab, sizes[2], out);
+  if (h.flags & format::kPayloadPositionContexts) decodeContextPositions(rc, out.triangles, n, qRel);
+  else decodeLegacyPositions(rc, ranged, planes, ab + sizes[2], out.triangles, n, qRel);
+}
+
+PayloadBytes meshoptPayloadBytes(const uint8_t* data, size_t size) {
+  PayloadBytes b;
+  b.header = sizeof(PayloadHeader);
+  PayloadHeader h;
+  if (size < sizeof h + 8) return b.other = size - b.header, b;
+  std::memcpy(&h, data, sizeof h);
+  uint32_t rawSize, zSize;
+  std::memcpy(&rawSize, data + sizeof h, 4);
+  std::memcpy(&zSize, data + sizeof h + 4, 4);
+  b.header += 8;
+  const bool rangeIndices = h.flags & format::kPayloadRangeIndices;
+  size_t frame = rangeIndices && zSize == 0 ? rawSize : zSize;
+  if (frame > size - b.header) return b.other = size - b.header, b;
+  if (!(h.flags & format::kPayloadRangePositions)) return b.index = size - b.header, b;
+  const uint8_t* rs = data + b.header + frame;
+  size_t rest = size - b.header - frame;
+  if (!rangeIndices) {
+    // The frame holds the index code (and the attributes, if any).
+    b.index = frame, b.positions = rest;
+    return b;
+  }
+  b.attributes = frame;
+  std::vector<uint8_t> raw(std::max<uint32_t>(rawSize, 12));
+  if (zSize == 0) std::memcpy(raw.data(), data + b.header, rawSize);
+  else if (ZSTD_isError(ZSTD_decompress(raw.data(), raw.size(), data + b.header, zSize))) return b.other = rest, b;
+  uint32_t indexBytes;
+  std::memcpy(&indexBytes, raw.data(), 4);
+  if (indexBytes < 1 + uint64_t(h.triangleCount) + 16 || indexBytes > (uint64_t(h.triangleCount) + 1) * 64)
+    return b.other = rest, b;
+  std::vector<uint8_t> code(indexBytes);
+  RangeDecoder rc(rs, rs + rest);
+  decodeIndexCode(rc, code.data(), code.size(), h.triangleCount);
+  // The decoder has read up to 4 bytes ahead of what the index code needed.
+  b.index = std::min(rest, rc.consumed(rs) > 4 ? rc.consumed(rs) - 4 : size_t(0));
+  b.positions = rest - b.index;
+  return b;
+}
+
+}  // namespace mt::codec_detail
