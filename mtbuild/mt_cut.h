@@ -1,6 +1,8 @@
 // Cuts of an MT file: choosing them, assembling them into one welded mesh, and checking that the
 // result is conforming. Used by the inspection tools (mtverify, mtextract), by the build tests and
-// as the reference the renderer's ExtractRender is tested against.
+// as the reference the renderer's ExtractRender is tested against. One job per file: node sets and
+// cut selection (mt_cut.cpp), welding by grid position (mt_weld.cpp), the conformity check
+// (mt_conformity.cpp) and the bounded edge counting it uses (mt_edge_count.h/.cpp).
 //
 // Vocabulary (BMT section 3.1, mt_format.h "DAG orientation"): a cut is given by a node SET that
 // contains the source (node 0, full resolution), not the sink (last node), and is closed under

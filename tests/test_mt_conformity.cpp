@@ -5,6 +5,7 @@
 // overflow and are split again), and the same verdict on deliberately broken cuts, with a first
 // problem that is a real violating edge.
 #include <gtest/gtest.h>
+#include <tbb/global_control.h>
 
 #include <cstdio>
 #include <map>
@@ -274,6 +275,41 @@ TEST(BoundedConformity, DamagedPatchesAndTooSmallABudgetAreClearErrors) {
         EXPECT_NE(std::string(e.what()).find("patch 3"), std::string::npos) << e.what();
       }
     }
+}
+
+// The bounded check's plan, its overflow splits and its report depend only on the file, the arcs
+// and the options: the same for 1, 2 and 4 threads, on a broken cut whose parts overflow.
+TEST(BoundedConformity, PartsSplitsAndReportDoNotDependOnThreads) {
+  TempDir tmp;
+  auto r = MtFileReader::open(buildMt(tmp, "--triangles 20k --holes 4 --seed 21", "--patch-triangles 300"));
+  const std::vector<uint32_t> finest = cutArcs(*r, finestCut(*r).inSet);
+  std::vector<uint32_t> twice = finest;
+  twice.push_back(finest[finest.size() / 2]);
+  const ConformityReference ref = makeConformityReference(assembleCut(*r, finest));
+  const std::vector<GridBox> boxes = allPatchBoxes(*r);
+  for (const Variant& v : {kVariants[4], kVariants[5]}) {
+    SCOPED_TRACE(v.name);
+    const EdgeCountOptions o = optionsOf(v, boxes);
+    std::string first;
+    uint32_t parts = 0, splits = 0;
+    uint64_t newEdges = 0;
+    for (int threads : {1, 2, 4}) {
+      tbb::global_control limit(tbb::global_control::max_allowed_parallelism, size_t(threads));
+      EdgeCountStats st;
+      const ConformityReport rep = checkConforming(*r, twice, ref, o, &st);
+      ASSERT_FALSE(rep.conforming());
+      EXPECT_GT(st.splitParts, 0u) << "the underestimate must overflow parts";
+      if (threads == 1) {
+        first = rep.firstProblem, parts = st.parts, splits = st.splitParts;
+        newEdges = rep.newBoundaryEdges + rep.newNonManifoldEdges;
+        continue;
+      }
+      EXPECT_EQ(rep.firstProblem, first) << threads << " threads";
+      EXPECT_EQ(st.parts, parts) << threads << " threads";
+      EXPECT_EQ(st.splitParts, splits) << threads << " threads";
+      EXPECT_EQ(rep.newBoundaryEdges + rep.newNonManifoldEdges, newEdges) << threads << " threads";
+    }
+  }
 }
 
 }  // namespace
