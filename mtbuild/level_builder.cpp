@@ -8,10 +8,12 @@
 #include <cstdlib>
 #include <filesystem>
 #include <limits>
+#include <thread>
 
 #include <unistd.h>
 
 #include "base/interrupt.h"
+#include "base/memory_plan.h"
 #include "base/output_path.h"
 #include "base/process.h"
 #include "mtbuild/level_state.h"
@@ -126,7 +128,7 @@ bool LevelBuilder::State::weldToGrid(const QuantizationGrid& grid) {
   for (int a = 0; a < 3; ++a) cells.origin[a] = grid.origin[a];
   cells.step = grid.step;
   heal::HealOptions ho;
-  ho.memoryBytes = std::max<uint64_t>(options.memoryBytes / 4, 16ull << 20);
+  ho.memoryBytes = planMemory(options.memoryBytes, 1).gridWeld;
   ho.progress = options.progress;
   heal::PassReport w = heal::weldToGrid(*store, cells, ho);
   report.weldedVertices = w.get("merged");
@@ -497,6 +499,8 @@ BuildReport LevelBuilder::finish() {
   report.buildSeconds = secondsSince(s.buildStart);
   report.totalSeconds = secondsSince(s.t0);
   report.peakRssBytes = peakRssBytes();
+  const unsigned threads = s.options.threads ? s.options.threads : std::max(1u, std::thread::hardware_concurrency());
+  report.extraJson += ",\n  \"memory_plan\": " + toJson(planMemory(s.options.memoryBytes, threads));
   auto reader = MtFileReader::open(s.output);
   report.storedTriangles = reader->header().storedTriangles;
   s.completed = true;

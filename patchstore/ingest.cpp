@@ -44,6 +44,7 @@
 // ingest_internal.h what they share.
 #include <malloc.h>
 #include <signal.h>
+#include <tbb/task_arena.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -98,7 +99,7 @@ void boundaryStage(IngestContext& ctx, PatchStageOutput& patches) {
   SharedSorter& shared = *patches.shared;
   checkInterrupt("ingest: sort");
   shared.finish();
-  EntrySorter entries(ctx.scratch + "/s6", ctx.memoryBytes / 8);
+  EntrySorter entries(ctx.scratch + "/s6", ctx.plan.boundarySorter);
   {
     LocalRec r;
     bool have = shared.next(r);
@@ -165,7 +166,9 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
   useStreamingAllocator();
   StageClock clock(opt.progress);
   auto impl = std::make_unique<PatchStore::Impl>();
-  IngestContext ctx{scratch, opt.memoryBytes, opt.progress, assigner, report, *impl, clock};
+  // Every buffer's share of the cap (base/memory_plan.h).
+  const MemoryPlan plan = planMemory(opt.memoryBytes, unsigned(std::max(1, tbb::this_task_arena::max_concurrency())));
+  IngestContext ctx{scratch, plan, opt.progress, assigner, report, *impl, clock};
   ParsedInput in = parseInput(input, ctx);
   impl->env = env;
   impl->dir = dir;

@@ -281,9 +281,8 @@ void endOfPass(IngestContext& ctx, const char* stage) {
 // does not give, and the assign stage then looks cells up in spatially coherent order (cache hits
 // instead of random reads of the seed tables). Deterministic: ties by face.
 void chunkedCentroids(IngestContext& ctx, const ParsedInput& in) {
-  const uint64_t B = ctx.memoryBytes;
-  MortonFaceSorter byCode(ctx.scratch + "/s0", B / 4, MortonFaceCode{}, 63, true);
-  computeCentroids(ctx.scratch, in, B * 2 / 5, byCode, ctx.progress);
+  MortonFaceSorter byCode(ctx.scratch + "/s0", ctx.plan.chunkedSorter, MortonFaceCode{}, 63, true);
+  computeCentroids(ctx.scratch, in, ctx.plan.chunkedPositions, byCode, ctx.progress);
   std::remove((ctx.scratch + "/face.bin").c_str());
   endOfPass(ctx, "centroids");
   checkInterrupt("ingest: sort");
@@ -304,16 +303,16 @@ using CellSorter = ExternalSorter<FaceRec, FaceLess>;
 // vpartition/irregular.cpp; its time is reported apart from the sorts'), then every face keyed in
 // Morton order; faces externally sorted by (cell key, face).
 std::unique_ptr<CellSorter> chunkedAssign(IngestContext& ctx, const ParsedInput& in) {
-  const uint64_t B = ctx.memoryBytes, nf = in.faces;
+  const uint64_t nf = in.faces;
   CentroidFile centroids(ctx.scratch + "/morton.bin", nf, in.bounds);
   {
     Progress progress(ctx.progress, "ingest: partition", nf);
-    ctx.assigner.prepare(centroids, B / 2);
+    ctx.assigner.prepare(centroids, ctx.plan.assigner);
     progress.finish(nf);
   }
   ctx.report.assigner = ctx.assigner.describe();
   endOfPass(ctx, "partition");
-  auto byCell = std::make_unique<CellSorter>(ctx.scratch + "/s1", B / 4, FaceLess{}, true);
+  auto byCell = std::make_unique<CellSorter>(ctx.scratch + "/s1", ctx.plan.chunkedSorter, FaceLess{}, true);
   Progress progress(ctx.progress, "ingest: assign", nf);
   TempReader cr(ctx.scratch + "/morton.bin", 4 << 20);
   std::vector<FaceCentroid> batch;
@@ -349,7 +348,7 @@ std::unique_ptr<PairSorter> chunkedGroup(IngestContext& ctx, CellSorter& byCell,
   checkInterrupt("ingest: sort");
   byCell.finish();
   std::vector<uint64_t>& patchKey = out.patchKey;
-  auto pairs = std::make_unique<PairSorter>(ctx.scratch + "/s2", ctx.memoryBytes / 4, U64Less{}, true);
+  auto pairs = std::make_unique<PairSorter>(ctx.scratch + "/s2", ctx.plan.chunkedSorter, U64Less{}, true);
   TempWriter pface(ctx.scratch + "/pface.bin", 4 << 20);
   constexpr size_t kBatch = 64;
   std::vector<std::vector<uint32_t>> tris(kBatch), verts(kBatch);
@@ -415,7 +414,7 @@ std::unique_ptr<PatchSorter<Full>> chunkedJoin(IngestContext& ctx, const ParsedI
                                                PatchStageOutput& out) {
   checkInterrupt("ingest: sort");
   pairs.finish();
-  auto byPatch = std::make_unique<PatchSorter<Full>>(ctx.scratch + "/s3", ctx.memoryBytes / 4, KeyLess<VertexData<Full>>{}, true);
+  auto byPatch = std::make_unique<PatchSorter<Full>>(ctx.scratch + "/s3", ctx.plan.chunkedSorter, KeyLess<VertexData<Full>>{}, true);
   Progress progress(ctx.progress, "ingest: vertices", in.vertices, "vert");
   TempReader vr(ctx.scratch + "/vert.bin", 4 << 20);
   std::vector<char> rec(in.layout.size());
@@ -522,8 +521,8 @@ void chunkedPatches(IngestContext& ctx, const ParsedInput& in, PatchSorter<Full>
                     PatchStageOutput& out) {
   checkInterrupt("ingest: sort");
   byPatch.finish();
-  out.shared = std::make_unique<SharedSorter>(ctx.scratch + "/s4", ctx.memoryBytes / 8);
-  out.edges = std::make_unique<EdgeSorter>(ctx.scratch + "/s5", ctx.memoryBytes / 16);
+  out.shared = std::make_unique<SharedSorter>(ctx.scratch + "/s4", ctx.plan.chunkedSharedSorter);
+  out.edges = std::make_unique<EdgeSorter>(ctx.scratch + "/s5", ctx.plan.chunkedEdgeSorter);
   const uint32_t P = uint32_t(out.patchKey.size());
   Progress progress(ctx.progress, "ingest: patches", in.faces);
   TempReader pface(ctx.scratch + "/pface.bin", 4 << 20);

@@ -19,6 +19,7 @@
 
 #include "base/external_sort.h"
 #include "base/interrupt.h"
+#include "base/memory_plan.h"
 #include "base/process.h"
 #include "base/temp_file.h"
 #include "patchstore/store_impl.h"
@@ -332,11 +333,11 @@ class MortonSort {
 
 // ---- what the stages hand to each other ----------------------------------------------------------
 
-// What every stage reads: the scratch folder, the cap, the assigner, and what it fills (the
-// report and the new store's state).
+// What every stage reads: the scratch folder, the memory plan (every buffer's share of the cap),
+// the assigner, and what it fills (the report and the new store's state).
 struct IngestContext {
   const std::string& scratch;
-  uint64_t memoryBytes;  // the --memory cap
+  const MemoryPlan& plan;
   bool progress;         // progress lines on stderr
   CellAssigner& assigner;
   IngestReport& report;

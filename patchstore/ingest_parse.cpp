@@ -332,7 +332,7 @@ std::optional<FaceFile> plyTriangleBlock(const std::string& path) {
 // STL is a triangle soup: three new vertices per triangle. Vertices with bit-identical positions
 // are welded (out of core: sort by position, then rewrite the corners in vertex order), so the
 // store holds a connected mesh; the duplicates stay in vert.bin, unreferenced. Returns the count
-// of vertices merged into an earlier one.
+// of vertices merged into an earlier one. `budget`: each of its two sorters' (alive together).
 uint64_t weldSoup(const std::string& scratch, const VertexRecordLayout& layout, uint64_t nv, uint64_t budget) {
   struct PosRec {
     double p[3];
@@ -351,7 +351,7 @@ uint64_t weldSoup(const std::string& scratch, const VertexRecordLayout& layout, 
   struct MapLess {
     bool operator()(const MapRec& a, const MapRec& b) const { return a.vertex < b.vertex; }
   };
-  ExternalSorter<PosRec, PosLess> byPosition(scratch + "/w1", budget / 2, {}, true);
+  ExternalSorter<PosRec, PosLess> byPosition(scratch + "/w1", budget, {}, true);
   {
     TempReader vr(scratch + "/vert.bin", 4 << 20);
     std::vector<char> rec(layout.size());
@@ -366,7 +366,7 @@ uint64_t weldSoup(const std::string& scratch, const VertexRecordLayout& layout, 
   }
   checkInterrupt("ingest: sort");
   byPosition.finish();
-  ExternalSorter<MapRec, MapLess> byVertex(scratch + "/w2", budget / 2, {}, true);
+  ExternalSorter<MapRec, MapLess> byVertex(scratch + "/w2", budget, {}, true);
   uint64_t welded = 0;
   {
     PosRec r, first{};
@@ -402,17 +402,6 @@ uint64_t weldSoup(const std::string& scratch, const VertexRecordLayout& layout, 
 
 
 // Resident set size now (VmRSS), to size the passes that follow the resident vertex records.
-
-// The most bytes of vertex records the resident path keeps in RAM: the records, a state byte per
-// vertex and a bit per vertex and thread must fit in the cap with a reserve for the passes'
-// buffers and the assigner. The reserve covers what the resident passes hold besides the records
-// at their peak (sort buffers, which shrink to fit, the assigner's seeds and tables, the process
-// itself; measured at 53M/512M: ~165 MiB above the records, of which ~60 MiB can shrink).
-uint64_t residentRecordLimit(uint64_t B, const VertexRecordLayout& layout) {
-  const uint64_t reserve = std::max<uint64_t>(128ull << 20, B / 4);
-  const double perVertex = double(layout.size()) + 1 + std::max(2, tbb::this_task_arena::max_concurrency()) / 8.0;
-  return B > reserve ? uint64_t(double(B - reserve) * double(layout.size()) / perVertex) : 0;
-}
 
 // The reader on its own thread; this one runs the Morton pipeline over its chunks (codes in
 // parallel, added to the sort in face order) until the reader is done.
@@ -521,11 +510,13 @@ void reportRead(const MeshHeader& header, const ReadStats& stats, IngestReport& 
 }  // namespace
 
 ParsedInput parseInput(const std::string& input, IngestContext& ctx) {
-  const uint64_t B = ctx.memoryBytes;
   auto reader = openMesh(input);
   const MeshHeader& header = reader->header();
   const VertexRecordLayout expected{header.doublePrecision, header.hasNormals, header.hasColors};
-  const uint64_t residentLimit = residentRecordLimit(B, expected);
+  // The records stay in RAM when they fit the plan's limit (its reserve covers what the resident
+  // passes hold besides the records at their peak: sort buffers, which shrink to fit, the
+  // assigner's seeds and tables, the process itself).
+  const uint64_t residentLimit = ctx.plan.residentRecordLimit(expected.size());
   Progress parseProgress(ctx.progress, "ingest: parse", uint64_t(std::max<int64_t>(0, header.declaredFaces)));
   ScratchSink sink(ctx.scratch, parseProgress, residentLimit);
   // A resident binary PLY of triangles: its faces are read in place later, not copied.
@@ -537,11 +528,10 @@ ParsedInput parseInput(const std::string& input, IngestContext& ctx) {
     if (inPlace) sink.skipFaceFile();
   }
   // The Morton sort of the resident path, filled during the parse when the input allows it; its
-  // budget is what the declared vertex records leave.
+  // budget is what the declared vertex records leave (with 64 MiB for the parse's buffers).
   const uint64_t declaredRecords = uint64_t(std::max<int64_t>(0, header.declaredVertices)) * expected.size();
   ParsedInput in;
-  in.morton = std::make_unique<MortonSort>(
-      ctx.scratch + "/m0", std::max<uint64_t>(8 << 20, B > declaredRecords + (64 << 20) ? (B - declaredRecords - (64 << 20)) * 4 / 5 : 0));
+  in.morton = std::make_unique<MortonSort>(ctx.scratch + "/m0", ctx.plan.residentSorter(declaredRecords, 64ull << 20));
   ReadStats stats;
   if (residentLimit > 0) {
     stats = readFused(*reader, sink, *in.morton, expected);
@@ -560,7 +550,7 @@ ParsedInput parseInput(const std::string& input, IngestContext& ctx) {
   assert(stats.triangles == in.faces);  // the sink saw every triangle the reader counted
   if (header.format == MeshFormat::StlAscii || header.format == MeshFormat::StlBinary) {
     Progress progress(ctx.progress, "ingest: weld", in.vertices, "vert");
-    ctx.report.weldedVertices = weldSoup(ctx.scratch, in.layout, in.vertices, B * 6 / 10);
+    ctx.report.weldedVertices = weldSoup(ctx.scratch, in.layout, in.vertices, ctx.plan.soupWeldSorter);
     progress.finish(in.vertices);
   }
   if (!sink.inRam() && in.vertices * in.layout.size() <= residentLimit) sink.loadVertices(ctx.scratch);

@@ -432,22 +432,16 @@ void buildResidentPatch(ResidentPatch& w, const ResidentVertices& rv, const uint
     if (s.shared[l]) w.shared.push_back({s.globals[l], l});
 }
 
-// Room left for the resident passes: the cap minus what is resident now (records, code, the
-// assigner later), with a margin for what the passes allocate besides their sort buffers.
-uint64_t room(uint64_t B, uint64_t margin) {
-  uint64_t rss = currentRssBytes();
-  uint64_t left = B > rss + margin ? B - rss - margin : 0;
-  return std::max<uint64_t>(8 << 20, left);
-}
-
 // Stage 2: the assigner prepared from the Morton-ordered centroids (the irregular V-partition
 // samples them). Returns whether the input's face order is spatially coherent.
 bool residentPartition(IngestContext& ctx, ParsedInput& in, const ResidentVertices& rv) {
   bool coherent = true;
   {
-    ResidentCentroids centroids(ctx, in, rv, room(ctx.memoryBytes, 32 << 20) * 4 / 5);
+    // The sorters' shares are what the resident set (records, code, the assigner later) leaves,
+    // with a margin for what the pass allocates besides them (MemoryPlan::residentSorter).
+    ResidentCentroids centroids(ctx, in, rv, ctx.plan.residentSorter(currentRssBytes(), 32 << 20));
     Progress progress(ctx.progress, "ingest: partition", in.faces);
-    ctx.assigner.prepare(centroids, ctx.memoryBytes / 2);
+    ctx.assigner.prepare(centroids, ctx.plan.assigner);
     progress.finish(in.faces);
     coherent = centroids.coherent();
     std::remove((ctx.scratch + "/morton.bin").c_str());
@@ -467,7 +461,7 @@ using FaceGroups = KeyGroupSorter<FaceCorners, AdditionOrder>;
 std::unique_ptr<FaceGroups> residentAssign(IngestContext& ctx, const ParsedInput& in, const ResidentVertices& rv, bool coherent) {
   const size_t batchFaces = coherent ? kFaceBatch : 4 * kFaceBatch;
   const uint64_t batchBytes = coherent ? 0 : (size_t(std::max(2, tbb::this_task_arena::max_concurrency())) + 2) * batchFaces * 56;
-  auto groups = std::make_unique<FaceGroups>(ctx.scratch + "/g", room(ctx.memoryBytes, (48 << 20) + batchBytes) * 4 / 5,
+  auto groups = std::make_unique<FaceGroups>(ctx.scratch + "/g", ctx.plan.residentSorter(currentRssBytes(), (48 << 20) + batchBytes),
                                              AdditionOrder{}, true);
   Progress progress(ctx.progress, "ingest: assign", in.faces);
   struct Keyed {
@@ -630,9 +624,9 @@ std::vector<uint8_t> residentShared(IngestContext& ctx, const ParsedInput& in, F
 void residentPatches(IngestContext& ctx, const ParsedInput& in, const ResidentVertices& rv, FaceGroups& groups,
                      const std::vector<uint8_t>& state, PatchStageOutput& out) {
   {
-    const uint64_t left = room(ctx.memoryBytes, 48 << 20);
-    out.shared = std::make_unique<SharedSorter>(ctx.scratch + "/s4", left / 3, KeyOf<LocalRec>{}, 64, true);
-    out.edges = std::make_unique<EdgeSorter>(ctx.scratch + "/s5", left / 6, KeyOf<EdgeRec>{}, 64, true);
+    const uint64_t inUse = currentRssBytes();
+    out.shared = std::make_unique<SharedSorter>(ctx.scratch + "/s4", ctx.plan.residentSharedSorter(inUse), KeyOf<LocalRec>{}, 64, true);
+    out.edges = std::make_unique<EdgeSorter>(ctx.scratch + "/s5", ctx.plan.residentEdgeSorter(inUse), KeyOf<EdgeRec>{}, 64, true);
   }
   SharedSorter& shared = *out.shared;
   EdgeSorter& edges = *out.edges;

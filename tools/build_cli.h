@@ -12,6 +12,7 @@
 #include <string>
 
 #include "base/error.h"
+#include "base/memory_plan.h"
 #include "base/output_path.h"
 #include "base/size.h"
 #include "mtbuild/build.h"
@@ -123,7 +124,7 @@ struct BuildCli {
     if (normals && noNormals) throw Error("--normals and --no-normals contradict each other");
     BuildOptions o;
     o.memoryBytes = parseBuildMemory(memory);
-    o.levelLoopBytes = o.memoryBytes / 2;
+    o.levelLoopBytes = planMemory(o.memoryBytes, 1).levelLoop;  // the plan's share for the regions in flight
     const bool threadsGiven = threadsOption && threadsOption->count() > 0;
     const bool patchGiven = patchTrianglesOption && patchTrianglesOption->count() > 0;
     if ((threadsGiven || threads != 0) && (threads < 1 || threads > kMaxBuildThreads))

@@ -13,6 +13,7 @@
 #include <unordered_set>
 
 #include "base/external_sort.h"
+#include "base/memory_plan.h"
 #include "base/progress.h"
 #include "patchstore/heal/region.h"
 
@@ -202,7 +203,7 @@ PassReport removeSmallComponents(PatchStore& store, uint64_t minTriangles, const
   struct LinkLess {
     bool operator()(const Link& a, const Link& b) const { return std::tie(a.key, a.node) < std::tie(b.key, b.node); }
   };
-  ExternalSorter<Link, LinkLess> sorter(scratchPrefix(store, options, "components"), options.memoryBytes / 2);
+  ExternalSorter<Link, LinkLess> sorter(scratchPrefix(store, options, "components"), planMemory(options.memoryBytes, 1).healSorter);
   std::vector<uint32_t> base(ids.size() + 1, 0);
   std::vector<uint64_t> nodeTriangles;
   std::vector<uint32_t> label, vertexLabel;

@@ -27,6 +27,7 @@
 #include <xxhash.h>
 
 #include "base/external_sort.h"
+#include "base/memory_plan.h"
 #include "base/progress.h"
 #include "patchstore/heal/region.h"
 
@@ -257,7 +258,7 @@ PassReport weldToGrid(PatchStore& store, const GridCells& grid, const HealOption
   keyOf.bits = bits;
   keyOf.packed = packed;
 
-  StableKeySorter<CellRecord, CellKey> sorter(scratchPrefix(store, options, "gridweld"), options.memoryBytes, CellKey{},
+  StableKeySorter<CellRecord, CellKey> sorter(scratchPrefix(store, options, "gridweld"), planMemory(options.memoryBytes, 1).healSorter, CellKey{},
                                               packed ? 3 * bits : 64);
   const std::vector<PatchId> withRepeated = scanVertices(store, grid, keyOf, info.vertices, options.progress, sorter);
   std::vector<std::vector<uint64_t>> candidates = candidateClusters(sorter);

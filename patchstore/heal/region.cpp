@@ -11,6 +11,7 @@
 #include <tuple>
 
 #include "base/external_sort.h"
+#include "base/memory_plan.h"
 #include "base/progress.h"
 
 namespace mt::heal {
@@ -329,7 +330,7 @@ struct EdgeLess {
 
 void edgeCensus(const PatchStore& store, const HealOptions& options, const std::function<bool(uint32_t)>& want,
                 const std::function<void(const EdgeUse&)>& fn, const char* task) {
-  ExternalSorter<EdgeRecord, EdgeLess> sorter(scratchPrefix(store, options, "edges"), options.memoryBytes / 2);
+  ExternalSorter<EdgeRecord, EdgeLess> sorter(scratchPrefix(store, options, "edges"), planMemory(options.memoryBytes, 1).healSorter);
   std::vector<PatchId> ids = store.patchIds();
   Progress progress(options.progress, task, ids.size(), "patches");
   std::vector<EdgeRecord> local;

@@ -20,6 +20,7 @@
 #include <tuple>
 
 #include "base/external_sort.h"
+#include "base/memory_plan.h"
 #include "base/interrupt.h"
 #include "base/progress.h"
 #include "patchstore/heal/region.h"
@@ -72,7 +73,7 @@ void step(PatchStore& store, double factor, const HealOptions& options, const st
     if (interruptible) checkInterrupt(task);
   };
   // A. 1-rings of shared vertices.
-  ExternalSorter<RingRecord, RingLess> sorter(scratchPrefix(store, options, "smooth"), options.memoryBytes / 2);
+  ExternalSorter<RingRecord, RingLess> sorter(scratchPrefix(store, options, "smooth"), planMemory(options.memoryBytes, 1).healSorter);
   std::vector<uint32_t> offset, ring;
   Progress progressA(options.progress, task + " rings", ids.size(), "patches");
   size_t done = 0;

@@ -19,6 +19,7 @@
 #include <unordered_map>
 
 #include "base/external_sort.h"
+#include "base/memory_plan.h"
 #include "base/progress.h"
 #include "patchstore/heal/region.h"
 
@@ -190,7 +191,7 @@ PassReport weld(PatchStore& store, double eps, const HealOptions& options) {
   Sorters sorters;
   for (int g = 0; g < grids; ++g)
     sorters.push_back(std::make_unique<ExternalSorter<Point, PointLess>>(
-        scratchPrefix(store, options, "weld" + std::to_string(g)), options.memoryBytes / 2 / grids));
+        scratchPrefix(store, options, "weld" + std::to_string(g)), planMemory(options.memoryBytes, 1).healSorter / grids));
   addVertices(store, eps, options, sorters);
   Clusters clusters;
   pairNeighbours(sorters, eps, clusters);
