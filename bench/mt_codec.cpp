@@ -1,10 +1,10 @@
-// Patch codec size and speed (mtbuild/patch_codec.h): bytes per triangle and encode/decode rates
+// Patch codec size and speed (mtfile/patch_codec.h): bytes per triangle and encode/decode rates
 // for both codecs, with and without normals, on ~2k-triangle scan-like patches: a regular grid
 // (level 0 of a range scan) and the same surface simplified 2x and 4x (coarser levels).
 // Grid step = 1/16 of the sample spacing (quantization error 0.054 spacing).
 #include <benchmark/benchmark.h>
 
-#include "mtbuild/patch_codec.h"
+#include "mtfile/patch_codec.h"
 #include "mtbuild/simplify_region.h"
 #include "testing/scan_grid.h"
 

@@ -16,7 +16,7 @@
 #include <string>
 #include <vector>
 
-#include "mtbuild/patch_codec.h"
+#include "mtfile/patch_codec.h"
 #include "mtbuild/simplify_region.h"
 #include "patchstore/patch_store.h"
 #include "vpartition/vpartition.h"

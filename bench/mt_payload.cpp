@@ -21,8 +21,8 @@
 
 #include <zstd.h>
 
-#include "mtbuild/mt_file.h"
-#include "mtbuild/patch_codec.h"
+#include "mtfile/mt_file.h"
+#include "mtfile/patch_codec.h"
 
 using namespace mt;
 using Clock = std::chrono::steady_clock;

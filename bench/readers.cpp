@@ -9,7 +9,7 @@
 #include <string>
 
 #include "patchstore/io/ply_writer.h"
-#include "patchstore/mesh_reader.h"
+#include "patchstore/io/mesh_reader.h"
 
 namespace {
 

@@ -14,8 +14,8 @@
 #include <vector>
 
 #include "base/error.h"
-#include "mtbuild/mt_format.h"
-#include "mtbuild/patch_codec.h"
+#include "mtfile/mt_format.h"
+#include "mtfile/patch_codec.h"
 #include "patchstore/patch_store.h"
 #include "vpartition/vpartition.h"
 

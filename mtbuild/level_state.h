@@ -17,7 +17,7 @@
 #include "base/progress.h"
 #include "mtbuild/build.h"
 #include "mtbuild/dag_node.h"
-#include "mtbuild/mt_file.h"
+#include "mtfile/mt_file.h"
 
 namespace mt {
 

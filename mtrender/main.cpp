@@ -24,7 +24,7 @@
 #include "base/size.h"
 #include "mtrender/engine.h"
 #include "mtrender/viewer.h"
-#include "tools/cli_checks.h"
+#include "base/cli_checks.h"
 
 using namespace mt::render;
 using Clock = std::chrono::steady_clock;

@@ -3,7 +3,7 @@
 // contributes a contiguous range), so every file shares one cut machinery, one patch cache and one
 // budget. Payloads are not read here: PatchServer reads them on demand through the readers.
 //
-// mtrender depends on mtbuild/mt_file.h (the MT file format and its reader, library mt_mtfile)
+// mtrender depends on mtfile/mt_file.h (the MT file format and its reader, library mt_mtfile)
 // and base/error.h only.
 #pragma once
 
@@ -13,7 +13,7 @@
 #include <string>
 #include <vector>
 
-#include "mtbuild/mt_file.h"
+#include "mtfile/mt_file.h"
 
 namespace mt::render {
 

@@ -23,7 +23,7 @@
 
 #include "base/env.h"
 #include "patchstore/cell_assigner.h"
-#include "patchstore/mesh_reader.h"
+#include "patchstore/io/mesh_reader.h"
 
 namespace mt {
 

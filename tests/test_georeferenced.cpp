@@ -11,9 +11,9 @@
 #include <string>
 #include <vector>
 
-#include "mtbuild/mt_file.h"
+#include "mtfile/mt_file.h"
 #include "patchstore/io/ply_writer.h"
-#include "patchstore/mesh_reader.h"
+#include "patchstore/io/mesh_reader.h"
 #include "tests/test_support.h"
 
 namespace mt {

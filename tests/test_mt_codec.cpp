@@ -1,4 +1,4 @@
-// Patch codec (mtbuild/patch_codec.h): exact round trip of grid coordinates and triangles for both
+// Patch codec (mtfile/patch_codec.h): exact round trip of grid coordinates and triangles for both
 // codecs, with and without normals/colours; shared border vertices quantize identically.
 #include <gtest/gtest.h>
 
@@ -13,9 +13,9 @@
 #include <tuple>
 
 #include "base/error.h"
-#include "mtbuild/fan_order.h"
-#include "mtbuild/mt_file.h"
-#include "mtbuild/patch_codec.h"
+#include "mtfile/fan_order.h"
+#include "mtfile/mt_file.h"
+#include "mtfile/patch_codec.h"
 #include "mtbuild/simplify_region.h"
 #include "test_support.h"
 #include "testing/scan_grid.h"
@@ -453,7 +453,7 @@ TEST(Codec, BadInputAndDamagedPayloadsThrow) {
   }
 }
 
-// ---- fan order (mtbuild/fan_order.h) ---------------------------------------------------------
+// ---- fan order (mtfile/fan_order.h) ---------------------------------------------------------
 
 // The triangles as a multiset of index triples rotated to their smallest corner (winding kept).
 std::multiset<std::array<uint32_t, 3>> rotatedSet(const std::vector<uint32_t>& tris) {

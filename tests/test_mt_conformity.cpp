@@ -1,4 +1,4 @@
-// The crack-free check in bounded memory (mtbuild/mt_cut.h "Conformity in bounded memory")
+// The crack-free check in bounded memory (mtfile/mt_cut.h "Conformity in bounded memory")
 // against the in-memory one (assembleCut + makeConformityReference + checkConforming), on MT
 // files built by mtgen + mtbuild: the same reference and the same counts for every cut, whatever
 // the budget and the way the edges are split into parts (k-d boxes, hash ranges, parts that
@@ -16,8 +16,8 @@
 #include <vector>
 
 #include "base/error.h"
-#include "mtbuild/mt_cut.h"
-#include "mtbuild/mt_file.h"
+#include "mtfile/mt_cut.h"
+#include "mtfile/mt_file.h"
 #include "tests/test_support.h"
 
 namespace mt::test {

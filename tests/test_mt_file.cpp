@@ -1,4 +1,4 @@
-// MT file writer/reader (mtbuild/mt_file.h): round trip, temporary name until complete, and clear
+// MT file writer/reader (mtfile/mt_file.h): round trip, temporary name until complete, and clear
 // one-line errors naming the file (and the patch or byte offset) for every kind of damage.
 #include <gtest/gtest.h>
 
@@ -8,7 +8,7 @@
 
 #include "base/env.h"
 #include "base/error.h"
-#include "mtbuild/mt_file.h"
+#include "mtfile/mt_file.h"
 #include "testing/scan_grid.h"
 #include "tests/test_support.h"
 

@@ -1,5 +1,5 @@
 // The MT inspection tools (mtinfo, mtverify, mtextract) and the cut library they share
-// (mtbuild/mt_cut.h), on small MT files written here with MtFileWriter: a wavy scan-like grid cut
+// (mtfile/mt_cut.h), on small MT files written here with MtFileWriter: a wavy scan-like grid cut
 // in 4x4 level-0 tiles (the source's fragment), four level-1 nodes each simplifying a 2x2 group of
 // tiles with the group's border locked (BMT section 4), one level-2 node over everything, a sink.
 // Deliberately broken variants (a flipped payload byte, a non-monotone error, a moved border
@@ -19,10 +19,10 @@
 #include <vector>
 
 #include "base/error.h"
-#include "mtbuild/mt_cut.h"
-#include "mtbuild/mt_file.h"
+#include "mtfile/mt_cut.h"
+#include "mtfile/mt_file.h"
 #include "mtbuild/simplify_region.h"
-#include "patchstore/mesh_reader.h"
+#include "patchstore/io/mesh_reader.h"
 #include "testing/scan_grid.h"
 #include "tests/test_support.h"
 

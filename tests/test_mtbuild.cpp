@@ -12,7 +12,7 @@
 #include <random>
 
 #include "mtbuild/build.h"
-#include "mtbuild/mt_file.h"
+#include "mtfile/mt_file.h"
 #include "mtbuild/region_window.h"
 #include "tests/test_support.h"
 

@@ -15,8 +15,8 @@
 #include <sstream>
 
 #include "base/error.h"
-#include "mtbuild/mt_cut.h"
-#include "mtbuild/mt_file.h"
+#include "mtfile/mt_cut.h"
+#include "mtfile/mt_file.h"
 #include "mtrender/engine.h"
 #include "mtrender/extract.h"
 #include "mtrender/image.h"

@@ -8,7 +8,7 @@
 #include <filesystem>
 #include <fstream>
 
-#include "patchstore/mesh_reader.h"
+#include "patchstore/io/mesh_reader.h"
 #include "tests/test_support.h"
 
 namespace mt::test {

@@ -11,7 +11,7 @@
 #include <vector>
 
 #include "patchstore/io/ply_writer.h"
-#include "patchstore/mesh_reader.h"
+#include "patchstore/io/mesh_reader.h"
 #include "tests/test_support.h"
 
 using ::testing::HasSubstr;

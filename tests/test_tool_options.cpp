@@ -16,7 +16,7 @@
 
 #include "base/error.h"
 #include "base/size.h"
-#include "mtbuild/mt_file.h"
+#include "mtfile/mt_file.h"
 #include "patchstore/patch_store.h"
 #include "tests/test_support.h"
 

@@ -3,7 +3,7 @@
 //   mtextract OUT.mt --triangles N -o CUT.ply             best cut of at most N triangles
 //   mtextract OUT.mt --eye X,Y,Z --target X,Y,Z [--fov DEG] [--width PX] [--pixels TOL]
 //                    [--triangles N] -o CUT.ply           view-dependent (BMT 5.1)
-// The cut is chosen by mtbuild/mt_cut.h, its patches decoded and welded by exact grid position,
+// The cut is chosen by mtfile/mt_cut.h, its patches decoded and welded by exact grid position,
 // and written with PlyWriter under a name unique to the process (CUT.ply.tmp.PID.RANDOM), renamed
 // over CUT.ply when complete: on any error nothing is left under CUT.ply. The input is never the
 // output (refused by inode), and the output format is chosen by the extension: .ply only.
@@ -23,10 +23,10 @@
 #include "base/error.h"
 #include "base/interrupt.h"
 #include "base/output_path.h"
-#include "mtbuild/mt_cut.h"
-#include "mtbuild/mt_file.h"
+#include "mtfile/mt_cut.h"
+#include "mtfile/mt_file.h"
 #include "patchstore/io/ply_writer.h"
-#include "tools/cli_checks.h"
+#include "base/cli_checks.h"
 
 namespace {
 

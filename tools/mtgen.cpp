@@ -34,7 +34,7 @@
 #include "base/error.h"
 #include "base/output_path.h"
 #include "patchstore/io/ply_writer.h"
-#include "tools/cli_checks.h"
+#include "base/cli_checks.h"
 #include "testing/scan_generator.h"
 
 namespace {

@@ -14,9 +14,9 @@
 
 #include "base/error.h"
 #include "base/output_path.h"
-#include "mtbuild/mt_cut.h"
-#include "mtbuild/mt_file.h"
-#include "tools/cli_checks.h"
+#include "mtfile/mt_cut.h"
+#include "mtfile/mt_file.h"
+#include "base/cli_checks.h"
 
 namespace {
 

@@ -9,7 +9,7 @@
 //    source is left out: it is in every cut, never refined past, so its sphere means nothing
 //    (the builder writes radius 0); what a node must hold of it is its floor;
 // 5. crack-free cuts: the finest and coarsest cuts and K random valid cuts, each welded by exact
-//    grid position, are conforming by the rule in mtbuild/mt_cut.h (no boundary / non-manifold
+//    grid position, are conforming by the rule in mtfile/mt_cut.h (no boundary / non-manifold
 //    edge away from the input's own). The cuts are never assembled: their edges are counted in
 //    parts that fit --memory (mt_cut.h "Conformity in bounded memory"), so any file size can be
 //    checked; the payload pass of 1 gathers the patches' grid boxes the parts are planned from.
@@ -30,9 +30,9 @@
 #include "base/error.h"
 #include "base/output_path.h"
 #include "base/size.h"
-#include "mtbuild/mt_cut.h"
-#include "mtbuild/mt_file.h"
-#include "tools/cli_checks.h"
+#include "mtfile/mt_cut.h"
+#include "mtfile/mt_file.h"
+#include "base/cli_checks.h"
 
 namespace {
 
@@ -357,7 +357,7 @@ int main(int argc, char** argv) {
                "checksum; the DAG's shape; errors monotone towards the sink (sink +inf); bounding spheres nested\n"
                "and containing their patches; and crack-free cuts: the finest, the coarsest and K random valid\n"
                "cuts, each welded by exact grid position, may have no boundary or non-manifold edge away from the\n"
-               "input's own (rule in mtbuild/mt_cut.h). One line per problem on stderr; exit 0 only if all hold.\n"
+               "input's own (rule in mtfile/mt_cut.h). One line per problem on stderr; exit 0 only if all hold.\n"
                "Memory: --memory, plus the file's DAG and index and the check's own per-patch arrays (about 120\n"
                "bytes per patch in all, ~0.15 byte per input triangle), for any file size. Cuts are never assembled:\n"
                "their edges are counted in parts that fit --memory (32-byte table slots, 3/4 full at most), each\n"

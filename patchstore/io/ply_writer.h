@@ -9,7 +9,7 @@
 #include <string>
 #include <vector>
 
-#include "patchstore/mesh_reader.h"
+#include "patchstore/io/mesh_reader.h"
 
 namespace mt {
 

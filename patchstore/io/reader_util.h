@@ -19,7 +19,7 @@
 #include <type_traits>
 #include <vector>
 
-#include "patchstore/mesh_reader.h"
+#include "patchstore/io/mesh_reader.h"
 
 namespace mt::io {
 

@@ -17,8 +17,8 @@
 #include <string>
 
 #include "base/error.h"
-#include "mtbuild/patch_codec_detail.h"
-#include "mtbuild/range_coder.h"
+#include "mtfile/patch_codec_detail.h"
+#include "mtfile/range_coder.h"
 
 namespace mt::codec_detail {
 

@@ -1,7 +1,7 @@
 // Patch codec (see patch_codec.h; byte layouts in mt_format.h): the grid, octahedral normals, the
 // preparation shared by both codecs, and the dispatch. The codecs are patch_codec_meshopt.cpp and
 // patch_codec_draco.cpp (patch_codec_detail.h lists the files).
-#include "mtbuild/patch_codec.h"
+#include "mtfile/patch_codec.h"
 
 #include <meshoptimizer.h>
 
@@ -11,8 +11,8 @@
 #include <string>
 
 #include "base/error.h"
-#include "mtbuild/fan_order.h"
-#include "mtbuild/patch_codec_detail.h"
+#include "mtfile/fan_order.h"
+#include "mtfile/patch_codec_detail.h"
 
 namespace mt {
 

@@ -22,8 +22,8 @@
 #include <vector>
 
 #include "base/env.h"
-#include "mtbuild/mt_format.h"
-#include "mtbuild/patch_codec.h"
+#include "mtfile/mt_format.h"
+#include "mtfile/patch_codec.h"
 
 namespace mt {
 

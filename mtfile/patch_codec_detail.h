@@ -11,8 +11,8 @@
 #include <string>
 #include <vector>
 
-#include "mtbuild/mt_format.h"
-#include "mtbuild/patch_codec.h"
+#include "mtfile/mt_format.h"
+#include "mtfile/patch_codec.h"
 
 namespace mt::codec_detail {
 

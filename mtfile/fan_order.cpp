@@ -1,5 +1,5 @@
 // Fan order for the patch codec (see fan_order.h).
-#include "mtbuild/fan_order.h"
+#include "mtfile/fan_order.h"
 
 #include <cassert>
 #include <utility>

@@ -9,7 +9,7 @@
 #include <functional>
 #include <vector>
 
-#include "mtbuild/mt_cut.h"
+#include "mtfile/mt_cut.h"
 
 namespace mt::cut_internal {
 

@@ -1,5 +1,5 @@
 // MT file writer and reader (see mt_file.h, layout in mt_format.h).
-#include "mtbuild/mt_file.h"
+#include "mtfile/mt_file.h"
 
 #include <xxhash.h>
 

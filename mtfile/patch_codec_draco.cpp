@@ -11,7 +11,7 @@
 #include <draco/mesh/mesh.h>
 
 #include "base/error.h"
-#include "mtbuild/patch_codec_detail.h"
+#include "mtfile/patch_codec_detail.h"
 
 namespace mt::codec_detail {
 

@@ -1,6 +1,6 @@
 // Counting a cut's edges in bounded memory (mt_edge_count.h; the plan and its guarantees are in
 // mt_cut.h, "Conformity in bounded memory").
-#include "mtbuild/mt_edge_count.h"
+#include "mtfile/mt_edge_count.h"
 
 #include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
@@ -15,7 +15,7 @@
 #include <thread>
 
 #include "base/error.h"
-#include "mtbuild/mt_cut_internal.h"
+#include "mtfile/mt_cut_internal.h"
 
 namespace mt::cut_internal {
 

@@ -21,7 +21,7 @@
 #include <cstdint>
 #include <vector>
 
-#include "mtbuild/mt_format.h"
+#include "mtfile/mt_format.h"
 
 namespace mt {
 

@@ -1,7 +1,7 @@
 // Cuts of an MT file as node sets (see mt_cut.h for the vocabulary): their validity, the cut
 // selections (by error, triangle budget or view, at random for tests), their statistics, and the
 // payload check. Assembling a cut is in mt_weld.cpp, its conformity in mt_conformity.cpp.
-#include "mtbuild/mt_cut.h"
+#include "mtfile/mt_cut.h"
 
 #include <tbb/parallel_for.h>
 

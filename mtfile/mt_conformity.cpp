@@ -11,8 +11,8 @@
 #include <cstdio>
 
 #include "base/error.h"
-#include "mtbuild/mt_cut.h"
-#include "mtbuild/mt_edge_count.h"
+#include "mtfile/mt_cut.h"
+#include "mtfile/mt_edge_count.h"
 
 namespace mt {
 

@@ -6,7 +6,7 @@
 #include <string>
 #include <vector>
 
-#include "mtbuild/mt_file.h"
+#include "mtfile/mt_file.h"
 
 namespace mt::cut_internal {
 

@@ -48,7 +48,7 @@
 #include <string>
 #include <vector>
 
-#include "mtbuild/mt_file.h"
+#include "mtfile/mt_file.h"
 
 namespace mt {
 

@@ -6,8 +6,8 @@
 #include <cassert>
 #include <cmath>
 
-#include "mtbuild/mt_cut_internal.h"
-#include "mtbuild/mt_cut.h"
+#include "mtfile/mt_cut_internal.h"
+#include "mtfile/mt_cut.h"
 
 namespace mt {
 
