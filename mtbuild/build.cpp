@@ -382,6 +382,7 @@ std::string fingerprint(const std::string& input, const BuildOptions& o, bool st
   s << "patch_triangles=" << o.patchTriangles << "\n";
   s << "codec=" << (o.codec == format::Codec::Draco ? "draco" : "meshopt") << "\n";
   s << "normals=" << (o.normals ? 1 : 0) << "\n";
+  s << "simplifier=" << (o.simplifier == RegionSimplifier::Meshopt ? "meshopt" : "quadric") << "\n";
   s << "root_triangles=" << o.rootTriangles << "\n";
   return s.str();
 }
@@ -465,6 +466,9 @@ RegionResult processRegion(const RegionTask& task, const RegionContext& ctx) {
   out.encoded = encodePatches(floorPatches(lm), ctx.grid, codec);
   // Simplify to about half with the region's border locked (BMT 4), split by V*(level).
   SimplifyRegionOptions so;
+  so.simplifier = ctx.simplifier;
+  so.gridStep = ctx.grid.step;
+  for (int a = 0; a < 3; ++a) so.gridOrigin[a] = ctx.grid.origin[a];
   // At least one triangle: a region that had some must keep some, or its node would carry no
   // patch and have no arc to the sink (a one-triangle input built such a file).
   so.targetTriangles = std::max<size_t>(
@@ -923,6 +927,7 @@ LevelBuilder::LevelBuilder(const std::string& input, const std::string& output, 
   s.ctx.codec.normals = options.normals;
   s.ctx.sequence = &s.sequence;
   s.ctx.partitionLevels = s.sequence.levels();
+  s.ctx.simplifier = options.simplifier;
   s.ctx.rootTriangles = options.rootTriangles ? options.rootTriangles : 2ull * patchTriangles;
   if (!options.taskTimesPath.empty()) {
     s.taskTimes = std::fopen(options.taskTimesPath.c_str(), resumed ? "a" : "w");

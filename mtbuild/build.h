@@ -16,6 +16,7 @@
 #include "base/error.h"
 #include "mtbuild/mt_format.h"
 #include "mtbuild/patch_codec.h"
+#include "mtbuild/simplify_region.h"
 #include "patchstore/patch_store.h"
 #include "vpartition/vpartition.h"
 
@@ -46,6 +47,7 @@ struct BuildOptions {
   uint32_t patchTriangles = 0;        // 0: kDefaultMtPatchTriangles (ignored for a store input)
   format::Codec codec = format::Codec::Meshopt;
   bool normals = false;               // store normals (else the renderer computes them)
+  RegionSimplifier simplifier = RegionSimplifier::Quadric;  // --simplifier
   // Continue a killed build from the checkpoint in its work directory (the last finished level).
   bool resume = false;
   bool progress = true;
@@ -119,6 +121,7 @@ struct RegionContext {
   const PartitionSequence* sequence = nullptr;
   uint32_t partitionLevels = 0;       // sequence->levels()
   uint64_t rootTriangles = 0;
+  RegionSimplifier simplifier = RegionSimplifier::Quadric;
 };
 
 // One region of V(level): its floor (the V*(level-1) patches inside it) assembled into one mesh,

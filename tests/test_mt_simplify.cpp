@@ -75,24 +75,40 @@ TEST(SimplifyRegion, LockedVerticesKeepIdentityAndPosition) {
   size_t lockedCount = 0;
   for (uint8_t l : r.locked) lockedCount += l;
   ASSERT_GT(lockedCount, r.g.vertexCount() / 40);
-  SimplifyRegionOptions opt;
-  opt.targetTriangles = r.g.triangleCount() / 2;
-  SimplifiedRegion s = simplifyRegion(r.g.positions.data(), r.g.vertexCount(), r.g.triangles.data(),
-                                      r.g.triangleCount(), r.locked.data(), opt);
-  std::set<uint32_t> kept(s.origin.begin(), s.origin.end());
-  for (uint32_t v = 0; v < r.g.vertexCount(); ++v)
-    if (r.locked[v]) {
-      EXPECT_TRUE(kept.count(v)) << "locked vertex " << v << " removed";
+  for (RegionSimplifier simplifier : {RegionSimplifier::Quadric, RegionSimplifier::Meshopt}) {
+    SimplifyRegionOptions opt;
+    opt.targetTriangles = r.g.triangleCount() / 2;
+    opt.simplifier = simplifier;
+    SimplifiedRegion s = simplifyRegion(r.g.positions.data(), r.g.vertexCount(), r.g.triangles.data(),
+                                        r.g.triangleCount(), r.locked.data(), opt);
+    std::set<uint32_t> kept(s.origin.begin(), s.origin.end());
+    for (uint32_t v = 0; v < r.g.vertexCount(); ++v)
+      if (r.locked[v]) {
+        EXPECT_TRUE(kept.count(v)) << "locked vertex " << v << " removed";
+      }
+    uint32_t moved = 0;
+    for (size_t i = 0; i < s.origin.size(); ++i) {
+      if (i) {
+        ASSERT_LT(s.origin[i - 1], s.origin[i]);
+      }
+      bool same = true;
+      for (int k = 0; k < 3; ++k) same &= s.positions[i * 3 + k] == r.g.positions[s.origin[i] * 3 + k];  // bit-exact
+      if (r.locked[s.origin[i]] || simplifier == RegionSimplifier::Meshopt) {
+        ASSERT_TRUE(same) << "vertex " << s.origin[i] << " moved";
+      }
+      moved += !same;
     }
-  for (size_t i = 0; i < s.origin.size(); ++i) {
-    if (i) {
-      ASSERT_LT(s.origin[i - 1], s.origin[i]);
+    EXPECT_EQ(moved, s.movedVertices);
+    // Optimal placement moves most of the kept free vertices; half-edge collapse none.
+    if (simplifier == RegionSimplifier::Quadric) {
+      EXPECT_GT(moved, (s.vertexCount() - lockedCount) / 2);
+    } else {
+      EXPECT_EQ(moved, 0u);
     }
-    for (int k = 0; k < 3; ++k) ASSERT_EQ(s.positions[i * 3 + k], r.g.positions[s.origin[i] * 3 + k]);  // bit-exact
+    for (uint32_t i : s.triangles) ASSERT_LT(i, s.vertexCount());
+    std::set<uint32_t> referenced(s.triangles.begin(), s.triangles.end());
+    EXPECT_EQ(referenced.size(), s.vertexCount()) << "every output vertex is used";
   }
-  for (uint32_t i : s.triangles) ASSERT_LT(i, s.vertexCount());
-  std::set<uint32_t> referenced(s.triangles.begin(), s.triangles.end());
-  EXPECT_EQ(referenced.size(), s.vertexCount()) << "every output vertex is used";
 }
 
 TEST(SimplifyRegion, ReachesTargetAndSimplifiesHoleBorders) {
@@ -203,25 +219,34 @@ double bruteDistance2(const double* p, const double* positions, const uint32_t* 
   return best;
 }
 
-// The definition in simplify_region.h, computed the slow way: max of (a) removed input vertices
-// -> result triangles and (b) the centroids of the result triangles that are not input triangles
-// -> input triangles.
+// The definition in simplify_region.h, computed the slow way: max of (a) the input vertices no
+// result vertex sits on (removed or moved) -> result triangles and (b) the moved vertices, and the
+// centroids and edge midpoints of the result triangles that are not input triangles with unmoved
+// corners -> input triangles.
 double bruteForceError(const ScanGrid& g, const SimplifiedRegion& s) {
   std::set<std::array<uint32_t, 3>> input;
   for (size_t t = 0; t < g.triangleCount(); ++t)
     input.insert({g.triangles[t * 3], g.triangles[t * 3 + 1], g.triangles[t * 3 + 2]});
-  std::vector<uint8_t> used(g.vertexCount(), 0), kept(g.vertexCount(), 0);
+  std::vector<uint8_t> used(g.vertexCount(), 0), still(g.vertexCount(), 0);
   for (uint32_t v : g.triangles) used[v] = 1;
-  for (uint32_t o : s.origin) kept[o] = 1;
+  std::vector<uint8_t> moved(s.vertexCount(), 0);
+  for (uint32_t i = 0; i < s.vertexCount(); ++i) {
+    const uint32_t o = s.origin[i];
+    moved[i] = !std::equal(&s.positions[i * 3], &s.positions[i * 3] + 3, &g.positions[o * 3]);
+    still[o] = !moved[i];
+  }
   double worst2 = 0;
   for (uint32_t v = 0; v < g.vertexCount(); ++v)
-    if (used[v] && !kept[v])
+    if (used[v] && !still[v])
       worst2 = std::max(worst2, bruteDistance2(&g.positions[v * 3], s.positions.data(), s.triangles.data(), s.triangleCount()));
+  for (uint32_t i = 0; i < s.vertexCount(); ++i)
+    if (moved[i])
+      worst2 = std::max(worst2, bruteDistance2(&s.positions[i * 3], g.positions.data(), g.triangles.data(), g.triangleCount()));
   for (uint32_t t = 0; t < s.triangleCount(); ++t) {
-    if (input.count({s.origin[s.triangles[t * 3]], s.origin[s.triangles[t * 3 + 1]], s.origin[s.triangles[t * 3 + 2]]}))
+    const uint32_t* f = &s.triangles[t * 3];
+    if (!moved[f[0]] && !moved[f[1]] && !moved[f[2]] && input.count({s.origin[f[0]], s.origin[f[1]], s.origin[f[2]]}))
       continue;
-    const double* p[3] = {&s.positions[s.triangles[t * 3] * 3], &s.positions[s.triangles[t * 3 + 1] * 3],
-                          &s.positions[s.triangles[t * 3 + 2] * 3]};
+    const double* p[3] = {&s.positions[f[0] * 3], &s.positions[f[1] * 3], &s.positions[f[2] * 3]};
     double c[3];
     for (int a = 0; a < 3; ++a) c[a] = (p[0][a] + p[1][a] + p[2][a]) / 3;
     worst2 = std::max(worst2, bruteDistance2(c, g.positions.data(), g.triangles.data(), g.triangleCount()));
@@ -258,8 +283,10 @@ TEST(SimplifyRegion, MeasuredErrorEqualsBruteForce) {
     std::vector<uint8_t> locked(g.vertexCount(), 0);
     if (c.locks)
       for (uint32_t v = 0; v < g.vertexCount(); v += 13) locked[v] = 1;
+    for (RegionSimplifier simplifier : {RegionSimplifier::Quadric, RegionSimplifier::Meshopt}) {
     SimplifyRegionOptions opt;
     opt.targetTriangles = g.triangleCount() / c.div;
+    opt.simplifier = simplifier;
     SimplifiedRegion s = simplifyRegion(g.positions.data(), g.vertexCount(), g.triangles.data(), g.triangleCount(),
                                         c.locks ? locked.data() : nullptr, opt);
     ASSERT_LT(s.triangleCount(), g.triangleCount());
@@ -271,6 +298,8 @@ TEST(SimplifyRegion, MeasuredErrorEqualsBruteForce) {
                                             c.locks ? locked.data() : nullptr, opt);
     EXPECT_EQ(again.error, s.error);
     EXPECT_EQ(again.triangles, s.triangles);
+    EXPECT_EQ(again.positions, s.positions);
+    }
   }
 }
 
@@ -346,16 +375,19 @@ TEST(SimplifyRegion, NoNewEdgeBetweenLockedVertices) {
       uint32_t a = r.g.triangles[t + k], b = r.g.triangles[t + (k + 1) % 3];
       inputEdges.insert({std::min(a, b), std::max(a, b)});
     }
+  for (RegionSimplifier simplifier : {RegionSimplifier::Quadric, RegionSimplifier::Meshopt})
   for (size_t div : {2, 8}) {
     SimplifyRegionOptions opt;
     opt.targetTriangles = r.g.triangleCount() / div;
+    opt.simplifier = simplifier;
     SimplifiedRegion s = simplifyRegion(r.g.positions.data(), r.g.vertexCount(), r.g.triangles.data(),
                                         r.g.triangleCount(), r.locked.data(), opt);
     EXPECT_LT(s.triangleCount(), r.g.triangleCount() * 2 / div);
-    // Halving (the level loop's case) locks the border's first ring up front, which makes a chord
-    // impossible: one meshopt run. At 1/8 the ring would take too much of the budget, so the
-    // retry loop enforces the rule instead (and needs more than one run on this region).
-    if (div == 2) {
+    // The quadric simplifier refuses such a collapse itself: one run. For meshopt, halving (the
+    // level loop's case) locks the border's first ring up front, which makes a chord impossible:
+    // one run. At 1/8 the ring would take too much of the budget, so the retry loop enforces the
+    // rule instead (and needs more than one run on this region).
+    if (simplifier == RegionSimplifier::Quadric || div == 2) {
       EXPECT_EQ(s.attempts, 1u);
       EXPECT_GE(s.triangleCount(), opt.targetTriangles * 9 / 10);
     } else {

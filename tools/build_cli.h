@@ -59,7 +59,7 @@ inline uint64_t parseBuildMemory(const std::string& text) {
 }
 
 struct BuildCli {
-  std::string input, output, memory = "1G", partition = "irregular", codec = "meshopt", statsJson, workDir, taskTimes;
+  std::string input, output, memory = "1G", partition = "irregular", codec = "meshopt", simplifier = "quadric", statsJson, workDir, taskTimes;
   int64_t threads = 0, patchTriangles = 0;  // signed, so that -1 is refused with the range, not wrapped
   bool normals = false, noNormals = false, resume = false, quiet = false;
   CLI::Option *threadsOption = nullptr, *patchTrianglesOption = nullptr;  // given explicitly: 0 is refused
@@ -91,6 +91,9 @@ struct BuildCli {
                        "memory cap and a level has too few regions to share out; ignored for a store input, which keeps "
                        "its own)");
     app.add_option("--codec", codec, "Patch coding: meshopt (default, fast decode) or draco (smallest files)");
+    app.add_option("--simplifier", simplifier,
+                   "Region simplifier: quadric (default: edge collapse with optimal placement, closer to the input at\n"
+                   "equal size) or meshopt (half-edge collapse, every vertex an input vertex)");
     app.add_flag("--normals", normals, "Store per-vertex normals (2x8 bit) instead of letting the renderer compute them");
     app.add_flag("--no-normals", noNormals, "Store no normals (the default; kept for scripts that say so explicitly)");
     app.add_flag("--resume", resume,
@@ -135,6 +138,9 @@ struct BuildCli {
     if (codec == "meshopt") o.codec = format::Codec::Meshopt;
     else if (codec == "draco") o.codec = format::Codec::Draco;
     else throw Error("unknown --codec '" + codec + "' (expected meshopt or draco)");
+    if (simplifier == "quadric") o.simplifier = RegionSimplifier::Quadric;
+    else if (simplifier == "meshopt") o.simplifier = RegionSimplifier::Meshopt;
+    else throw Error("unknown --simplifier '" + simplifier + "' (expected quadric or meshopt)");
     // The output may not be the input (by inode, whatever the spelling): said first, as it matters
     // most. The MT tools know a file by its contents, but a build's output named .ply or .glb
     // would be taken for one by everything else.
