@@ -6,12 +6,14 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <functional>
 #include <map>
 #include <random>
 #include <set>
 #include <utility>
 
 #include "base/error.h"
+#include "mtbuild/quadric_simplify.h"
 #include "mtbuild/scan_grid.h"
 #include "mtbuild/simplify_region.h"
 #include "mtbuild/surface_distance.h"
@@ -401,6 +403,156 @@ TEST(SimplifyRegion, NoNewEdgeBetweenLockedVertices) {
         }
       }
   }
+}
+
+// The quadric simplifier on its own (mtbuild/quadric_simplify.h).
+struct QuadricRun {
+  std::vector<uint32_t> indices;
+  std::vector<double> positions;
+  std::vector<uint8_t> moved;
+  QuadricSimplifyStats stats;
+};
+
+QuadricRun runQuadric(const Region& r, size_t targetTriangles, const QuadricSimplifyOptions& options = {}) {
+  QuadricRun q;
+  q.indices.resize(r.g.triangles.size());
+  q.positions.resize(r.g.positions.size());
+  q.moved.resize(r.g.vertexCount());
+  size_t n = quadricSimplify(q.indices.data(), q.positions.data(), q.moved.data(), r.g.triangles.data(),
+                             r.g.triangles.size(), r.g.positions.data(), r.g.vertexCount(), 3 * sizeof(double),
+                             r.locked.data(), targetTriangles * 3, options, &q.stats);
+  q.indices.resize(n);
+  return q;
+}
+
+// z of the (unnormalized) normal of triangle t; the scan grid is a height field seen from +z.
+double normalZ(const std::vector<uint32_t>& tris, const std::vector<double>& pos, size_t t) {
+  const double *a = &pos[tris[t * 3] * 3], *b = &pos[tris[t * 3 + 1] * 3], *c = &pos[tris[t * 3 + 2] * 3];
+  return (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
+}
+
+// Connected components of the border edges: one per hole, plus the outer rim.
+size_t borderLoops(const std::vector<uint32_t>& tris) {
+  std::map<std::pair<uint32_t, uint32_t>, int> count;
+  for (size_t t = 0; t < tris.size(); t += 3)
+    for (int k = 0; k < 3; ++k) {
+      uint32_t a = tris[t + k], b = tris[t + (k + 1) % 3];
+      count[{std::min(a, b), std::max(a, b)}]++;
+    }
+  std::map<uint32_t, uint32_t> parent;
+  std::function<uint32_t(uint32_t)> find = [&](uint32_t v) { return parent[v] == v ? v : parent[v] = find(parent[v]); };
+  for (auto& [e, c] : count)
+    if (c == 1) {
+      if (!parent.count(e.first)) parent[e.first] = e.first;
+      if (!parent.count(e.second)) parent[e.second] = e.second;
+      parent[find(e.first)] = find(e.second);
+    }
+  size_t roots = 0;
+  for (auto& [v, p] : parent) roots += find(v) == v;
+  return roots;
+}
+
+TEST(QuadricSimplify, LocksTopologyBordersAndDeterminism) {
+  Region r = makeRegion();
+  std::set<std::pair<uint32_t, uint32_t>> inputEdges;
+  for (size_t t = 0; t < r.g.triangles.size(); t += 3)
+    for (int k = 0; k < 3; ++k) {
+      uint32_t a = r.g.triangles[t + k], b = r.g.triangles[t + (k + 1) % 3];
+      inputEdges.insert({std::min(a, b), std::max(a, b)});
+    }
+  for (size_t t = 0; t < r.g.triangleCount(); ++t) ASSERT_GT(normalZ(r.g.triangles, r.g.positions, t), 0);
+  const size_t loops = borderLoops(r.g.triangles);
+  ASSERT_EQ(loops, 4u);  // the rim and three holes
+  for (size_t div : {2, 8}) {
+    const size_t target = r.g.triangleCount() / div;
+    QuadricRun q = runQuadric(r, target);
+    EXPECT_LE(q.indices.size() / 3, target) << "div " << div;
+    EXPECT_GE(q.indices.size() / 3, target - 2) << "div " << div;  // a collapse removes 1 or 2
+    const size_t removed = r.g.triangleCount() - q.indices.size() / 3;
+    EXPECT_GE(q.stats.collapses, (removed + 1) / 2);  // an interior collapse removes 2, a border one 1
+    EXPECT_LE(q.stats.collapses, removed);
+    std::set<uint32_t> referenced(q.indices.begin(), q.indices.end());
+    for (uint32_t v = 0; v < r.g.vertexCount(); ++v)
+      if (r.locked[v]) {
+        EXPECT_TRUE(referenced.count(v)) << "locked vertex " << v << " removed";
+        EXPECT_EQ(q.moved[v], 0) << v;
+        for (int k = 0; k < 3; ++k) EXPECT_EQ(q.positions[v * 3 + k], r.g.positions[v * 3 + k]) << v;
+      }
+    EdgeStats e = edgeStats(q.indices);
+    EXPECT_EQ(e.nonManifoldEdges, 0u);
+    EXPECT_EQ(borderLoops(q.indices), loops) << "no hole closed, opened or merged; div " << div;
+    for (size_t t = 0; t < q.indices.size() / 3; ++t) ASSERT_GT(normalZ(q.indices, q.positions, t), 0) << "flip";
+    for (size_t t = 0; t < q.indices.size(); t += 3)
+      for (int k = 0; k < 3; ++k) {
+        uint32_t a = q.indices[t + k], b = q.indices[t + (k + 1) % 3];
+        if (r.locked[a] && r.locked[b]) {
+          EXPECT_TRUE(inputEdges.count({std::min(a, b), std::max(a, b)})) << "new chord " << a << "-" << b;
+        }
+      }
+    std::set<std::array<uint32_t, 3>> faces;
+    for (size_t t = 0; t < q.indices.size(); t += 3) {
+      std::array<uint32_t, 3> f = {q.indices[t], q.indices[t + 1], q.indices[t + 2]};
+      std::sort(f.begin(), f.end());
+      EXPECT_TRUE(faces.insert(f).second) << "duplicate face";
+    }
+    QuadricRun again = runQuadric(r, target);
+    EXPECT_EQ(again.indices, q.indices);
+    EXPECT_EQ(again.positions, q.positions);
+  }
+}
+
+// Moved vertices land on grid points, and no two kept vertices share a grid cell (cuts are welded
+// by grid position), also with a coarse step (a third of the sample spacing, where a snapped
+// optimum often costs more than an end, which is then kept instead).
+TEST(QuadricSimplify, GridPointsInDistinctCells) {
+  Region r = makeRegion();
+  for (double step : {0.1, 0.37}) {
+    QuadricSimplifyOptions o;
+    o.gridStep = step;
+    o.gridOrigin[0] = -1.01, o.gridOrigin[1] = -1.02, o.gridOrigin[2] = -30.03;
+    auto cell = [&](const double* p) {
+      std::array<int64_t, 3> c;
+      for (int a = 0; a < 3; ++a) c[a] = int64_t(std::floor((p[a] - o.gridOrigin[a]) / o.gridStep + 0.5));
+      return c;
+    };
+    std::set<std::array<int64_t, 3>> inputCells;
+    for (uint32_t v = 0; v < r.g.vertexCount(); ++v) inputCells.insert(cell(&r.g.positions[v * 3]));
+    ASSERT_EQ(inputCells.size(), r.g.vertexCount());
+    QuadricRun q = runQuadric(r, r.g.triangleCount() / 4, o);
+    std::set<uint32_t> kept(q.indices.begin(), q.indices.end());
+    std::set<std::array<int64_t, 3>> cells;
+    size_t moved = 0;
+    for (uint32_t v : kept) {
+      EXPECT_TRUE(cells.insert(cell(&q.positions[v * 3])).second) << "vertex " << v << " shares a cell";
+      if (!q.moved[v]) continue;
+      ++moved;
+      std::array<int64_t, 3> c = cell(&q.positions[v * 3]);
+      for (int a = 0; a < 3; ++a) EXPECT_EQ(q.positions[v * 3 + a], o.gridOrigin[a] + o.gridStep * double(c[a]));
+    }
+    EXPECT_GT(moved, kept.size() / (step < 0.2 ? 2 : 10)) << "step " << step;
+  }
+}
+
+// The point of optimal placement: at equal size, closer to the input on average than half-edge
+// collapse (every kept vertex an input sample) on a noisy curved surface.
+TEST(QuadricSimplify, CloserOnAverageThanHalfEdgeCollapse) {
+  Region r = makeRegion();
+  auto meanDistance = [&](const SimplifiedRegion& s) {
+    TriangleGrid grid(s.positions.data(), s.vertexCount(), s.triangles.data(), s.triangleCount());
+    double sum = 0;
+    for (uint32_t v = 0; v < r.g.vertexCount(); ++v) sum += grid.distance(&r.g.positions[v * 3]);
+    return sum / r.g.vertexCount();
+  };
+  SimplifyRegionOptions opt;
+  opt.targetTriangles = r.g.triangleCount() / 8;
+  SimplifiedRegion q = simplifyRegion(r.g.positions.data(), r.g.vertexCount(), r.g.triangles.data(),
+                                      r.g.triangleCount(), r.locked.data(), opt);
+  opt.simplifier = RegionSimplifier::Meshopt;
+  SimplifiedRegion m = simplifyRegion(r.g.positions.data(), r.g.vertexCount(), r.g.triangles.data(),
+                                      r.g.triangleCount(), r.locked.data(), opt);
+  EXPECT_LE(q.triangleCount(), m.triangleCount() * 21 / 20);
+  EXPECT_LT(meanDistance(q), 0.8 * meanDistance(m));
+  EXPECT_LT(q.error, m.error);
 }
 }  // namespace
 }  // namespace mt
