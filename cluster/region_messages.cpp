@@ -57,6 +57,7 @@ std::string encodeContext(const RegionContext& c, const std::string& sequenceByt
   w.put(c.codec);
   w.put(c.partitionLevels);
   w.put(c.rootTriangles);
+  w.put(c.simplifier);
   w.putString(sequenceBytes);
   return seal(w);
 }
@@ -67,6 +68,7 @@ void decodeContext(const std::string& bytes, WorkerContext& out) {
   out.context.codec = r.get<PatchCodecOptions>();
   out.context.partitionLevels = r.get<uint32_t>();
   out.context.rootTriangles = r.get<uint64_t>();
+  out.context.simplifier = r.get<RegionSimplifier>();
   out.sequence = PartitionSequence::deserialize(r.getString());
   out.context.sequence = &out.sequence;
 }

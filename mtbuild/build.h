@@ -16,6 +16,7 @@
 #include "base/error.h"
 #include "mtfile/mt_format.h"
 #include "mtfile/patch_codec.h"
+#include "mtbuild/simplify_region.h"
 #include "patchstore/patch_store.h"
 #include "vpartition/vpartition.h"
 
@@ -52,6 +53,7 @@ struct BuildOptions {
   format::Codec codec = format::Codec::Meshopt;
   bool strips = false;                // meshopt patches as tri-strips (--index-order strip)
   bool normals = false;               // store normals (else the renderer computes them)
+  RegionSimplifier simplifier = RegionSimplifier::Meshopt;  // --simplifier
   // Continue a killed build from the checkpoint in its work directory (the last finished level).
   bool resume = false;
   bool progress = true;
@@ -140,6 +142,7 @@ struct RegionContext {
   const PartitionSequence* sequence = nullptr;
   uint32_t partitionLevels = 0;       // sequence->levels()
   uint64_t rootTriangles = 0;
+  RegionSimplifier simplifier = RegionSimplifier::Meshopt;
 };
 
 // One region of V(level): its floor (the V*(level-1) patches inside it) assembled into one mesh,

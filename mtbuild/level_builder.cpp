@@ -265,6 +265,7 @@ LevelBuilder::LevelBuilder(const std::string& input, const std::string& output, 
   s.ctx.codec.strips = options.strips;
   s.ctx.sequence = &s.sequence;
   s.ctx.partitionLevels = s.sequence.levels();
+  s.ctx.simplifier = options.simplifier;
   s.ctx.rootTriangles = options.rootTriangles ? options.rootTriangles : 2ull * patchTriangles;
   if (!options.taskTimesPath.empty()) {
     s.taskTimes = std::fopen(options.taskTimesPath.c_str(), resumed ? "a" : "w");

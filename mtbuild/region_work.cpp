@@ -105,6 +105,9 @@ RegionResult processRegion(const RegionTask& task, const RegionContext& ctx) {
   out.encoded = encodePatches(floorPatches(lm), ctx.grid, codec);
   // Simplify to about half with the region's border locked (BMT 4), split by V*(level).
   SimplifyRegionOptions so;
+  so.simplifier = ctx.simplifier;
+  so.gridStep = ctx.grid.step;
+  for (int a = 0; a < 3; ++a) so.gridOrigin[a] = ctx.grid.origin[a];
   // At least one triangle: a region that had some must keep some, or its node would carry no
   // patch and have no arc to the sink (a one-triangle input built such a file).
   so.targetTriangles = std::max<size_t>(

@@ -1,4 +1,5 @@
-// Region simplification with per-vertex locks on meshoptimizer 0.18 (see simplify_region.h).
+// Region simplification with per-vertex locks (see simplify_region.h): the simplifier run, the
+// builder's rules checked on its result, and the measured error.
 #include "mtbuild/simplify_region.h"
 
 #include <meshoptimizer.h>
@@ -9,6 +10,7 @@
 #include <string>
 
 #include "base/error.h"
+#include "mtbuild/quadric_simplify.h"
 #include "mtbuild/surface_distance.h"
 #include "patchstore/patch_store.h"
 
@@ -16,69 +18,16 @@ namespace mt {
 
 namespace {
 
-// Runs meshopt_simplify with `lock` frozen; returns the kept triangle list (input indices) in `out`.
-// `pos` holds the vertexCount float positions; it is extended in place (and trimmed back on the
-// next call) with the lock duplicates, so retries reuse its storage.
-void simplifyLocked(std::vector<float>& pos, size_t vertexCount, const uint32_t* triangles, size_t indexCount,
-                    const std::vector<uint8_t>& lock, size_t targetIndexCount, float* relError,
-                    std::vector<uint32_t>& out) {
-  // One unreferenced duplicate per locked vertex: meshopt 0.18 then sees a position shared by two
-  // vertices without a matching attribute seam and classifies it Kind_Locked (never collapsed,
-  // but still a valid collapse target). Vertices are compared by float position, so two input
-  // vertices that round to the same float are also kept: conservative, never wrong.
-  pos.resize(vertexCount * 3);
-  for (size_t v = 0; v < vertexCount; ++v)
-    if (lock[v]) pos.push_back(pos[v * 3]), pos.push_back(pos[v * 3 + 1]), pos.push_back(pos[v * 3 + 2]);
-  out.resize(indexCount);
-  // Error limit: none (FLT_MAX); the target count decides, the error is measured afterwards.
-  size_t n = meshopt_simplify(out.data(), triangles, indexCount, pos.data(), pos.size() / 3, 12, targetIndexCount,
-                              FLT_MAX, 0, relError);
-  out.resize(n);
-}
-
-}  // namespace
-
-SimplifiedRegion simplifyRegion(const double* positions, size_t vertexCount, const uint32_t* triangles,
-                                size_t triangleCount, const uint8_t* locked, const SimplifyRegionOptions& options) {
-  size_t indexCount = triangleCount * 3;
-  std::vector<uint8_t> used(vertexCount, 0);
-  for (size_t i = 0; i < indexCount; ++i) {
-    if (triangles[i] >= vertexCount)
-      throw Error("simplifyRegion: triangle " + std::to_string(i / 3) + " uses vertex " +
-                  std::to_string(triangles[i]) + " of " + std::to_string(vertexCount));
-    used[triangles[i]] = 1;
-  }
-
-  // meshopt works in float: center the region first so far-from-origin scans keep their precision
-  // (positions are only used to rank collapses; the output copies the double input positions).
-  double lo[3] = {DBL_MAX, DBL_MAX, DBL_MAX}, hi[3] = {-DBL_MAX, -DBL_MAX, -DBL_MAX};
-  for (size_t v = 0; v < vertexCount; ++v)
-    for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], positions[v * 3 + a]), hi[a] = std::max(hi[a], positions[v * 3 + a]);
-  std::vector<uint8_t> lock(vertexCount, 0);
-  if (locked)
-    for (size_t v = 0; v < vertexCount; ++v) lock[v] = locked[v] ? 1 : 0;
-  std::vector<float> pos;
-  pos.reserve(vertexCount * 6);  // room for a duplicate of every vertex (locks and their first ring)
-  pos.resize(vertexCount * 3);
-  for (size_t v = 0; v < vertexCount; ++v)
-    for (int a = 0; a < 3; ++a) pos[v * 3 + a] = float(positions[v * 3 + a] - 0.5 * (lo[a] + hi[a]));
-
-  size_t targetIndexCount = std::min(options.targetTriangles, triangleCount) * 3;
-  float relError = 0;
-  std::vector<uint32_t> out;
-  // Things meshopt 0.18 does not promise and the builder needs: (1) a locked vertex can vanish
-  // when all its triangles collapse away (a locked corner whose other two vertices merge); (2) a
-  // border collapse can create a non-manifold edge (two hole borders pinched together), which a
-  // cut would show as a crack-like defect the input did not have. Either way: lock the input
-  // triangles around the offending vertices and redo. Deterministic; usually runs once.
-  // Input adjacency, both directions, in CSR form (counting sort: two linear passes). Entries
-  // are not deduplicated: the number of times w appears in v's list is the number of input
-  // triangles that use edge v-w (each triangle lists each of its edges once per direction).
-  std::vector<uint32_t> adjStart(vertexCount + 1, 0), adj(indexCount * 2);
-  for (size_t i = 0; i < indexCount; ++i) adjStart[triangles[i] + 1] += 2;
-  for (size_t v = 0; v < vertexCount; ++v) adjStart[v + 1] += adjStart[v];
-  {
-    std::vector<uint32_t> fill(adjStart.begin(), adjStart.end() - 1);
+// Input adjacency, both directions, in CSR form (counting sort: two linear passes). Entries are
+// not deduplicated: the number of times w appears in v's list is the number of input triangles
+// that use edge v-w (each triangle lists each of its edges once per direction).
+struct Adjacency {
+  std::vector<uint32_t> start, adj;
+  Adjacency(const uint32_t* triangles, size_t indexCount, size_t vertexCount)
+      : start(vertexCount + 1, 0), adj(indexCount * 2) {
+    for (size_t i = 0; i < indexCount; ++i) start[triangles[i] + 1] += 2;
+    for (size_t v = 0; v < vertexCount; ++v) start[v + 1] += start[v];
+    std::vector<uint32_t> fill(start.begin(), start.end() - 1);
     for (size_t t = 0; t < indexCount; t += 3)
       for (int k = 0; k < 3; ++k) {
         uint32_t a = triangles[t + k], b = triangles[t + (k + 1) % 3];
@@ -86,186 +35,292 @@ SimplifiedRegion simplifyRegion(const double* positions, size_t vertexCount, con
         adj[fill[b]++] = a;
       }
   }
-  auto inputUses = [&](uint32_t a, uint32_t b) {
-    if (adjStart[a + 1] - adjStart[a] > adjStart[b + 1] - adjStart[b]) std::swap(a, b);
+  size_t uses(uint32_t a, uint32_t b) const {
+    if (start[a + 1] - start[a] > start[b + 1] - start[b]) std::swap(a, b);
     size_t n = 0;
-    for (uint32_t i = adjStart[a]; i < adjStart[a + 1]; ++i) n += adj[i] == b;
+    for (uint32_t i = start[a]; i < start[a + 1]; ++i) n += adj[i] == b;
     return n;
-  };
-  // Rule (3) below (no new edge between two locked vertices) is what made most regions run
-  // meshopt two or three times (measured on level-1 regions of a 1M scan: 2.7 runs per region,
-  // ~44 such chords per region on the first run): collapsing a free vertex onto a locked
-  // neighbour joins that locked vertex to the free vertex's other neighbours. So every free
-  // vertex with a locked neighbour is locked up front (the region border's first ring). Then no
-  // locked vertex has a free neighbour, and since a collapse only adds neighbours to its target,
-  // no locked vertex ever gains one: no chord can appear and no locked vertex can lose its
-  // triangles (rules 1 and 3 hold by construction; 1.00 runs per region). The ring is not
-  // simplified at this level; it lies inside the next level's regions (BMT 4: the borders of
-  // V(i+1) and V(i+2) differ), which simplify it. Measured: same output count, same error.
-  // Only when the ring is cheap: locked vertices and their ring all survive, so when together
-  // they would take more than half of the target's vertices (~targetTriangles / 2; only for
-  // reductions far beyond the level loop's halving) the rest of the region would pay for them,
-  // and the retry loop alone is used instead.
-  if (locked) {
-    std::vector<uint32_t> ring;
-    size_t lockedUsed = 0;
-    for (size_t v = 0; v < vertexCount; ++v) {
-      if (!used[v]) continue;
-      if (locked[v]) {
-        ++lockedUsed;
-        continue;
-      }
-      for (uint32_t i = adjStart[v]; i < adjStart[v + 1]; ++i)
-        if (locked[adj[i]]) {
-          ring.push_back(uint32_t(v));
-          break;
-        }
-    }
-    if ((lockedUsed + ring.size()) * 4 <= targetIndexCount / 3)
-      for (uint32_t v : ring) lock[v] = 1;
   }
+};
+
+// One simplifier run with `lock` frozen: the kept triangle list (input ids) in `out`, and for the
+// quadric simplifier every vertex's position (`moved`: which changed).
+struct Run {
+  std::vector<uint32_t> out;
+  std::vector<double> positions;  // Quadric only: 3 per input vertex
+  std::vector<uint8_t> moved;     // Quadric only: 1 per input vertex
+  float relError = 0;             // Meshopt only
+  std::vector<float> pos;         // Meshopt only: centred float positions (+ lock duplicates)
+};
+
+// meshopt 0.18 with locks: one unreferenced duplicate per locked vertex makes meshopt see a
+// position shared by two vertices without a matching attribute seam and classify it Kind_Locked
+// (never collapsed, but still a valid collapse target). Vertices are compared by float position,
+// so two input vertices that round to the same float are also kept: conservative, never wrong.
+void runMeshopt(Run& run, size_t vertexCount, const uint32_t* triangles, size_t indexCount,
+                const std::vector<uint8_t>& lock, size_t targetIndexCount) {
+  std::vector<float>& pos = run.pos;
+  pos.resize(vertexCount * 3);
+  for (size_t v = 0; v < vertexCount; ++v)
+    if (lock[v]) pos.push_back(pos[v * 3]), pos.push_back(pos[v * 3 + 1]), pos.push_back(pos[v * 3 + 2]);
+  run.out.resize(indexCount);
+  // Error limit: none (FLT_MAX); the target count decides, the error is measured afterwards.
+  size_t n = meshopt_simplify(run.out.data(), triangles, indexCount, pos.data(), pos.size() / 3, 12, targetIndexCount,
+                              FLT_MAX, 0, &run.relError);
+  run.out.resize(n);
+}
+
+// meshopt works in float: centre the region first so far-from-origin scans keep their precision
+// (positions are only used to rank collapses; the output copies the double input positions).
+void prepareMeshopt(Run& run, const double* positions, size_t vertexCount) {
+  double lo[3] = {DBL_MAX, DBL_MAX, DBL_MAX}, hi[3] = {-DBL_MAX, -DBL_MAX, -DBL_MAX};
+  for (size_t v = 0; v < vertexCount; ++v)
+    for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], positions[v * 3 + a]), hi[a] = std::max(hi[a], positions[v * 3 + a]);
+  run.pos.reserve(vertexCount * 6);  // room for a duplicate of every vertex
+  run.pos.resize(vertexCount * 3);
+  for (size_t v = 0; v < vertexCount; ++v)
+    for (int a = 0; a < 3; ++a) run.pos[v * 3 + a] = float(positions[v * 3 + a] - 0.5 * (lo[a] + hi[a]));
+}
+
+// Meshopt only. Rule (3) of findBrokenRules (no new edge between locked vertices) made most regions
+// run meshopt two or three times (level-1 regions of a 1M scan: 2.7 runs per region, ~44 such
+// chords per region on the first run): collapsing a free vertex onto a locked neighbour joins that
+// locked vertex to the free vertex's other neighbours. So every free vertex with a locked
+// neighbour is locked up front (the region border's first ring). Then no locked vertex has a free
+// neighbour, and since a half-edge collapse only adds neighbours to its target, no locked vertex
+// ever gains one. The ring lies inside the next level's regions (BMT 4: the borders of V(i+1) and
+// V(i+2) differ), which simplify it. Only when the ring is cheap: locked vertices and their ring
+// all survive, so when together they would take more than half of the target's vertices the rest
+// of the region would pay for them, and the retry loop alone is used instead. (The quadric
+// simplifier checks the rule per collapse and needs no ring.)
+void lockBorderRing(std::vector<uint8_t>& lock, const uint8_t* locked, const std::vector<uint8_t>& used,
+                    const Adjacency& adjacency, size_t targetIndexCount) {
+  std::vector<uint32_t> ring;
+  size_t lockedUsed = 0;
+  for (size_t v = 0; v < lock.size(); ++v) {
+    if (!used[v]) continue;
+    if (locked[v]) {
+      ++lockedUsed;
+      continue;
+    }
+    for (uint32_t i = adjacency.start[v]; i < adjacency.start[v + 1]; ++i)
+      if (locked[adjacency.adj[i]]) {
+        ring.push_back(uint32_t(v));
+        break;
+      }
+  }
+  if ((lockedUsed + ring.size()) * 4 <= targetIndexCount / 3)
+    for (uint32_t v : ring) lock[v] = 1;
+}
+
+// What the builder needs and neither simplifier promises for every input (the quadric one checks
+// the same per collapse, but inputs that are non-manifold already can defeat a local check):
+// (1) a locked vertex vanished (all its triangles collapsed away); (2) an output edge is used by 3+
+// triangles that the input did not have so (two hole borders pinched together: a crack-like
+// defect in a cut); (3) a new edge between two locked vertices (a chord across the region's
+// border can duplicate an edge an outside patch already has, which the region cannot see).
+// Marks the vertices involved in `bad`; returns whether any rule was broken.
+bool findBrokenRules(const std::vector<uint32_t>& out, const std::vector<uint8_t>& lock,
+                     const std::vector<uint8_t>& used, const uint8_t* locked, const Adjacency& adjacency,
+                     std::vector<uint8_t>& kept, std::vector<uint8_t>& bad) {
+  const size_t vertexCount = lock.size();
+  std::fill(kept.begin(), kept.end(), 0);
+  std::fill(bad.begin(), bad.end(), 0);
+  for (uint32_t v : out) kept[v] = 1;
+  bool problem = false;
+  for (size_t v = 0; v < vertexCount; ++v)
+    if (lock[v] && used[v] && !kept[v]) bad[v] = 1, problem = true;
   // Output edges bucketed by their smaller vertex (counting sort), to find edges with 3+ triangles.
-  std::vector<uint32_t> edgeStart, edgeOther, edgeFill;
-  std::vector<uint8_t> kept(vertexCount), bad(vertexCount), multiplicity(vertexCount, 0);
-  int attempt = 0;
-  for (;; ++attempt) {
-    simplifyLocked(pos, vertexCount, triangles, indexCount, lock, targetIndexCount, &relError, out);
-    std::fill(kept.begin(), kept.end(), 0);
-    std::fill(bad.begin(), bad.end(), 0);
-    for (uint32_t v : out) kept[v] = 1;
-    bool problem = false;
-    for (size_t v = 0; v < vertexCount; ++v)
-      if (lock[v] && used[v] && !kept[v]) bad[v] = 1, problem = true;
-    edgeStart.assign(vertexCount + 1, 0);
-    for (size_t t = 0; t < out.size(); t += 3)
-      for (int k = 0; k < 3; ++k) ++edgeStart[std::min(out[t + k], out[t + (k + 1) % 3]) + 1];
-    for (size_t v = 0; v < vertexCount; ++v) edgeStart[v + 1] += edgeStart[v];
-    edgeFill.assign(edgeStart.begin(), edgeStart.end() - 1);
-    edgeOther.resize(out.size());
+  std::vector<uint32_t> edgeStart(vertexCount + 1, 0), edgeOther(out.size());
+  for (size_t t = 0; t < out.size(); t += 3)
+    for (int k = 0; k < 3; ++k) ++edgeStart[std::min(out[t + k], out[t + (k + 1) % 3]) + 1];
+  for (size_t v = 0; v < vertexCount; ++v) edgeStart[v + 1] += edgeStart[v];
+  std::vector<uint32_t> edgeFill(edgeStart.begin(), edgeStart.end() - 1);
+  for (size_t t = 0; t < out.size(); t += 3)
+    for (int k = 0; k < 3; ++k) {
+      uint32_t a = out[t + k], b = out[t + (k + 1) % 3];
+      edgeOther[edgeFill[std::min(a, b)]++] = std::max(a, b);
+    }
+  std::vector<uint32_t> count(vertexCount, 0);
+  for (size_t v = 0; v < vertexCount; ++v) {
+    uint32_t e0 = edgeStart[v], e1 = edgeStart[v + 1];
+    if (e1 - e0 < 3) continue;
+    for (uint32_t e = e0; e < e1; ++e) ++count[edgeOther[e]];
+    for (uint32_t e = e0; e < e1; ++e) {
+      uint32_t w = edgeOther[e];
+      if (count[w] >= 3 && adjacency.uses(uint32_t(v), w) <= 2) bad[v] = bad[w] = 1, problem = true;
+    }
+    for (uint32_t e = e0; e < e1; ++e) count[edgeOther[e]] = 0;
+  }
+  if (locked)
     for (size_t t = 0; t < out.size(); t += 3)
       for (int k = 0; k < 3; ++k) {
         uint32_t a = out[t + k], b = out[t + (k + 1) % 3];
-        edgeOther[edgeFill[std::min(a, b)]++] = std::max(a, b);
+        if (locked[a] && locked[b] && adjacency.uses(a, b) == 0) bad[a] = bad[b] = 1, problem = true;
       }
-    for (size_t v = 0; v < vertexCount; ++v) {
-      uint32_t e0 = edgeStart[v], e1 = edgeStart[v + 1];
-      if (e1 - e0 < 3) continue;
-      for (uint32_t e = e0; e < e1; ++e) ++multiplicity[edgeOther[e]];
-      for (uint32_t e = e0; e < e1; ++e) {
-        uint32_t w = edgeOther[e];
-        if (multiplicity[w] >= 3 && inputUses(uint32_t(v), w) <= 2) {
-          bad[v] = bad[w] = 1;
-          problem = true;
-        }
-      }
-      for (uint32_t e = e0; e < e1; ++e) multiplicity[edgeOther[e]] = 0;
+  return problem;
+}
+
+// Runs the chosen simplifier until its result keeps the builder's rules (findBrokenRules): after a
+// broken rule the input triangles around the offending vertices are locked and the run redone.
+// Deterministic; usually runs once. Fills `kept`; returns the number of runs.
+int simplifyWithRules(Run& run, const double* positions, size_t vertexCount, const uint32_t* triangles,
+                      size_t indexCount, const uint8_t* locked, const std::vector<uint8_t>& used,
+                      const SimplifyRegionOptions& options, std::vector<uint8_t>& kept) {
+  const bool quadric = options.simplifier == RegionSimplifier::Quadric;
+  const size_t targetIndexCount = std::min(options.targetTriangles * 3, indexCount);
+  Adjacency adjacency(triangles, indexCount, vertexCount);
+  std::vector<uint8_t> lock(vertexCount, 0), bad(vertexCount);
+  if (locked)
+    for (size_t v = 0; v < vertexCount; ++v) lock[v] = locked[v] ? 1 : 0;
+  if (!quadric) {
+    prepareMeshopt(run, positions, vertexCount);
+    if (locked) lockBorderRing(lock, locked, used, adjacency, targetIndexCount);
+  }
+  QuadricSimplifyOptions qo;
+  qo.gridStep = options.gridStep;
+  for (int a = 0; a < 3; ++a) qo.gridOrigin[a] = options.gridOrigin[a];
+  for (int attempt = 0;; ++attempt) {
+    if (quadric) {
+      run.out.resize(indexCount);
+      run.positions.resize(vertexCount * 3);
+      run.moved.resize(vertexCount);
+      size_t n = quadricSimplify(run.out.data(), run.positions.data(), run.moved.data(), triangles, indexCount,
+                                 positions, vertexCount, 3 * sizeof(double), lock.data(), targetIndexCount, qo);
+      run.out.resize(n);
+    } else {
+      runMeshopt(run, vertexCount, triangles, indexCount, lock, targetIndexCount);
     }
-    // (3) A new edge between two locked vertices (a chord across the region's border) can
-    // duplicate an edge an outside patch already has: the two sheets would touch along it, a
-    // non-manifold edge in the cut. The region cannot see outside edges, so no new locked-locked
-    // edge is allowed.
-    if (locked)
-      for (size_t t = 0; t < out.size(); t += 3)
-        for (int k = 0; k < 3; ++k) {
-          uint32_t a = out[t + k], b = out[t + (k + 1) % 3];
-          if (locked[a] && locked[b] && inputUses(a, b) == 0) {
-            bad[a] = bad[b] = 1;
-            problem = true;
-          }
-        }
-    if (!problem) break;
+    if (!findBrokenRules(run.out, lock, used, locked, adjacency, kept, bad)) return attempt + 1;
     if (attempt == 16) {
       // Rare (seen on inputs that are non-manifold already): keep the region as it is. An
       // unsimplified region is always a valid fragment; the level above simplifies it.
-      out.assign(triangles, triangles + indexCount);
+      run.out.assign(triangles, triangles + indexCount);
+      run.moved.assign(run.moved.size(), 0);
+      run.positions.assign(positions, positions + run.positions.size());
       std::fill(kept.begin(), kept.end(), 0);
-      for (uint32_t v : out) kept[v] = 1;
-      break;
+      for (uint32_t v : run.out) kept[v] = 1;
+      return attempt + 1;
     }
     for (size_t t = 0; t < indexCount; t += 3)
       if (bad[triangles[t]] || bad[triangles[t + 1]] || bad[triangles[t + 2]])
         lock[triangles[t]] = lock[triangles[t + 1]] = lock[triangles[t + 2]] = 1;
   }
+}
 
-  SimplifiedRegion r;
-  r.attempts = uint32_t(attempt + 1);
-  std::vector<uint32_t>& remap = edgeFill;  // reuse: vertexCount entries
-  remap.assign(vertexCount, ~0u);
+// Fills r.origin, r.positions and r.triangles from the run (kept vertices in input order).
+void assembleResult(SimplifiedRegion& r, const Run& run, const double* positions, const std::vector<uint8_t>& kept) {
+  const size_t vertexCount = kept.size();
+  std::vector<uint32_t> remap(vertexCount, ~0u);
   size_t keptCount = 0;
   for (size_t v = 0; v < vertexCount; ++v) keptCount += kept[v];
   r.origin.reserve(keptCount);
   r.positions.resize(keptCount * 3);
+  const double* from = run.positions.empty() ? positions : run.positions.data();
   for (size_t v = 0; v < vertexCount; ++v)
     if (kept[v]) {
       uint32_t i = uint32_t(r.origin.size());
       remap[v] = i;
       r.origin.push_back(uint32_t(v));
-      for (int a = 0; a < 3; ++a) r.positions[size_t(i) * 3 + a] = positions[v * 3 + a];
+      for (int a = 0; a < 3; ++a) r.positions[size_t(i) * 3 + a] = from[v * 3 + a];
+      r.movedVertices += !run.moved.empty() && run.moved[v];
     }
-  r.triangles.resize(out.size());
-  for (size_t i = 0; i < out.size(); ++i) r.triangles[i] = remap[out[i]];
-  if (vertexCount) r.quadricError = double(relError) * double(meshopt_simplifyScale(pos.data(), vertexCount, 12));
+  r.triangles.resize(run.out.size());
+  for (size_t i = 0; i < run.out.size(); ++i) r.triangles[i] = remap[run.out[i]];
+}
 
-  if (options.measureError && out.size() < indexCount) {
-    // max over samples of the exact distance to the other surface, squared:
-    //   (a) input -> result: removed vertices (kept vertices are result vertices: distance 0);
-    //   (b) result -> input: result triangle centroids (result vertices are input vertices),
-    //       except for the result triangles that are input triangles.
-    // Each query only has to decide whether its sample is farther than the worst so far
-    // (TriangleGrid::distance2Above), which most samples are not; the value is the same as
-    // computing every sample's distance exactly. A strided subset of both directions goes first
-    // so the running worst is large early and the other queries stop at their first close triangle.
-    TriangleGrid resultGrid(r.positions.data(), r.origin.size(), r.triangles.data(), r.triangleCount());
-    TriangleGrid inputGrid(positions, vertexCount, triangles, triangleCount);
-    // Result triangles that are input triangles (all three corners kept) lie on the input: their
-    // centroids need no query (a third of the result triangles at the level loop's halving: 20%
-    // of the query time). meshopt keeps the survivors in input order, so one merge-like walk
-    // finds them; a survivor out of order would only be queried like the others.
-    std::vector<uint8_t> onInput(out.size() / 3, 0);
-    for (size_t t = 0, i = 0; t < out.size(); t += 3) {
-      while (i < indexCount && !(kept[triangles[i]] && kept[triangles[i + 1]] && kept[triangles[i + 2]])) i += 3;
-      if (i < indexCount && out[t] == triangles[i] && out[t + 1] == triangles[i + 1] && out[t + 2] == triangles[i + 2])
-        onInput[t / 3] = 1, i += 3;
-    }
-    std::vector<uint64_t> edges;  // (lower, higher) input vertex ids of the queried triangles' edges
-    edges.reserve(out.size());
-    for (size_t t = 0; t < out.size() / 3; ++t)
-      if (!onInput[t])
-        for (int e = 0; e < 3; ++e) {
-          const uint64_t a = out[t * 3 + e], b = out[t * 3 + (e + 1) % 3];
-          edges.push_back(a < b ? a << 32 | b : b << 32 | a);
-        }
-    std::sort(edges.begin(), edges.end());
-    edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
-    constexpr size_t kStride = 16;
-    double worst2 = 0;
-    for (int pass = 0; pass < 2; ++pass) {
-      size_t k = 0;
-      for (size_t v = 0; v < vertexCount; ++v)
-        if (used[v] && !kept[v] && ((k++ % kStride == 0) == (pass == 0)))
-          worst2 = std::max(worst2, resultGrid.distance2Above(positions + v * 3, worst2));
-      for (size_t t = 0; t < out.size() / 3; ++t) {
-        if ((t % kStride == 0) != (pass == 0) || onInput[t]) continue;
-        const double *p0 = positions + size_t(out[t * 3]) * 3, *p1 = positions + size_t(out[t * 3 + 1]) * 3,
-                     *p2 = positions + size_t(out[t * 3 + 2]) * 3;
-        double c[3];
-        for (int a = 0; a < 3; ++a) c[a] = (p0[a] + p1[a] + p2[a]) / 3;
-        worst2 = std::max(worst2, inputGrid.distance2Above(c, worst2));
-      }
-      // The midpoint of every edge of those triangles, each once: on noisy scans the farthest
-      // point of a large result triangle from the input is often near an edge, and centroids
-      // alone left the stored error up to 11% below MeshLab's Hausdorff (0.3 M dragon scan,
-      // level 1). The edges of input triangles lie on the input.
-      for (size_t k = 0; k < edges.size(); ++k) {
-        if ((k % kStride == 0) != (pass == 0)) continue;
-        const double *a0 = positions + size_t(edges[k] >> 32) * 3, *a1 = positions + size_t(edges[k] & 0xffffffffu) * 3;
-        double m[3];
-        for (int a = 0; a < 3; ++a) m[a] = 0.5 * (a0[a] + a1[a]);
-        worst2 = std::max(worst2, inputGrid.distance2Above(m, worst2));
-      }
-    }
-    r.error = std::sqrt(worst2);
+// The measured error (SimplifiedRegion::error): the max over samples of the exact distance to the
+// other surface:
+//   (a) input -> result: every input vertex no result vertex sits on (removed or moved);
+//   (b) result -> input: moved vertices, and the centroids and edge midpoints of result triangles,
+//       except for the result triangles that are input triangles with unmoved corners.
+// Each query only has to decide whether its sample is farther than the worst so far
+// (TriangleGrid::distance2Above), which most samples are not; the value is the same as computing
+// every sample's distance exactly. A strided subset of all samples goes first so the running worst
+// is large early and the other queries stop at their first close triangle.
+double measureError(const SimplifiedRegion& r, const Run& run, const double* positions, size_t vertexCount,
+                    const uint32_t* triangles, size_t indexCount, const std::vector<uint8_t>& used,
+                    const std::vector<uint8_t>& kept) {
+  const std::vector<uint32_t>& out = run.out;
+  auto moved = [&](uint32_t v) { return !run.moved.empty() && run.moved[v]; };
+  const double* at = run.positions.empty() ? positions : run.positions.data();  // result positions by input id
+  TriangleGrid resultGrid(r.positions.data(), r.origin.size(), r.triangles.data(), r.triangleCount());
+  TriangleGrid inputGrid(positions, vertexCount, triangles, indexCount / 3);
+  // Result triangles that are input triangles lie on the input: their samples need no query (a
+  // third of the result triangles at the level loop's halving). Both simplifiers keep the
+  // survivors in input order, so one merge-like walk finds them; a survivor out of order would
+  // only be queried like the others.
+  auto still = [&](uint32_t v) { return kept[v] && !moved(v); };
+  std::vector<uint8_t> onInput(out.size() / 3, 0);
+  for (size_t t = 0, i = 0; t < out.size(); t += 3) {
+    while (i < indexCount && !(still(triangles[i]) && still(triangles[i + 1]) && still(triangles[i + 2]))) i += 3;
+    if (i < indexCount && out[t] == triangles[i] && out[t + 1] == triangles[i + 1] && out[t + 2] == triangles[i + 2])
+      onInput[t / 3] = 1, i += 3;
   }
+  std::vector<uint64_t> edges;  // (lower, higher) input vertex ids of the queried triangles' edges
+  edges.reserve(out.size());
+  for (size_t t = 0; t < out.size() / 3; ++t)
+    if (!onInput[t])
+      for (int e = 0; e < 3; ++e) {
+        const uint64_t a = out[t * 3 + e], b = out[t * 3 + (e + 1) % 3];
+        edges.push_back(a < b ? a << 32 | b : b << 32 | a);
+      }
+  std::sort(edges.begin(), edges.end());
+  edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
+  constexpr size_t kStride = 16;
+  double worst2 = 0;
+  for (int pass = 0; pass < 2; ++pass) {
+    size_t k = 0;
+    for (size_t v = 0; v < vertexCount; ++v)
+      if (used[v] && !still(uint32_t(v)) && ((k++ % kStride == 0) == (pass == 0)))
+        worst2 = std::max(worst2, resultGrid.distance2Above(positions + v * 3, worst2));
+    k = 0;
+    for (size_t v = 0; v < vertexCount; ++v)
+      if (kept[v] && moved(uint32_t(v)) && ((k++ % kStride == 0) == (pass == 0)))
+        worst2 = std::max(worst2, inputGrid.distance2Above(at + v * 3, worst2));
+    for (size_t t = 0; t < out.size() / 3; ++t) {
+      if ((t % kStride == 0) != (pass == 0) || onInput[t]) continue;
+      const double *p0 = at + size_t(out[t * 3]) * 3, *p1 = at + size_t(out[t * 3 + 1]) * 3,
+                   *p2 = at + size_t(out[t * 3 + 2]) * 3;
+      double c[3];
+      for (int a = 0; a < 3; ++a) c[a] = (p0[a] + p1[a] + p2[a]) / 3;
+      worst2 = std::max(worst2, inputGrid.distance2Above(c, worst2));
+    }
+    // The midpoint of every edge of those triangles, each once: on noisy scans the farthest point
+    // of a large result triangle from the input is often near an edge, and centroids alone left
+    // the stored error up to 11% below MeshLab's Hausdorff (0.3 M dragon scan, level 1).
+    for (size_t e = 0; e < edges.size(); ++e) {
+      if ((e % kStride == 0) != (pass == 0)) continue;
+      const double *a0 = at + size_t(edges[e] >> 32) * 3, *a1 = at + size_t(edges[e] & 0xffffffffu) * 3;
+      double m[3];
+      for (int a = 0; a < 3; ++a) m[a] = 0.5 * (a0[a] + a1[a]);
+      worst2 = std::max(worst2, inputGrid.distance2Above(m, worst2));
+    }
+  }
+  return std::sqrt(worst2);
+}
+
+}  // namespace
+
+SimplifiedRegion simplifyRegion(const double* positions, size_t vertexCount, const uint32_t* triangles,
+                                size_t triangleCount, const uint8_t* locked, const SimplifyRegionOptions& options) {
+  const size_t indexCount = triangleCount * 3;
+  std::vector<uint8_t> used(vertexCount, 0);
+  for (size_t i = 0; i < indexCount; ++i) {
+    if (triangles[i] >= vertexCount)
+      throw Error("simplifyRegion: triangle " + std::to_string(i / 3) + " uses vertex " +
+                  std::to_string(triangles[i]) + " of " + std::to_string(vertexCount));
+    used[triangles[i]] = 1;
+  }
+  Run run;
+  std::vector<uint8_t> kept(vertexCount);
+  SimplifiedRegion r;
+  r.attempts = uint32_t(simplifyWithRules(run, positions, vertexCount, triangles, indexCount, locked, used, options, kept));
+  assembleResult(r, run, positions, kept);
+  if (options.simplifier == RegionSimplifier::Meshopt && vertexCount)
+    r.quadricError = double(run.relError) * double(meshopt_simplifyScale(run.pos.data(), vertexCount, 12));
+  if (options.measureError && (run.out.size() < indexCount || r.movedVertices))
+    r.error = measureError(r, run, positions, vertexCount, triangles, indexCount, used, kept);
   return r;
 }
 

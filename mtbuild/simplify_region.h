@@ -6,17 +6,24 @@
 //   * every other vertex may go, including vertices on real mesh boundaries (scan holes), so a
 //     scan with holes still reaches a small coarsest level; borders between patches inside the
 //     region are not borders of the loaded mesh at all, hence free;
-//   * simplification is by half-edge collapse: every output vertex IS an input vertex (origin[]),
-//     with its position copied bit for bit, so shared vertices keep their identity and position;
+//   * a free vertex may move (quadric simplifier) and keeps the id of one input vertex it
+//     replaces (origin[]), whose attributes it takes; locked vertices keep id and position bit
+//     for bit, so shared vertices keep their identity and position;
 //   * the returned error is MEASURED on the result (see SimplifiedRegion::error), so the builder
 //     can accumulate a real, monotone error bound level by level (BMT 4.1).
 //
-// Approach: meshoptimizer 0.18's quadric simplifier (meshopt_simplify). It has no per-vertex lock
-// argument, and meshopt_SimplifyLockBorder would freeze scan holes too. But it classifies a vertex
-// that shares its position with another vertex and has no matching seam as "locked": so every
-// locked vertex gets one unreferenced duplicate appended to the position array, which makes the
-// simplifier keep it exactly while every other vertex (borders included) stays collapsible.
-// Measured ~10x faster than OpenMesh's decimater for the same job (see docs/mt-format.md).
+// Two simplifiers (SimplifyRegionOptions::simplifier):
+//   * Quadric (default): mtbuild/quadric_simplify.h, G&H 1997 edge collapse with optimal placement,
+//     locks and the rules below built in. Moved vertices are put on the MT's quantization grid
+//     (gridStep/gridOrigin) in a cell no other vertex of the region occupies, so the quantized
+//     patches keep every vertex distinct, as the grid weld left them.
+//   * Meshopt: meshoptimizer 0.18's half-edge collapse (every output vertex is an input vertex).
+//     It has no per-vertex lock argument, and meshopt_SimplifyLockBorder would freeze scan holes
+//     too; but it classifies a vertex that shares its position with another vertex and has no
+//     matching seam as "locked": so every locked vertex gets one unreferenced duplicate appended
+//     to the position array, which makes it keep that vertex exactly.
+// Either result is checked against the rules the builder needs (locked vertices kept, no new
+// non-manifold edge, no new edge between locked vertices) and redone with more locks if broken.
 #pragma once
 
 #include <cstddef>
@@ -27,26 +34,34 @@ namespace mt {
 
 struct LoadedMesh;
 
+enum class RegionSimplifier : uint8_t { Quadric, Meshopt };
+
 struct SimplifyRegionOptions {
   size_t targetTriangles = 0;  // aim; the result may stop above it (topology, locks)
+  RegionSimplifier simplifier = RegionSimplifier::Meshopt;
+  // The MT's quantization grid (QuantizationGrid's origin and step); step 0: none. Quadric only.
+  double gridStep = 0;
+  double gridOrigin[3] = {0, 0, 0};
   // Measure SimplifiedRegion::error (exact over its samples; ~0.6x the cost of meshopt_simplify).
   bool measureError = true;
 };
 
 struct SimplifiedRegion {
-  std::vector<double> positions;   // 3 per vertex: exact copies of the input positions
+  std::vector<double> positions;   // 3 per vertex: the input position, or the moved one
   std::vector<uint32_t> triangles; // 3 per triangle, indices into positions
   std::vector<uint32_t> origin;    // 1 per vertex: its index in the input (ascending)
   // Measured symmetric deviation between the result and the input region, a sampled Hausdorff
   // estimate: max of (a) the exact distance from every removed input vertex to the result and
-  // (b) the distance from every result triangle's centroid and edge midpoints to the input; kept
-  // vertices, and the result triangles that are input triangles (a third of them; not queried),
-  // lie on both surfaces. Sampled, so a deviation between samples can be missed. It
+  // (b) the distance from every moved vertex and every result triangle's centroid and edge
+  // midpoints to the input; unmoved kept vertices, and the result triangles that are input
+  // triangles (not queried), lie on both surfaces. Every input vertex a result vertex does not
+  // sit on exactly counts as removed. Sampled, so a deviation between samples can be missed. It
   // bounds the distance to the region's INPUT (the previous level); the builder adds the
   // previous level's bound.
   double error = 0;
-  double quadricError = 0;  // meshoptimizer's own estimate (absolute units), for reference
-  uint32_t attempts = 0;    // meshopt_simplify runs (retries after a rule was broken; for profiling)
+  double quadricError = 0;  // meshoptimizer's own estimate (absolute units), for reference (Meshopt)
+  uint32_t attempts = 0;    // simplifier runs (retries after a rule was broken; for profiling)
+  uint32_t movedVertices = 0;  // result vertices not at their input position
   uint32_t vertexCount() const { return uint32_t(origin.size()); }
   uint32_t triangleCount() const { return uint32_t(triangles.size() / 3); }
 };

@@ -6,12 +6,14 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <functional>
 #include <map>
 #include <random>
 #include <set>
 #include <utility>
 
 #include "base/error.h"
+#include "mtbuild/quadric_simplify.h"
 #include "mtbuild/simplify_region.h"
 #include "mtbuild/surface_distance.h"
 #include "patchstore/patch_store.h"
@@ -75,24 +77,40 @@ TEST(SimplifyRegion, LockedVerticesKeepIdentityAndPosition) {
   size_t lockedCount = 0;
   for (uint8_t l : r.locked) lockedCount += l;
   ASSERT_GT(lockedCount, r.g.vertexCount() / 40);
-  SimplifyRegionOptions opt;
-  opt.targetTriangles = r.g.triangleCount() / 2;
-  SimplifiedRegion s = simplifyRegion(r.g.positions.data(), r.g.vertexCount(), r.g.triangles.data(),
-                                      r.g.triangleCount(), r.locked.data(), opt);
-  std::set<uint32_t> kept(s.origin.begin(), s.origin.end());
-  for (uint32_t v = 0; v < r.g.vertexCount(); ++v)
-    if (r.locked[v]) {
-      EXPECT_TRUE(kept.count(v)) << "locked vertex " << v << " removed";
+  for (RegionSimplifier simplifier : {RegionSimplifier::Quadric, RegionSimplifier::Meshopt}) {
+    SimplifyRegionOptions opt;
+    opt.targetTriangles = r.g.triangleCount() / 2;
+    opt.simplifier = simplifier;
+    SimplifiedRegion s = simplifyRegion(r.g.positions.data(), r.g.vertexCount(), r.g.triangles.data(),
+                                        r.g.triangleCount(), r.locked.data(), opt);
+    std::set<uint32_t> kept(s.origin.begin(), s.origin.end());
+    for (uint32_t v = 0; v < r.g.vertexCount(); ++v)
+      if (r.locked[v]) {
+        EXPECT_TRUE(kept.count(v)) << "locked vertex " << v << " removed";
+      }
+    uint32_t moved = 0;
+    for (size_t i = 0; i < s.origin.size(); ++i) {
+      if (i) {
+        ASSERT_LT(s.origin[i - 1], s.origin[i]);
+      }
+      bool same = true;
+      for (int k = 0; k < 3; ++k) same &= s.positions[i * 3 + k] == r.g.positions[s.origin[i] * 3 + k];  // bit-exact
+      if (r.locked[s.origin[i]] || simplifier == RegionSimplifier::Meshopt) {
+        ASSERT_TRUE(same) << "vertex " << s.origin[i] << " moved";
+      }
+      moved += !same;
     }
-  for (size_t i = 0; i < s.origin.size(); ++i) {
-    if (i) {
-      ASSERT_LT(s.origin[i - 1], s.origin[i]);
+    EXPECT_EQ(moved, s.movedVertices);
+    // Optimal placement moves most of the kept free vertices; half-edge collapse none.
+    if (simplifier == RegionSimplifier::Quadric) {
+      EXPECT_GT(moved, (s.vertexCount() - lockedCount) / 2);
+    } else {
+      EXPECT_EQ(moved, 0u);
     }
-    for (int k = 0; k < 3; ++k) ASSERT_EQ(s.positions[i * 3 + k], r.g.positions[s.origin[i] * 3 + k]);  // bit-exact
+    for (uint32_t i : s.triangles) ASSERT_LT(i, s.vertexCount());
+    std::set<uint32_t> referenced(s.triangles.begin(), s.triangles.end());
+    EXPECT_EQ(referenced.size(), s.vertexCount()) << "every output vertex is used";
   }
-  for (uint32_t i : s.triangles) ASSERT_LT(i, s.vertexCount());
-  std::set<uint32_t> referenced(s.triangles.begin(), s.triangles.end());
-  EXPECT_EQ(referenced.size(), s.vertexCount()) << "every output vertex is used";
 }
 
 TEST(SimplifyRegion, ReachesTargetAndSimplifiesHoleBorders) {
@@ -203,25 +221,34 @@ double bruteDistance2(const double* p, const double* positions, const uint32_t* 
   return best;
 }
 
-// The definition in simplify_region.h, computed the slow way: max of (a) removed input vertices
-// -> result triangles and (b) the centroids of the result triangles that are not input triangles
-// -> input triangles.
+// The definition in simplify_region.h, computed the slow way: max of (a) the input vertices no
+// result vertex sits on (removed or moved) -> result triangles and (b) the moved vertices, and the
+// centroids and edge midpoints of the result triangles that are not input triangles with unmoved
+// corners -> input triangles.
 double bruteForceError(const ScanGrid& g, const SimplifiedRegion& s) {
   std::set<std::array<uint32_t, 3>> input;
   for (size_t t = 0; t < g.triangleCount(); ++t)
     input.insert({g.triangles[t * 3], g.triangles[t * 3 + 1], g.triangles[t * 3 + 2]});
-  std::vector<uint8_t> used(g.vertexCount(), 0), kept(g.vertexCount(), 0);
+  std::vector<uint8_t> used(g.vertexCount(), 0), still(g.vertexCount(), 0);
   for (uint32_t v : g.triangles) used[v] = 1;
-  for (uint32_t o : s.origin) kept[o] = 1;
+  std::vector<uint8_t> moved(s.vertexCount(), 0);
+  for (uint32_t i = 0; i < s.vertexCount(); ++i) {
+    const uint32_t o = s.origin[i];
+    moved[i] = !std::equal(&s.positions[i * 3], &s.positions[i * 3] + 3, &g.positions[o * 3]);
+    still[o] = !moved[i];
+  }
   double worst2 = 0;
   for (uint32_t v = 0; v < g.vertexCount(); ++v)
-    if (used[v] && !kept[v])
+    if (used[v] && !still[v])
       worst2 = std::max(worst2, bruteDistance2(&g.positions[v * 3], s.positions.data(), s.triangles.data(), s.triangleCount()));
+  for (uint32_t i = 0; i < s.vertexCount(); ++i)
+    if (moved[i])
+      worst2 = std::max(worst2, bruteDistance2(&s.positions[i * 3], g.positions.data(), g.triangles.data(), g.triangleCount()));
   for (uint32_t t = 0; t < s.triangleCount(); ++t) {
-    if (input.count({s.origin[s.triangles[t * 3]], s.origin[s.triangles[t * 3 + 1]], s.origin[s.triangles[t * 3 + 2]]}))
+    const uint32_t* f = &s.triangles[t * 3];
+    if (!moved[f[0]] && !moved[f[1]] && !moved[f[2]] && input.count({s.origin[f[0]], s.origin[f[1]], s.origin[f[2]]}))
       continue;
-    const double* p[3] = {&s.positions[s.triangles[t * 3] * 3], &s.positions[s.triangles[t * 3 + 1] * 3],
-                          &s.positions[s.triangles[t * 3 + 2] * 3]};
+    const double* p[3] = {&s.positions[f[0] * 3], &s.positions[f[1] * 3], &s.positions[f[2] * 3]};
     double c[3];
     for (int a = 0; a < 3; ++a) c[a] = (p[0][a] + p[1][a] + p[2][a]) / 3;
     worst2 = std::max(worst2, bruteDistance2(c, g.positions.data(), g.triangles.data(), g.triangleCount()));
@@ -258,8 +285,10 @@ TEST(SimplifyRegion, MeasuredErrorEqualsBruteForce) {
     std::vector<uint8_t> locked(g.vertexCount(), 0);
     if (c.locks)
       for (uint32_t v = 0; v < g.vertexCount(); v += 13) locked[v] = 1;
+    for (RegionSimplifier simplifier : {RegionSimplifier::Quadric, RegionSimplifier::Meshopt}) {
     SimplifyRegionOptions opt;
     opt.targetTriangles = g.triangleCount() / c.div;
+    opt.simplifier = simplifier;
     SimplifiedRegion s = simplifyRegion(g.positions.data(), g.vertexCount(), g.triangles.data(), g.triangleCount(),
                                         c.locks ? locked.data() : nullptr, opt);
     ASSERT_LT(s.triangleCount(), g.triangleCount());
@@ -271,6 +300,8 @@ TEST(SimplifyRegion, MeasuredErrorEqualsBruteForce) {
                                             c.locks ? locked.data() : nullptr, opt);
     EXPECT_EQ(again.error, s.error);
     EXPECT_EQ(again.triangles, s.triangles);
+    EXPECT_EQ(again.positions, s.positions);
+    }
   }
 }
 
@@ -346,16 +377,19 @@ TEST(SimplifyRegion, NoNewEdgeBetweenLockedVertices) {
       uint32_t a = r.g.triangles[t + k], b = r.g.triangles[t + (k + 1) % 3];
       inputEdges.insert({std::min(a, b), std::max(a, b)});
     }
+  for (RegionSimplifier simplifier : {RegionSimplifier::Quadric, RegionSimplifier::Meshopt})
   for (size_t div : {2, 8}) {
     SimplifyRegionOptions opt;
     opt.targetTriangles = r.g.triangleCount() / div;
+    opt.simplifier = simplifier;
     SimplifiedRegion s = simplifyRegion(r.g.positions.data(), r.g.vertexCount(), r.g.triangles.data(),
                                         r.g.triangleCount(), r.locked.data(), opt);
     EXPECT_LT(s.triangleCount(), r.g.triangleCount() * 2 / div);
-    // Halving (the level loop's case) locks the border's first ring up front, which makes a chord
-    // impossible: one meshopt run. At 1/8 the ring would take too much of the budget, so the
-    // retry loop enforces the rule instead (and needs more than one run on this region).
-    if (div == 2) {
+    // The quadric simplifier refuses such a collapse itself: one run. For meshopt, halving (the
+    // level loop's case) locks the border's first ring up front, which makes a chord impossible:
+    // one run. At 1/8 the ring would take too much of the budget, so the retry loop enforces the
+    // rule instead (and needs more than one run on this region).
+    if (simplifier == RegionSimplifier::Quadric || div == 2) {
       EXPECT_EQ(s.attempts, 1u);
       EXPECT_GE(s.triangleCount(), opt.targetTriangles * 9 / 10);
     } else {
@@ -369,6 +403,156 @@ TEST(SimplifyRegion, NoNewEdgeBetweenLockedVertices) {
         }
       }
   }
+}
+
+// The quadric simplifier on its own (mtbuild/quadric_simplify.h).
+struct QuadricRun {
+  std::vector<uint32_t> indices;
+  std::vector<double> positions;
+  std::vector<uint8_t> moved;
+  QuadricSimplifyStats stats;
+};
+
+QuadricRun runQuadric(const Region& r, size_t targetTriangles, const QuadricSimplifyOptions& options = {}) {
+  QuadricRun q;
+  q.indices.resize(r.g.triangles.size());
+  q.positions.resize(r.g.positions.size());
+  q.moved.resize(r.g.vertexCount());
+  size_t n = quadricSimplify(q.indices.data(), q.positions.data(), q.moved.data(), r.g.triangles.data(),
+                             r.g.triangles.size(), r.g.positions.data(), r.g.vertexCount(), 3 * sizeof(double),
+                             r.locked.data(), targetTriangles * 3, options, &q.stats);
+  q.indices.resize(n);
+  return q;
+}
+
+// z of the (unnormalized) normal of triangle t; the scan grid is a height field seen from +z.
+double normalZ(const std::vector<uint32_t>& tris, const std::vector<double>& pos, size_t t) {
+  const double *a = &pos[tris[t * 3] * 3], *b = &pos[tris[t * 3 + 1] * 3], *c = &pos[tris[t * 3 + 2] * 3];
+  return (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
+}
+
+// Connected components of the border edges: one per hole, plus the outer rim.
+size_t borderLoops(const std::vector<uint32_t>& tris) {
+  std::map<std::pair<uint32_t, uint32_t>, int> count;
+  for (size_t t = 0; t < tris.size(); t += 3)
+    for (int k = 0; k < 3; ++k) {
+      uint32_t a = tris[t + k], b = tris[t + (k + 1) % 3];
+      count[{std::min(a, b), std::max(a, b)}]++;
+    }
+  std::map<uint32_t, uint32_t> parent;
+  std::function<uint32_t(uint32_t)> find = [&](uint32_t v) { return parent[v] == v ? v : parent[v] = find(parent[v]); };
+  for (auto& [e, c] : count)
+    if (c == 1) {
+      if (!parent.count(e.first)) parent[e.first] = e.first;
+      if (!parent.count(e.second)) parent[e.second] = e.second;
+      parent[find(e.first)] = find(e.second);
+    }
+  size_t roots = 0;
+  for (auto& [v, p] : parent) roots += find(v) == v;
+  return roots;
+}
+
+TEST(QuadricSimplify, LocksTopologyBordersAndDeterminism) {
+  Region r = makeRegion();
+  std::set<std::pair<uint32_t, uint32_t>> inputEdges;
+  for (size_t t = 0; t < r.g.triangles.size(); t += 3)
+    for (int k = 0; k < 3; ++k) {
+      uint32_t a = r.g.triangles[t + k], b = r.g.triangles[t + (k + 1) % 3];
+      inputEdges.insert({std::min(a, b), std::max(a, b)});
+    }
+  for (size_t t = 0; t < r.g.triangleCount(); ++t) ASSERT_GT(normalZ(r.g.triangles, r.g.positions, t), 0);
+  const size_t loops = borderLoops(r.g.triangles);
+  ASSERT_EQ(loops, 4u);  // the rim and three holes
+  for (size_t div : {2, 8}) {
+    const size_t target = r.g.triangleCount() / div;
+    QuadricRun q = runQuadric(r, target);
+    EXPECT_LE(q.indices.size() / 3, target) << "div " << div;
+    EXPECT_GE(q.indices.size() / 3, target - 2) << "div " << div;  // a collapse removes 1 or 2
+    const size_t removed = r.g.triangleCount() - q.indices.size() / 3;
+    EXPECT_GE(q.stats.collapses, (removed + 1) / 2);  // an interior collapse removes 2, a border one 1
+    EXPECT_LE(q.stats.collapses, removed);
+    std::set<uint32_t> referenced(q.indices.begin(), q.indices.end());
+    for (uint32_t v = 0; v < r.g.vertexCount(); ++v)
+      if (r.locked[v]) {
+        EXPECT_TRUE(referenced.count(v)) << "locked vertex " << v << " removed";
+        EXPECT_EQ(q.moved[v], 0) << v;
+        for (int k = 0; k < 3; ++k) EXPECT_EQ(q.positions[v * 3 + k], r.g.positions[v * 3 + k]) << v;
+      }
+    EdgeStats e = edgeStats(q.indices);
+    EXPECT_EQ(e.nonManifoldEdges, 0u);
+    EXPECT_EQ(borderLoops(q.indices), loops) << "no hole closed, opened or merged; div " << div;
+    for (size_t t = 0; t < q.indices.size() / 3; ++t) ASSERT_GT(normalZ(q.indices, q.positions, t), 0) << "flip";
+    for (size_t t = 0; t < q.indices.size(); t += 3)
+      for (int k = 0; k < 3; ++k) {
+        uint32_t a = q.indices[t + k], b = q.indices[t + (k + 1) % 3];
+        if (r.locked[a] && r.locked[b]) {
+          EXPECT_TRUE(inputEdges.count({std::min(a, b), std::max(a, b)})) << "new chord " << a << "-" << b;
+        }
+      }
+    std::set<std::array<uint32_t, 3>> faces;
+    for (size_t t = 0; t < q.indices.size(); t += 3) {
+      std::array<uint32_t, 3> f = {q.indices[t], q.indices[t + 1], q.indices[t + 2]};
+      std::sort(f.begin(), f.end());
+      EXPECT_TRUE(faces.insert(f).second) << "duplicate face";
+    }
+    QuadricRun again = runQuadric(r, target);
+    EXPECT_EQ(again.indices, q.indices);
+    EXPECT_EQ(again.positions, q.positions);
+  }
+}
+
+// Moved vertices land on grid points, and no two kept vertices share a grid cell (cuts are welded
+// by grid position), also with a coarse step (a third of the sample spacing, where a snapped
+// optimum often costs more than an end, which is then kept instead).
+TEST(QuadricSimplify, GridPointsInDistinctCells) {
+  Region r = makeRegion();
+  for (double step : {0.1, 0.37}) {
+    QuadricSimplifyOptions o;
+    o.gridStep = step;
+    o.gridOrigin[0] = -1.01, o.gridOrigin[1] = -1.02, o.gridOrigin[2] = -30.03;
+    auto cell = [&](const double* p) {
+      std::array<int64_t, 3> c;
+      for (int a = 0; a < 3; ++a) c[a] = int64_t(std::floor((p[a] - o.gridOrigin[a]) / o.gridStep + 0.5));
+      return c;
+    };
+    std::set<std::array<int64_t, 3>> inputCells;
+    for (uint32_t v = 0; v < r.g.vertexCount(); ++v) inputCells.insert(cell(&r.g.positions[v * 3]));
+    ASSERT_EQ(inputCells.size(), r.g.vertexCount());
+    QuadricRun q = runQuadric(r, r.g.triangleCount() / 4, o);
+    std::set<uint32_t> kept(q.indices.begin(), q.indices.end());
+    std::set<std::array<int64_t, 3>> cells;
+    size_t moved = 0;
+    for (uint32_t v : kept) {
+      EXPECT_TRUE(cells.insert(cell(&q.positions[v * 3])).second) << "vertex " << v << " shares a cell";
+      if (!q.moved[v]) continue;
+      ++moved;
+      std::array<int64_t, 3> c = cell(&q.positions[v * 3]);
+      for (int a = 0; a < 3; ++a) EXPECT_EQ(q.positions[v * 3 + a], o.gridOrigin[a] + o.gridStep * double(c[a]));
+    }
+    EXPECT_GT(moved, kept.size() / (step < 0.2 ? 2 : 10)) << "step " << step;
+  }
+}
+
+// The point of optimal placement: at equal size, closer to the input on average than half-edge
+// collapse (every kept vertex an input sample) on a noisy curved surface.
+TEST(QuadricSimplify, CloserOnAverageThanHalfEdgeCollapse) {
+  Region r = makeRegion();
+  auto meanDistance = [&](const SimplifiedRegion& s) {
+    TriangleGrid grid(s.positions.data(), s.vertexCount(), s.triangles.data(), s.triangleCount());
+    double sum = 0;
+    for (uint32_t v = 0; v < r.g.vertexCount(); ++v) sum += grid.distance(&r.g.positions[v * 3]);
+    return sum / r.g.vertexCount();
+  };
+  SimplifyRegionOptions opt;
+  opt.targetTriangles = r.g.triangleCount() / 8;
+  SimplifiedRegion q = simplifyRegion(r.g.positions.data(), r.g.vertexCount(), r.g.triangles.data(),
+                                      r.g.triangleCount(), r.locked.data(), opt);
+  opt.simplifier = RegionSimplifier::Meshopt;
+  SimplifiedRegion m = simplifyRegion(r.g.positions.data(), r.g.vertexCount(), r.g.triangles.data(),
+                                      r.g.triangleCount(), r.locked.data(), opt);
+  EXPECT_LE(q.triangleCount(), m.triangleCount() * 21 / 20);
+  EXPECT_LT(meanDistance(q), 0.8 * meanDistance(m));
+  EXPECT_LT(q.error, m.error);
 }
 }  // namespace
 }  // namespace mt

@@ -1,0 +1,598 @@
+// Quadric edge collapse with optimal placement and per-vertex locks (see quadric_simplify.h).
+#include "mtbuild/quadric_simplify.h"
+
+#include <algorithm>
+#include <cassert>
+#include <cfloat>
+#include <cmath>
+#include <cstring>
+#include <unordered_map>
+#include <vector>
+
+namespace mt {
+
+namespace {
+
+// G&H section 5: the squared distance to a set of planes n.p + d = 0 is p^T A p + 2 b.p + c with
+// A = sum n n^T, b = sum d n, c = sum d^2. Each face plane is weighted by the face's area, so a
+// quadric measures area x squared distance and does not depend on how finely a region is sampled.
+struct Quadric {
+  double a00 = 0, a11 = 0, a22 = 0, a01 = 0, a02 = 0, a12 = 0, b0 = 0, b1 = 0, b2 = 0, c = 0;
+
+  void addPlane(const double n[3], double d, double w) {
+    a00 += w * n[0] * n[0], a11 += w * n[1] * n[1], a22 += w * n[2] * n[2];
+    a01 += w * n[0] * n[1], a02 += w * n[0] * n[2], a12 += w * n[1] * n[2];
+    b0 += w * d * n[0], b1 += w * d * n[1], b2 += w * d * n[2];
+    c += w * d * d;
+  }
+  void add(const Quadric& q) {
+    a00 += q.a00, a11 += q.a11, a22 += q.a22, a01 += q.a01, a02 += q.a02, a12 += q.a12;
+    b0 += q.b0, b1 += q.b1, b2 += q.b2, c += q.c;
+  }
+  double at(const double p[3]) const {
+    const double x = p[0], y = p[1], z = p[2];
+    double e = a00 * x * x + a11 * y * y + a22 * z * z + 2 * (a01 * x * y + a02 * x * z + a12 * y * z) +
+               2 * (b0 * x + b1 * y + b2 * z) + c;
+    return e > 0 ? e : 0;  // rounding can make a zero error slightly negative
+  }
+  // G&H section 4: the point of least error solves A p = -b. A is singular on a flat or
+  // cylindrical neighbourhood (a line or plane of minima); a small Tikhonov term pulling toward
+  // `toward` (the edge midpoint) picks the minimum nearest the edge there and keeps the system
+  // well conditioned. Returns false when the quadric is empty.
+  bool minimum(const double toward[3], double p[3]) const {
+    const double trace = a00 + a11 + a22;
+    if (!(trace > 0)) return false;
+    const double l = 1e-4 * trace;
+    const double m00 = a00 + l, m11 = a11 + l, m22 = a22 + l;
+    const double r0 = -b0 + l * toward[0], r1 = -b1 + l * toward[1], r2 = -b2 + l * toward[2];
+    const double c00 = m11 * m22 - a12 * a12, c01 = a02 * a12 - a01 * m22, c02 = a01 * a12 - a02 * m11;
+    const double c11 = m00 * m22 - a02 * a02, c12 = a01 * a02 - m00 * a12, c22 = m00 * m11 - a01 * a01;
+    const double det = m00 * c00 + a01 * c01 + a02 * c02;
+    if (!(std::fabs(det) > 1e-12 * trace * trace * trace)) return false;
+    p[0] = (c00 * r0 + c01 * r1 + c02 * r2) / det;
+    p[1] = (c01 * r0 + c11 * r1 + c12 * r2) / det;
+    p[2] = (c02 * r0 + c12 * r1 + c22 * r2) / det;
+    return std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2]);
+  }
+};
+
+void sub(const double* a, const double* b, double* o) { o[0] = a[0] - b[0], o[1] = a[1] - b[1], o[2] = a[2] - b[2]; }
+void cross(const double* a, const double* b, double* o) {
+  o[0] = a[1] * b[2] - a[2] * b[1], o[1] = a[2] * b[0] - a[0] * b[2], o[2] = a[0] * b[1] - a[1] * b[0];
+}
+double dot(const double* a, const double* b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+double dist2(const double* a, const double* b) {
+  double d[3];
+  sub(a, b, d);
+  return dot(d, d);
+}
+
+// Twice the area vector of triangle (a, b, c).
+void areaVector(const double* a, const double* b, const double* c, double* n) {
+  double e1[3], e2[3];
+  sub(b, a, e1), sub(c, a, e2), cross(e1, e2, n);
+}
+
+// Shape quality in [0, 1]: 4 sqrt(3) area / (sum of squared edge lengths); 1 for equilateral.
+double quality(const double* a, const double* b, const double* c, const double* n) {
+  const double l = dist2(a, b) + dist2(b, c) + dist2(c, a);
+  return l > 0 ? 2 * std::sqrt(3.0) * std::sqrt(dot(n, n)) / l : 0;
+}
+
+struct Cell {
+  int64_t c[3];
+  bool operator==(const Cell& o) const { return c[0] == o.c[0] && c[1] == o.c[1] && c[2] == o.c[2]; }
+};
+struct CellHash {
+  size_t operator()(const Cell& k) const {
+    uint64_t h = uint64_t(k.c[0]) * 0x9E3779B97F4A7C15ull ^ uint64_t(k.c[1]) * 0xC2B2AE3D27D4EB4Full ^
+                 uint64_t(k.c[2]) * 0x165667B19E3779F9ull;
+    return size_t(h ^ (h >> 29));
+  }
+};
+
+// A collapse of edge (s, r): r disappears, s survives at p (local coordinates).
+struct Candidate {
+  double cost;
+  uint32_t s, r;
+  uint32_t versionS, versionR;
+  double p[3];  // local
+  double g[3];  // global (on the grid when moved and a grid is given)
+  bool moves;
+};
+// A heap entry, 16 bytes (the heap outgrows the caches; its sift-downs were a third of the time
+// with 32-byte entries): the collapse is recomputed from (s, r, allowMove) when popped, since
+// candidate() is a pure function of the two vertices' state. The versions are truncated (15 and 16
+// bits), so a popped entry is also checked against the recomputed cost.
+struct Entry {
+  float cost;
+  uint32_t s, r;
+  uint16_t versionS;  // low 15 bits; the top bit: the cost includes the shape penalty
+  uint16_t versionR;  // low 15 bits; the top bit: the collapse may move the vertex
+  bool allowMove() const { return versionR >> 15; }
+  bool penalized() const { return versionS >> 15; }
+};
+static_assert(sizeof(Entry) == 16, "heap entries stay small");
+// Heap order: least cost first; ties by vertex ids, so the order never depends on push order.
+struct Later {
+  bool operator()(const Entry& x, const Entry& y) const {
+    if (x.cost != y.cost) return x.cost > y.cost;
+    if (x.s != y.s) return x.s > y.s;
+    return x.r > y.r;
+  }
+};
+Entry entryOf(const Candidate& c, bool allowMove) {
+  return {float(c.cost), c.s, c.r, uint16_t(c.versionS & 0x7fff), uint16_t((c.versionR & 0x7fff) | (allowMove ? 0x8000 : 0))};
+}
+
+enum class Verdict { Ok, Refused, GridTaken };
+
+constexpr double kMinQuality = 0.05;  // a face below this is a sliver; none is made from a better one
+// A collapse that makes a face of quality q below kFairQuality costs cost * kFairQuality / q (the
+// shape penalty of vcg's TriEdgeCollapseQuadric, which Nexus uses, with its threshold 0.3): at a
+// given triangle count, well-shaped triangles follow the surface more closely on average.
+constexpr double kFairQuality = 0.3;
+
+class Simplifier {
+ public:
+  Simplifier(const uint32_t* indices, size_t indexCount, const double* positions, size_t vertexCount, size_t stride,
+             const uint8_t* locked, const QuadricSimplifyOptions& options, double* outPositions, uint8_t* moved);
+  void run(size_t targetTriangles);
+  size_t write(uint32_t* destination) const;
+  QuadricSimplifyStats stats;
+
+ private:
+  void buildLists();
+  void buildQuadrics();
+  bool candidate(uint32_t a, uint32_t b, bool allowMove, Candidate& c) const;
+  void pushEdgesOf(uint32_t v);
+  Verdict check(const Candidate& c);
+  void collapse(const Candidate& c);
+  Cell cellOf(const double* global) const;
+  Cell cellOfVertex(uint32_t v) const { return cellOf(out_ + size_t(v) * 3); }
+  void snap(double* global) const;
+  void appendTriangle(uint32_t v, uint32_t t);
+  void neighbours(uint32_t v, std::vector<uint32_t>& n) const;
+
+  const QuadricSimplifyOptions& options_;
+  size_t nv_;
+  double center_[3] = {0, 0, 0};
+  double lo_[3] = {0, 0, 0}, hi_[3] = {0, 0, 0};  // the input's bounding box, local
+  std::vector<double> pos_;  // local (centred) positions: the quadrics stay precise far from the origin
+  double* out_;              // global positions (the caller's destinationPositions)
+  uint8_t* moved_;
+  std::vector<uint8_t> frozen_, locked_;  // frozen: never removed nor moved (locks and non-manifold spots)
+  std::vector<uint32_t> tri_;
+  std::vector<uint8_t> dead_;
+  std::vector<uint32_t> start_, count_, cap_, pool_, live_, version_;
+  std::vector<Quadric> quadric_;
+  std::vector<Entry> heap_, retry_;
+  void push(const Candidate& c, bool allowMove) {
+    heap_.push_back(entryOf(c, allowMove));
+    std::push_heap(heap_.begin(), heap_.end(), Later());
+  }
+  bool current(const Entry& e) const {
+    return count_[e.r] && (version_[e.s] & 0x7fff) == (e.versionS & 0x7fffu) && (version_[e.r] & 0x7fff) == (e.versionR & 0x7fffu);
+  }
+  void dropStale();
+  std::unordered_map<Cell, uint32_t, CellHash> cells_;  // grid cell -> number of live vertices in it
+  size_t liveTriangles_ = 0;
+  // Scratch of check(), kept for collapse().
+  std::vector<uint32_t> ts_, tr_, edge_, ns_, nr_, nb_;
+  double minQuality_ = 1;  // the worst quality of a face the checked collapse changes
+};
+
+Simplifier::Simplifier(const uint32_t* indices, size_t indexCount, const double* positions, size_t vertexCount,
+                       size_t stride, const uint8_t* locked, const QuadricSimplifyOptions& options,
+                       double* outPositions, uint8_t* moved)
+    : options_(options), nv_(vertexCount), out_(outPositions), moved_(moved) {
+  double lo[3] = {DBL_MAX, DBL_MAX, DBL_MAX}, hi[3] = {-DBL_MAX, -DBL_MAX, -DBL_MAX};
+  for (size_t v = 0; v < nv_; ++v) {
+    const double* p = reinterpret_cast<const double*>(reinterpret_cast<const char*>(positions) + v * stride);
+    for (int a = 0; a < 3; ++a) out_[v * 3 + a] = p[a], lo[a] = std::min(lo[a], p[a]), hi[a] = std::max(hi[a], p[a]);
+  }
+  if (nv_)
+    for (int a = 0; a < 3; ++a) center_[a] = 0.5 * (lo[a] + hi[a]);
+  pos_.resize(nv_ * 3);
+  for (size_t i = 0; i < nv_ * 3; ++i) pos_[i] = out_[i] - center_[i % 3];
+  if (nv_)
+    for (int a = 0; a < 3; ++a) lo_[a] = lo[a] - center_[a], hi_[a] = hi[a] - center_[a];
+  if (moved_) std::memset(moved_, 0, nv_);
+  locked_.assign(nv_, 0);
+  if (locked)
+    for (size_t v = 0; v < nv_; ++v) locked_[v] = locked[v] ? 1 : 0;
+  frozen_ = locked_;
+  tri_.assign(indices, indices + indexCount);
+  dead_.assign(indexCount / 3, 0);
+  version_.assign(nv_, 0);
+  buildLists();
+  buildQuadrics();
+  if (options_.gridStep > 0)
+    for (uint32_t v = 0; v < nv_; ++v)
+      if (live_[v]) ++cells_[cellOfVertex(v)];
+}
+
+// Vertex -> triangle lists in one pool (counting sort). A list that outgrows its room moves to the
+// end of the pool with twice the room, so a collapse appends in amortized constant time.
+void Simplifier::buildLists() {
+  const size_t nt = tri_.size() / 3;
+  count_.assign(nv_, 0);
+  for (uint32_t v : tri_) ++count_[v];
+  start_.assign(nv_, 0);
+  size_t at = 0;
+  for (size_t v = 0; v < nv_; ++v) start_[v] = uint32_t(at), at += count_[v];
+  cap_ = count_;
+  pool_.resize(at);
+  std::vector<uint32_t> fill(start_);
+  for (size_t t = 0; t < nt; ++t) {
+    const uint32_t* f = &tri_[t * 3];
+    // A triangle with a repeated corner is kept as it is: its corners are frozen.
+    if (f[0] == f[1] || f[1] == f[2] || f[2] == f[0]) frozen_[f[0]] = frozen_[f[1]] = frozen_[f[2]] = 1;
+    for (int k = 0; k < 3; ++k) pool_[fill[f[k]]++] = uint32_t(t);
+  }
+  live_ = count_;
+  liveTriangles_ = nt;
+}
+
+// Face quadrics (G&H 5) and, on open borders, G&H 6.2's boundary planes: the plane through a
+// border edge perpendicular to its face, heavily weighted, so a hole's border keeps its shape while
+// it simplifies (the region's own border is locked; scan holes are not). Vertices on an edge used
+// by three or more triangles, or on more than two border edges, are frozen: no collapse around
+// them can keep the surface a manifold that the link condition describes.
+void Simplifier::buildQuadrics() {
+  quadric_.assign(nv_, Quadric());
+  const size_t nt = tri_.size() / 3;
+  for (size_t t = 0; t < nt; ++t) {
+    const uint32_t* f = &tri_[t * 3];
+    double n[3];
+    areaVector(&pos_[f[0] * 3], &pos_[f[1] * 3], &pos_[f[2] * 3], n);
+    const double len = std::sqrt(dot(n, n));
+    if (!(len > 0)) continue;
+    for (double& x : n) x /= len;
+    const double d = -dot(n, &pos_[f[0] * 3]);
+    for (int k = 0; k < 3; ++k) quadric_[f[k]].addPlane(n, d, 0.5 * len);
+  }
+  std::vector<uint32_t> nb;
+  for (uint32_t a = 0; a < nv_; ++a) {
+    nb.clear();
+    for (uint32_t i = start_[a]; i < start_[a] + count_[a]; ++i)
+      for (int k = 0; k < 3; ++k)
+        if (tri_[pool_[i] * 3 + k] != a) nb.push_back(tri_[pool_[i] * 3 + k]);
+    std::sort(nb.begin(), nb.end());
+    uint32_t borderEdges = 0;
+    for (size_t i = 0; i < nb.size();) {
+      size_t j = i;
+      while (j < nb.size() && nb[j] == nb[i]) ++j;
+      const uint32_t b = nb[i], uses = uint32_t(j - i);
+      i = j;
+      if (uses > 2) frozen_[a] = frozen_[b] = 1;
+      if (uses != 1) continue;
+      ++borderEdges;
+      if (b < a) continue;  // each border edge's planes once, from its lower vertex
+      for (uint32_t k = start_[a]; k < start_[a] + count_[a]; ++k) {
+        const uint32_t* f = &tri_[pool_[k] * 3];
+        if (f[0] != b && f[1] != b && f[2] != b) continue;
+        double fn[3], e[3], n[3];
+        areaVector(&pos_[f[0] * 3], &pos_[f[1] * 3], &pos_[f[2] * 3], fn);
+        sub(&pos_[b * 3], &pos_[a * 3], e);
+        cross(e, fn, n);
+        const double len = std::sqrt(dot(n, n));
+        if (!(len > 0)) break;
+        for (double& x : n) x /= len;
+        const double w = options_.boundaryWeight * dot(e, e), d = -dot(n, &pos_[a * 3]);
+        quadric_[a].addPlane(n, d, w);
+        quadric_[b].addPlane(n, d, w);
+        break;
+      }
+    }
+    if (borderEdges > 2) frozen_[a] = 1;
+  }
+}
+
+Cell Simplifier::cellOf(const double* g) const {
+  Cell c;
+  for (int a = 0; a < 3; ++a) c.c[a] = int64_t(std::floor((g[a] - options_.gridOrigin[a]) / options_.gridStep + 0.5));
+  return c;
+}
+
+void Simplifier::snap(double* g) const {
+  const Cell c = cellOf(g);
+  for (int a = 0; a < 3; ++a) g[a] = options_.gridOrigin[a] + options_.gridStep * double(c.c[a]);
+}
+
+// The collapse of edge (a, b) and its cost (G&H 4): toward a frozen end without moving it; else to
+// the quadric's minimum when it lies within one edge length of the edge's midpoint (farther means
+// the minimum is set by noise far from this neighbourhood, as vcg also refuses), else to the best
+// of the two ends and the midpoint; a new point is clamped to the input's bounding box. allowMove false: only the ends (the grid cell of a new point
+// was taken).
+bool Simplifier::candidate(uint32_t a, uint32_t b, bool allowMove, Candidate& c) const {
+  if (frozen_[a] && frozen_[b]) return false;
+  Quadric q = quadric_[a];
+  q.add(quadric_[b]);
+  const double *pa = &pos_[a * 3], *pb = &pos_[b * 3];
+  c.moves = false;
+  if (frozen_[a] || frozen_[b]) {
+    c.s = frozen_[a] ? a : b;
+    std::memcpy(c.p, &pos_[c.s * 3], sizeof c.p);
+    std::memcpy(c.g, out_ + size_t(c.s) * 3, sizeof c.g);
+  } else {
+    double mid[3], p[3];
+    for (int k = 0; k < 3; ++k) mid[k] = 0.5 * (pa[k] + pb[k]);
+    const double l2 = dist2(pa, pb);
+    bool ok = allowMove && q.minimum(mid, p) && dist2(p, mid) <= l2;
+    if (allowMove && !ok) std::memcpy(p, mid, sizeof p), ok = true;  // compared with the ends below
+    // Never outside the input's box: the quantization grid covers the input's box only.
+    for (int k = 0; k < 3; ++k) p[k] = std::min(std::max(p[k], lo_[k]), hi_[k]);
+    double g[3];
+    for (int k = 0; k < 3; ++k) g[k] = p[k] + center_[k];
+    if (ok && options_.gridStep > 0) {
+      snap(g);
+      for (int k = 0; k < 3; ++k) p[k] = g[k] - center_[k];
+    }
+    const double ea = q.at(pa), eb = q.at(pb), ep = ok ? q.at(p) : DBL_MAX;
+    if (ep < std::min(ea, eb)) {
+      std::memcpy(c.p, p, sizeof c.p);
+      std::memcpy(c.g, g, sizeof c.g);
+      c.moves = true;
+      const double da = dist2(p, pa), db = dist2(p, pb);  // the nearer end keeps its id (attributes)
+      c.s = da < db || (da == db && a < b) ? a : b;
+    } else {
+      c.s = ea < eb || (ea == eb && a < b) ? a : b;
+      std::memcpy(c.p, &pos_[c.s * 3], sizeof c.p);
+      std::memcpy(c.g, out_ + size_t(c.s) * 3, sizeof c.g);
+    }
+  }
+  c.r = c.s == a ? b : a;
+  c.cost = q.at(c.p);
+  c.versionS = version_[c.s], c.versionR = version_[c.r];
+  return true;
+}
+
+void Simplifier::neighbours(uint32_t v, std::vector<uint32_t>& n) const {
+  n.clear();
+  for (uint32_t i = start_[v]; i < start_[v] + count_[v]; ++i) {
+    const uint32_t t = pool_[i];
+    if (dead_[t]) continue;
+    for (int k = 0; k < 3; ++k)
+      if (tri_[t * 3 + k] != v) n.push_back(tri_[t * 3 + k]);
+  }
+  std::sort(n.begin(), n.end());
+}
+
+void Simplifier::pushEdgesOf(uint32_t v) {
+  neighbours(v, nb_);
+  nb_.erase(std::unique(nb_.begin(), nb_.end()), nb_.end());
+  for (uint32_t w : nb_) {
+    Candidate c;
+    if (candidate(v, w, true, c)) push(c, true);
+  }
+}
+
+// Whether collapse c may be done now. The link condition (Dey, Edelsbrunner et al. 1999, as used
+// for G&H's "valid pairs" restricted to edges): the common neighbours of s and r are exactly the
+// apexes of the edge's triangles, and an interior edge does not join two border vertices; with it
+// the result stays a manifold with no duplicate face. Then the region rules (locks, chords), the
+// face rules (no flip, no new sliver) and the grid rule (a moved vertex takes a free cell).
+Verdict Simplifier::check(const Candidate& c) {
+  const uint32_t s = c.s, r = c.r;
+  minQuality_ = 1;
+  auto liveOf = [&](uint32_t v, std::vector<uint32_t>& out) {
+    out.clear();
+    for (uint32_t i = start_[v]; i < start_[v] + count_[v]; ++i)
+      if (!dead_[pool_[i]]) out.push_back(pool_[i]);
+  };
+  auto has = [&](uint32_t t, uint32_t v) { return tri_[t * 3] == v || tri_[t * 3 + 1] == v || tri_[t * 3 + 2] == v; };
+  liveOf(s, ts_), liveOf(r, tr_);
+  edge_.clear();
+  for (uint32_t t : ts_)
+    if (has(t, r)) edge_.push_back(t);
+  if (edge_.empty() || edge_.size() > 2) return Verdict::Refused;
+  // Neighbours with multiplicity: a neighbour seen once is across a border edge.
+  neighbours(s, ns_), neighbours(r, nr_);
+  auto border = [](std::vector<uint32_t>& n) {
+    bool b = false;
+    for (size_t i = 0; i < n.size();) {
+      size_t j = i;
+      while (j < n.size() && n[j] == n[i]) ++j;
+      b |= j - i == 1;
+      i = j;
+    }
+    n.erase(std::unique(n.begin(), n.end()), n.end());
+    return b;
+  };
+  const bool sBorder = border(ns_), rBorder = border(nr_);
+  if (edge_.size() == 2 && sBorder && rBorder) return Verdict::Refused;
+  uint32_t apex[2] = {~0u, ~0u};
+  for (size_t i = 0; i < edge_.size(); ++i)
+    for (int k = 0; k < 3; ++k) {
+      const uint32_t v = tri_[edge_[i] * 3 + k];
+      if (v != s && v != r) apex[i] = v;
+    }
+  if (edge_.size() == 2 && apex[0] == apex[1]) return Verdict::Refused;  // a duplicate face
+  for (size_t i = 0; i < edge_.size(); ++i)
+    if (live_[apex[i]] <= 1) return Verdict::Refused;  // the apex would lose its last triangle
+  size_t common = 0;
+  for (size_t i = 0, j = 0; i < ns_.size() && j < nr_.size();) {
+    if (ns_[i] < nr_[j]) ++i;
+    else if (nr_[j] < ns_[i]) ++j;
+    else ++common, ++i, ++j;
+  }
+  if (common != edge_.size()) return Verdict::Refused;
+  // A locked survivor gains r's neighbours: none of them may be locked (a chord across the region
+  // border could duplicate an edge of a patch outside it).
+  if (locked_[s])
+    for (uint32_t w : nr_)
+      if (w != s && locked_[w] && !std::binary_search(ns_.begin(), ns_.end(), w)) return Verdict::Refused;
+  // Faces that change: r's (r becomes s), and s's when s moves.
+  for (int pass = 0; pass < (c.moves ? 2 : 1); ++pass)
+    for (uint32_t t : pass == 0 ? tr_ : ts_) {
+      if (has(t, s) && has(t, r)) continue;
+      const double* q[3];
+      const double* n[3];
+      for (int k = 0; k < 3; ++k) {
+        const uint32_t v = tri_[t * 3 + k];
+        q[k] = &pos_[v * 3];
+        n[k] = v == r || v == s ? c.p : q[k];
+      }
+      double before[3], after[3];
+      areaVector(q[0], q[1], q[2], before);
+      areaVector(n[0], n[1], n[2], after);
+      if (!(dot(before, after) > 0)) return Verdict::Refused;
+      const double qa = quality(n[0], n[1], n[2], after);
+      if (qa < kMinQuality && qa < quality(q[0], q[1], q[2], before)) return Verdict::Refused;
+      minQuality_ = std::min(minQuality_, qa);
+    }
+  if (c.moves && options_.gridStep > 0) {
+    const Cell k = cellOf(c.g);
+    auto it = cells_.find(k);
+    uint32_t n = it == cells_.end() ? 0 : it->second;
+    n -= cellOfVertex(s) == k;
+    n -= cellOfVertex(r) == k;
+    if (n > 0) return Verdict::GridTaken;
+  }
+  return Verdict::Ok;
+}
+
+void Simplifier::appendTriangle(uint32_t v, uint32_t t) {
+  if (count_[v] == cap_[v]) {
+    const uint32_t room = std::max<uint32_t>(8, cap_[v] * 2), at = uint32_t(pool_.size());
+    pool_.resize(pool_.size() + room);
+    std::copy(pool_.begin() + start_[v], pool_.begin() + start_[v] + count_[v], pool_.begin() + at);
+    start_[v] = at, cap_[v] = room;
+  }
+  pool_[start_[v] + count_[v]++] = t;
+}
+
+// Performs collapse c (check() has just filled ts_, tr_ and edge_ for it).
+void Simplifier::collapse(const Candidate& c) {
+  const uint32_t s = c.s, r = c.r;
+  for (uint32_t t : edge_) {
+    dead_[t] = 1;
+    for (int k = 0; k < 3; ++k) --live_[tri_[t * 3 + k]];
+    --liveTriangles_;
+  }
+  // s's list without its dead triangles, then r's live ones, renamed.
+  uint32_t n = 0;
+  for (uint32_t i = start_[s]; i < start_[s] + count_[s]; ++i)
+    if (!dead_[pool_[i]]) pool_[start_[s] + n++] = pool_[i];
+  count_[s] = n;
+  for (uint32_t t : tr_) {
+    if (dead_[t]) continue;
+    for (int k = 0; k < 3; ++k)
+      if (tri_[t * 3 + k] == r) tri_[t * 3 + k] = s;
+    appendTriangle(s, t);
+  }
+  live_[s] += live_[r];
+  live_[r] = 0;
+  count_[r] = 0;
+  if (options_.gridStep > 0) {
+    for (uint32_t v : {s, r}) {
+      auto it = cells_.find(cellOfVertex(v));
+      assert(it != cells_.end());
+      if (--it->second == 0) cells_.erase(it);
+    }
+  }
+  std::memcpy(&pos_[s * 3], c.p, sizeof c.p);
+  std::memcpy(out_ + size_t(s) * 3, c.g, sizeof c.g);
+  if (c.moves && moved_) moved_[s] = 1;
+  if (options_.gridStep > 0) ++cells_[cellOfVertex(s)];
+  quadric_[s].add(quadric_[r]);
+  ++version_[s], ++version_[r];
+  ++stats.collapses;
+  stats.maxCost = std::max(stats.maxCost, c.cost);
+  pushEdgesOf(s);
+}
+
+// Collapses in cost order until the target. A refused collapse waits for the next round (its
+// neighbourhood may change); a collapse whose new point's grid cell is taken is offered again
+// without the move (its ends' cells are its own).
+void Simplifier::run(size_t targetTriangles) {
+  std::vector<uint32_t> nb;
+  for (uint32_t v = 0; v < nv_; ++v) {
+    neighbours(v, nb);
+    nb.erase(std::unique(nb.begin(), nb.end()), nb.end());
+    for (uint32_t w : nb) {
+      Candidate c;
+      if (w > v && candidate(v, w, true, c)) heap_.push_back(entryOf(c, true));
+    }
+  }
+  std::make_heap(heap_.begin(), heap_.end(), Later());
+  size_t liveEntries = heap_.size();  // entries pushed since the last clean-up, stale or not
+  for (int round = 0; liveTriangles_ > targetTriangles;) {
+    if (heap_.empty()) {
+      if (retry_.empty() || round == 3) break;
+      ++round;
+      for (const Entry& e : retry_)
+        if (current(e)) heap_.push_back(e);
+      retry_.clear();
+      std::make_heap(heap_.begin(), heap_.end(), Later());
+      continue;
+    }
+    std::pop_heap(heap_.begin(), heap_.end(), Later());
+    const Entry e = heap_.back();
+    heap_.pop_back();
+    if (!current(e)) continue;
+    Candidate c;
+    candidate(e.s, e.r, e.allowMove(), c);
+    if (c.s != e.s || (!e.penalized() && float(c.cost) != e.cost)) continue;  // stale after a version wrap
+    const Verdict verdict = check(c);
+    // The shape penalty needs the neighbourhood, so it is applied when popped (the raw cost is a
+    // lower bound): a penalized collapse that is no longer the cheapest goes back in.
+    if (verdict == Verdict::Ok && !e.penalized() && minQuality_ < kFairQuality) {
+      Entry p = e;
+      p.cost = float(c.cost * (kFairQuality / std::max(minQuality_, 1e-6)));
+      p.versionS |= 0x8000;
+      if (!heap_.empty() && !Later()(heap_.front(), p)) {
+        heap_.push_back(p);
+        std::push_heap(heap_.begin(), heap_.end(), Later());
+        continue;
+      }
+    }
+    if (verdict == Verdict::Ok) {
+      collapse(c);
+    } else if (verdict == Verdict::GridTaken) {
+      Candidate d;
+      if (candidate(c.s, c.r, false, d)) push(d, false);
+    } else {
+      ++stats.rejected;
+      retry_.push_back(e);
+    }
+    // Each collapse leaves the entries of its two vertices stale: drop them when they are most
+    // of the heap, which keeps it near the number of live edges.
+    if (heap_.size() > 2 * liveEntries + 1024) {
+      dropStale();
+      liveEntries = heap_.size();
+    }
+  }
+}
+
+void Simplifier::dropStale() {
+  heap_.erase(std::remove_if(heap_.begin(), heap_.end(), [&](const Entry& e) { return !current(e); }), heap_.end());
+  std::make_heap(heap_.begin(), heap_.end(), Later());
+}
+
+size_t Simplifier::write(uint32_t* destination) const {
+  size_t n = 0;
+  for (size_t t = 0; t < dead_.size(); ++t)
+    if (!dead_[t])
+      for (int k = 0; k < 3; ++k) destination[n++] = tri_[t * 3 + k];
+  return n;
+}
+
+}  // namespace
+
+size_t quadricSimplify(uint32_t* destination, double* destinationPositions, uint8_t* moved, const uint32_t* indices,
+                       size_t indexCount, const double* positions, size_t vertexCount, size_t positionStride,
+                       const uint8_t* locked, size_t targetIndexCount, const QuadricSimplifyOptions& options,
+                       QuadricSimplifyStats* stats) {
+  assert(indexCount % 3 == 0);
+  assert(positionStride >= 3 * sizeof(double));
+  for (size_t i = 0; i < indexCount; ++i) assert(indices[i] < vertexCount);
+  Simplifier s(indices, indexCount, positions, vertexCount, positionStride, locked, options, destinationPositions,
+               moved);
+  s.run(targetIndexCount / 3);
+  if (stats) *stats = s.stats;
+  return s.write(destination);
+}
+
+}  // namespace mt

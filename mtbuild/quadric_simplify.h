@@ -1,0 +1,54 @@
+// Quadric edge collapse with optimal placement and per-vertex locks (Garland & Heckbert 1997,
+// "Surface Simplification Using Quadric Error Metrics").
+//
+// Why not meshoptimizer's simplifier: meshopt 0.18 collapses half-edges only, so every kept vertex
+// is an input sample and a coarse surface runs through the samples, on one side of every chord of
+// a curved surface. G&H section 4 places the merged vertex at the minimum of the summed quadrics,
+// which straddles the surface; ranking each collapse by the error AT that point (not at an
+// endpoint) is what lowers the mean distance (docs/mtbuild.md, "Quality at equal size").
+//
+// What the batched MT (BMT section 4) needs on top of G&H:
+//   * locked vertices (region borders) never move and never disappear; an edge between two locked
+//     vertices is never collapsed, and no collapse creates an edge between two locked vertices
+//     that was not there (it could duplicate an edge of a patch outside the region);
+//   * topology safety: the link condition (Dey et al.; no non-manifold edge or vertex results),
+//     no face flips, no sliver faces made from good ones, no vertex left without triangles;
+//   * open borders (scan holes) kept in shape by G&H section 6.2's perpendicular boundary planes;
+//   * optionally, moved vertices snapped to the MT's quantization grid and kept out of any grid
+//     cell another vertex of the mesh already occupies (cuts are welded by grid position);
+//   * deterministic: one binary heap ordered by (cost, lower id, higher id).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+namespace mt {
+
+struct QuadricSimplifyOptions {
+  // The quantization grid moved vertices are snapped to (step 0: no grid). A point p is in cell
+  // floor((p - origin) / step + 0.5) on each axis, as QuantizationGrid::quantize rounds it.
+  double gridStep = 0;
+  double gridOrigin[3] = {0, 0, 0};
+  // Weight of the boundary planes relative to the face planes (G&H 6.2 "a large penalty factor").
+  double boundaryWeight = 10;
+};
+
+struct QuadricSimplifyStats {
+  size_t collapses = 0;
+  size_t rejected = 0;      // popped collapses refused by a rule (topology, locks, flips, grid)
+  double maxCost = 0;       // largest quadric error of a performed collapse (squared units x area)
+};
+
+// positions: vertexCount points of 3 doubles, positionStride bytes apart. indices: indexCount
+// (a multiple of 3) vertex ids < vertexCount. locked: 1 byte per vertex (non-zero = frozen) or
+// null. Collapses until at most targetIndexCount indices remain or no collapse is allowed.
+// destination: room for indexCount indices; receives the kept triangles (input vertex ids, in input
+// order). destinationPositions: 3 doubles per vertex; receives every vertex's position (a locked
+// or unmoved vertex: its input position bit for bit). moved (optional, 1 byte per vertex): set to
+// 1 for vertices whose position changed. Returns the number of indices written.
+size_t quadricSimplify(uint32_t* destination, double* destinationPositions, uint8_t* moved, const uint32_t* indices,
+                       size_t indexCount, const double* positions, size_t vertexCount, size_t positionStride,
+                       const uint8_t* locked, size_t targetIndexCount, const QuadricSimplifyOptions& options,
+                       QuadricSimplifyStats* stats = nullptr);
+
+}  // namespace mt
