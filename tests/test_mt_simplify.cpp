@@ -544,6 +544,7 @@ TEST(QuadricSimplify, CloserOnAverageThanHalfEdgeCollapse) {
     return sum / r.g.vertexCount();
   };
   SimplifyRegionOptions opt;
+  opt.simplifier = RegionSimplifier::Quadric;
   opt.targetTriangles = r.g.triangleCount() / 8;
   SimplifiedRegion q = simplifyRegion(r.g.positions.data(), r.g.vertexCount(), r.g.triangles.data(),
                                       r.g.triangleCount(), r.locked.data(), opt);
