@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Issue 6 "done means": mtcluster with -np 1, 2, 4 (oversubscribed here) writes the same bytes as
+# Cluster identity: mtcluster with -np 1, 2, 4 (oversubscribed here) writes the same bytes as
 # mtbuild, on three different mtgen scans (one with holes). Prints one line per run and a verdict;
 # exit status 0 only if every file is byte-identical to mtbuild's.
 #   bench/cluster_identity.sh [BUILD_DIR] [TRIANGLES]   (defaults: build, 200k)

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Ingest benchmark (issue: patch store). Generates an mtgen scan (default 53M triangles, ~1 GB of
+# Ingest benchmark. Generates an mtgen scan (default 53M triangles, ~1 GB of
 # PLY, with holes and shuffled faces), ingests it with a memory cap, and prints throughput (input
 # triangles/s), peak RSS (/usr/bin/time -v) and store size; then exports and checks the round trip
 # size, with per-stage wall/CPU seconds. Usage: bench/ingest.sh [TRIANGLES=53M] [MEMORY=256M] [WORKDIR=out/bench-ingest]
