@@ -16,6 +16,8 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <filesystem>
+#include <memory>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -24,6 +26,7 @@
 #include "base/interrupt.h"
 #include "base/output_path.h"
 #include "mtfile/mt_cut.h"
+#include "mtfile/mt_cut_writer.h"
 #include "mtfile/mt_file.h"
 #include "patchstore/io/ply_writer.h"
 #include "base/cli_checks.h"
@@ -35,6 +38,7 @@ struct Options {
   double error = NAN;
   uint64_t triangles = 0;
   std::string eye, target;
+  uint64_t memoryBytes = uint64_t(1) << 30;
   double fov = 60, width = 1920, pixels = 1;
   bool hasError = false, hasTriangles = false, hasEye = false, hasTarget = false;
 };
@@ -77,6 +81,61 @@ void checkOutputFormat(const std::string& output) {
   if (ext == ".ply") return;
   if (ext.empty()) mt::fail(output, "the output name has no extension: cannot choose its format (supported: .ply)");
   mt::fail(output, "cannot write the format " + name.substr(dot) + " (supported: .ply)");
+}
+
+// The PLY writer as the streamed weld's sink: the header's choices made as assembleCut's path
+// makes them, from the cut's extent.
+class PlySink : public mt::WeldedCutSink {
+ public:
+  PlySink(const std::string& output, double gridStep) : output_(output), gridStep_(gridStep) {}
+  void begin(const mt::WeldedCutInfo& info) override {
+    mt::PlyWriteOptions options;
+    options.doublePrecision = info.maxAbsCoordinate * 0x1.0p-23 > gridStep_ * 0.5;
+    options.normals = info.normals;
+    options.colors = info.colors;
+    ply_ = std::make_unique<mt::PlyWriter>(output_, options);
+  }
+  void vertex(const double p[3], const float* n, const uint8_t* c) override { ply_->addVertex(p, n, c); }
+  void triangle(uint32_t a, uint32_t b, uint32_t c) override { ply_->addTriangle(a, b, c); }
+  void finish() { ply_->finish(); }
+
+ private:
+  std::string output_;
+  double gridStep_;
+  std::unique_ptr<mt::PlyWriter> ply_;
+};
+
+// The cut welded in bounded memory: sorts spill to a folder beside the output, removed at the end
+// (or when an error or a signal unwinds).
+int writeStreamedPly(const Options& o, const mt::MtFileReader& r, const std::vector<uint32_t>& arcs,
+                     const mt::CutStats& stats, const mt::ViewParams& view) {
+  struct ScratchDir {
+    std::string path;
+    ~ScratchDir() {
+      std::error_code ec;
+      if (!path.empty()) std::filesystem::remove_all(path, ec);
+    }
+  } scratch{mt::uniqueTempName(o.output) + ".sort"};
+  if (!std::filesystem::create_directory(scratch.path)) mt::fail(scratch.path, "cannot create the scratch folder");
+  mt::WeldedCutOptions options;
+  options.memoryBytes = o.memoryBytes;
+  options.scratchDir = scratch.path;
+  options.poll = [&] { mt::checkInterrupt(o.output); };
+  PlySink sink(o.output, r.header().gridStep);
+  const mt::WeldedCutInfo info = mt::writeWeldedCut(r, arcs, options, sink);
+  mt::checkInterrupt(o.output);
+  sink.finish();
+  std::fprintf(stderr, "mtextract: %s: %" PRIu64 " triangles, %" PRIu64 " vertices from %" PRIu64 " patches; %u nodes in the "
+               "set, %u on the front; max error %.9g", o.output.c_str(), info.triangles, info.vertices, info.patches,
+               stats.nodes, stats.frontNodes, stats.maxError);
+  if (o.hasEye) {
+    double worst = 0;
+    for (uint32_t a : arcs) worst = std::max(worst, mt::screenSpaceError(r.nodes()[r.arcs()[a].from], view));
+    std::fprintf(stderr, ", max screen-space error %.3g px", worst);
+  }
+  if (info.degenerateTriangles) std::fprintf(stderr, "; %" PRIu64 " degenerate triangles dropped", info.degenerateTriangles);
+  std::fprintf(stderr, " (welded in bounded memory)\n");
+  return 0;
 }
 
 int run(const Options& o) {
@@ -125,6 +184,10 @@ int run(const Options& o) {
     std::fprintf(stderr, "mtextract: warning: the coarsest cut has %" PRIu64 " triangles, more than --triangles %" PRIu64
                  "; writing it\n", stats.triangles, o.triangles);
 
+  // A cut whose assembled mesh would not fit --memory is welded through external sorts and
+  // streamed to the PLY (same bytes, mtfile/mt_cut_writer.h).
+  if (const std::vector<uint32_t> arcs = mt::cutArcs(r, cut.inSet); mt::assembledCutBytes(r, arcs) > o.memoryBytes)
+    return writeStreamedPly(o, r, arcs, stats, view);
   mt::WeldedMesh mesh = mt::assembleCut(r, mt::cutArcs(r, cut.inSet));
   mt::checkInterrupt(o.output);
 
@@ -196,6 +259,12 @@ int main(int argc, char** argv) {
   app.add_option("--pixels", o.pixels, "View-dependent: tolerated screen-space error in pixels")
       ->check(mt::cli::numberIn(kPixelsRange))
       ->capture_default_str();
+  std::string memory = "1G";
+  app.add_option("--memory", memory,
+                 "Memory for the weld, from 1M to 1024T, e.g. 512M, 4G (K, M, G, T are powers of 1024): a cut whose "
+                 "welded mesh (about 60 bytes per triangle) would not fit is welded through external sorts in a folder "
+                 "beside the output, streamed, same bytes")
+      ->capture_default_str();
   if (int code = mt::cli::parse(app, argc, argv, "mtextract"); code >= 0) return code;
   o.hasError = err->count() > 0;
   o.hasTriangles = tri->count() > 0;
@@ -203,6 +272,7 @@ int main(int argc, char** argv) {
   o.hasTarget = target->count() > 0;
   mt::installInterruptHandlers();
   try {
+    o.memoryBytes = mt::cli::sizeOption(memory, "--memory", uint64_t(1) << 20, uint64_t(1) << 50, "1M", "1024T");
     return run(o);
   } catch (const mt::Interrupted& e) {
     std::fprintf(stderr, "mtextract: %s; nothing was written\n", e.what());
