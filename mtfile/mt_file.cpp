@@ -10,6 +10,7 @@
 #include <type_traits>
 #include <string>
 
+#include "base/buffered_file.h"
 #include "base/error.h"
 
 namespace mt {
@@ -51,7 +52,8 @@ MtFileWriter::MtFileWriter(const std::string& path, const FileHeader& header, co
     : path_(path), tmp_(tempPath.empty() ? path + ".tmp" : tempPath), env_(env), header_(header) {
   if (header_.payloadAlignment == 0) header_.payloadAlignment = kDefaultPayloadAlignment;
   if (header_.payloadAlignment & (header_.payloadAlignment - 1)) fail(path_, "payload alignment must be a power of two");
-  file_ = env_->newWritableFile(tmp_);
+  // Payloads of a few hundred bytes each: appended through a buffer, written in large blocks.
+  file_ = std::make_unique<BufferedWritableFile>(env_->newWritableFile(tmp_));
   // The header is rewritten with its final counts and offsets by finish().
   FileHeader placeholder{};
   write(&placeholder, sizeof placeholder);
@@ -77,7 +79,7 @@ MtFileWriter::MtFileWriter(const std::string& path, const FileHeader& header, ui
   if (!env_->exists(tmp_)) failIo(tmp_, "cannot reopen to resume: no such file");
   if (uint64_t have = env_->fileSize(tmp_); have < length)
     fail(tmp_, "cannot resume: " + std::to_string(have) + " bytes, the checkpoint recorded " + std::to_string(length));
-  file_ = env_->newWritableFileAt(tmp_, length);  // cuts off the payloads of an unfinished level
+  file_ = std::make_unique<BufferedWritableFile>(env_->newWritableFileAt(tmp_, length));  // cuts off the payloads of an unfinished level
   assert(file_->size() == offset_);
 }
 

@@ -32,28 +32,59 @@ std::string PatchStore::Impl::segmentPath(uint32_t n) const { return numbered(di
 std::string PatchStore::Impl::manifestPath(uint64_t n) const { return numbered(dir, "MANIFEST-", n, ""); }
 
 void PatchStore::Impl::startSegment() {
+  std::lock_guard<std::mutex> lock(appendMutex);
+  startSegmentLocked();
+}
+
+void PatchStore::Impl::startSegmentLocked() {
   if (activeWriter) {
-    activeWriter->sync();
+    flushAppendsLocked(true);
     activeWriter->close();
   }
   activeSegment = nextSegment++;
-  activeWriter = env->newWritableFile(segmentPath(activeSegment));
+  activeWriter = std::make_unique<BufferedWritableFile>(env->newWritableFile(segmentPath(activeSegment)));
   liveBytes[activeSegment] += 0;
   segmentBytes[activeSegment] = 0;
 }
 
+void PatchStore::Impl::flushAppendsLocked(bool sync) const {
+  if (!activeWriter) return;
+  try {
+    if (sync)
+      activeWriter->sync();
+    else
+      activeWriter->flush();
+  } catch (const Error& e) {
+    appendError = e.what();
+    throw;
+  }
+}
+
 BlockHandle PatchStore::Impl::appendBlock(const std::string& payload) {
-  if (!activeWriter || activeWriter->size() >= kSegmentRollBytes) startSegment();
+  std::lock_guard<std::mutex> lock(appendMutex);
+  if (!appendError.empty()) fail(dir, "store refuses updates after a failed write (" + appendError + "); reopen it");
+  if (!activeWriter || activeWriter->size() >= kSegmentRollBytes) startSegmentLocked();
   BlockHeader h{kBlockMagic, uint32_t(payload.size()), blockChecksum(payload.data(), payload.size())};
   BlockHandle handle{activeSegment, h.size, activeWriter->size(), h.checksum};
-  activeWriter->append(&h, sizeof h);
-  activeWriter->append(payload.data(), payload.size());
+  try {
+    activeWriter->append(&h, sizeof h);
+    activeWriter->append(payload.data(), payload.size());
+  } catch (const Error& e) {
+    appendError = e.what();
+    throw;
+  }
   segmentBytes[activeSegment] = activeWriter->size();
   return handle;
 }
 
 std::string PatchStore::Impl::readBlock(const BlockHandle& h, const std::string& what) const {
   std::shared_ptr<RandomAccessFile> file;
+  {
+    // A block still in the active segment's buffer is written out first.
+    std::lock_guard<std::mutex> lock(appendMutex);
+    if (activeWriter && h.segment == activeSegment && h.offset + sizeof(BlockHeader) + h.size > activeWriter->flushedSize())
+      flushAppendsLocked(false);
+  }
   {
     std::lock_guard<std::mutex> lock(readersMutex);
     auto it = readers.find(h.segment);

@@ -18,6 +18,7 @@
 #include <string>
 #include <vector>
 
+#include "base/buffered_file.h"
 #include "base/file_lock.h"
 #include "patchstore/patch_store.h"
 #include "patchstore/store_format.h"
@@ -55,8 +56,14 @@ struct PatchStore::Impl {
   std::map<std::string, std::string> blobs;
 
   // Segments: the one being appended to, and lazily opened readers for all.
+  // The active segment's appends are buffered into large sequential writes (BufferedWritableFile);
+  // appendMutex guards the buffer, so that a reader of a block still in it has it flushed first.
+  // A failed flush leaves records pointing at bytes that never reached the file: appendError then
+  // refuses every later update and commit, as a failed commit does.
   uint32_t activeSegment = 0;
-  std::unique_ptr<WritableFile> activeWriter;
+  std::unique_ptr<BufferedWritableFile> activeWriter;
+  mutable std::mutex appendMutex;
+  mutable std::string appendError;
   std::map<uint32_t, uint64_t> liveBytes;  // per segment, of blocks referenced by live patches
   std::map<uint32_t, uint64_t> segmentBytes;  // per segment, its file size (live and dead blocks)
   mutable std::mutex readersMutex;
@@ -99,6 +106,9 @@ struct PatchStore::Impl {
   store_format::BlockHandle appendBlock(const std::string& payload);
   std::string readBlock(const store_format::BlockHandle& h, const std::string& what) const;
   void startSegment();
+  void startSegmentLocked();  // under appendMutex
+  // Under appendMutex: writes (and with `sync`, fsyncs) the active segment's buffered blocks.
+  void flushAppendsLocked(bool sync) const;
 
   // ---- manifest ----
   std::string encodeSnapshot() const;

@@ -177,7 +177,11 @@ void PatchStore::Impl::commitPending() {
 }
 
 void PatchStore::Impl::commitPendingUnchecked() {
-  if (activeWriter) activeWriter->sync();  // blocks before the record that references them
+  {
+    std::lock_guard<std::mutex> lock(appendMutex);
+    if (!appendError.empty()) fail(dir, "store refuses to commit after a failed write (" + appendError + "); reopen it");
+    flushAppendsLocked(true);  // blocks before the record that references them
+  }
   ByteWriter w;
   w.put(nextPatchId);
   w.put(nextSegment);

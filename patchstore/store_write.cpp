@@ -15,6 +15,10 @@ using namespace store_format;
 
 void PatchStore::Impl::startUpdate(const std::string& where) {
   if (!failedCommit.empty()) fail(where, "store refuses updates after a failed commit; reopen it");
+  {
+    std::lock_guard<std::mutex> lock(appendMutex);
+    if (!appendError.empty()) fail(where, "store refuses updates after a failed write (" + appendError + "); reopen it");
+  }
   lockForWriting();
 }
 
