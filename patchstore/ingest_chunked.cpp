@@ -337,6 +337,33 @@ std::unique_ptr<CellSorter> chunkedAssign(IngestContext& ctx, const ParsedInput&
   return byCell;
 }
 
+// Per-thread scratch of buildPatch and chunkedGroup (reused from patch to patch).
+struct ChunkedScratch {
+  std::vector<uint64_t> table, keys, tmp;
+};
+ChunkedScratch& chunkedScratch() {
+  thread_local ChunkedScratch s;
+  return s;
+}
+inline unsigned bitWidth(uint64_t x) { return x == 0 ? 1 : unsigned(64 - __builtin_clzll(x)); }
+
+// The distinct values of `values`, ascending, into `out` (a radix sort on the bits that differ:
+// a patch's corners span a narrow range of input indices in a scan).
+void distinctSorted(const std::vector<uint32_t>& values, std::vector<uint32_t>& out) {
+  out.clear();
+  if (values.empty()) return;
+  auto [lo, hi] = std::minmax_element(values.begin(), values.end());
+  const uint32_t base = *lo;
+  const unsigned bits = bitWidth(*hi - base);
+  ChunkedScratch& s = chunkedScratch();
+  s.keys.resize(values.size());
+  s.tmp.resize(values.size());
+  for (size_t i = 0; i < values.size(); ++i) s.keys[i] = values[i] - base;
+  const uint64_t* sorted = lsdRadixSort(s.keys.data(), s.tmp.data(), values.size(), [](uint64_t x) { return x; }, bits);
+  for (size_t i = 0; i < values.size(); ++i)
+    if (i == 0 || sorted[i] != sorted[i - 1]) out.push_back(uint32_t(sorted[i]) + base);
+}
+
 using PairSorter = ExternalSorter<uint64_t, U64Less>;
 
 // Stage 4: consecutive keys become patches 0..P-1 -> pface.bin (their corners), patchTris (their
@@ -354,11 +381,7 @@ std::unique_ptr<PairSorter> chunkedGroup(IngestContext& ctx, CellSorter& byCell,
   std::vector<std::vector<uint32_t>> tris(kBatch), verts(kBatch);
   size_t filled = 0;
   auto flush = [&]() {
-    tbb::parallel_for(size_t(0), filled, [&](size_t i) {
-      verts[i] = tris[i];
-      std::sort(verts[i].begin(), verts[i].end());
-      verts[i].erase(std::unique(verts[i].begin(), verts[i].end()), verts[i].end());
-    });
+    tbb::parallel_for(size_t(0), filled, [&](size_t i) { distinctSorted(tris[i], verts[i]); });
     for (size_t i = 0; i < filled; ++i) {
       const uint32_t k = uint32_t(patchKey.size() - filled + i);
       pface.write(tris[i].data(), tris[i].size() * 4);
@@ -457,32 +480,73 @@ struct PatchWork {
 
 // The geometry block of one patch (local order = ascending input index), its duplicate faces and
 // edge use counts; edges between two shared vertices go to w.crossEdges, to be summed over patches.
+// Corners find their local index in a hash table of the patch's vertices (a binary search per
+// corner was the largest part of the chunked path's patch stage); duplicate faces and edges are
+// counted from keys packed in k bits per local index and radix sorted (the orders, and so the
+// cross-edge order, are those of the comparison sorts they replace).
 void buildPatch(PatchWork& w, const VertexLayout& layout, const std::string& scratch) {
   Patch& p = w.p;
-  for (uint32_t& v : p.triangles) {
-    auto it = std::lower_bound(w.globalIds.begin(), w.globalIds.end(), v);
-    if (it == w.globalIds.end() || *it != v) fail(scratch, "internal: patch vertex missing");
-    v = uint32_t(it - w.globalIds.begin());
+  ChunkedScratch& s = chunkedScratch();
+  const uint32_t nv = uint32_t(w.globalIds.size());
+  size_t slots = 16;
+  while (slots < 2 * size_t(nv)) slots *= 2;
+  const unsigned shift = 64 - unsigned(__builtin_ctzll(slots));
+  constexpr uint64_t kEmpty = ~uint64_t(0);
+  s.table.assign(slots, kEmpty);
+  auto home = [&](uint32_t v) { return size_t((uint64_t(v) * 0x9E3779B97F4A7C15ull) >> shift); };
+  for (uint32_t l = 0; l < nv; ++l) {
+    size_t i = home(w.globalIds[l]);
+    while (s.table[i] != kEmpty) i = (i + 1) & (slots - 1);
+    s.table[i] = uint64_t(w.globalIds[l]) << 32 | l;
   }
-  std::vector<std::array<uint32_t, 3>> sortedTris;
-  std::vector<uint64_t> edgeList;
-  for (size_t t = 0; t < p.triangles.size(); t += 3) {
-    std::array<uint32_t, 3> s3 = {p.triangles[t], p.triangles[t + 1], p.triangles[t + 2]};
-    std::sort(s3.begin(), s3.end());
-    sortedTris.push_back(s3);
-    if (s3[0] == s3[1] || s3[1] == s3[2]) continue;  // degenerate: no proper edges
+  for (uint32_t& v : p.triangles) {
+    size_t i = home(v);
+    for (;; i = (i + 1) & (slots - 1)) {
+      if (s.table[i] == kEmpty) fail(scratch, "internal: patch vertex missing");
+      if (uint32_t(s.table[i] >> 32) == v) break;
+    }
+    v = uint32_t(s.table[i]);
+  }
+  const size_t nt = p.triangles.size() / 3;
+  const unsigned k = bitWidth(nv > 0 ? nv - 1 : 0);
+  if (3 * k <= 64) {
+    s.keys.resize(nt);
+    s.tmp.resize(nt);
+    for (size_t t = 0; t < nt; ++t) {
+      std::array<uint32_t, 3> s3 = {p.triangles[3 * t], p.triangles[3 * t + 1], p.triangles[3 * t + 2]};
+      if (s3[1] < s3[0]) std::swap(s3[0], s3[1]);
+      if (s3[2] < s3[1]) std::swap(s3[1], s3[2]);
+      if (s3[1] < s3[0]) std::swap(s3[0], s3[1]);
+      s.keys[t] = uint64_t(s3[0]) << (2 * k) | uint64_t(s3[1]) << k | s3[2];
+    }
+    const uint64_t* sorted = lsdRadixSort(s.keys.data(), s.tmp.data(), nt, [](uint64_t x) { return x; }, 3 * k);
+    for (size_t i = 1; i < nt; ++i) w.duplicates += sorted[i] == sorted[i - 1];
+  } else {
+    std::vector<std::array<uint32_t, 3>> sortedTris;
+    for (size_t t = 0; t < nt; ++t) {
+      std::array<uint32_t, 3> s3 = {p.triangles[3 * t], p.triangles[3 * t + 1], p.triangles[3 * t + 2]};
+      std::sort(s3.begin(), s3.end());
+      sortedTris.push_back(s3);
+    }
+    std::sort(sortedTris.begin(), sortedTris.end());
+    for (size_t i = 1; i < sortedTris.size(); ++i) w.duplicates += sortedTris[i] == sortedTris[i - 1];
+  }
+  s.keys.clear();
+  for (size_t t = 0; t < nt; ++t) {
+    const uint32_t* f = &p.triangles[3 * t];
+    if (f[0] == f[1] || f[1] == f[2] || f[0] == f[2]) continue;  // degenerate: no proper edges
     for (int e = 0; e < 3; ++e) {
-      uint32_t a = p.triangles[t + e], b = p.triangles[t + (e + 1) % 3];
-      edgeList.push_back(uint64_t(std::min(a, b)) << 32 | std::max(a, b));
+      uint32_t a = f[e], b = f[(e + 1) % 3];
+      s.keys.push_back(uint64_t(std::min(a, b)) << k | std::max(a, b));
     }
   }
-  std::sort(sortedTris.begin(), sortedTris.end());
-  for (size_t i = 1; i < sortedTris.size(); ++i) w.duplicates += sortedTris[i] == sortedTris[i - 1];
-  std::sort(edgeList.begin(), edgeList.end());
-  for (size_t i = 0; i < edgeList.size();) {
+  s.tmp.resize(s.keys.size());
+  const uint64_t* edges = lsdRadixSort(s.keys.data(), s.tmp.data(), s.keys.size(), [](uint64_t x) { return x; }, 2 * k);
+  const uint64_t lowMask = (uint64_t(1) << k) - 1;
+  for (size_t i = 0, n = s.keys.size(); i < n;) {
     size_t j = i;
-    while (j < edgeList.size() && edgeList[j] == edgeList[i]) ++j;
-    uint32_t a = uint32_t(edgeList[i] >> 32), b = uint32_t(edgeList[i]);
+    while (j < n && edges[j] == edges[i]) ++j;
+    uint32_t a = uint32_t(edges[i] >> k), b = uint32_t(edges[i] & lowMask);
     if (w.holders[a] > 1 && w.holders[b] > 1)
       w.crossEdges.push_back({uint64_t(w.globalIds[a]) << 32 | w.globalIds[b], uint32_t(j - i), 0});
     else if (j - i > 2)
