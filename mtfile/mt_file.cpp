@@ -88,7 +88,15 @@ void MtFileWriter::syncPayloads() {
   file_->sync();
 }
 
-void MtFileWriter::detach() { file_.reset(); }
+void MtFileWriter::detach() {
+  // What was appended is written out (the buffer) and the file closed; an error here changes
+  // nothing: a resume cuts the file back to its checkpoint anyway.
+  try {
+    if (file_) file_->close();
+  } catch (const Error&) {
+  }
+  file_.reset();
+}
 
 void MtFileWriter::write(const void* data, size_t size) {
   if (!file_) fail(tmp_, "write after finish or failure");

@@ -215,7 +215,7 @@ TEST(MtFile, FailingWriteSyncOrRenameLeavesNothing) {
   FaultInjectionEnv counting(Env::Default());
   writeSmall(path, Codec::Meshopt, &counting);
   const std::string good = test::readFile(path);
-  ASSERT_GT(counting.writes, 5);
+  ASSERT_GE(counting.writes, 2);  // payloads are buffered: the payload block, then the header
   ASSERT_EQ(counting.syncs, 1);
   ASSERT_EQ(counting.renames, 1);
   const std::pair<FaultInjectionEnv::Op, int64_t> ops[] = {{FaultInjectionEnv::Op::Write, counting.writes},
