@@ -83,6 +83,12 @@ void checkOutputFormat(const std::string& output) {
   mt::fail(output, "cannot write the format " + name.substr(dot) + " (supported: .ply)");
 }
 
+bool isPlyOutput(const std::string& output) {
+  std::string ext = output.size() >= 4 ? output.substr(output.size() - 4) : "";
+  for (auto& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+  return ext == ".ply";
+}
+
 // The PLY writer as the streamed weld's sink: the header's choices made as assembleCut's path
 // makes them, from the cut's extent.
 class PlySink : public mt::WeldedCutSink {
@@ -186,7 +192,8 @@ int run(const Options& o) {
 
   // A cut whose assembled mesh would not fit --memory is welded through external sorts and
   // streamed to the PLY (same bytes, mtfile/mt_cut_writer.h).
-  if (const std::vector<uint32_t> arcs = mt::cutArcs(r, cut.inSet); mt::assembledCutBytes(r, arcs) > o.memoryBytes)
+  if (const std::vector<uint32_t> arcs = mt::cutArcs(r, cut.inSet);
+      isPlyOutput(o.output) && mt::assembledCutBytes(r, arcs) > o.memoryBytes)
     return writeStreamedPly(o, r, arcs, stats, view);
   mt::WeldedMesh mesh = mt::assembleCut(r, mt::cutArcs(r, cut.inSet));
   mt::checkInterrupt(o.output);
