@@ -12,6 +12,8 @@
 // --reencode: decode every patch and encode it again with this binary's codec, with the options
 // the builder uses (level >= 1 = simplified), and print the sizes: a codec change measured on the
 // patches of a real build without rebuilding it (the grid step, hence the patches, stay the same).
+#include <algorithm>
+#include <array>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -46,6 +48,24 @@ void split(const std::vector<uint8_t>& p, format::Codec codec, Split& s) {
 
 uint64_t positionBytes(const std::vector<uint8_t>& p, format::Codec codec) {
   return payloadBytes(p.data(), p.size(), codec).positions;
+}
+
+// The patch's triangles as sorted grid-coordinate triples, each rotated to start at its smallest
+// corner (winding kept): equal for two codings of the same triangles in any order and numbering.
+std::vector<std::array<uint32_t, 9>> triangleKeys(const DecodedPatch& d) {
+  std::vector<std::array<uint32_t, 9>> keys(d.triangleCount());
+  for (size_t t = 0; t < keys.size(); ++t) {
+    std::array<uint32_t, 3> c[3];
+    for (int k = 0; k < 3; ++k)
+      for (int x = 0; x < 3; ++x) c[k][x] = d.q[d.triangles[t * 3 + k] * 3 + x];
+    int r = 0;
+    for (int k = 1; k < 3; ++k)
+      if (c[k] < c[r]) r = k;
+    for (int k = 0; k < 3; ++k)
+      for (int x = 0; x < 3; ++x) keys[t][k * 3 + x] = c[(r + k) % 3][x];
+  }
+  std::sort(keys.begin(), keys.end());
+  return keys;
 }
 
 }  // namespace
@@ -97,7 +117,8 @@ int main(int argc, char** argv) {
         o.simplified = levelOf[i] >= 1 || std::getenv("MT_FAN0");
         std::vector<uint8_t> e = encodePatch(in, grid, o);
         DecodedPatch back = decodePatch(e.data(), e.size(), r->codec(), grid);
-        if (back.q.size() != d.q.size() || back.triangles.size() != d.triangles.size())
+        if (back.q.size() != d.q.size() || back.triangles.size() != d.triangles.size() ||
+            triangleKeys(back) != triangleKeys(d))
           throw std::runtime_error("re-encoded patch " + std::to_string(i) + " does not round-trip");
         s.reencoded += e.size();
         if (meshopt) s.reencodedPosition += positionBytes(e, r->codec());

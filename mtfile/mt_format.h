@@ -173,6 +173,7 @@ constexpr uint8_t kPayloadStrip = 1u << 3;    // meshopt: indices are a strip (r
 constexpr uint8_t kPayloadRangePositions = 1u << 4;  // meshopt: positions range-coded after the zstd frame (v2)
 constexpr uint8_t kPayloadRangeIndices = 1u << 5;      // meshopt: index code range-coded ahead of the positions (v3)
 constexpr uint8_t kPayloadPositionContexts = 1u << 6;  // meshopt: positions with the version-3 model (v3)
+constexpr uint8_t kPayloadConnectivity = 1u << 7;      // meshopt: triangles by the version-4 connectivity code (v4)
 
 // Codec::Meshopt, after the PayloadHeader:
 //   uint32 rawSize, uint32 zstdSize, then zstdSize bytes (one zstd frame) that decompress to

@@ -344,6 +344,33 @@ std::vector<uint8_t> encodeMeshoptWith(const Prepared& p, const std::vector<uint
   PayloadHeader hh = h;
   hh.flags = flags;
   std::vector<uint8_t> out;
+  // Candidate C (version 4): sizes and attributes as in B, the triangles by the connectivity code.
+  // The positions are the same in every candidate: the code gives back the same triangles in the
+  // same order, only rotated, and each triangle's new vertices keep their corner order.
+  std::vector<uint8_t> connectivity;
+  if (!strip) {
+    std::vector<uint8_t> rawC;
+    uint32_t sizesC[3] = {0, indexCount, uint32_t(abuf.size())};
+    appendBytes(rawC, sizesC, sizeof sizesC);
+    appendBytes(rawC, abuf.data(), abuf.size());
+    std::vector<uint8_t> frameC = abuf.empty() ? std::vector<uint8_t>() : zstdFrame(rawC, options.zstdLevel);
+    if (frameC.empty() || frameC.size() >= rawC.size()) frameC.clear();
+    PayloadHeader hc = h;
+    hc.flags = uint8_t((flags & ~format::kPayloadRangeIndices) | format::kPayloadConnectivity);
+    appendBytes(connectivity, &hc, sizeof hc);
+    uint32_t rawSize = uint32_t(rawC.size()), zSize = uint32_t(frameC.size());
+    appendBytes(connectivity, &rawSize, 4);
+    appendBytes(connectivity, &zSize, 4);
+    if (zSize) appendBytes(connectivity, frameC.data(), frameC.size());
+    else appendBytes(connectivity, rawC.data(), rawC.size());
+    RangeEncoder rc(connectivity);
+    std::vector<uint32_t> coded;
+    encodeConnectivity(rc, tri.data(), tri.size(), n, coded);
+    auto model = std::make_unique<ContextModel>();
+    for (size_t v = 0; v < n; ++v)
+      for (uint32_t x = 0; x < 3; ++x) encodeResidual(rc, *model, kind[v], x, res[v * 3 + x]);
+    rc.finish();
+  }
   appendBytes(out, &hh, sizeof hh);
   uint32_t rawSize = uint32_t(raw.size()), zSize = uint32_t(frame.size());
   appendBytes(out, &rawSize, 4);
@@ -358,6 +385,7 @@ std::vector<uint8_t> encodeMeshoptWith(const Prepared& p, const std::vector<uint
   for (size_t v = 0; v < n; ++v)
     for (uint32_t x = 0; x < 3; ++x) encodeResidual(rc, *model, kind[v], x, res[v * 3 + x]);
   rc.finish();
+  if (!connectivity.empty() && connectivity.size() <= out.size()) return connectivity;
   return out;
 }
 
@@ -412,10 +440,14 @@ MeshoptFrame readMeshoptFrame(const uint8_t* data, size_t size, const PayloadHea
   const bool ranged = h.flags & format::kPayloadRangePositions;
   const bool rangeIndices = h.flags & format::kPayloadRangeIndices;
   const bool contextual = h.flags & format::kPayloadPositionContexts;
+  const bool connectivity = h.flags & format::kPayloadConnectivity;
   if ((rangeIndices || contextual) && !ranged) bad("version-3 flags without range-coded positions");
   if (rangeIndices && (h.flags & format::kPayloadStrip)) bad("range-coded indices cannot be a strip");
-  // Version 3 with range-coded indices may store the raw bytes as they are (zSize 0).
-  const bool stored = rangeIndices && zSize == 0;
+  if (connectivity && (!contextual || rangeIndices || (h.flags & format::kPayloadStrip)))
+    bad("connectivity code with flags " + std::to_string(h.flags));
+  // Version 3 with range-coded indices, and version 4 with the connectivity code, may store the
+  // raw bytes as they are (zSize 0).
+  const bool stored = (rangeIndices || connectivity) && zSize == 0;
   const size_t frameBytes = stored ? rawSize : zSize;
   // Version 1 payloads end with the zstd frame; range-coded streams follow it.
   if (ranged ? frameBytes > size - pos : size - pos != zSize)
@@ -573,6 +605,14 @@ void decodeMeshopt(const uint8_t* data, size_t size, const PayloadHeader& h, Dec
   std::vector<uint8_t> rangedIndex;
   const uint8_t* ib = f.raw.data() + 12;
   const uint8_t* ab = ib + sizes[0];
+  if (h.flags & format::kPayloadConnectivity) {
+    if (uint64_t(sizes[2]) + 12 != f.raw.size() || sizes[0] != 0 || sizes[1] != uint64_t(h.triangleCount) * 3)
+      bad("stream sizes do not add up");
+    decodeConnectivity(rc, h.triangleCount, uint32_t(n), out.triangles);
+    decodeMeshoptAttributes(h, f.raw.data() + 12, sizes[2], out);
+    decodeContextPositions(rc, out.triangles, n, qRel);
+    return;
+  }
   if (rangeIndices) {
     if (uint64_t(sizes[2]) + 12 != f.raw.size()) bad("stream sizes do not add up");
     if (sizes[0] < 1 + uint64_t(h.triangleCount) + 16 ||
@@ -603,17 +643,32 @@ PayloadBytes meshoptPayloadBytes(const uint8_t* data, size_t size) {
   std::memcpy(&zSize, data + sizeof h + 4, 4);
   b.header += 8;
   const bool rangeIndices = h.flags & format::kPayloadRangeIndices;
-  size_t frame = rangeIndices && zSize == 0 ? rawSize : zSize;
+  const bool connectivity = h.flags & format::kPayloadConnectivity;
+  size_t frame = (rangeIndices || connectivity) && zSize == 0 ? rawSize : zSize;
   if (frame > size - b.header) return b.other = size - b.header, b;
   if (!(h.flags & format::kPayloadRangePositions)) return b.index = size - b.header, b;
   const uint8_t* rs = data + b.header + frame;
   size_t rest = size - b.header - frame;
-  if (!rangeIndices) {
+  if (!rangeIndices && !connectivity) {
     // The frame holds the index code (and the attributes, if any).
     b.index = frame, b.positions = rest;
     return b;
   }
   b.attributes = frame;
+  if (connectivity) {
+    if (uint64_t(h.triangleCount) > uint64_t(size) * 64 + 64 || uint64_t(h.vertexCount) > uint64_t(size) * 64 + 64)
+      return b.other = rest, b;
+    RangeDecoder rc(rs, rs + rest);
+    std::vector<uint32_t> triangles;
+    try {
+      decodeConnectivity(rc, h.triangleCount, h.vertexCount, triangles);
+    } catch (const Error&) {
+      return b.other = rest, b;
+    }
+    b.index = std::min(rest, rc.consumed(rs) > 4 ? rc.consumed(rs) - 4 : size_t(0));
+    b.positions = rest - b.index;
+    return b;
+  }
   std::vector<uint8_t> raw(std::max<uint32_t>(rawSize, 12));
   if (zSize == 0) std::memcpy(raw.data(), data + b.header, rawSize);
   else if (ZSTD_isError(ZSTD_decompress(raw.data(), raw.size(), data + b.header, zSize))) return b.other = rest, b;
