@@ -1,6 +1,7 @@
 // Codec::Meshopt (patch_codec.h; byte layouts in mt_format.h).
 //
-// Indices: meshopt_encodeIndexBuffer (list) or meshopt_encodeIndexSequence (strip). Positions:
+// Triangles: the connectivity code (patch_codec_connectivity.cpp), or meshopt_encodeIndexBuffer
+// (list) or meshopt_encodeIndexSequence (strip) in the zstd frame. Positions:
 // parallelogram prediction (Touma-Gotsman) along the decoded triangle order, residuals range-coded
 // by prediction kind; normals/colours: meshopt vertex codec. The sizes and the attributes (and the
 // index code when zstd finds its repeats) go into one zstd frame. Measured on scan-like patches the
