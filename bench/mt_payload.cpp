@@ -1,5 +1,5 @@
 // Where the bytes of an MT file go, and how fast its patches decode (bench/size_scan.sh runs it).
-//   bench_mt_payload FILE.mt [--repeat R] [--reencode] [--json]
+//   bench_mt_payload FILE.mt [--repeat R] [--reencode] [--json] [--same-as OTHER.mt]
 // Per level (of the node whose fragment holds the patch) and in total, bytes per input triangle:
 //   header   PayloadHeader + the two frame sizes (32 bytes per patch),
 //   index    the index code: the zstd frame (v2 payloads, and v3 ones that keep it there: it holds
@@ -12,6 +12,11 @@
 // --reencode: decode every patch and encode it again with this binary's codec, with the options
 // the builder uses (level >= 1 = simplified), and print the sizes: a codec change measured on the
 // patches of a real build without rebuilding it (the grid step, hence the patches, stay the same).
+// --same-as: checks that OTHER.mt (e.g. the same input built by another codec version) has the same
+// grid, DAG, node errors and, patch by patch, the same triangles on the same grid points (in any
+// order and rotation), and exits 1 if not: a codec change that keeps geometry and errors.
+#include <algorithm>
+#include <array>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -48,22 +53,61 @@ uint64_t positionBytes(const std::vector<uint8_t>& p, format::Codec codec) {
   return payloadBytes(p.data(), p.size(), codec).positions;
 }
 
+// The patch's triangles as sorted grid-coordinate triples, each rotated to start at its smallest
+// corner (winding kept): equal for two codings of the same triangles in any order and numbering.
+std::vector<std::array<uint32_t, 9>> triangleKeys(const DecodedPatch& d) {
+  std::vector<std::array<uint32_t, 9>> keys(d.triangleCount());
+  for (size_t t = 0; t < keys.size(); ++t) {
+    std::array<uint32_t, 3> c[3];
+    for (int k = 0; k < 3; ++k)
+      for (int x = 0; x < 3; ++x) c[k][x] = d.q[d.triangles[t * 3 + k] * 3 + x];
+    int r = 0;
+    for (int k = 1; k < 3; ++k)
+      if (c[k] < c[r]) r = k;
+    for (int k = 0; k < 3; ++k)
+      for (int x = 0; x < 3; ++x) keys[t][k * 3 + x] = c[(r + k) % 3][x];
+  }
+  std::sort(keys.begin(), keys.end());
+  return keys;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   if (argc < 2) {
-    std::fprintf(stderr, "usage: %s FILE.mt [--repeat R] [--reencode] [--json]\n", argv[0]);
+    std::fprintf(stderr, "usage: %s FILE.mt [--repeat R] [--reencode] [--json] [--same-as OTHER.mt]\n", argv[0]);
     return 2;
   }
   int repeat = 3;
   bool reencode = false, json = false;
+  const char* sameAs = nullptr;
   for (int i = 2; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--repeat") && i + 1 < argc) repeat = std::atoi(argv[++i]);
     else if (!std::strcmp(argv[i], "--reencode")) reencode = true;
     else if (!std::strcmp(argv[i], "--json")) json = true;
+    else if (!std::strcmp(argv[i], "--same-as") && i + 1 < argc) sameAs = argv[++i];
   }
   try {
     auto r = MtFileReader::open(argv[1]);
+    if (sameAs) {
+      auto o = MtFileReader::open(sameAs);
+      auto fail = [&](const std::string& what) {
+        std::fprintf(stderr, "%s and %s differ: %s\n", argv[1], sameAs, what.c_str());
+        return 1;
+      };
+      if (r->grid().step != o->grid().step || std::memcmp(r->grid().origin, o->grid().origin, sizeof r->grid().origin))
+        return fail("grid");
+      if (r->nodes().size() != o->nodes().size() || r->patches().size() != o->patches().size()) return fail("counts");
+      for (size_t i = 0; i < r->nodes().size(); ++i)
+        if (r->nodes()[i].error != o->nodes()[i].error || r->nodes()[i].triangles != o->nodes()[i].triangles)
+          return fail("node " + std::to_string(i));
+      for (uint32_t i = 0; i < r->patches().size(); ++i)
+        if (r->patches()[i].arc != o->patches()[i].arc || triangleKeys(r->readPatch(i)) != triangleKeys(o->readPatch(i)))
+          return fail("patch " + std::to_string(i));
+      std::printf("%s and %s: same grid, %zu nodes with the same errors, %zu patches with the same triangles\n",
+                  argv[1], sameAs, r->nodes().size(), r->patches().size());
+      return 0;
+    }
     const auto& hdr = r->header();
     bool meshopt = r->codec() == format::Codec::Meshopt;
     QuantizationGrid grid = r->grid();
@@ -97,7 +141,8 @@ int main(int argc, char** argv) {
         o.simplified = levelOf[i] >= 1 || std::getenv("MT_FAN0");
         std::vector<uint8_t> e = encodePatch(in, grid, o);
         DecodedPatch back = decodePatch(e.data(), e.size(), r->codec(), grid);
-        if (back.q.size() != d.q.size() || back.triangles.size() != d.triangles.size())
+        if (back.q.size() != d.q.size() || back.triangles.size() != d.triangles.size() ||
+            triangleKeys(back) != triangleKeys(d))
           throw std::runtime_error("re-encoded patch " + std::to_string(i) + " does not round-trip");
         s.reencoded += e.size();
         if (meshopt) s.reencodedPosition += positionBytes(e, r->codec());

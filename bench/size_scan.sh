@@ -5,7 +5,8 @@
 #   bench/size_scan.sh [WORKDIR=/tmp/size_scan] [MESH.ply ...]
 # Without meshes: the scan-derived meshes in /work/data (arm0.8M, bunny1.2M, dragon0.3M,
 # arm3.3M; made with ../shared/tools/scangen) and two mtgen meshes of similar sizes, generated in
-# WORKDIR. BIN=dir/bin picks the build; CUTS=K for mtverify (default 8, 0 skips it).
+# WORKDIR. BIN=dir/bin picks the build; CUTS=K for mtverify (default 8, 0 skips it); MTBUILD_ARGS adds
+# mtbuild options (e.g. "--simplifier quadric").
 # Meshes and .mt files stay in WORKDIR (outside the repository): delete them when done.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -29,7 +30,8 @@ printf "%-14s %9s %7s %7s %7s %7s %7s %9s %9s %11s %s\n" mesh triangles "B/tri" 
 for mesh in "${meshes[@]}"; do
   name=$(basename "$mesh" .ply)
   out="$work/$name.mt"
-  "$bin/mtbuild" "$mesh" -o "$out" --threads 2 -q
+  # shellcheck disable=SC2086
+  "$bin/mtbuild" "$mesh" -o "$out" --threads 2 -q ${MTBUILD_ARGS:-}
   j=$("$bin/bench_mt_payload" "$out" --repeat 3 --json)
   err=$("$bin/mtinfo" "$out" --json | python3 -c 'import json,sys; d=json.load(sys.stdin); print(d["perLevel"][0]["errorMax"])' 2>/dev/null || echo "?")
   verdict="skipped"
@@ -43,4 +45,4 @@ print(f"{name:14s} {d['input_triangles']:9d} {d['bpt']:7.3f} {d['index']:7.3f} {
       f"{d['header']:7.3f} {d['meta'] + d['pad']:7.3f} {d['decode_mb_s']:9.1f} {d['decode_mtri_s']:9.2f} {err:>11s} {verdict}")
 PY
 done
-echo "(B/tri, index, pos, header, meta+pad: bytes per input triangle; decode: one thread, payloads in memory, best of 3)"
+echo "(B/tri, index (the triangles' code), pos, header, meta+pad: bytes per input triangle; decode: one thread, payloads in memory, best of 3)"

@@ -48,9 +48,12 @@ constexpr char kFooterMagic[8] = {'B', 'M', 'T', '-', 'E', 'N', 'D', '\n'};
 // Version 2: meshopt payloads may set kPayloadRangePositions (positions range-coded after the
 // zstd frame instead of byte planes inside it). Version 3: meshopt payloads may also set
 // kPayloadPositionContexts (another residual model) and kPayloadRangeIndices (the index code
-// range-coded ahead of the positions). Readers accept kMinReadableVersion..kVersion; the payload
-// flags say how each payload is coded, so one decoder reads all three.
-constexpr uint32_t kVersion = 3;
+// range-coded ahead of the positions). Version 4: meshopt payloads may also set
+// kPayloadConnectivity (the triangles by the connectivity code instead of the meshopt index code);
+// version-4 writers no longer set kPayloadRangeIndices. Readers accept
+// kMinReadableVersion..kVersion; the payload flags say how each payload is coded, so one decoder
+// reads all four.
+constexpr uint32_t kVersion = 4;
 constexpr uint32_t kMinReadableVersion = 1;
 constexpr uint32_t kHeaderSize = 256;
 constexpr uint32_t kFooterSize = 32;
@@ -173,6 +176,7 @@ constexpr uint8_t kPayloadStrip = 1u << 3;    // meshopt: indices are a strip (r
 constexpr uint8_t kPayloadRangePositions = 1u << 4;  // meshopt: positions range-coded after the zstd frame (v2)
 constexpr uint8_t kPayloadRangeIndices = 1u << 5;      // meshopt: index code range-coded ahead of the positions (v3)
 constexpr uint8_t kPayloadPositionContexts = 1u << 6;  // meshopt: positions with the version-3 model (v3)
+constexpr uint8_t kPayloadConnectivity = 1u << 7;      // meshopt: triangles by the version-4 connectivity code (v4)
 
 // Codec::Meshopt, after the PayloadHeader:
 //   uint32 rawSize, uint32 zstdSize, then zstdSize bytes (one zstd frame) that decompress to
@@ -215,6 +219,44 @@ constexpr uint8_t kPayloadPositionContexts = 1u << 6;  // meshopt: positions wit
 //       code (0 for the first);
 //     each data byte as an 8-bit tree over data[top bit of the previous data byte (0 first)];
 //   then the positions (kPayloadPositionContexts) in the same stream.
+//   "An n-bit tree over P" (above and below): the n bits of a value, most significant first, bit i
+//   coded with probability P[m], m starting at 1 and becoming (m << 1) | bit after each bit; the
+//   value is m - 2^n at the end. P has 2^n entries (entry 0 unused).
+//   kPayloadConnectivity (version 4, needs kPayloadRangePositions and kPayloadPositionContexts,
+//   never kPayloadStrip or kPayloadRangeIndices): the frame is as with kPayloadRangeIndices
+//   (zSize 0 = stored) with indexBytes = 0 and indexCount = 3 * triangles; the range-coded stream
+//   starts with the connectivity code (counted bits, fresh per payload), then the positions
+//   (kPayloadPositionContexts) in the same stream, predicted along the triangles as decoded here.
+//   Decoder state: next = 0 (the next new vertex); an edge FIFO of 16 directed edges (e0, e1), all
+//   empty, pushed at position `offset` (starting at 0, then offset = (offset + 1) & 15), slot i
+//   being the entry at (offset - 1 - i) & 15 (slot 0 = the most recent push); per vertex two lists
+//   of open half-edges, out[u] (the v of every open u->v) and in[v] (the u), most recently added
+//   first; ctx = 15. Probabilities: slot0[16], slot1[16], slotRest[16][16], third[12][4],
+//   fresh[3], length[64], mantissa[33][32]. Per triangle t = 0 .. triangles - 1:
+//     edge slot s: bit over slot0[ctx]: 0 -> s = 0; else bit over slot1[ctx]: 0 -> s = 1; else
+//       s = 2 + a 4-bit tree over slotRest[ctx]; s = 16 means "no edge", s = 17 is an error.
+//     s <= 15 (attached): (a, b) = slot s's edge (an error if the slot is empty); then the symbol
+//       y as a 2-bit tree over third[min(s, 2) * 4 + (ctx & 3)]:
+//         y = 0: c = next, next += 1;
+//         y = 1: c = the first entry of out[a] (an error if empty);
+//         y = 2: c = the first entry of in[b] (an error if empty);
+//         y = 3: c = an explicit vertex (below).
+//     s = 16 (free): y = 3; for corner k = 0, 1, 2: a bit over fresh[k]: 0 -> v_k = next,
+//       next += 1; 1 -> v_k = an explicit vertex; (a, b, c) = (v_0, v_1, v_2).
+//     An explicit vertex: its distance d = next - 1 - v (next as it is at that point) as the bit
+//       length k of d (0..32; above 32 an error) by a 6-bit tree over length, then for k >= 2 the
+//       k-1 bits below the leading one, most significant first, bit i (i = k-2 .. 0) over
+//       mantissa[k][i]; d = k for k <= 1. d >= next is an error.
+//     next > vertexCount after the triangle is an error. The triangle is (a, b, c) in this corner
+//       order. Then its directed edges a->b, b->c, c->a are added in that order to the open
+//       half-edges: if out[v] holds u (the twin v->u is open), adding u->v removes the first entry
+//       equal to u from out[v] and the first entry equal to v from in[u]; else it puts v at the
+//       front of out[u] and u at the front of in[v]. Then the FIFO: for s = 16 push (b, a); in both cases push (c, b), then (a, c).
+//       ctx = (s = 16 ? 3 : min(s, 2)) * 4 + y.
+//   After the last triangle next must equal vertexCount (every vertex referenced). Vertices are
+//   thus numbered by first use, and the encoder attaches a triangle to the lowest FIFO slot whose
+//   edge (e0, e1) equals (v0, v1), (v1, v2) or (v2, v0) of the triangle (tried in that order per
+//   slot), and prefers y = 0, then 1, then 2 (the decoder does not depend on these choices).
 //   Prediction (parallelogram rule): walk the decoded triangles in order; at the first use of a
 //   vertex v in triangle (v, a, b) (rotated so v comes first):
 //     a, b known and a visited triangle has directed edge (b, a) or else (a, b) with third vertex

@@ -225,7 +225,7 @@ DecodedPatch decodePatch(const uint8_t* data, size_t size, Codec codec, const Qu
   if (size < sizeof(PayloadHeader)) bad("shorter than its header (" + std::to_string(size) + " bytes)");
   PayloadHeader h;
   std::memcpy(&h, data, sizeof h);
-  if (h.flags & ~uint8_t(0x7F)) bad("unknown flags");
+  // Every bit of h.flags is defined (mt_format.h); the codec checks the combinations.
   // A payload cannot describe more than ~8 triangles per byte in any codec; this bounds every
   // allocation below by the payload size even when the header is damaged.
   if (uint64_t(h.triangleCount) > uint64_t(size) * 64 + 64 || uint64_t(h.vertexCount) > uint64_t(size) * 64 + 64)

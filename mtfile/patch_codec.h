@@ -9,10 +9,11 @@
 //      and vertices in first-use (fetch) order;
 //   3. normals (given, or computed from the quantized geometry) are stored octahedral 2x8 bit,
 //      colours RGBA8;
-//   4. Codec::Meshopt: meshopt_encodeIndexBuffer (or, as an option, a strip with
-//      meshopt_encodeIndexSequence),
-//      positions by parallelogram prediction, normals/colours by meshopt_encodeVertexBuffer, then
-//      zstd over all (the meshopt codecs are designed to be followed by a general-purpose one);
+//   4. Codec::Meshopt: the triangles by the range-coded connectivity code
+//      (patch_codec_connectivity.cpp) or, when zstd makes it smaller (regular grids),
+//      meshopt_encodeIndexBuffer in the zstd frame (as an option, a strip with
+//      meshopt_encodeIndexSequence); positions by parallelogram prediction, range-coded;
+//      normals/colours by meshopt_encodeVertexBuffer in the zstd frame;
 //      Codec::Draco: edgebreaker with the grid coordinates as a lossless INT32 attribute.
 // Decoding returns the exact grid coordinates, so a decode is bit-exact on positions.
 #pragma once

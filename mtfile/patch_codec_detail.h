@@ -44,6 +44,17 @@ void decodeMeshopt(const uint8_t* data, size_t size, const format::PayloadHeader
 // payloadBytes for a meshopt payload of at least sizeof(PayloadHeader) bytes.
 PayloadBytes meshoptPayloadBytes(const uint8_t* data, size_t size);
 
+// The connectivity code (kPayloadConnectivity, patch_codec_connectivity.cpp) of a triangle list
+// whose vertices are numbered by first use; `coded` receives the triangles as the decoder gives
+// them back (each rotated to start at the edge it is attached to). The decoder throws on a code
+// that names no valid vertex or leaves vertices unreferenced.
+class RangeEncoder;
+class RangeDecoder;
+void encodeConnectivity(RangeEncoder& rc, const uint32_t* indices, size_t indexCount, size_t vertexCount,
+                        std::vector<uint32_t>& coded);
+void decodeConnectivity(RangeDecoder& rc, uint32_t triangleCount, uint32_t vertexCount,
+                        std::vector<uint32_t>& triangles);
+
 std::vector<uint8_t> encodeDraco(const Prepared& p, const PatchCodecOptions& options);
 void decodeDraco(const uint8_t* data, size_t size, const format::PayloadHeader& h, DecodedPatch& out,
                  std::vector<uint32_t>& qRel);

@@ -1,6 +1,7 @@
 // Codec::Meshopt (patch_codec.h; byte layouts in mt_format.h).
 //
-// Indices: meshopt_encodeIndexBuffer (list) or meshopt_encodeIndexSequence (strip). Positions:
+// Triangles: the connectivity code (patch_codec_connectivity.cpp), or meshopt_encodeIndexBuffer
+// (list) or meshopt_encodeIndexSequence (strip) in the zstd frame. Positions:
 // parallelogram prediction (Touma-Gotsman) along the decoded triangle order, residuals range-coded
 // by prediction kind; normals/colours: meshopt vertex codec. The sizes and the attributes (and the
 // index code when zstd finds its repeats) go into one zstd frame. Measured on scan-like patches the
@@ -192,31 +193,9 @@ struct ContextModel {
   CountedBit mantissa[3][33][32];  // [axis][k][bit]
 };
 
-// The index code (meshopt_encodeIndexBuffer bytes, `bytes` of them, for `triangles` triangles;
-// bytes >= 1 + triangles + 16 as version 1 always writes).
-void encodeIndexCode(RangeEncoder& rc, const uint8_t* code, size_t bytes, uint32_t triangles) {
-  IndexModel m;
-  const uint8_t* tail = code + bytes - 16;
-  bool standard = code[0] == kIndexHeaderV1 && std::memcmp(tail, kCodeAuxTableV1, 16) == 0;
-  rc.bit(m.standard, standard ? 0 : 1);
-  if (!standard) {
-    rc.tree(m.data[0], code[0], 8);
-    for (int i = 0; i < 16; ++i) rc.tree(m.data[0], tail[i], 8);
-  }
-  uint32_t ctx = 0;
-  for (uint32_t t = 0; t < triangles; ++t) {
-    uint32_t c = code[1 + t], h = c >> 4;
-    rc.tree(m.hi[ctx], h, 4);
-    rc.tree(m.lo[(h << 1) | (ctx & 1)], c & 15, 4);
-    ctx = (h << 1) | ((c & 15) == 0);
-  }
-  uint32_t cont = 0;
-  for (size_t i = 1 + triangles; i < bytes - 16; ++i) {
-    rc.tree(m.data[cont], code[i], 8);
-    cont = code[i] >> 7;
-  }
-}
-
+// The version-3 index code (meshopt_encodeIndexBuffer bytes, `bytes` of them, for `triangles`
+// triangles; bytes >= 1 + triangles + 16 as version 1 always writes). Version-4 writers code the
+// triangles with the connectivity code instead (patch_codec_connectivity.cpp).
 void decodeIndexCode(RangeDecoder& rc, uint8_t* code, size_t bytes, uint32_t triangles) {
   IndexModel m;
   uint8_t* tail = code + bytes - 16;
@@ -272,11 +251,16 @@ std::vector<uint8_t> zstdFrame(const std::vector<uint8_t>& raw, int level) {
   return z;
 }
 
-// One candidate encoding of the patch with the given triangle list (already in final order).
-// Version 3: the index code goes either into the zstd frame (as in version 2: zstd finds the
-// repeats of a regular grid's codes, 0.15 B/triangle on mtgen's level-0 patches) or, when that is
-// smaller, range-coded ahead of the positions (kPayloadRangeIndices: 0.92 against 1.10 B/input
-// triangle on the patches of a 0.8M scan-derived build, whose codes do not repeat).
+// The payload of the patch with the given triangle list (already in final order), in the smaller
+// of two codings of the triangles:
+//   A (version 2): the meshopt index code in the zstd frame, with the sizes and the attributes
+//     (zstd finds the repeats of a regular grid's codes: 0.15 B/triangle on mtgen's level-0 patches);
+//   C (version 4, kPayloadConnectivity; never for strips): sizes and attributes in the frame
+//     (stored as they are when zstd does not make them smaller: zSize 0), the triangles by the
+//     connectivity code ahead of the positions in the range-coded stream. Measured on the patches
+//     of a 0.8M scan-derived build, index bytes per input triangle: zstd 1.10, the range-coded
+//     meshopt code of version 3 (kPayloadRangeIndices) 0.92, the connectivity code 0.64.
+// Version 3's coding (B) is never smaller than C, so the encoder no longer writes it.
 std::vector<uint8_t> encodeMeshoptWith(const Prepared& p, const std::vector<uint32_t>& tri,
                                        const std::vector<uint8_t>& ibuf, uint32_t indexCount, bool strip,
                                        const PatchCodecOptions& options) {
@@ -288,7 +272,9 @@ std::vector<uint8_t> encodeMeshoptWith(const Prepared& p, const std::vector<uint
   std::vector<uint32_t> res(n * 3, 0);
   std::vector<uint8_t> kind(n, 0);
   // res in first-use order (the decoder's order): vertices are numbered by first use already, so
-  // the walk meets them as 0, 1, 2, ... and the residuals are written in vertex order.
+  // the walk meets them as 0, 1, 2, ... and the residuals are written in vertex order. The same
+  // for both codings: C gives back the same triangles in the same order, each only rotated, and
+  // a triangle whose corners are rotated has at most one new vertex.
   [[maybe_unused]] uint32_t visited = 0;
   parallelogramWalk(tri.data(), tri.size(), n, q.data(), range, [&](uint32_t v, const int64_t pred[3], const Prediction& how) {
     assert(v == visited++);
@@ -311,33 +297,34 @@ std::vector<uint8_t> encodeMeshoptWith(const Prepared& p, const std::vector<uint
     abuf.resize(meshopt_encodeVertexBuffer(abuf.data(), abuf.size(), attrs.data(), n, attrStride));
   }
 
-  // Candidate A: sizes, index code and attributes in the frame.
+  // A: sizes, index code and attributes in the frame.
   std::vector<uint8_t> raw;
   uint32_t sizes[3] = {uint32_t(ibuf.size()), indexCount, uint32_t(abuf.size())};
   appendBytes(raw, sizes, sizeof sizes);
   appendBytes(raw, ibuf.data(), ibuf.size());
   appendBytes(raw, abuf.data(), abuf.size());
   std::vector<uint8_t> frame = zstdFrame(raw, options.zstdLevel);
-  // Candidate B: sizes and attributes in the frame (stored as they are when zstd does not make
-  // them smaller: zSize 0), the index code range-coded.
-  const bool rangeable = !strip && ibuf.size() >= 1 + size_t(h.triangleCount) + 16;
-  if (rangeable) {
-    std::vector<uint8_t> rawB;
-    appendBytes(rawB, sizes, sizeof sizes);
-    appendBytes(rawB, abuf.data(), abuf.size());
-    std::vector<uint8_t> frameB = abuf.empty() ? std::vector<uint8_t>() : zstdFrame(rawB, options.zstdLevel);
-    bool stored = frameB.empty() || frameB.size() >= rawB.size();
-    std::vector<uint8_t> idx;
+  // C: the frame without the index code, and the connectivity code's bytes (coded alone here to
+  // compare; the positions cost the same in both).
+  if (!strip) {
+    std::vector<uint8_t> rawC;
+    uint32_t sizesC[3] = {0, indexCount, uint32_t(abuf.size())};
+    appendBytes(rawC, sizesC, sizeof sizesC);
+    appendBytes(rawC, abuf.data(), abuf.size());
+    std::vector<uint8_t> frameC = abuf.empty() ? std::vector<uint8_t>() : zstdFrame(rawC, options.zstdLevel);
+    bool stored = frameC.empty() || frameC.size() >= rawC.size();
+    std::vector<uint8_t> conn;
+    std::vector<uint32_t> coded;
     {
-      RangeEncoder rc(idx);
-      encodeIndexCode(rc, ibuf.data(), ibuf.size(), h.triangleCount);
+      RangeEncoder rc(conn);
+      encodeConnectivity(rc, tri.data(), tri.size(), n, coded);
       rc.finish();
     }
-    if ((stored ? rawB.size() : frameB.size()) + idx.size() < frame.size()) {
-      flags |= format::kPayloadRangeIndices;
-      raw.swap(rawB);
+    if ((stored ? rawC.size() : frameC.size()) + conn.size() <= frame.size()) {
+      flags |= format::kPayloadConnectivity;
+      raw.swap(rawC);
       if (stored) frame.clear();
-      else frame.swap(frameB);
+      else frame.swap(frameC);
     }
   }
 
@@ -350,10 +337,13 @@ std::vector<uint8_t> encodeMeshoptWith(const Prepared& p, const std::vector<uint
   appendBytes(out, &zSize, 4);
   if (zSize) appendBytes(out, frame.data(), frame.size());
   else appendBytes(out, raw.data(), raw.size());
-  // After the frame one range-coded stream: the index code (kPayloadRangeIndices), then the
-  // position residuals in vertex order, x y z per vertex.
+  // After the frame one range-coded stream: the connectivity code (kPayloadConnectivity), then
+  // the position residuals in vertex order, x y z per vertex.
   RangeEncoder rc(out);
-  if (flags & format::kPayloadRangeIndices) encodeIndexCode(rc, ibuf.data(), ibuf.size(), h.triangleCount);
+  if (flags & format::kPayloadConnectivity) {
+    std::vector<uint32_t> coded;
+    encodeConnectivity(rc, tri.data(), tri.size(), n, coded);
+  }
   auto model = std::make_unique<ContextModel>();
   for (size_t v = 0; v < n; ++v)
     for (uint32_t x = 0; x < 3; ++x) encodeResidual(rc, *model, kind[v], x, res[v * 3 + x]);
@@ -412,10 +402,14 @@ MeshoptFrame readMeshoptFrame(const uint8_t* data, size_t size, const PayloadHea
   const bool ranged = h.flags & format::kPayloadRangePositions;
   const bool rangeIndices = h.flags & format::kPayloadRangeIndices;
   const bool contextual = h.flags & format::kPayloadPositionContexts;
+  const bool connectivity = h.flags & format::kPayloadConnectivity;
   if ((rangeIndices || contextual) && !ranged) bad("version-3 flags without range-coded positions");
   if (rangeIndices && (h.flags & format::kPayloadStrip)) bad("range-coded indices cannot be a strip");
-  // Version 3 with range-coded indices may store the raw bytes as they are (zSize 0).
-  const bool stored = rangeIndices && zSize == 0;
+  if (connectivity && (!contextual || rangeIndices || (h.flags & format::kPayloadStrip)))
+    bad("connectivity code with flags " + std::to_string(h.flags));
+  // Version 3 with range-coded indices, and version 4 with the connectivity code, may store the
+  // raw bytes as they are (zSize 0).
+  const bool stored = (rangeIndices || connectivity) && zSize == 0;
   const size_t frameBytes = stored ? rawSize : zSize;
   // Version 1 payloads end with the zstd frame; range-coded streams follow it.
   if (ranged ? frameBytes > size - pos : size - pos != zSize)
@@ -573,6 +567,14 @@ void decodeMeshopt(const uint8_t* data, size_t size, const PayloadHeader& h, Dec
   std::vector<uint8_t> rangedIndex;
   const uint8_t* ib = f.raw.data() + 12;
   const uint8_t* ab = ib + sizes[0];
+  if (h.flags & format::kPayloadConnectivity) {
+    if (uint64_t(sizes[2]) + 12 != f.raw.size() || sizes[0] != 0 || sizes[1] != uint64_t(h.triangleCount) * 3)
+      bad("stream sizes do not add up");
+    decodeConnectivity(rc, h.triangleCount, uint32_t(n), out.triangles);
+    decodeMeshoptAttributes(h, f.raw.data() + 12, sizes[2], out);
+    decodeContextPositions(rc, out.triangles, n, qRel);
+    return;
+  }
   if (rangeIndices) {
     if (uint64_t(sizes[2]) + 12 != f.raw.size()) bad("stream sizes do not add up");
     if (sizes[0] < 1 + uint64_t(h.triangleCount) + 16 ||
@@ -603,17 +605,32 @@ PayloadBytes meshoptPayloadBytes(const uint8_t* data, size_t size) {
   std::memcpy(&zSize, data + sizeof h + 4, 4);
   b.header += 8;
   const bool rangeIndices = h.flags & format::kPayloadRangeIndices;
-  size_t frame = rangeIndices && zSize == 0 ? rawSize : zSize;
+  const bool connectivity = h.flags & format::kPayloadConnectivity;
+  size_t frame = (rangeIndices || connectivity) && zSize == 0 ? rawSize : zSize;
   if (frame > size - b.header) return b.other = size - b.header, b;
   if (!(h.flags & format::kPayloadRangePositions)) return b.index = size - b.header, b;
   const uint8_t* rs = data + b.header + frame;
   size_t rest = size - b.header - frame;
-  if (!rangeIndices) {
+  if (!rangeIndices && !connectivity) {
     // The frame holds the index code (and the attributes, if any).
     b.index = frame, b.positions = rest;
     return b;
   }
   b.attributes = frame;
+  if (connectivity) {
+    if (uint64_t(h.triangleCount) > uint64_t(size) * 64 + 64 || uint64_t(h.vertexCount) > uint64_t(size) * 64 + 64)
+      return b.other = rest, b;
+    RangeDecoder rc(rs, rs + rest);
+    std::vector<uint32_t> triangles;
+    try {
+      decodeConnectivity(rc, h.triangleCount, h.vertexCount, triangles);
+    } catch (const Error&) {
+      return b.other = rest, b;
+    }
+    b.index = std::min(rest, rc.consumed(rs) > 4 ? rc.consumed(rs) - 4 : size_t(0));
+    b.positions = rest - b.index;
+    return b;
+  }
   std::vector<uint8_t> raw(std::max<uint32_t>(rawSize, 12));
   if (zSize == 0) std::memcpy(raw.data(), data + b.header, rawSize);
   else if (ZSTD_isError(ZSTD_decompress(raw.data(), raw.size(), data + b.header, zSize))) return b.other = rest, b;

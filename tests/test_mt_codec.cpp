@@ -16,6 +16,8 @@
 #include "mtfile/fan_order.h"
 #include "mtfile/mt_file.h"
 #include "mtfile/patch_codec.h"
+#include "mtfile/patch_codec_detail.h"
+#include "mtfile/range_coder.h"
 #include "mtbuild/simplify_region.h"
 #include "test_support.h"
 #include "testing/scan_grid.h"
@@ -268,11 +270,9 @@ TEST(Codec, Version2PayloadStillDecodes) {
   EXPECT_EQ(triangleSet(d3.q, d3.triangles), triangleSet(d.q, d.triangles));
 }
 
-// Version 3: the index code is range-coded when that is smaller than zstd (an irregular,
-// simplified patch), the sizes are then stored without a zstd frame when there are no attributes,
-// and with colours the frame holds them; every variant round-trips exactly, and payloadBytes
-// accounts for every byte.
-TEST(Codec, Version3RangeCodedIndicesRoundTrip) {
+// A simplified, irregular patch (fan order is what the builder gives such patches), 47x47 grid
+// halved.
+SimplifiedRegion simplifiedPatch() {
   ScanGridOptions o;
   o.nx = o.ny = 47;
   o.jitter = 0.1;
@@ -281,8 +281,16 @@ TEST(Codec, Version3RangeCodedIndicesRoundTrip) {
   SimplifyRegionOptions so;
   so.targetTriangles = grid0.triangleCount() / 2;
   so.measureError = false;
-  SimplifiedRegion g = simplifyRegion(grid0.positions.data(), grid0.vertexCount(), grid0.triangles.data(),
-                                      grid0.triangleCount(), nullptr, so);
+  return simplifyRegion(grid0.positions.data(), grid0.vertexCount(), grid0.triangles.data(), grid0.triangleCount(),
+                        nullptr, so);
+}
+
+// Version 4: the triangles are coded by the connectivity code when that is smaller than zstd over
+// the meshopt index code (an irregular, simplified patch), the sizes are then stored without a
+// zstd frame when there are no attributes, and with colours the frame holds them; every variant
+// round-trips exactly, and payloadBytes accounts for every byte.
+TEST(Codec, Version4ConnectivityCodeRoundTrip) {
+  SimplifiedRegion g = simplifiedPatch();
   std::vector<uint8_t> rgba(g.vertexCount() * 4);
   for (size_t i = 0; i < rgba.size(); ++i) rgba[i] = uint8_t((i * 13) ^ (i >> 5));
   QuantizationGrid grid = gridFor(1.0 / 16);
@@ -295,17 +303,130 @@ TEST(Codec, Version3RangeCodedIndicesRoundTrip) {
     format::PayloadHeader h;
     std::memcpy(&h, payload.data(), sizeof h);
     EXPECT_TRUE(h.flags & format::kPayloadPositionContexts);
-    EXPECT_TRUE(h.flags & format::kPayloadRangeIndices) << "colors " << colors;
+    EXPECT_TRUE(h.flags & format::kPayloadConnectivity) << "colors " << colors;
+    EXPECT_FALSE(h.flags & format::kPayloadRangeIndices);
     uint32_t zSize;
     std::memcpy(&zSize, payload.data() + sizeof h + 4, 4);
     EXPECT_EQ(zSize == 0, !colors);
     DecodedPatch d = decodePatch(payload.data(), payload.size(), Codec::Meshopt, grid);
     EXPECT_EQ(triangleSet(d.q, d.triangles), triangleSet(quantizeAll(g.positions, grid), g.triangles));
+    if (colors) {
+      // the colours follow their vertices
+      std::map<std::array<uint32_t, 3>, std::array<uint8_t, 4>> byPosition;
+      std::vector<uint32_t> q = quantizeAll(g.positions, grid);
+      for (size_t v = 0; v < g.vertexCount(); ++v)
+        byPosition[{q[v * 3], q[v * 3 + 1], q[v * 3 + 2]}] = {rgba[v * 4], rgba[v * 4 + 1], rgba[v * 4 + 2], rgba[v * 4 + 3]};
+      for (size_t v = 0; v < d.vertexCount(); ++v) {
+        std::array<uint8_t, 4> c = {d.colors[v * 4], d.colors[v * 4 + 1], d.colors[v * 4 + 2], d.colors[v * 4 + 3]};
+        EXPECT_EQ((byPosition[{d.q[v * 3], d.q[v * 3 + 1], d.q[v * 3 + 2]}]), c);
+      }
+    }
     PayloadBytes b = payloadBytes(payload.data(), payload.size(), Codec::Meshopt);
     EXPECT_EQ(b.header + b.index + b.attributes + b.positions + b.other, payload.size());
     EXPECT_EQ(b.other, 0u);
     EXPECT_GT(b.index, g.triangleCount() / 8);  // more than one bit per triangle
-    EXPECT_LT(b.index, g.triangleCount());      // and less than a byte
+    EXPECT_LT(b.index, g.triangleCount() / 2);  // and less than four
+  }
+}
+
+// Version-4 readers still decode version-3 payloads (the meshopt index code range-coded, the
+// sizes stored without a zstd frame): this one was written by the version-3 encoder (the patch
+// and grid of Version2PayloadStillDecodes).
+TEST(Codec, Version3PayloadStillDecodes) {
+  const std::vector<uint8_t> v3 = {
+    0x19, 0x00, 0x00, 0x00, 0x20, 0x00, 0x00, 0x00, 0x40, 0x00, 0x00, 0x00, 0x40, 0x00, 0x00, 0x00,
+    0x40, 0x00, 0x00, 0x00, 0x70, 0x00, 0x00, 0x00, 0x0c, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00,
+    0x35, 0x00, 0x00, 0x00, 0x60, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x78, 0x10, 0x00, 0x08,
+    0x72, 0x56, 0x45, 0xda, 0xe4, 0x40, 0x2e, 0xae, 0xd1, 0x20, 0x5e, 0x37, 0x16, 0x71, 0x21, 0xc7,
+    0x84, 0x85, 0xaa, 0x01, 0xed, 0x83, 0x03, 0xa0, 0x7d, 0xc4, 0xaa, 0x76, 0x94, 0x49, 0x9e, 0x4c,
+    0xee, 0x3d, 0x43, 0xf4, 0x96, 0xd4, 0x9a, 0x44, 0x72, 0x75, 0x18, 0x18, 0x1e, 0x2e, 0x02, 0x81,
+    0xfc, 0xe3, 0x78, 0xa9, 0x37, 0xc9, 0x94, 0x8b, 0xee, 0xbf, 0x92, 0xb0, 0x8e, 0x28, 0x72, 0xb4,
+    0x40, 0x4e, 0x06};
+  std::vector<double> p;
+  std::vector<uint32_t> t;
+  smallIrregularPatch(p, t);
+  double lo[3] = {-1, -1, -1}, hi[3] = {10, 10, 10};
+  QuantizationGrid grid = QuantizationGrid::fromBounds(lo, hi, 1.0 / 64);
+  format::PayloadHeader h;
+  std::memcpy(&h, v3.data(), sizeof h);
+  EXPECT_EQ(h.flags, format::kPayloadRangePositions | format::kPayloadRangeIndices | format::kPayloadPositionContexts);
+  DecodedPatch d = decodePatch(v3.data(), v3.size(), Codec::Meshopt, grid);
+  EXPECT_EQ(triangleSet(d.q, d.triangles), triangleSet(quantizeAll(p, grid), t));
+  PayloadBytes b = payloadBytes(v3.data(), v3.size(), Codec::Meshopt);
+  EXPECT_EQ(b.header + b.index + b.attributes + b.positions + b.other, v3.size());
+  EXPECT_EQ(b.other, 0u);
+  // and the version-4 encoding of the same patch is smaller and decodes to the same triangles
+  std::vector<uint8_t> v4 = encodePatch({p.data(), 25, t.data(), t.size() / 3, nullptr, nullptr}, grid, {});
+  std::memcpy(&h, v4.data(), sizeof h);
+  EXPECT_TRUE(h.flags & format::kPayloadConnectivity);
+  EXPECT_LT(v4.size(), v3.size());
+  DecodedPatch d4 = decodePatch(v4.data(), v4.size(), Codec::Meshopt, grid);
+  EXPECT_EQ(triangleSet(d4.q, d4.triangles), triangleSet(d.q, d.triangles));
+}
+
+// The connectivity code takes any triangle list whose vertices are numbered by first use:
+// degenerate and repeated triangles, non-manifold edges, both windings, several components,
+// triangles that touch no earlier one. Each comes back exactly, in order, rotated only.
+TEST(Codec, ConnectivityCodeTakesAnyTriangleList) {
+  std::mt19937 rng(11);
+  for (int round = 0; round < 60; ++round) {
+    uint32_t vertices = 3 + rng() % 200, triangles = 1 + rng() % 400;
+    std::vector<uint32_t> raw(triangles * 3);
+    for (size_t i = 0; i < raw.size(); ++i) {
+      // mostly near the previous triangle's vertices, sometimes anywhere, sometimes a repeat
+      uint32_t base = i >= 3 ? raw[i - 3] : 0;
+      uint32_t r = rng() % 10;
+      raw[i] = r < 6 ? (base + rng() % 5) % vertices : r < 9 ? rng() % vertices : (i ? raw[i - 1] : 0);
+    }
+    std::vector<uint32_t> remap(vertices), tri(raw.size());
+    size_t used = meshopt_optimizeVertexFetchRemap(remap.data(), raw.data(), raw.size(), vertices);
+    meshopt_remapIndexBuffer(tri.data(), raw.data(), raw.size(), remap.data());
+    std::vector<uint8_t> bytes, tail(8, 0xA5);
+    std::vector<uint32_t> coded;
+    {
+      codec_detail::RangeEncoder rc(bytes);
+      codec_detail::encodeConnectivity(rc, tri.data(), tri.size(), used, coded);
+      rc.finish();
+    }
+    ASSERT_EQ(coded.size(), tri.size());
+    for (size_t t = 0; t < tri.size(); t += 3) {
+      std::array<uint32_t, 3> a = {tri[t], tri[t + 1], tri[t + 2]}, b = {coded[t], coded[t + 1], coded[t + 2]};
+      bool rotation = false;
+      for (int r = 0; r < 3; ++r) rotation |= a == std::array<uint32_t, 3>{b[r], b[(r + 1) % 3], b[(r + 2) % 3]};
+      ASSERT_TRUE(rotation) << "round " << round << " triangle " << t / 3;
+    }
+    std::vector<uint32_t> decoded;
+    codec_detail::RangeDecoder rd(bytes.data(), bytes.data() + bytes.size());
+    codec_detail::decodeConnectivity(rd, triangles, uint32_t(used), decoded);
+    ASSERT_EQ(decoded, coded) << "round " << round;
+    EXPECT_EQ(rd.overrun(), 0u);
+  }
+}
+
+// A connectivity-coded payload, truncated or with any byte changed, throws mt::Error or decodes to
+// valid indices; never crashes.
+TEST(Codec, DamagedConnectivityPayloadsThrowOrStayValid) {
+  SimplifiedRegion g = simplifiedPatch();
+  QuantizationGrid grid = gridFor(1.0 / 16);
+  PatchCodecOptions opt;
+  opt.simplified = true;
+  std::vector<uint8_t> payload =
+      encodePatch({g.positions.data(), g.vertexCount(), g.triangles.data(), g.triangleCount(), nullptr, nullptr}, grid, opt);
+  format::PayloadHeader h;
+  std::memcpy(&h, payload.data(), sizeof h);
+  ASSERT_TRUE(h.flags & format::kPayloadConnectivity);
+  for (size_t cut : {size_t(24), size_t(40), size_t(60), payload.size() / 3, payload.size() / 2, payload.size() - 1})
+    EXPECT_THROW(decodePatch(payload.data(), cut, Codec::Meshopt, grid), Error) << "cut at " << cut;
+  for (size_t i = 0; i < payload.size(); i += std::max<size_t>(1, payload.size() / 300)) {
+    for (uint8_t flip : {uint8_t(0x01), uint8_t(0x80), uint8_t(0x5A)}) {
+      auto damaged = payload;
+      damaged[i] ^= flip;
+      try {
+        DecodedPatch d = decodePatch(damaged.data(), damaged.size(), Codec::Meshopt, grid);
+        for (uint32_t idx : d.triangles) ASSERT_LT(idx, d.vertexCount());
+      } catch (const Error&) {
+      }
+    }
   }
 }
 
