@@ -20,7 +20,7 @@ configure_and_build() {
     cmake -S . -B "$BUILD" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DMT_FUZZ=ON \
       -DCMAKE_CXX_COMPILER=clang++-14 -DCMAKE_C_COMPILER=clang-14 "${launcher[@]}" >/dev/null
   fi
-  nice cmake --build "$BUILD" --parallel "$(nproc)" --target fuzz_all >/dev/null
+  cmake --build "$BUILD" --parallel "$(nproc)" --target fuzz_all >/dev/null
 }
 
 if [[ ${1:-} == --seeds ]]; then

@@ -13,7 +13,7 @@ TESTS=(test_patchstore test_mtbuild test_build_safety test_mtrender test_cluster
 TOOLS=(mtgen mtstore mtbuild mtcluster mtinfo mtverify mtextract mtrender)
 launcher=()
 command -v ccache >/dev/null && launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache)
-cmake -S . -B "$BUILD" -G Ninja -DCMAKE_BUILD_TYPE=Release -DCMAKE_CXX_FLAGS_RELEASE="-O1 -g -DNDEBUG" \
+cmake -S . -B "$BUILD" -G Ninja -DCMAKE_BUILD_TYPE=Release \
   -DMT_SANITIZE=thread -DMT_BENCH=OFF "${launcher[@]}" >/dev/null
 nice cmake --build "$BUILD" --parallel "$(nproc)" --target "${TESTS[@]}" "${TOOLS[@]}"
 # TBB, Mesa and Open MPI are not instrumented: their internal synchronisation is invisible to TSan,

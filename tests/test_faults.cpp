@@ -16,6 +16,10 @@
 #include "base/error.h"
 #include "base/exit_code.h"
 #include "mtbuild/build.h"
+#include "patchstore/cell_assigner.h"
+#include "patchstore/heal/heal.h"
+#include "patchstore/io/ply_writer.h"
+#include "patchstore/patch_store.h"
 #include "test_support.h"
 
 namespace fs = std::filesystem;
@@ -26,11 +30,12 @@ using mt::test::writeFile;
 namespace {
 
 // A wavy 20 x 20 grid (722 triangles): small enough to build in a fraction of a second, large
-// enough for three levels with 100-triangle patches.
-std::string writeGrid(const TempDir& tmp) {
+// enough for three levels with 100-triangle patches. `degenerate` adds that many triangles with a
+// repeated vertex (work for heal's --remove-degenerate).
+std::string writeGrid(const TempDir& tmp, int degenerate = 0) {
   const int n = 20;
   std::ostringstream s;
-  s << "OFF\n" << n * n << " " << 2 * (n - 1) * (n - 1) << " 0\n";
+  s << "OFF\n" << n * n << " " << 2 * (n - 1) * (n - 1) + degenerate << " 0\n";
   for (int y = 0; y < n; ++y)
     for (int x = 0; x < n; ++x) s << x << " " << y << " " << 0.7 * std::sin(0.6 * x) * std::cos(0.45 * y) << "\n";
   for (int y = 0; y + 1 < n; ++y)
@@ -38,6 +43,7 @@ std::string writeGrid(const TempDir& tmp) {
       const int a = y * n + x, b = a + 1, c = a + n, d = c + 1;
       s << "3 " << a << " " << b << " " << d << "\n3 " << a << " " << d << " " << c << "\n";
     }
+  for (int i = 0; i < degenerate; ++i) s << "3 " << 17 * i % (n * n) << " " << 17 * i % (n * n) << " " << (17 * i + 1) % (n * n) << "\n";
   const std::string path = tmp.file("grid.off");
   writeFile(path, s.str());
   return path;
@@ -173,4 +179,113 @@ TEST(Faults, DiskFullAnywhereNamesTheFileAndLeavesNoPartialOutput) {
     mt::buildMt(input, out, resume);
     EXPECT_EQ(readFile(out), reference);
   }
+}
+
+// mtextract's and mtstore export's writer: every write, fsync and rename of a PLY fails in turn;
+// nothing is left under the final name, nor the temporary file.
+TEST(Faults, EveryWriteOfAPlyOutputLeavesNothingUnderItsName) {
+  TempDir tmp;
+  auto write = [&](const std::string& path) {
+    mt::PlyWriter w(path, {});
+    for (int i = 0; i < 3000; ++i) {
+      const double p[3] = {double(i), double(i % 7), 0.5 * i};
+      w.addVertex(p);
+    }
+    for (uint32_t i = 0; i + 2 < 3000; ++i) w.addTriangle(i, i + 1, i + 2);
+    w.finish();
+  };
+  write(tmp.file("ref.ply"));
+  const std::string reference = readFile(tmp.file("ref.ply"));
+  mt::FaultInjectionEnv env(mt::Env::Default());
+  {
+    mt::ScopedDefaultEnv scoped(&env);
+    write(tmp.file("count.ply"));
+  }
+  EXPECT_EQ(readFile(tmp.file("count.ply")), reference);
+  const int64_t counts[3] = {env.writes, env.syncs, env.renames};
+  ASSERT_GE(counts[0], 2);
+  int injected = 0;
+  for (auto op : {mt::FaultInjectionEnv::Op::Write, mt::FaultInjectionEnv::Op::Sync, mt::FaultInjectionEnv::Op::Rename})
+    for (int64_t k = 1; k <= counts[int(op)]; ++k) {
+      SCOPED_TRACE(std::string(opName(op)) + " " + std::to_string(k));
+      env.failAfter(op, k, ENOSPC, /*partial=*/true);
+      std::string message;
+      {
+        mt::ScopedDefaultEnv scoped(&env);
+        try {
+          write(tmp.file("out.ply"));
+        } catch (const mt::Error& e) {
+          message = e.what();
+        }
+      }
+      env.disarm();
+      ++injected;
+      EXPECT_NE(message.find(tmp.file("out.ply")), std::string::npos) << message;
+      EXPECT_NE(message.find("No space left on device"), std::string::npos) << message;
+      EXPECT_EQ(filesOf(tmp.file("out.ply")), std::vector<std::string>{}) << message;
+    }
+  std::printf("[ faults ] PLY output: %d failures injected\n", injected);
+}
+
+// heal's updates go through the store's Env: every write, fsync and rename of a heal pass fails in
+// turn; the store then opens, checks clean, and holds the old surface or the healed one.
+TEST(Faults, EveryWriteOfAHealPassLeavesTheOldOrTheHealedStore) {
+  TempDir tmp;
+  const std::string input = writeGrid(tmp, 40);
+  {
+    auto assigner = mt::makeGridAssigner(100);
+    mt::IngestOptions o;
+    o.progress = false;
+    mt::PatchStore::ingest(input, tmp.file("base"), *assigner, o);
+  }
+  auto exportOf = [&](const std::string& dir) {
+    auto store = mt::PatchStore::open(dir);
+    store->exportPly(tmp.file("e.ply"));
+    return readFile(tmp.file("e.ply"));
+  };
+  auto heal = [&](mt::Env* env) {
+    fs::remove_all(tmp.file("s"));
+    fs::copy(tmp.file("base"), tmp.file("s"), fs::copy_options::recursive);
+    auto store = mt::PatchStore::open(tmp.file("s"), env);
+    mt::heal::HealOptions options;
+    options.memoryBytes = 64ull << 20;
+    mt::heal::removeDegenerate(*store, options);
+    store->sync();
+  };
+  const std::string before = exportOf(tmp.file("base"));
+  mt::FaultInjectionEnv env(mt::Env::Default());
+  {
+    mt::ScopedDefaultEnv scoped(&env);
+    heal(&env);
+  }
+  const std::string after = exportOf(tmp.file("s"));
+  ASSERT_NE(before, after) << "the pass must change something";
+  const int64_t counts[3] = {env.writes, env.syncs, env.renames};
+  int injected = 0, old = 0, healed = 0;
+  for (auto op : {mt::FaultInjectionEnv::Op::Write, mt::FaultInjectionEnv::Op::Sync, mt::FaultInjectionEnv::Op::Rename})
+    for (int64_t k = 1; k <= counts[int(op)]; ++k) {
+      SCOPED_TRACE(std::string(opName(op)) + " " + std::to_string(k));
+      env.failAfter(op, k);
+      {
+        mt::ScopedDefaultEnv scoped(&env);
+        try {
+          heal(&env);
+        } catch (const mt::Error&) {
+        }
+      }
+      env.disarm();
+      ++injected;
+      {
+        auto store = mt::PatchStore::open(tmp.file("s"));
+        mt::CheckReport c = store->check();
+        ASSERT_TRUE(c.ok) << (c.problems.empty() ? "" : c.problems[0]);
+      }
+      const std::string now = exportOf(tmp.file("s"));
+      EXPECT_TRUE(now == before || now == after);
+      old += now == before;
+      healed += now == after;
+    }
+  std::printf("[ faults ] heal: %d failures injected (%lld writes, %lld fsyncs, %lld renames): %d old, %d healed\n",
+              injected, (long long)counts[0], (long long)counts[1], (long long)counts[2], old, healed);
+  EXPECT_GT(old, 0);
 }
