@@ -6,6 +6,7 @@
 # features), corpus size and findings (crash/leak/timeout/oom files left in build-fuzz/findings/).
 #   bench/fuzz.sh SECONDS [TARGET...]      e.g. bench/fuzz.sh 600; bench/fuzz.sh 60 mt_file reader_ply
 #   bench/fuzz.sh --seeds                  remakes the MT-file, payload and store seeds (needs build/bin)
+#   MT_FUZZ_NO_BUILD=1 bench/fuzz.sh ...   runs what build-fuzz/bin has, without building
 # Exit 1 when any target found something.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -14,6 +15,7 @@ BUILD=$ROOT/build-fuzz
 ALL=(reader_ply reader_obj reader_off reader_stl mt_file patch_meshopt patch_draco store_manifest store_segment camera_path)
 
 configure_and_build() {
+  [[ ${MT_FUZZ_NO_BUILD:-0} == 1 ]] && return 0
   if [[ ! -f $BUILD/build.ninja ]]; then
     local launcher=()
     command -v ccache >/dev/null && launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache)
@@ -38,8 +40,8 @@ if [[ ${1:-} == --seeds ]]; then
   rm -rf fuzz/corpus/mt_file fuzz/corpus/patch_meshopt fuzz/corpus/patch_draco fuzz/corpus/store_* fuzz/store
   mkdir -p fuzz/corpus/mt_file fuzz/corpus/patch_meshopt fuzz/corpus/patch_draco fuzz/corpus/store_manifest fuzz/corpus/store_segment
   cp "$T/small_strip.mt" "$T/small_draco_n.mt" "$T/mid_meshopt.mt" fuzz/corpus/mt_file/
-  for f in small_strip mid_meshopt; do "$BUILD/fuzz/fuzz_seed_payloads" "$T/$f.mt" fuzz/corpus/patch_meshopt 12; done
-  for f in small_draco_n mid_draco; do "$BUILD/fuzz/fuzz_seed_payloads" "$T/$f.mt" fuzz/corpus/patch_draco 12; done
+  for f in small_strip mid_meshopt; do "$BUILD/bin/fuzz_seed_payloads" "$T/$f.mt" fuzz/corpus/patch_meshopt 12; done
+  for f in small_draco_n mid_draco; do "$BUILD/bin/fuzz_seed_payloads" "$T/$f.mt" fuzz/corpus/patch_draco 12; done
   "$B/mtstore" ingest "$T/tiny.ply" -o fuzz/store --patch-triangles 64 -q
   cp fuzz/store/MANIFEST-* fuzz/corpus/store_manifest/
   cp fuzz/store/SEG-* fuzz/corpus/store_segment/
@@ -61,7 +63,7 @@ run_one() {
   [[ -f $root/fuzz/dict/$name.dict ]] && dict=(-dict="$root/fuzz/dict/$name.dict")
   mkdir -p "$build/corpus/$t"
   # -rss_limit_mb: a reader must stay within its memory bound on any input; -timeout: and finish.
-  nice -n 10 "$build/fuzz/fuzz_$t" "$build/corpus/$t" "$root/fuzz/corpus/$t" "${dict[@]}" \
+  nice -n 10 "$build/bin/fuzz_$t" "$build/corpus/$t" "$root/fuzz/corpus/$t" "${dict[@]}" \
     -max_total_time="$s" -rss_limit_mb=2048 -timeout=20 -print_final_stats=1 \
     -artifact_prefix="$build/findings/$t-" >"$build/logs/$t.log" 2>&1 || true
 }

@@ -19,8 +19,8 @@
 #include <thread>
 #include <vector>
 
-#include "base/exit_code.h"
 #include "base/error.h"
+#include "base/exit_code.h"
 #include "base/output_path.h"
 #include "base/size.h"
 #include "mtrender/engine.h"

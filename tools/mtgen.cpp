@@ -31,8 +31,8 @@
 #include <thread>
 #include <vector>
 
-#include "base/exit_code.h"
 #include "base/error.h"
+#include "base/exit_code.h"
 #include "base/output_path.h"
 #include "patchstore/io/ply_writer.h"
 #include "base/cli_checks.h"

@@ -12,8 +12,8 @@
 #include <string>
 #include <vector>
 
-#include "base/exit_code.h"
 #include "base/error.h"
+#include "base/exit_code.h"
 #include "base/output_path.h"
 #include "mtfile/mt_cut.h"
 #include "mtfile/mt_file.h"

@@ -27,8 +27,8 @@
 #include <string>
 #include <vector>
 
-#include "base/exit_code.h"
 #include "base/error.h"
+#include "base/exit_code.h"
 #include "base/output_path.h"
 #include "base/size.h"
 #include "mtfile/mt_cut.h"
