@@ -5,6 +5,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <cassert>
 #include <cerrno>
 #include <cstring>
@@ -187,7 +188,12 @@ class FaultyWritableFile : public WritableFile {
   FaultyWritableFile(FaultInjectionEnv* env, std::string path, std::unique_ptr<WritableFile> base)
       : env_(env), path_(std::move(path)), base_(std::move(base)) {}
   void append(const void* data, size_t size) override {
-    env_->hit(FaultInjectionEnv::Op::Write, path_);
+    try {
+      env_->hit(FaultInjectionEnv::Op::Write, path_);
+    } catch (const Error&) {
+      if (env_->partialWrites() && size > 1) base_->append(data, size / 2);
+      throw;
+    }
     base_->append(data, size);
   }
   void sync() override {
@@ -226,10 +232,18 @@ class FaultyRandomAccessFile : public RandomAccessFile {
 
 }  // namespace
 
+namespace {
+std::atomic<Env*> gDefaultOverride{nullptr};
+}  // namespace
+
 Env* Env::Default() {
   static PosixEnv env;
-  return &env;
+  Env* override = gDefaultOverride.load(std::memory_order_acquire);
+  return override ? override : &env;
 }
+
+ScopedDefaultEnv::ScopedDefaultEnv(Env* env) : previous_(gDefaultOverride.exchange(env)) {}
+ScopedDefaultEnv::~ScopedDefaultEnv() { gDefaultOverride.store(previous_); }
 
 std::unique_ptr<WritableFile> FaultInjectionEnv::newWritableFile(const std::string& path) {
   return std::make_unique<FaultyWritableFile>(this, path, base_->newWritableFile(path));
@@ -261,7 +275,8 @@ void FaultInjectionEnv::hit(Op op, const std::string& path, const std::string& w
   if (--remaining_ == 0) {
     remaining_ = -1;
     fired_ = true;
-    failIo(path, std::string("injected ") + kNames[int(op)] + " failure" + where);
+    failIo(path, std::string("injected ") + kNames[int(op)] + " failure" + where +
+                     (errnum_ ? std::string(": ") + std::strerror(errnum_) : std::string()));
   }
 }
 

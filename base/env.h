@@ -39,6 +39,7 @@ class RandomAccessFile {
 class Env {
  public:
   virtual ~Env() = default;
+  // The process's Env: the POSIX one, or the one a ScopedDefaultEnv put in its place.
   static Env* Default();
 
   virtual std::unique_ptr<WritableFile> newWritableFile(const std::string& path) = 0;  // truncates
@@ -57,13 +58,36 @@ class Env {
   virtual uint64_t fileSize(const std::string& path) = 0;
 };
 
+// For tests: makes Env::Default() return `env` while it lives, so code that takes no Env (the
+// build, the tools' outputs) runs on a FaultInjectionEnv. Set it before any thread that may call
+// Env::Default() starts, and let it go after they end.
+class ScopedDefaultEnv {
+ public:
+  explicit ScopedDefaultEnv(Env* env);
+  ~ScopedDefaultEnv();
+  ScopedDefaultEnv(const ScopedDefaultEnv&) = delete;
+  ScopedDefaultEnv& operator=(const ScopedDefaultEnv&) = delete;
+
+ private:
+  Env* previous_;
+};
+
 // Wraps another Env and fails the N-th write, fsync, rename or read from now on (counting from
 // 1), by throwing mt::Error (Io) as a real failure would. Used by the crash-safety tests.
+// failAfter's `errnum` (e.g. ENOSPC) puts the system's text for it in the message, as a real
+// failure of that kind would ("...: injected write failure: No space left on device"); with
+// `partial`, a failed write first writes half of its bytes (a disk that fills mid-write).
 class FaultInjectionEnv : public Env {
  public:
   enum class Op { Write, Sync, Rename, Read };
   explicit FaultInjectionEnv(Env* base) : base_(base) {}
-  void failAfter(Op op, int64_t count) { op_ = op; remaining_ = count; }
+  void failAfter(Op op, int64_t count, int errnum = 0, bool partial = false) {
+    op_ = op;
+    remaining_ = count;
+    errnum_ = errnum;
+    partial_ = partial;
+  }
+  bool partialWrites() const { return partial_; }
   void disarm() { remaining_ = -1; }
   bool fired() const { return fired_; }
   // Counts of each operation so far (to enumerate every failure point in a test). Reads may come
@@ -91,6 +115,8 @@ class FaultInjectionEnv : public Env {
   std::mutex mutex_;
   Op op_ = Op::Write;
   int64_t remaining_ = -1;
+  int errnum_ = 0;
+  bool partial_ = false;
   bool fired_ = false;
 };
 

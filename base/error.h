@@ -1,5 +1,6 @@
 // Error type shared by every layer. A message is one line and names the file and the element,
-// byte offset or line where the problem is, so the CLIs can print it as is and exit 1. Its kind
+// byte offset or line where the problem is, so the CLIs can print it as is (base/exit_code.h gives
+// the exit code of its kind: 1 invalid input, 3 corruption, 4 I/O, 5 resource). Its kind
 // says what went wrong, for callers that act on it (retry an I/O error, report damage, ask for
 // more memory) and for tests: bad input from the user, a file of ours that is damaged, the system
 // failing a read or write, a resource that is short, or a stop asked for by a signal.

@@ -8,6 +8,7 @@
 #include <cstdlib>
 #include <fstream>
 
+#include "base/exit_code.h"
 #include "base/interrupt.h"
 #include "cluster/cluster_build.h"
 #include "patchstore/patch_store.h"
@@ -73,12 +74,12 @@ int main(int argc, char** argv) {
     MPI_Finalize();
     return 1;
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "mtcluster: %s\n", e.what());
+    const int code = mt::reportError("mtcluster", e);
     std::fflush(stderr);
     // Other ranks may be mid-region or waiting for rank 0: stop them all (the work directory and
     // temporary MT file stay for --resume when a level was checkpointed).
-    MPI_Abort(MPI_COMM_WORLD, 1);
-    return 1;
+    MPI_Abort(MPI_COMM_WORLD, code);
+    return code;
   }
   MPI_Finalize();
   return 0;

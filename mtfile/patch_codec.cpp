@@ -34,8 +34,8 @@ QuantizationGrid QuantizationGrid::fromBounds(const double minCorner[3], const d
     g.origin[a] = minCorner[a];
     double cells = std::floor((maxCorner[a] - minCorner[a]) / step + 0.5) + 1;
     if (!(cells < double(1u << 31)))
-      throw Error("quantization grid: box needs more than 31 bits per axis at step " +
-                  std::to_string(step));
+      throw Error("quantization grid: box needs more than 31 bits per axis at step " + std::to_string(step),
+                  ErrorKind::Resource);
     while (double(1ull << bits) < cells) ++bits;
   }
   g.bits = bits;

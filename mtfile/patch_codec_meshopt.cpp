@@ -420,6 +420,8 @@ MeshoptFrame readMeshoptFrame(const uint8_t* data, size_t size, const PayloadHea
   uint64_t maxRaw = 12 + meshopt_encodeIndexSequenceBound(tri3 + h.triangleCount, n) +
                     meshopt_encodeIndexBufferBound(tri3, n) + meshopt_encodeVertexBufferBound(n, 8) + n * 12;
   if (rawSize > maxRaw) bad("raw size " + std::to_string(rawSize) + " too large for its counts");
+  // Checked before decompressing: an empty stream would reach memcpy with a null destination.
+  if (rawSize < 12) bad("raw stream too short");
   MeshoptFrame f;
   f.raw.resize(rawSize);
   if (stored) {
@@ -430,7 +432,6 @@ MeshoptFrame readMeshoptFrame(const uint8_t* data, size_t size, const PayloadHea
     size_t got = ZSTD_decompressDCtx(dctx.get(), f.raw.data(), f.raw.size(), data + pos, zSize);
     if (ZSTD_isError(got) || got != rawSize) bad("zstd frame does not decompress");
   }
-  if (rawSize < 12) bad("raw stream too short");
   std::memcpy(f.sizes, f.raw.data(), 12);
   f.rangeBegin = data + pos + frameBytes;
   return f;

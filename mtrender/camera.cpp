@@ -93,6 +93,7 @@ CameraPath loadCameraPath(const std::string& path, const glm::dvec3& c, double r
     int n = 0;
     while (n < 9 && all >> v[n]) ++n;
     std::string rest;
+    all.clear();  // a word after the numbers stopped the loop with failbit: still read it
     if ((n != 6 && n != 9) || (all >> rest))
       fail(path, "line " + std::to_string(lineNo) + ": expected 6 or 9 numbers (eye, target, [up])");
     CameraPose p;
@@ -104,6 +105,11 @@ CameraPath loadCameraPath(const std::string& path, const glm::dvec3& c, double r
       p.eye = c + r * p.eye;
       p.target = c + r * p.target;
     }
+    // A view needs finite points (1e308 in unit space overflows once scaled) and a direction.
+    for (int i = 0; i < 3; ++i)
+      if (!std::isfinite(p.eye[i]) || !std::isfinite(p.target[i]) || !std::isfinite(p.up[i]))
+        fail(path, "line " + std::to_string(lineNo) + ": a coordinate is out of range");
+    if (p.eye == p.target) fail(path, "line " + std::to_string(lineNo) + ": eye and target are the same point");
     out.poses.push_back(p);
   }
   if (out.poses.empty()) fail(path, "the camera path has no pose");

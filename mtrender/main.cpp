@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "base/error.h"
+#include "base/exit_code.h"
 #include "base/output_path.h"
 #include "base/size.h"
 #include "mtrender/engine.h"
@@ -459,9 +460,6 @@ int main(int argc, char** argv) {
     if (!o.headless) return runViewerFor(o, eo, ds);
     return runHeadless(o, eo, ds, programStart);
   } catch (const std::exception& e) {
-    // One line "mtrender: MESSAGE"; some layers already name the tool.
-    const std::string message = e.what();
-    std::fprintf(stderr, "%s%s\n", message.rfind("mtrender: ", 0) == 0 ? "" : "mtrender: ", message.c_str());
-    return 1;
+    return mt::reportError("mtrender", e);  // one line "mtrender: MESSAGE"; the exit code by kind
   }
 }

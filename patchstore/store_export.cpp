@@ -43,7 +43,7 @@ void PatchStore::exportPly(const std::string& path, bool progress) const {
       }
     if (progress && ++done % 4096 == 0) std::fprintf(stderr, "\rexport: vertices %zu/%zu patches", done, ids.size());
   }
-  if (next > kMaxVertices) fail(path, "too many vertices for 32-bit indices");
+  if (next > kMaxVertices) fail(path, "too many vertices for 32-bit indices", ErrorKind::Resource);
   // Pass 2: triangles. A non-owned vertex's global index is its owner's base plus its rank among
   // the owner's owned vertices, found from the owner's boundary list alone.
   std::unordered_map<PatchId, std::vector<uint32_t>> notOwnedCache;  // sorted non-owned locals

@@ -1,7 +1,28 @@
 #!/usr/bin/env bash
-# Sets up (packages + Release build) and runs every test with CTest. Benchmarks live in bench/.
+# Sets up (packages + Release build) and runs every test with CTest; then builds the whole suite
+# again under AddressSanitizer + UndefinedBehaviorSanitizer and runs it (docs/hardening.md).
+# Benchmarks live in bench/ (bench/tsan.sh is the ThreadSanitizer run, bench/fuzz.sh the fuzzers).
+#   MT_SANITIZE_STAGE=0 scripts/test.sh    skips the sanitizer stage (a quick local run)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/setup.sh
-cd build
-ctest --output-on-failure --timeout 900 -j "$(nproc)"
+(cd build && ctest --output-on-failure --timeout 900 -j "$(nproc)")
+
+[[ ${MT_SANITIZE_STAGE:-1} == 0 ]] && exit 0
+
+# The sanitizer stage: gcc, -O1 (ASan's own advice: fast enough, and keeps the stack traces),
+# without bench/. Any report fails the test (-fno-sanitize-recover=all; ASan's exit code).
+# Left out here, and why (each still runs in the Release suite above):
+SANITIZER_EXCLUDE='^(RealScans\.)'
+#   RealScans.*  builds from CGAL's demo models and scangen meshes of up to ~1M triangles: minutes
+#                under ASan; the same code paths run on small inputs in test_mtbuild and test_faults.
+stage_start=$(date +%s)
+cmake -S . -B build-asan -G Ninja -DCMAKE_BUILD_TYPE=Release \
+  -DMT_SANITIZE=address,undefined -DMT_BENCH=OFF >/dev/null
+cmake --build build-asan --parallel "$(nproc)"
+built=$(date +%s)
+export ASAN_OPTIONS="detect_leaks=1:abort_on_error=0:strict_string_checks=1:detect_stack_use_after_return=0"
+export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"
+export LSAN_OPTIONS="suppressions=$PWD/scripts/lsan.supp:print_suppressions=0"
+(cd build-asan && ctest --output-on-failure --timeout 900 -j "$(nproc)" -E "$SANITIZER_EXCLUDE")
+echo "test.sh: sanitizer stage: build $((built - stage_start)) s, suite $(($(date +%s) - built)) s"

@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <fstream>
 
+#include "base/exit_code.h"
 #include "base/interrupt.h"
 #include "mtbuild/build.h"
 #include "patchstore/patch_store.h"
@@ -44,8 +45,7 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "mtbuild: %s\n", e.what());
     return 128 + e.signal();
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "mtbuild: %s\n", e.what());
-    return 1;
+    return mt::reportError("mtbuild", e);
   }
   return 0;
 }

@@ -23,6 +23,7 @@
 #include <vector>
 
 #include "base/error.h"
+#include "base/exit_code.h"
 #include "base/interrupt.h"
 #include "base/output_path.h"
 #include "mtfile/mt_cut.h"
@@ -285,7 +286,6 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "mtextract: %s; nothing was written\n", e.what());
     return 128 + e.signal();
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "mtextract: %s\n", e.what());
-    return 1;
+    return mt::reportError("mtextract", e);
   }
 }

@@ -32,6 +32,7 @@
 #include <vector>
 
 #include "base/error.h"
+#include "base/exit_code.h"
 #include "base/output_path.h"
 #include "patchstore/io/ply_writer.h"
 #include "base/cli_checks.h"
@@ -694,8 +695,7 @@ int run(int argc, char** argv) {
     for (int sig : {SIGINT, SIGTERM, SIGHUP}) signal(sig, removeTemporaryAndExit);
     writeMesh(c.settings, generator, c.shuffle);
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "mtgen: error: %s\n", e.what());
-    return 1;
+    return mt::reportError("mtgen", e);
   }
   return 0;
 }

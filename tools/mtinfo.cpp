@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "base/error.h"
+#include "base/exit_code.h"
 #include "base/output_path.h"
 #include "mtfile/mt_cut.h"
 #include "mtfile/mt_file.h"
@@ -165,7 +166,7 @@ int run(const std::string& path, bool json, bool check) {
     std::fprintf(stderr, "%s [node %u, level %u]\n", d.message.c_str(), node, nodes[node].level);
   }
   std::fprintf(stderr, "%s: checked %zu payloads, %zu damaged\n", path.c_str(), reader->patches().size(), damaged.size());
-  return damaged.empty() ? 0 : 1;
+  return damaged.empty() ? 0 : mt::kExitCorruption;
 }
 
 }  // namespace
@@ -174,20 +175,18 @@ int main(int argc, char** argv) {
   CLI::App app{"mtinfo: describe a batched Multi-Triangulation file (.mt): levels, nodes, arcs, patches, per-level\n"
                "triangles and error, bytes per triangle, quantization, bounding box and DAG shape (depth = arcs on\n"
                "the longest source->sink path; backward/forward star sizes over the inner nodes).\n"
-               "A damaged header, DAG or index is reported on one line naming the file and where; exit 1."};
+               "A damaged header, DAG or index is reported on one line naming the file and where; exit 3 (README, \"Exit codes\")."};
   std::string path;
   bool json = false, check = false;
   app.add_option("file", path, "The MT file to describe")->required();
   app.add_flag("--json", json, "Print one JSON object instead of the text table (inf/nan errors are null)");
   app.add_flag("--check", check,
                "Also read and decode every patch payload, verifying its checksum; each damaged patch is named "
-               "on stderr with its node and level, and the exit code is 1 if any is damaged");
+               "on stderr with its node and level, and the exit code is 3 (corrupt file) if any is damaged");
   if (int code = mt::cli::parse(app, argc, argv, "mtinfo"); code >= 0) return code;
   try {
     return run(path, json, check);
   } catch (const std::exception& e) {
-    std::fflush(stdout);
-    std::fprintf(stderr, "mtinfo: %s\n", e.what());
-    return 1;
+    return mt::reportError("mtinfo", e);
   }
 }

@@ -16,6 +16,8 @@
 #include <iostream>
 #include <sstream>
 
+#include "base/env.h"
+#include "base/exit_code.h"
 #include "base/interrupt.h"
 #include "base/output_path.h"
 #include "base/process.h"
@@ -106,7 +108,7 @@ void runExport(const std::string& dir, const std::string& output, bool quiet) {
   try {
     store->exportPly(tmp, !quiet);
     mt::checkInterrupt("export");
-    if (std::rename(tmp.c_str(), output.c_str()) != 0) mt::fail(output, std::string("cannot rename from ") + tmp + ": " + std::strerror(errno));
+    mt::Env::Default()->renameFile(tmp, output);  // names the file (I/O error)
   } catch (...) {
     std::filesystem::remove(tmp, ec);
     throw;
@@ -236,7 +238,7 @@ int runCheck(const std::string& dir) {
   for (const std::string& p : r.problems) std::fprintf(stderr, "%s\n", p.c_str());
   std::printf("%s: %" PRIu64 " patches, %" PRIu64 " boundary entries checked: %s\n", dir.c_str(), r.patchesChecked,
               r.entriesChecked, r.ok ? "OK" : "PROBLEMS FOUND");
-  return r.ok ? 0 : 1;
+  return r.ok ? 0 : mt::kExitCorruption;
 }
 
 // The heal command line's checks, before anything is opened: a pass is given and every range
@@ -362,8 +364,7 @@ int main(int argc, char** argv) {
     if (*c.heal) return runHeal(a, *c.heal, c.passes);
     if (*c.check) return runCheck(a.dir);
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "mtstore: %s\n", e.what());
-    return 1;
+    return mt::reportError("mtstore", e);
   }
   return 0;
 }

@@ -28,6 +28,7 @@
 #include <vector>
 
 #include "base/error.h"
+#include "base/exit_code.h"
 #include "base/output_path.h"
 #include "base/size.h"
 #include "mtfile/mt_cut.h"
@@ -347,7 +348,7 @@ int run(const std::string& path, uint32_t randomCuts, uint64_t seed, uint64_t me
   problems.flushCaps();
   std::fflush(stderr);
   printSummary(r, path, problems, scan.damage.size(), cuts, randomCuts, seed);
-  return problems.total() ? 1 : 0;
+  return problems.total() ? mt::kExitCorruption : 0;  // a file of ours that breaks its promises
 }
 
 }  // namespace
@@ -357,7 +358,7 @@ int main(int argc, char** argv) {
                "checksum; the DAG's shape; errors monotone towards the sink (sink +inf); bounding spheres nested\n"
                "and containing their patches; and crack-free cuts: the finest, the coarsest and K random valid\n"
                "cuts, each welded by exact grid position, may have no boundary or non-manifold edge away from the\n"
-               "input's own (rule in mtfile/mt_cut.h). One line per problem on stderr; exit 0 only if all hold.\n"
+               "input's own (rule in mtfile/mt_cut.h). One line per problem on stderr; exit 0 only if all hold, 3 if not.\n"
                "Memory: --memory, plus the file's DAG and index and the check's own per-patch arrays (about 120\n"
                "bytes per patch in all, ~0.15 byte per input triangle), for any file size. Cuts are never assembled:\n"
                "their edges are counted in parts that fit --memory (32-byte table slots, 3/4 full at most), each\n"
@@ -387,8 +388,6 @@ int main(int argc, char** argv) {
     const uint64_t memoryBytes = mt::cli::sizeOption(memory, "--memory", uint64_t(64) << 10, uint64_t(1) << 50, "64K", "1024T");
     return run(path, cuts, seed, memoryBytes, quiet);
   } catch (const std::exception& e) {
-    std::fflush(stdout);
-    std::fprintf(stderr, "mtverify: %s\n", e.what());
-    return 1;
+    return mt::reportError("mtverify", e);
   }
 }

@@ -243,7 +243,8 @@ void VPartitionAssigner::prepare(const CentroidSource& centroids, uint64_t memor
     if (memoryBytes && bytes > memoryBytes)
       throw Error(std::string("V-partition: ") + what + " need " + std::to_string(bytes >> 20) +
                   " MiB, more than the " + std::to_string(memoryBytes >> 20) +
-                  " MiB allowed; raise --memory or --patch-triangles");
+                  " MiB allowed; raise --memory or --patch-triangles",
+                  ErrorKind::Resource);
   };
   tooBig(sampleCount * 16, "the centroid sample would");
   vp::CentroidSample sample = vp::sampleCentroids(centroids, P);

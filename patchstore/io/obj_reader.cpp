@@ -70,7 +70,8 @@ class ObjReader final : public MeshReader {
   }
 
   void readVertex(std::string_view rest, uint64_t index, Batcher& batch) {
-    if (index >= kMaxVertices) fail(path_, "more vertices than the supported " + std::to_string(kMaxVertices));
+    if (index >= kMaxVertices)
+      fail(path_, "more vertices than the supported " + std::to_string(kMaxVertices), ErrorKind::Resource);
     Tokens tok{rest};
     double values[6];
     int n = 0;

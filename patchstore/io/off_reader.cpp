@@ -87,7 +87,8 @@ class OffReader final : public MeshReader {
     int64_t v = number<int64_t>(tok, "header", 0), f = number<int64_t>(tok, "header", 0);
     if (v < 0 || f < 0) fail(path_, "negative element count in OFF header" + atLine(in_->line()));
     if (uint64_t(v) > kMaxVertices)
-      fail(path_, std::to_string(v) + " vertices is more than the supported " + std::to_string(kMaxVertices));
+      fail(path_, std::to_string(v) + " vertices is more than the supported " + std::to_string(kMaxVertices),
+           ErrorKind::Resource);
     if (v == 0 || f == 0) fail(path_, "mesh has no triangles");
     vertexCount_ = uint64_t(v);
     faceCount_ = uint64_t(f);

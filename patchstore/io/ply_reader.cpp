@@ -221,7 +221,7 @@ class PlyReader final : public MeshReader {
     if (!face_ || face_->count == 0 || vertex_->count == 0) fail(path_, "mesh has no triangles");
     if (vertex_->count > kMaxVertices)
       fail(path_, std::to_string(vertex_->count) + " vertices is more than the supported " +
-                      std::to_string(kMaxVertices));
+                      std::to_string(kMaxVertices), ErrorKind::Resource);
     mapVertexProperties(*vertex_);
     mapFaceProperties(*face_);
     header_.declaredVertices = int64_t(vertex_->count);

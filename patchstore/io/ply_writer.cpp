@@ -1,11 +1,8 @@
 #include "patchstore/io/ply_writer.h"
 
-#include "base/output_path.h"
-
-#include <unistd.h>
-
-#include <cerrno>
 #include <cstring>
+
+#include "base/output_path.h"
 
 namespace mt {
 
@@ -32,14 +29,13 @@ std::string headerText(const PlyWriteOptions& o, uint64_t vertices, uint64_t tri
 
 PlyWriter::PlyWriter(const std::string& path, const PlyWriteOptions& options, const std::string& temporaryPath)
     : path_(path), tmpPath_(temporaryPath.empty() ? uniqueTempName(path) : temporaryPath), options_(options) {
-  file_ = std::fopen(tmpPath_.c_str(), "wb");
-  if (!file_) fail(path_, std::string("cannot create output: ") + std::strerror(errno));
+  file_ = Env::Default()->newWritableFile(tmpPath_);  // throws naming the file (Io)
   buffer_.reserve(kBufferBytes);
   writeHeader();
 }
 
 PlyWriter::~PlyWriter() {
-  if (file_) std::fclose(file_);
+  file_.reset();
   if (!finished_) std::remove(tmpPath_.c_str());
 }
 
@@ -49,15 +45,14 @@ void PlyWriter::writeHeader() {
   long pad = kHeaderBytes - long(h.size() + end.size());
   if (pad < 10) fail(path_, "PLY header does not fit its reserved space");
   h += "comment " + std::string(size_t(pad - 9), ' ') + "\n" + end;
-  if (std::fseek(file_, 0, SEEK_SET) != 0 || std::fwrite(h.data(), 1, h.size(), file_) != h.size())
-    fail(path_, std::string("write failed: ") + std::strerror(errno));
+  if (file_->size() == 0) file_->append(h.data(), h.size());
+  else file_->writeAt(0, h.data(), h.size());
   headerBytes_ = long(h.size());
 }
 
 void PlyWriter::flush() {
   if (buffer_.empty()) return;
-  if (std::fwrite(buffer_.data(), 1, buffer_.size(), file_) != buffer_.size())
-    fail(path_, std::string("write failed: ") + std::strerror(errno));
+  file_->append(buffer_.data(), buffer_.size());  // throws naming the file and offset (Io)
   buffer_.clear();
 }
 
@@ -101,12 +96,10 @@ void PlyWriter::addTriangle(uint32_t a, uint32_t b, uint32_t c) {
 void PlyWriter::finish() {
   flush();
   writeHeader();
-  if (std::fflush(file_) != 0 || fsync(fileno(file_)) != 0)
-    fail(path_, std::string("write failed: ") + std::strerror(errno));
-  std::fclose(file_);
-  file_ = nullptr;
-  if (std::rename(tmpPath_.c_str(), path_.c_str()) != 0)
-    fail(path_, std::string("cannot rename temporary output: ") + std::strerror(errno));
+  file_->sync();
+  file_->close();
+  file_.reset();
+  Env::Default()->renameFile(tmpPath_, path_);
   finished_ = true;
 }
 

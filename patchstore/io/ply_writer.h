@@ -1,14 +1,17 @@
 // Streaming binary little-endian PLY writer: vertices first, then triangles, counts known only at
 // the end. The header is written with room for the final counts and rewritten on finish(); the
 // file is written under PATH.tmp.PID.RANDOM (uniqueTempName) and renamed to PATH by finish(), so a
-// failed or interrupted write never leaves a partial file under the final name.
+// failed or interrupted write never leaves a partial file under the final name. Every write, fsync
+// and rename goes through Env::Default() (base/env.h), so tests can fail each in turn.
 #pragma once
 
 #include <cstdint>
 #include <cstdio>
+#include <memory>
 #include <string>
 #include <vector>
 
+#include "base/env.h"
 #include "patchstore/io/mesh_reader.h"
 
 namespace mt {
@@ -41,7 +44,7 @@ class PlyWriter {
   void flush();
   std::string path_, tmpPath_;
   PlyWriteOptions options_;
-  FILE* file_ = nullptr;
+  std::unique_ptr<WritableFile> file_;
   std::vector<char> buffer_;
   uint64_t vertices_ = 0, triangles_ = 0;
   long headerBytes_ = 0;

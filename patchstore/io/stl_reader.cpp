@@ -44,7 +44,7 @@ class StlReader final : public MeshReader {
     if (count == 0) fail(path_, "mesh has no triangles");
     if (3 * uint64_t(count) > kMaxVertices)
       fail(path_, std::to_string(3 * uint64_t(count)) + " vertices is more than the supported " +
-                      std::to_string(kMaxVertices));
+                      std::to_string(kMaxVertices), ErrorKind::Resource);
     header_.declaredFaces = count;
     header_.declaredVertices = 3 * int64_t(count);
   }
@@ -132,7 +132,9 @@ class StlReader final : public MeshReader {
         if (corners != 3)
           syntax("facet " + std::to_string(facet) + " has " + std::to_string(corners) + " vertices (3 needed)");
         uint32_t first = uint32_t(3 * facet);
-        if (3 * (facet + 1) > kMaxVertices) syntax("more vertices than the supported " + std::to_string(kMaxVertices));
+        if (3 * (facet + 1) > kMaxVertices)
+          fail(path_, "more vertices than the supported " + std::to_string(kMaxVertices) + atLine(in_->line()),
+               ErrorKind::Resource);
         for (const InputVertex& v : pending) batch.addVertex() = v;
         batch.addTriangle(first, first + 1, first + 2);
         inFacet = false;

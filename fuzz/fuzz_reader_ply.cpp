@@ -1,0 +1,8 @@
+// libFuzzer target: the PLY reader (patchstore/io/ply_reader.cpp) on arbitrary bytes, checking
+// the guarantees of mesh_reader.h on everything it delivers.
+#include "fuzz/fuzz_util.h"
+
+extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+  mt::fuzz::readMesh("input.ply", data, size);
+  return 0;
+}

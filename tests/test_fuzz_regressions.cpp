@@ -1,0 +1,59 @@
+// What the fuzzers of fuzz/ found, each kept as a regression test of the normal suite (the
+// sanitizer stage of scripts/test.sh runs these under ASan+UBSan, where the undefined behaviour
+// itself is caught, not only a wrong answer). docs/hardening.md lists the findings.
+#include <gtest/gtest.h>
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "base/error.h"
+#include "mtfile/patch_codec.h"
+#include "mtrender/camera.h"
+#include "test_support.h"
+
+using mt::test::TempDir;
+using mt::test::writeFile;
+
+// fuzz_patch_meshopt: a stored (not zstd-compressed) stream with raw size 0 reached memcpy with
+// the empty vector's null data pointer (UBSan: null passed to a nonnull parameter) before the
+// "raw stream too short" check. Now refused first.
+TEST(FuzzRegressions, MeshoptPayloadWithAnEmptyStoredStreamIsRefused) {
+  const std::vector<uint8_t> payload = {
+    0x52, 0x00, 0x00, 0x00, 0x6e, 0x00, 0x00, 0x00, 0x2f, 0x00, 0x00, 0x00, 0x53, 0x00, 0x00, 0x00,
+    0x02, 0x00, 0x00, 0x00, 0x70, 0x00, 0x00, 0x0c, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00,
+    0x8e, 0x00, 0x00, 0x00, 0x4a, 0x01, 0x00, 0x31, 0x00, 0x00, 0x00, 0x00, 0x00, 0x78, 0x08, 0x00,
+    0x44, 0xee, 0x42, 0xcf, 0x32, 0x85, 0x86, 0xf8, 0x52, 0x2b, 0xea, 0x04, 0x47, 0x8a, 0xf7, 0xbf,
+    0xed, 0xda, 0x7d, 0xa4, 0x51, 0x2f, 0xf1, 0xf0, 0x95, 0x04, 0xfd, 0x96, 0xf2, 0xa0, 0x80, 0x04,
+    0x1c, 0xae, 0x81, 0x99, 0xb0, 0xc0, 0x3a, 0x4d, 0x51, 0xfe, 0x71, 0x38, 0xdb, 0x98, 0x26, 0xc7,
+    0x34, 0xea, 0x65, 0x8b, 0x06, 0x10, 0xe4, 0xcd, 0x81, 0xaf, 0x25, 0xd6, 0xef, 0xcb, 0x0e, 0x32,
+    0x3a, 0xd0, 0x0c, 0x0e, 0x7e, 0x77, 0x82, 0x16, 0xd6, 0x65, 0x39, 0x3d, 0x57, 0x4c, 0x4f, 0xc0,
+    0xfa, 0xb7, 0xfb, 0x8b, 0x28, 0xf7, 0x99, 0x36, 0x8b, 0xf0, 0x00,
+  };
+  mt::QuantizationGrid grid;
+  EXPECT_THROW(mt::decodePatch(payload.data(), payload.size(), mt::format::Codec::Meshopt, grid), mt::Error);
+}
+
+// fuzz_camera_path: "-1e308" in unit space overflowed to -inf once scaled by the radius, and the
+// pose was accepted; a word after the six numbers ("0 0 0 0 0 0# x") was ignored.
+TEST(FuzzRegressions, CameraPathWithNonFiniteOrTrailingWordsIsRefused) {
+  TempDir tmp;
+  const glm::dvec3 centre(1, 2, 3);
+  const std::vector<std::pair<std::string, std::string>> bad = {
+      {"overflow", "mtrender-camera-path 1\n# seed\nspace unit\nfov 45\n0 -3 1  0 0 0\n1 -2 1  0 0-1e308\n"},
+      {"trailing", "0 -3 1  0 0 0# ace 2\n"},
+      {"same_point", "space object\n1 1 1 1 1 1\n"},
+  };
+  for (const auto& [name, text] : bad) {
+    writeFile(tmp.file(name), text);
+    try {
+      mt::render::loadCameraPath(tmp.file(name), centre, 4.0);
+      ADD_FAILURE() << name << ": accepted";
+    } catch (const mt::Error& e) {
+      EXPECT_NE(std::string(e.what()).find(tmp.file(name) + ": line "), std::string::npos) << e.what();
+    }
+  }
+  // The seed paths still load.
+  writeFile(tmp.file("good"), "space unit\nfov 30\n0 -3 1 0 0 0\n1 -2 1 0 0 0 0 0 1\n");
+  EXPECT_EQ(mt::render::loadCameraPath(tmp.file("good"), centre, 4.0).poses.size(), 2u);
+}
