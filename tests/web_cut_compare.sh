@@ -2,6 +2,7 @@
 # Web.CutMatchesExtractRender: for the same file, view and tolerance the web viewer's cut
 # (web/src/extract.js, run in node by web/test/cut_nodes.mjs) is ExtractRender's (mtrender/extract.h,
 # printed by web_cut_nodes), node for node, both run to convergence. 3 files x 8 views x 2 tolerances.
+# And the web decoder decodes every patch of the meshopt files to the C++ decoder's grid coordinates.
 # Usage: web_cut_compare.sh BIN_DIR SOURCE_DIR
 set -euo pipefail
 bin=$1 src=$2
@@ -43,6 +44,14 @@ for f in a b c; do
     compared=$((compared + n))
     echo "$f.mt tolerance $tol: $n views, cut sizes $(awk '{printf "%d ", NF - 2}' "$t/cpp")"
   done
+done
+# The web decoder (range coder, position prediction, meshopt and zstd from npm, checksums) gives
+# the C++ decoder's grid coordinates on every patch of the meshopt files.
+for f in a c; do
+  "$bin/web_cut_nodes" --decode "$t/$f.mt" >"$t/cpp"
+  node "$src/web/test/decode_check.mjs" "$t/$f.mt" >"$t/js"
+  diff "$t/cpp" "$t/js" >&2 || { echo "DIFFERENT: $f.mt decoded patches" >&2; fail=1; }
+  echo "$f.mt decoded: $(cat "$t/js")"
 done
 # A refined cut is not the trivial one: the views must have moved the cut off the coarsest set.
 nodes=$(awk '{print NF - 2}' "$t/cpp" | sort -n | uniq | wc -l)

@@ -18,7 +18,32 @@
 #include "mtrender/extract.h"
 #include "mtrender/scene.h"
 
+// web_cut_nodes --decode FILE.mt: every patch decoded by the C++ decoder, printed as
+// web/test/decode_check.mjs prints the web decoder's (patches, triangles, vertices, the sum of
+// every decoded grid coordinate).
+static int decodeAll(const char* path) {
+  auto r = mt::MtFileReader::open(path);
+  uint64_t tris = 0, verts = 0, qsum = 0;
+  for (uint32_t i = 0; i < r->patches().size(); ++i) {
+    mt::DecodedPatch d = r->readPatch(i);
+    tris += d.triangleCount();
+    verts += d.q.size() / 3;
+    for (uint32_t v : d.q) qsum += v;
+  }
+  std::printf("patches %zu triangles %llu vertices %llu qsum %llu\n", r->patches().size(), (unsigned long long)tris,
+              (unsigned long long)verts, (unsigned long long)qsum);
+  return 0;
+}
+
 int main(int argc, char** argv) {
+  if (argc == 3 && std::string(argv[1]) == "--decode") {
+    try {
+      return decodeAll(argv[2]);
+    } catch (const mt::Error& e) {
+      std::fprintf(stderr, "web_cut_nodes: %s\n", e.what());
+      return 1;
+    }
+  }
   if (argc != 6) {
     std::fprintf(stderr, "usage: web_cut_nodes FILE.mt VIEWS TOLERANCE WIDTH HEIGHT\n");
     return 2;
