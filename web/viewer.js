@@ -1,0 +1,125 @@
+// The standalone viewer page: viewer.html?file=URL[&tol=1][&budget=33][&cache=256][&bg=20242a]
+// [&path=orbit|fixed&frames=600][&view=EX,EY,EZ,TX,TY,TZ (unit space)]. Orbit/pan/zoom with the
+// mouse (three's OrbitControls); the HUD shows fps, triangles, cache, loads and the screen error.
+// `path` plays a recorded camera path frame by frame (the browser tests and bench/web.sh); the
+// per-frame figures are in window.mtViewer.frames.
+import * as THREE from 'three';
+import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
+import { MTObject } from './src/mt_object.js';
+
+const q = new URLSearchParams(location.search);
+const hud = document.getElementById('hud');
+const errBox = document.getElementById('error');
+const warnBox = document.getElementById('warn');
+const state = (window.mtViewer = { ready: false, error: null, warnings: [], frames: [], firstImageMs: null, done: false });
+
+function showError(msg) {
+  state.error = msg;
+  errBox.textContent = msg;
+  errBox.style.display = 'block';
+  hud.textContent = 'error';
+}
+
+// A camera path in unit space (p = centre + radius * v): one turn with elevation changes and
+// zooms, the last 15% of the frames still.
+function orbitPose(i, frames) {
+  const moving = Math.floor(frames * 0.85);
+  const f = Math.min(i, moving) / moving;
+  const a = 2 * Math.PI * f - Math.PI / 2;
+  const d = 2.3 + 1.1 * Math.cos(3 * Math.PI * f);
+  const el = 0.25 + 0.35 * Math.sin(2 * Math.PI * f);
+  return { eye: [d * Math.cos(a), d * Math.sin(a), d * el], target: [0.15 * Math.sin(4 * Math.PI * f), 0, 0] };
+}
+
+async function main() {
+  const file = q.get('file');
+  if (!file) return showError('viewer.html?file=URL: no MT file given');
+  const width = window.innerWidth, height = window.innerHeight;
+  const renderer = new THREE.WebGLRenderer({ antialias: false, preserveDrawingBuffer: true });
+  renderer.setPixelRatio(1);
+  renderer.setSize(width, height);
+  document.body.appendChild(renderer.domElement);
+  const bg = new THREE.Color('#' + (q.get('bg') || '20242a'));
+  renderer.setClearColor(bg);
+  const scene = new THREE.Scene();
+  const camera = new THREE.PerspectiveCamera(45, width / height, 0.01, 100);
+  camera.up.set(0, 0, 1);
+  scene.add(new THREE.HemisphereLight(0xffffff, 0x404040, 1.2));
+  const sun = new THREE.DirectionalLight(0xffffff, 1.6);
+  camera.add(sun);
+  sun.position.set(0.5, 1, 0.3);
+  scene.add(camera);
+
+  let mt;
+  try {
+    mt = await MTObject.open(file, {
+      pixelTolerance: Number(q.get('tol') || 1),
+      budgetMs: Number(q.get('budget') || 33),
+      cacheBytes: Number(q.get('cache') || 256) * 2 ** 20,
+      onWarning: (m) => {
+        state.warnings.push(m);
+        warnBox.textContent = `${state.warnings.length} damaged patch(es) skipped: ${m}`;
+      },
+    });
+  } catch (e) {
+    return showError(e.message);
+  }
+  scene.add(mt);
+  const r = mt.mt.radius;
+  const c = new THREE.Vector3(...mt.mt.center);
+  const unit = (v) => new THREE.Vector3(v[0], v[1], v[2]).multiplyScalar(r).add(c);
+  camera.near = r * 1e-3;
+  camera.far = r * 20;
+  camera.updateProjectionMatrix();
+  const controls = new OrbitControls(camera, renderer.domElement);
+  const setPose = (p) => {
+    camera.position.copy(unit(p.eye));
+    controls.target.copy(unit(p.target));
+    camera.lookAt(controls.target);
+  };
+  const v = (q.get('view') || '').split(',').map(Number);
+  setPose(v.length === 6 && v.every(Number.isFinite) ? { eye: v.slice(0, 3), target: v.slice(3) } : { eye: [0, -2.2, 1.1], target: [0, 0, 0] });
+  controls.update();
+  const path = q.get('path');
+  const frames = Number(q.get('frames') || 600);
+  state.ready = true;
+  state.fileSize = mt.mt.fileSize;
+  state.openBytes = mt.mt.source.bytesFetched;
+  state.budgetMs = mt.extract.options.budgetMs;
+  state.tolerance = mt.extract.options.pixelTolerance;
+  let i = 0, fpsAvg = 0, last = performance.now();
+  const loop = () => {
+    if (mt.fatal) return showError(mt.fatal.message);
+    const now = performance.now();
+    const dt = now - last;
+    last = now;
+    if (path === 'orbit') setPose(orbitPose(i, frames));
+    else controls.update();
+    const st = mt.update(camera, width, height);
+    // Near/far hug the model so depth precision holds close to the surface.
+    const dist = camera.position.distanceTo(c);
+    camera.near = Math.max(r * 5e-4, (dist - r) * 0.9);
+    camera.far = dist + r * 1.01;
+    camera.updateProjectionMatrix();
+    renderer.render(scene, camera);
+    if (state.firstImageMs === null) state.firstImageMs = performance.now();
+    if (i > 0) fpsAvg = fpsAvg ? 0.9 * fpsAvg + 0.1 * (1000 / dt) : 1000 / dt;
+    state.frames.push({
+      t: now, frameMs: i > 0 ? dt : 0, drawn: st.drawnTriangles, patches: st.drawnPatches, cacheBytes: st.cacheBytes,
+      cacheCap: st.cacheCap, bytesRead: st.bytesRead, err: st.maxScreenError, pending: st.loadsPending,
+      budget: st.budgetTriangles, loads: st.loads, still: path === 'orbit' ? i >= Math.floor(frames * 0.85) : null,
+    });
+    if (state.frames.length > 5000) state.frames.shift();
+    hud.textContent =
+      `fps ${fpsAvg.toFixed(1)}  (budget ${state.budgetMs} ms)\n` +
+      `triangles ${(st.drawnTriangles / 1e6).toFixed(2)} M drawn, ${st.drawnPatches} patches\n` +
+      `cache ${(st.cacheBytes / 2 ** 20).toFixed(1)} / ${(st.cacheCap / 2 ** 20).toFixed(0)} MiB\n` +
+      `loads ${st.loads}, pending ${st.loadsPending}, fetched ${(st.bytesRead / 2 ** 20).toFixed(1)} MiB of ${(mt.mt.fileSize / 2 ** 20).toFixed(1)}\n` +
+      `screen error ${st.maxScreenError.toFixed(2)} px (tolerance ${state.tolerance})`;
+    ++i;
+    if (path && i >= frames) state.done = true;
+    requestAnimationFrame(loop);
+  };
+  requestAnimationFrame(loop);
+}
+main().catch((e) => showError(e.stack || e.message));
