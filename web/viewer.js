@@ -55,6 +55,7 @@ async function main() {
     mt = await MTObject.open(file, {
       pixelTolerance: Number(q.get('tol') || 1),
       budgetMs: Number(q.get('budget') || 33),
+      fixedTriangles: Number(q.get('fixed') || 0),
       cacheBytes: Number(q.get('cache') || 256) * 2 ** 20,
       onWarning: (m) => {
         state.warnings.push(m);
@@ -82,6 +83,7 @@ async function main() {
   controls.update();
   const path = q.get('path');
   const frames = Number(q.get('frames') || 600);
+  state.canvas = renderer.domElement;
   state.ready = true;
   state.fileSize = mt.mt.fileSize;
   state.openBytes = mt.mt.source.bytesFetched;
@@ -107,7 +109,7 @@ async function main() {
     state.frames.push({
       t: now, frameMs: i > 0 ? dt : 0, drawn: st.drawnTriangles, patches: st.drawnPatches, cacheBytes: st.cacheBytes,
       cacheCap: st.cacheCap, bytesRead: st.bytesRead, err: st.maxScreenError, pending: st.loadsPending,
-      budget: st.budgetTriangles, loads: st.loads, still: path === 'orbit' ? i >= Math.floor(frames * 0.85) : null,
+      budget: st.budgetTriangles, loads: st.loads, moves: st.refinements + st.coarsenings, triangles: st.triangles, still: path === 'orbit' ? i >= Math.floor(frames * 0.85) : null,
     });
     if (state.frames.length > 5000) state.frames.shift();
     hud.textContent =
@@ -122,4 +124,80 @@ async function main() {
   };
   requestAnimationFrame(loop);
 }
+// The image as RGBA bytes (the drawing buffer is preserved).
+function pixels() {
+  const cv = state.canvas;
+  const c2 = document.createElement('canvas');
+  c2.width = cv.width;
+  c2.height = cv.height;
+  const g = c2.getContext('2d');
+  g.drawImage(cv, 0, 0);
+  return g.getImageData(0, 0, cv.width, cv.height);
+}
+// Background pixels not connected to the image border through background: holes inside the
+// silhouette. Components under `maxArea` pixels are counted as cracks (a real hole of the surface,
+// or the torus' middle, is large). Returns {crackPixels, components, surfacePixels}.
+state.cracks = (bgHex, maxArea = 400) => {
+  const img = pixels();
+  const { width: w, height: h, data } = img;
+  const bg = [parseInt(bgHex.slice(0, 2), 16), parseInt(bgHex.slice(2, 4), 16), parseInt(bgHex.slice(4, 6), 16)];
+  const isBg = new Uint8Array(w * h);
+  let surface = 0;
+  for (let i = 0; i < w * h; ++i) {
+    const d = Math.abs(data[4 * i] - bg[0]) + Math.abs(data[4 * i + 1] - bg[1]) + Math.abs(data[4 * i + 2] - bg[2]);
+    isBg[i] = d < 12 ? 1 : 0;
+    if (!isBg[i]) ++surface;
+  }
+  const seen = new Uint8Array(w * h);
+  const stack = [];
+  const fill = (start) => {
+    let area = 0;
+    stack.push(start);
+    seen[start] = 1;
+    let border = false;
+    while (stack.length) {
+      const i = stack.pop();
+      ++area;
+      const x = i % w, y = (i / w) | 0;
+      if (x === 0 || y === 0 || x === w - 1 || y === h - 1) border = true;
+      for (const j of [x > 0 ? i - 1 : -1, x < w - 1 ? i + 1 : -1, y > 0 ? i - w : -1, y < h - 1 ? i + w : -1])
+        if (j >= 0 && isBg[j] && !seen[j]) seen[j] = 1, stack.push(j);
+    }
+    return { area, border };
+  };
+  let crackPixels = 0, components = 0;
+  for (let i = 0; i < w * h; ++i)
+    if (isBg[i] && !seen[i]) {
+      const c = fill(i);
+      if (!c.border && c.area < maxArea) crackPixels += c.area, ++components;
+    }
+  return { crackPixels, components, surfacePixels: surface };
+};
+// The image against a PNG at `url`: the share of pixels whose RGB differs by more than `tol`
+// (sum of absolute differences), and the mean absolute difference per channel.
+state.compare = async (url, tol = 48) => {
+  const img = pixels();
+  const ref = await new Promise((resolve, reject) => {
+    const im = new Image();
+    im.onload = () => resolve(im);
+    im.onerror = () => reject(new Error(`cannot load ${url}`));
+    im.src = url;
+  });
+  if (ref.width !== img.width || ref.height !== img.height) return { error: `size ${ref.width}x${ref.height} vs ${img.width}x${img.height}` };
+  const c2 = document.createElement('canvas');
+  c2.width = ref.width;
+  c2.height = ref.height;
+  const g = c2.getContext('2d');
+  g.drawImage(ref, 0, 0);
+  const r = g.getImageData(0, 0, ref.width, ref.height).data;
+  let off = 0, sum = 0;
+  const n = img.width * img.height;
+  for (let i = 0; i < n; ++i) {
+    const d = Math.abs(img.data[4 * i] - r[4 * i]) + Math.abs(img.data[4 * i + 1] - r[4 * i + 1]) + Math.abs(img.data[4 * i + 2] - r[4 * i + 2]);
+    sum += d;
+    if (d > tol) ++off;
+  }
+  return { differing: off / n, mean: sum / (3 * n) };
+};
+state.png = () => state.canvas.toDataURL('image/png');
 main().catch((e) => showError(e.stack || e.message));

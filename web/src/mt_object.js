@@ -55,6 +55,7 @@ export class MTObject extends THREE.Group {
     this.extract = new ExtractRender(scene, this.cache, this.server, {
       pixelTolerance: options.pixelTolerance ?? 1,
       budgetMs: options.budgetMs ?? 33,
+      fixedTriangles: options.fixedTriangles || 0,
     });
     this.meshes = new Map();  // patch id -> Mesh (patches of the cut)
     this.frame = 0;
