@@ -1,7 +1,7 @@
 // The standalone viewer page: viewer.html?file=URL[&tol=1][&budget=33][&cache=256][&bg=20242a]
 // [&path=orbit|fixed&frames=600][&view=EX,EY,EZ,TX,TY,TZ (unit space)]. Orbit/pan/zoom with the
 // mouse (three's OrbitControls); the HUD shows fps, triangles, cache, loads and the screen error.
-// `path` plays a recorded camera path frame by frame (the browser tests and bench/web.sh); the
+// `capture` keeps the drawing buffer for reading the image back (the tests). `path` plays a recorded camera path frame by frame (the browser tests and bench/web.sh); the
 // per-frame figures are in window.mtViewer.frames.
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
@@ -35,7 +35,7 @@ async function main() {
   const file = q.get('file');
   if (!file) return showError('viewer.html?file=URL: no MT file given');
   const width = window.innerWidth, height = window.innerHeight;
-  const renderer = new THREE.WebGLRenderer({ antialias: false, preserveDrawingBuffer: true });
+  const renderer = new THREE.WebGLRenderer({ antialias: false, preserveDrawingBuffer: q.has('capture'), powerPreference: 'high-performance' });
   renderer.setPixelRatio(1);
   renderer.setSize(width, height);
   document.body.appendChild(renderer.domElement);
@@ -103,18 +103,18 @@ async function main() {
     camera.near = Math.max(r * 5e-4, (dist - r) * 0.9);
     camera.far = dist + r * 1.01;
     camera.updateProjectionMatrix();
-    renderer.render(scene, camera);
+    mt.render(renderer, scene, camera);
     if (state.firstImageMs === null) state.firstImageMs = performance.now();
     if (i > 0) fpsAvg = fpsAvg ? 0.9 * fpsAvg + 0.1 * (1000 / dt) : 1000 / dt;
     state.frames.push({
       t: now, frameMs: i > 0 ? dt : 0, drawn: st.drawnTriangles, patches: st.drawnPatches, cacheBytes: st.cacheBytes,
       cacheCap: st.cacheCap, bytesRead: st.bytesRead, err: st.maxScreenError, pending: st.loadsPending,
-      budget: st.budgetTriangles, loads: st.loads, moves: st.refinements + st.coarsenings, triangles: st.triangles, still: path === 'orbit' ? i >= Math.floor(frames * 0.85) : null,
+      budget: st.budgetTriangles, loads: st.loads, moves: st.refinements + st.coarsenings, evictions: st.evictions, givenUp: st.givenUp, triangles: st.triangles, still: path === 'orbit' ? i >= Math.floor(frames * 0.85) : null,
     });
     if (state.frames.length > 5000) state.frames.shift();
-    hud.textContent =
+    if (i % 10 === 0) hud.textContent =
       `fps ${fpsAvg.toFixed(1)}  (budget ${state.budgetMs} ms)\n` +
-      `triangles ${(st.drawnTriangles / 1e6).toFixed(2)} M drawn, ${st.drawnPatches} patches\n` +
+      `triangles ${(st.triangles / 1e6).toFixed(2)} M in the cut, ${(st.drawnTriangles / 1e6).toFixed(2)} M drawn this frame, ${st.drawnPatches} patches\n` +
       `cache ${(st.cacheBytes / 2 ** 20).toFixed(1)} / ${(st.cacheCap / 2 ** 20).toFixed(0)} MiB\n` +
       `loads ${st.loads}, pending ${st.loadsPending}, fetched ${(st.bytesRead / 2 ** 20).toFixed(1)} MiB of ${(mt.mt.fileSize / 2 ** 20).toFixed(1)}\n` +
       `screen error ${st.maxScreenError.toFixed(2)} px (tolerance ${state.tolerance})`;

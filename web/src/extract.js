@@ -324,6 +324,49 @@ export class ExtractRender {
     this.server.submit(out, frame);
   }
 
+  /**
+   * For a frame that leaves the cut as it is (it draws part of a still image): advances the render
+   * budget and asks for what the refinements of the cut beyond it would need, as if applied (the
+   * best first, two levels deep, within the scaled budget; up to twice it at prefetch priority).
+   */
+  requestAhead(frame, view) {
+    const t0 = now();
+    const st = this.newStats();
+    this.wanted.clear();
+    const extractMs = this.options.extractMs > 0 ? this.options.extractMs : Math.min(2.0, this.options.budgetMs / 20);
+    const budget = this.nextBudget(extractMs);
+    const tau = this.options.pixelTolerance * this.lodScale;
+    const { nodes, arcs, inArcs } = this.scene;
+    const heap = new Heap(true);
+    const depth = new Map();
+    for (let n = 0; n < nodes.count; ++n)
+      if (this.isRefineCandidate(n) && !this.badNode[n]) heap.push(this.screenError(n, view), n), depth.set(n, 0);
+    let triangles = this.visibleTriangles;
+    const seen = new Uint8Array(nodes.count);
+    while (!heap.empty()) {
+      const err = heap.topErr(), node = heap.topNode();
+      heap.pop();
+      if (err <= tau || seen[node]) continue;
+      seen[node] = 1;
+      const d = depth.get(node) || 0;
+      triangles += this.visibleDelta(node, true, view);
+      if (triangles > 2 * budget) break;
+      this.want(this.collectIn(node, this.scratch), d === 0 && triangles <= budget ? Urgency.Needed : Urgency.Prefetch);
+      if (d >= 1) continue;
+      for (let k = 0; k < nodes.inArcCount[node]; ++k) {
+        const p = arcs.from[inArcs[nodes.firstInArc[node] + k]];
+        if (!nodes.source[p] && !this.badNode[p]) heap.push(this.screenError(p, view), p), depth.set(p, d + 1);
+      }
+    }
+    this.submitRequests(frame, st);
+    st.budgetTriangles = budget;
+    st.triangles = this.triangles;
+    st.patches = this.cutPatchCount;
+    st.lodScale = this.lodScale;
+    st.extractMs = now() - t0;
+    return st;
+  }
+
   newStats() {
     return {
       extractMs: 0, triangles: 0, patches: 0, drawnPatches: 0, drawnTriangles: 0, misses: 0, requests: 0,

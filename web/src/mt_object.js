@@ -63,6 +63,14 @@ export class MTObject extends THREE.Group {
     this.prevPose = null;
     this.stats = null;
     this.drawnTriangles = 0;
+    // Progressive refinement of a still view (mtrender/engine.h): once the camera stops, the cut may
+    // grow to stillFrames frames' worth of the render budget and is drawn over that many frames into
+    // an accumulation target, at most one frame's budget a frame; the screen keeps the last
+    // complete image meanwhile. render() does this; update() + renderer.render() draws plainly.
+    this.stillFrames = options.stillFrames ?? 16;
+    this.stillCount = 0;
+    this.accum = null;  // {list: Mesh[], next, err}
+    this.shownErr = 0;
   }
 
   async _start() {
@@ -121,9 +129,25 @@ export class MTObject extends THREE.Group {
     const pose = this._pose(camera);
     const prev = this.prevPose || pose;
     this.prevPose = pose;
+    const still = this.frame > 1 && ['eye', 'target', 'up'].every((k) => pose[k].every((x, i) => Math.abs(x - prev[k][i]) <= 1e-9 * this.mt.radius));
+    this.stillCount = still ? this.stillCount + 1 : 0;
     const view = makeView(pose, width, height, this.mt.center, this.mt.radius);
     const ahead = makeView(extrapolate(prev, pose, 10), width, height, this.mt.center, this.mt.radius);
-    const st = this.extract.update(this.frame, view, ahead);
+    this.progressiveNow = this.progressive && this.stillCount >= 2 && this.stillFrames > 1;
+    let st;
+    if (!this.progressiveNow) {
+      this.accum = null;
+      this.extract.budgetScale = 1;
+      st = this.extract.update(this.frame, view, ahead);
+    } else if (this.accum && this.accum.next < this.accum.list.length) {
+      st = this.extract.requestAhead(this.frame, view);  // the image being drawn keeps its cut
+      st.maxScreenError = this.shownErr;
+    } else {
+      this.extract.budgetScale = this.stillFrames;
+      st = this.extract.update(this.frame, view, ahead);
+      this.cutChanged = st.refinements + st.coarsenings > 0 || !this.accum;
+    }
+    this.lastView = view;
     // The meshes: one per patch of the cut's visible arcs.
     const { arcs, arcPatches } = this.mt;
     const keep = new Set();
@@ -152,17 +176,94 @@ export class MTObject extends THREE.Group {
         this.remove(m);
         this.meshes.delete(id);
       }
+    if (this.progressiveNow && this.cutChanged && (!this.accum || this.accum.next >= this.accum.list.length)) {
+      this.accum = { list: [...this.meshes.values()], next: 0, err: st.maxScreenError, fresh: true };
+      this.cutChanged = false;
+    }
     this.drawnTriangles = drawnTriangles;
     st.drawnTriangles = drawnTriangles;
     st.drawnPatches = drawnPatches;
     st.cacheBytes = this.cache.usedBytes;
     st.cacheCap = this.cache.capBytes;
+    st.evictions = this.cache.evictions;
+    st.givenUp = this.cache.givenUp;
     st.loads = this.server.loads;
     st.bytesRead = this.mt.source.bytesFetched;
     st.badPatches = this.server.bad;
     st.loadsPending = this.server.queue.length + this.server.inFlight;
     this.stats = st;
     return st;
+  }
+
+  /**
+   * Draws the frame: the whole cut while the camera moves; once it is still, the next chunk of the
+   * still image (within one frame's render budget) into the accumulation target, showing the last
+   * complete image. Call after update(). Returns the triangles drawn this frame.
+   */
+  render(renderer, scene, camera) {
+    this.progressive = true;
+    const size = renderer.getDrawingBufferSize(new THREE.Vector2());
+    if (!this.targets || this.targets[0].width !== size.x || this.targets[0].height !== size.y) {
+      this.targets = [0, 1].map(() => new THREE.WebGLRenderTarget(size.x, size.y, { depthBuffer: true, colorSpace: THREE.SRGBColorSpace }));
+      this.blit = new THREE.Mesh(new THREE.PlaneGeometry(2, 2), new THREE.MeshBasicMaterial({ depthTest: false, depthWrite: false, transparent: true }));
+      this.blitScene = new THREE.Scene();
+      this.blitScene.add(this.blit);
+      this.blitCamera = new THREE.OrthographicCamera(-1, 1, 1, -1, 0, 1);
+      this.hasImage = false;
+    }
+    const [accumTarget, shown] = this.targets;
+    let drawn = 0;
+    // The targets are cleared transparent: the blit draws the model over the screen's own clear
+    // (the background colour is then converted exactly as a direct render's is).
+    const clearTarget = (t) => {
+      const alpha = renderer.getClearAlpha();
+      renderer.setRenderTarget(t);
+      renderer.setClearAlpha(0);
+      renderer.clear();
+      renderer.setClearAlpha(alpha);
+    };
+    const auto = renderer.autoClear;
+    renderer.autoClear = false;
+    if (!this.progressiveNow || !this.accum) {
+      clearTarget(shown);
+      renderer.render(scene, camera);
+      drawn = this.drawnTriangles;
+      this.hasImage = true;
+      this.shownErr = this.stats ? this.stats.maxScreenError : 0;
+    } else {
+      const a = this.accum;
+      const budget = Math.max(this.extract.frameBudget, 1000);
+      const chunk = new Set();
+      while (a.next < a.list.length && (chunk.size === 0 || drawn + a.list[a.next].geometry.index.count / 3 <= budget)) {
+        const m = a.list[a.next++];
+        chunk.add(m);
+        drawn += m.geometry.index.count / 3;
+      }
+      const visible = new Map();
+      for (const m of this.children) visible.set(m, m.visible), (m.visible = chunk.has(m));
+      if (a.fresh) clearTarget(accumTarget), (a.fresh = false);
+      renderer.setRenderTarget(accumTarget);
+      renderer.render(scene, camera);
+      for (const [m, v] of visible) m.visible = v;
+      if (a.next >= a.list.length) {
+        this.targets = [shown, accumTarget];  // the complete image is shown from now on
+        this.shownErr = a.err;
+      }
+    }
+    renderer.autoClear = auto;
+    renderer.setRenderTarget(null);
+    if (this.blit.material.map !== this.targets[1].texture) {
+      this.blit.material.map = this.targets[1].texture;
+      this.blit.material.needsUpdate = true;
+    }
+    renderer.render(this.blitScene, this.blitCamera);
+    // The time model learns from what this frame drew.
+    this.drawnTriangles = drawn;
+    if (this.stats) {
+      this.stats.drawnTriangles = drawn;
+      this.stats.maxScreenError = this.progressiveNow ? this.shownErr : this.stats.maxScreenError;
+    }
+    return drawn;
   }
 
   dispose() {
