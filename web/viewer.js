@@ -97,17 +97,21 @@ async function main() {
     last = now;
     if (path === 'orbit') setPose(orbitPose(i, frames));
     else controls.update();
+    const tu = performance.now();
     const st = mt.update(camera, width, height);
+    const updateMs = performance.now() - tu;
     // Near/far hug the model so depth precision holds close to the surface.
     const dist = camera.position.distanceTo(c);
     camera.near = Math.max(r * 5e-4, (dist - r) * 0.9);
     camera.far = dist + r * 1.01;
     camera.updateProjectionMatrix();
+    const tr = performance.now();
     mt.render(renderer, scene, camera);
+    const renderMs = performance.now() - tr;
     if (state.firstImageMs === null) state.firstImageMs = performance.now();
     if (i > 0) fpsAvg = fpsAvg ? 0.9 * fpsAvg + 0.1 * (1000 / dt) : 1000 / dt;
     state.frames.push({
-      t: now, frameMs: i > 0 ? dt : 0, drawn: st.drawnTriangles, patches: st.drawnPatches, cacheBytes: st.cacheBytes,
+      t: now, frameMs: i > 0 ? dt : 0, updateMs, renderMs, drawn: st.drawnTriangles, patches: st.drawnPatches, cacheBytes: st.cacheBytes,
       cacheCap: st.cacheCap, bytesRead: st.bytesRead, err: st.maxScreenError, pending: st.loadsPending,
       budget: st.budgetTriangles, loads: st.loads, moves: st.refinements + st.coarsenings, evictions: st.evictions, givenUp: st.givenUp, triangles: st.triangles, still: path === 'orbit' ? i >= Math.floor(frames * 0.85) : null,
     });

@@ -75,6 +75,8 @@ console.log(`file                      ${file} (${mib(s.fileSize)} MiB)`);
 console.log(`page load                 ${loadMs} ms (load event)`);
 console.log(`first image               ${s.first.toFixed(0)} ms after navigation start (header+DAG+index ${mib(s.openBytes)} MiB, coarsest cut loaded)`);
 console.log(`frames within ${budget} ms     ${(100 * within).toFixed(1)}% of ${ms.length} path frames (median ${ms[ms.length >> 1].toFixed(1)} ms, p95 ${ms[Math.floor(0.95 * ms.length)].toFixed(1)} ms, max ${ms.at(-1).toFixed(1)} ms)`);
+const med = (k) => pathFrames.map((x) => x[k]).sort((a, b) => a - b)[pathFrames.length >> 1];
+console.log(`page's own work         median cut update ${med('updateMs').toFixed(1)} ms, render calls ${med('renderMs').toFixed(1)} ms a frame (the rest of a frame is the browser's: SwiftShader, compositing)`);
 console.log(`triangles drawn           median ${pathFrames.map((x) => x.drawn).sort((a, b) => a - b)[pathFrames.length >> 1]}, max ${Math.max(...f.map((x) => x.drawn))}`);
 console.log(`cache                     max ${mib(maxCache)} MiB of a ${mib(cap)} MiB cap (${maxCache <= cap ? 'never above' : 'ABOVE'} the cap)`);
 console.log(`bytes fetched             ${mib(bytesPath)} MiB over the path (${(bytesPath / frames / 1024).toFixed(1)} KiB/frame), ${mib(f.at(-1).bytesRead)} MiB in all = ${(100 * f.at(-1).bytesRead / s.fileSize).toFixed(1)}% of the file`);
