@@ -25,8 +25,16 @@ export class MTObject extends THREE.Group {
    */
   static async open(url, options = {}) {
     const source = options.source || new HttpSource(url);
-    const scene = await openMtFile(source);
-    const obj = new MTObject(scene, options);
+    const libs = Object.assign(defaultLibUrls(), options.libs || {});
+    const pool = PatchServer.spawnWorkers(libs, options.workers);  // load the decoders meanwhile
+    let scene;
+    try {
+      scene = await openMtFile(source);
+    } catch (e) {
+      for (const w of pool) w.terminate();
+      throw e;
+    }
+    const obj = new MTObject(scene, Object.assign({}, options, { libs, pool }));
     await obj._start();
     return obj;
   }
@@ -43,7 +51,8 @@ export class MTObject extends THREE.Group {
     this.fatal = null;
     this.server = new PatchServer(scene, this.cache, {
       workers: options.workers,
-      libs: Object.assign(defaultLibUrls(), options.libs || {}),
+      pool: options.pool,
+      libs: options.libs || defaultLibUrls(),
       makeGeometry: (r) => this._geometry(r),
       onWarning: (m) => {
         this.warnings.push(m);

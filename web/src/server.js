@@ -30,12 +30,9 @@ export class PatchServer {
     this.nextJob = 1;
     this.nextWorker = 0;
     const h = scene.header;
-    const count = opt.workers || Math.max(1, Math.min(4, ((typeof navigator !== 'undefined' && navigator.hardwareConcurrency) || 2) - 1));
-    this.workers = [];
+    this.workers = opt.pool || PatchServer.spawnWorkers(opt.libs, opt.workers);
     const init = { type: 'init', libs: opt.libs, codec: h.codec, gridBits: h.gridBits, gridOrigin: h.gridOrigin, gridStep: h.gridStep, center: scene.center };
-    this.ready = Promise.all(Array.from({ length: count }, () => {
-      const w = new Worker(new URL('./worker.js', import.meta.url), { type: 'module' });
-      this.workers.push(w);
+    this.ready = Promise.all(this.workers.map((w) => {
       return new Promise((resolve, reject) => {
         w.onmessage = (e) => {
           if (e.data.type === 'ready') {
@@ -48,6 +45,15 @@ export class PatchServer {
         w.postMessage(init);
       });
     }));
+  }
+  /** Starts the decoding workers and has them load the npm decoders (before the file is open). */
+  static spawnWorkers(libs, workers) {
+    const count = workers || Math.max(1, Math.min(4, ((typeof navigator !== 'undefined' && navigator.hardwareConcurrency) || 2) - 1));
+    return Array.from({ length: count }, () => {
+      const w = new Worker(new URL('./worker.js', import.meta.url), { type: 'module' });
+      w.postMessage({ type: 'libs', libs });
+      return w;
+    });
   }
   meanLoadMs() { return this.loadMsAvg; }
   /** Replaces the pending requests ({id, urgency}[], in priority order). */

@@ -6,12 +6,23 @@ import { decodePatch } from './patch_codec.js';
 
 let libs = null, cfg = null, h64Raw = null;
 
+// Two steps, so the decoders load while the page still reads the file's index: 'libs' (the npm
+// decoders), then 'init' (the file's codec and grid; Draco's decoder when the file needs it).
+let libsPromise = null;
+function loadLibs(urls) {
+  if (!libsPromise)
+    libsPromise = Promise.all([import(urls.zstd), import(urls.meshopt), import(urls.xxhash)]).then(async ([zstdMod, meshoptMod, xxMod]) => {
+      const meshopt = meshoptMod.MeshoptDecoder;
+      await meshopt.ready;
+      const xx = await xxMod.default();
+      return { zstdMod, meshopt, xx };
+    });
+  return libsPromise;
+}
+
 async function init(msg) {
   cfg = msg;
-  const [zstdMod, meshoptMod, xxMod] = await Promise.all([import(msg.libs.zstd), import(msg.libs.meshopt), import(msg.libs.xxhash)]);
-  const meshopt = meshoptMod.MeshoptDecoder;
-  await meshopt.ready;
-  const xx = await xxMod.default();
+  const { zstdMod, meshopt, xx } = await loadLibs(msg.libs);
   h64Raw = xx.h64Raw;
   let draco = null;
   if (msg.codec === 2) {
@@ -57,6 +68,10 @@ function toRender(d) {
 
 self.onmessage = async (e) => {
   const msg = e.data;
+  if (msg.type === 'libs') {
+    loadLibs(msg.libs).catch(() => {});  // errors are reported by 'init'
+    return;
+  }
   if (msg.type === 'init') {
     try {
       await init(msg);
