@@ -14,5 +14,6 @@ run() { "$@" >"$t/log" 2>&1 || { cat "$t/log" >&2; echo "web_browser: failed: $*
 # The golden image (web/test/golden/torus.png) is of this file: same options, same bytes.
 run "$bin/mtgen" -o "$t/t.ply" --triangles 200k
 run "$bin/mtbuild" "$t/t.ply" -o "$t/t.mt" --threads 2
+run "$bin/mtbuild" "$t/t.ply" -o "$t/t-draco.mt" --threads 2 --codec draco
 rm -f "$t/t.ply"
 node "$src/web/test/browser.mjs" "$bin" "$t"

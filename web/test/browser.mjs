@@ -1,11 +1,12 @@
 // The web viewer in a real browser: Debian's chromium, headless, driven by playwright-core, WebGL
 // on SwiftShader, the MT files served by mtserve.
 //   node test/browser.mjs BIN_DIR DATA_DIR [--update-golden]
-// DATA_DIR holds t.mt (tests/web_browser.sh builds it). Tests:
+// DATA_DIR holds t.mt and t-draco.mt (tests/web_browser.sh builds them). Tests:
 //   golden        a fixed view at a fixed tolerance, converged, against test/golden/torus.png
 //                 (at most 2% of the pixels differ by more than 48 in RGB);
 //   cracks        several views and tolerances, converged: no background pixel enclosed by the
 //                 surface in a component under 400 pixels (the torus' own hole is far larger);
+//   draco         the same surface coded with Draco: decoded by Draco's wasm decoder, no crack;
 //   path          a recorded camera path (orbit, 240 frames) under a 2 MiB cache: the cache never
 //                 above its cap, the cut never above the frame's render budget, loads evicted and
 //                 redone; the frame times are printed (the timed figures are bench/web.sh's);
@@ -121,6 +122,19 @@ await test('cracks', async () => {
     notes.push(`${f.triangles} triangles`);
   }
   return `4 cuts, no crack (${notes.join(', ')})`;
+});
+
+await test('draco', async () => {
+  const { page, log } = await open('file=/data/t-draco.mt&tol=1&fixed=3000000&bg=ff00ff&view=0.4,-1.6,0.9,0,0,0');
+  await converge(page);
+  const r = await page.evaluate(() => window.mtViewer.cracks('ff00ff'));
+  const st = await page.evaluate(() => ({ f: window.mtViewer.frames.at(-1), w: window.mtViewer.warnings }));
+  await page.close();
+  check(st.w.length === 0, `warnings: ${st.w[0]}`);
+  check(!log.some((m) => m.startsWith('pageerror')), `page error: ${log.find((m) => m.startsWith('pageerror'))}`);
+  check(st.f.triangles > 20000 && r.surfacePixels > 1000, `the Draco file's cut has ${st.f.triangles} triangles, ${r.surfacePixels} pixels`);
+  check(r.crackPixels === 0, `${r.crackPixels} background pixels enclosed by the surface`);
+  return `${st.f.triangles} triangles decoded by Draco's decoder, no crack`;
 });
 
 await test('path', async () => {
