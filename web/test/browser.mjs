@@ -115,7 +115,10 @@ await test('cracks', async () => {
     await converge(page);
     const r = await page.evaluate(() => window.mtViewer.cracks('ff00ff'));
     const f = await page.evaluate(() => window.mtViewer.frames.at(-1));
+    // The detector finds a 20-pixel slit painted into the middle of the same image.
+    const slit = await page.evaluate(() => window.mtViewer.cracks('ff00ff', 400, true));
     await page.close();
+    check(slit.crackPixels >= 20, `view ${view}: the detector missed a painted 20-pixel slit (${slit.crackPixels})`);
     check(r.surfacePixels > 1000, `view ${view}: the surface covers only ${r.surfacePixels} pixels`);
     check(r.crackPixels === 0, `view ${view} tolerance ${tol}: ${r.crackPixels} background pixels in ${r.components} holes inside the silhouette`);
     check(f.triangles > 20000, `view ${view}: the cut has only ${f.triangles} triangles`);
