@@ -1,7 +1,7 @@
 // The standalone viewer page: viewer.html?file=URL[&tol=1][&budget=33][&cache=256][&bg=20242a]
 // [&path=orbit|fixed&frames=600][&view=EX,EY,EZ,TX,TY,TZ (unit space)]. Orbit/pan/zoom with the
 // mouse (three's OrbitControls); the HUD shows fps, triangles, cache, loads and the screen error.
-// `capture` keeps the drawing buffer for reading the image back (the tests). `path` plays a recorded camera path frame by frame (the browser tests and bench/web.sh); the
+// `plain` draws with renderer.render (no progressive still image). `capture` keeps the drawing buffer for reading the image back (the tests). `path` plays a recorded camera path frame by frame (the browser tests and bench/web.sh); the
 // per-frame figures are in window.mtViewer.frames.
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
@@ -106,7 +106,8 @@ async function main() {
     camera.far = dist + r * 1.01;
     camera.updateProjectionMatrix();
     const tr = performance.now();
-    mt.render(renderer, scene, camera);
+    if (q.has('plain')) renderer.render(scene, camera);
+    else mt.render(renderer, scene, camera);
     const renderMs = performance.now() - tr;
     if (state.firstImageMs === null) state.firstImageMs = performance.now();
     if (i > 0) fpsAvg = fpsAvg ? 0.9 * fpsAvg + 0.1 * (1000 / dt) : 1000 / dt;

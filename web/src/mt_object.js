@@ -206,40 +206,30 @@ export class MTObject extends THREE.Group {
 
   /**
    * Draws the frame: the whole cut while the camera moves; once it is still, the next chunk of the
-   * still image (within one frame's render budget) into the accumulation target, showing the last
-   * complete image. Call after update(). Returns the triangles drawn this frame.
+   * still image (within one frame's render budget) into an accumulation target, shown when complete
+   * (meanwhile the screen keeps the last image). Call after update(). Returns the triangles drawn.
    */
   render(renderer, scene, camera) {
     this.progressive = true;
-    const size = renderer.getDrawingBufferSize(new THREE.Vector2());
-    if (!this.targets || this.targets[0].width !== size.x || this.targets[0].height !== size.y) {
-      this.targets = [0, 1].map(() => new THREE.WebGLRenderTarget(size.x, size.y, { depthBuffer: true, colorSpace: THREE.SRGBColorSpace }));
-      this.blit = new THREE.Mesh(new THREE.PlaneGeometry(2, 2), new THREE.MeshBasicMaterial({ depthTest: false, depthWrite: false, transparent: true }));
-      this.blitScene = new THREE.Scene();
-      this.blitScene.add(this.blit);
-      this.blitCamera = new THREE.OrthographicCamera(-1, 1, 1, -1, 0, 1);
-      this.hasImage = false;
-    }
-    const [accumTarget, shown] = this.targets;
     let drawn = 0;
-    // The targets are cleared transparent: the blit draws the model over the screen's own clear
-    // (the background colour is then converted exactly as a direct render's is).
-    const clearTarget = (t) => {
-      const alpha = renderer.getClearAlpha();
-      renderer.setRenderTarget(t);
-      renderer.setClearAlpha(0);
-      renderer.clear();
-      renderer.setClearAlpha(alpha);
-    };
-    const auto = renderer.autoClear;
-    renderer.autoClear = false;
     if (!this.progressiveNow || !this.accum) {
-      clearTarget(shown);
+      // Moving: the whole cut, straight to the screen.
+      renderer.setRenderTarget(null);
       renderer.render(scene, camera);
       drawn = this.drawnTriangles;
-      this.hasImage = true;
       this.shownErr = this.stats ? this.stats.maxScreenError : 0;
-    } else {
+    } else if (this.accum.next < this.accum.list.length) {
+      // Still, an image in progress: its next chunk into the accumulation target. The screen is
+      // not touched, so the browser keeps showing the last image presented.
+      const size = renderer.getDrawingBufferSize(new THREE.Vector2());
+      if (!this.target || this.target.width !== size.x || this.target.height !== size.y) {
+        if (this.target) this.target.dispose();
+        this.target = new THREE.WebGLRenderTarget(size.x, size.y, { depthBuffer: true, colorSpace: THREE.SRGBColorSpace });
+        this.blit = new THREE.Mesh(new THREE.PlaneGeometry(2, 2), new THREE.MeshBasicMaterial({ map: this.target.texture, depthTest: false, depthWrite: false, transparent: true }));
+        this.blitScene = new THREE.Scene();
+        this.blitScene.add(this.blit);
+        this.blitCamera = new THREE.OrthographicCamera(-1, 1, 1, -1, 0, 1);
+      }
       const a = this.accum;
       const budget = Math.max(this.extract.frameBudget, 1000);
       const chunk = new Set();
@@ -250,27 +240,32 @@ export class MTObject extends THREE.Group {
       }
       const visible = new Map();
       for (const m of this.children) visible.set(m, m.visible), (m.visible = chunk.has(m));
-      if (a.fresh) clearTarget(accumTarget), (a.fresh = false);
-      renderer.setRenderTarget(accumTarget);
+      const auto = renderer.autoClear;
+      renderer.autoClear = false;
+      renderer.setRenderTarget(this.target);
+      if (a.fresh) {
+        // Cleared transparent: the blit draws the model over the screen's own clear, so the
+        // background colour is converted exactly as a direct render's is.
+        const alpha = renderer.getClearAlpha();
+        renderer.setClearAlpha(0);
+        renderer.clear();
+        renderer.setClearAlpha(alpha);
+        a.fresh = false;
+      }
       renderer.render(scene, camera);
+      renderer.autoClear = auto;
       for (const [m, v] of visible) m.visible = v;
+      renderer.setRenderTarget(null);
       if (a.next >= a.list.length) {
-        this.targets = [shown, accumTarget];  // the complete image is shown from now on
+        renderer.render(this.blitScene, this.blitCamera);  // the complete image, shown once
         this.shownErr = a.err;
       }
     }
-    renderer.autoClear = auto;
-    renderer.setRenderTarget(null);
-    if (this.blit.material.map !== this.targets[1].texture) {
-      this.blit.material.map = this.targets[1].texture;
-      this.blit.material.needsUpdate = true;
-    }
-    renderer.render(this.blitScene, this.blitCamera);
-    // The time model learns from what this frame drew.
+    // Still and complete: nothing to draw; the screen keeps the image.
     this.drawnTriangles = drawn;
     if (this.stats) {
       this.stats.drawnTriangles = drawn;
-      this.stats.maxScreenError = this.progressiveNow ? this.shownErr : this.stats.maxScreenError;
+      if (this.progressiveNow) this.stats.maxScreenError = this.shownErr;
     }
     return drawn;
   }
