@@ -13,12 +13,15 @@ PACKAGES=(
   libcli11-dev libgtest-dev libgmock-dev libbenchmark-dev libnanoflann-dev
   xvfb xauth gnuplot-nox time
   libimgui-dev libpng-dev libopengl-dev
+  nodejs chromium
 )
 
 missing=()
 for p in "${PACKAGES[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
 done
+# npm: Debian's package, unless the installed nodejs brings its own (NodeSource's conflicts with it).
+command -v npm >/dev/null || missing+=(npm)
 
 apt_wait() {
   # Another apt/dpkg (unattended-upgrades, a parallel setup) may hold the lock: wait, do not fail.

@@ -6,6 +6,8 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/setup.sh
+# The web viewer's npm packages (web/package-lock.json), for the Web.* tests.
+(cd web && npm ci --no-audit --no-fund --loglevel=error)
 (cd build && ctest --output-on-failure --timeout 900 -j "$(nproc)")
 
 [[ ${MT_SANITIZE_STAGE:-1} == 0 ]] && exit 0

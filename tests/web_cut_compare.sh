@@ -1,0 +1,60 @@
+#!/usr/bin/env bash
+# Web.CutMatchesExtractRender: for the same file, view and tolerance the web viewer's cut
+# (web/src/extract.js, run in node by web/test/cut_nodes.mjs) is ExtractRender's (mtrender/extract.h,
+# printed by web_cut_nodes), node for node, both run to convergence. 3 files x 8 views x 2 tolerances.
+# And the web decoder decodes every patch of the meshopt files to the C++ decoder's grid coordinates.
+# Usage: web_cut_compare.sh BIN_DIR SOURCE_DIR
+set -euo pipefail
+bin=$1 src=$2
+command -v node >/dev/null || { echo "web_cut_compare: node is not installed (scripts/setup.sh installs nodejs)" >&2; exit 1; }
+[[ -d $src/web/node_modules/xxhash-wasm ]] || { echo "web_cut_compare: run 'npm ci' in $src/web first (scripts/test.sh does)" >&2; exit 1; }
+t=$(mktemp -d)
+trap 'rm -rf "$t"' EXIT
+run() { "$@" >"$t/log" 2>&1 || { cat "$t/log" >&2; echo "web_cut_compare: failed: $*" >&2; exit 1; }; }
+run "$bin/mtgen" -o "$t/a.ply" --triangles 300k --density varying
+run "$bin/mtbuild" "$t/a.ply" -o "$t/a.mt" --threads 2
+run "$bin/mtgen" -o "$t/b.ply" --triangles 100k --colors --holes 4 --seed 3
+run "$bin/mtbuild" "$t/b.ply" -o "$t/b.mt" --threads 2 --codec draco
+run "$bin/mtgen" -o "$t/c.ply" --triangles 200k --components 3 --seed 5
+run "$bin/mtbuild" "$t/c.ply" -o "$t/c.mt" --threads 2 --partition regular
+# Unit-space views (eye, target): the default view, close-ups grazing the surface, views from
+# inside the sphere, from above and below, one looking away from most of the model.
+cat > "$t/views" <<'VIEWS'
+0 -2.2 1.1 0 0 0
+0.3 -0.8 0.4 0 0 0
+1.5 0.2 0.3 0 0 0
+0.1 -0.5 0.05 0.5 0.5 0
+0 0 3 0 0 0
+-0.4 -0.4 0.1 1 1 0.2
+0.2 0.1 -1.2 0 0 0
+0.6 0 0.1 2 0 0.1
+VIEWS
+fail=0 compared=0
+for f in a b c; do
+  for tol in 1 3; do
+    "$bin/web_cut_nodes" "$t/$f.mt" "$t/views" $tol 1280 720 >"$t/cpp"
+    node "$src/web/test/cut_nodes.mjs" "$t/$f.mt" "$t/views" $tol 1280 720 >"$t/js"
+    n=$(wc -l <"$t/cpp")
+    [[ $n -eq 8 ]] || { echo "web_cut_compare: $f.mt: web_cut_nodes printed $n views, expected 8" >&2; exit 1; }
+    if ! diff -q "$t/cpp" "$t/js" >/dev/null; then
+      echo "DIFFERENT: $f.mt tolerance $tol:" >&2
+      diff "$t/cpp" "$t/js" | head -6 >&2
+      fail=1
+    fi
+    compared=$((compared + n))
+    echo "$f.mt tolerance $tol: $n views, cut sizes $(awk '{printf "%d ", NF - 2}' "$t/cpp")"
+  done
+done
+# The views differ: they must have moved the cuts to different node sets.
+nodes=$(awk '{print NF - 2}' "$t/cpp" | sort -n | uniq | wc -l)
+[[ $nodes -ge 2 ]] || { echo "web_cut_compare: every view gave the same cut size: the views test nothing" >&2; exit 1; }
+# The web decoder (range coder, position prediction, meshopt and zstd from npm, checksums) gives
+# the C++ decoder's grid coordinates on every patch of the meshopt files.
+for f in a c; do
+  "$bin/web_cut_nodes" --decode "$t/$f.mt" >"$t/cpp"
+  node "$src/web/test/decode_check.mjs" "$t/$f.mt" >"$t/js"
+  diff "$t/cpp" "$t/js" >&2 || { echo "DIFFERENT: $f.mt decoded patches" >&2; fail=1; }
+  echo "$f.mt decoded: $(cat "$t/js")"
+done
+echo "web_cut_compare: $compared (file, view, tolerance) cuts compared"
+exit $fail

@@ -1,0 +1,384 @@
+// Codec::Meshopt, the decoder half of mtfile/patch_codec_meshopt.cpp, ported function by function
+// (readMeshoptFrame, decodeMeshoptTriangles, decodeMeshoptAttributes, decodeIndexCode,
+// decodeResidual, ResidualModel, parallelogramWalk, decodeContextPositions, decodeLegacyPositions,
+// decodeMeshopt) so that a change of the C++ decoder ports line by line. Byte layouts: mt_format.h.
+// `libs` brings the npm decoders: libs.zstd(bytes, rawSize) -> Uint8Array (fzstd) and libs.meshopt
+// (meshoptimizer's MeshoptDecoder, ready).
+
+import {
+  kPayloadHeaderSize, kPayloadNormals, kPayloadColors, kPayloadWide, kPayloadStrip, kPayloadRangePositions,
+  kPayloadRangeIndices, kPayloadPositionContexts, attributeStride,
+} from './format.js';
+import { RangeDecoder, countedBits } from './range_coder.js';
+
+export class BadPayload extends Error {
+  constructor(what) {
+    super(`bad patch payload: ${what}`);
+    this.name = 'BadPayload';
+  }
+}
+export const bad = (what) => { throw new BadPayload(what); };
+
+const kMaxQ = 0x7fffffff;
+const kIndexHeaderV1 = 0xe1;
+const kCodeAuxTableV1 = [0x00, 0x76, 0x87, 0x56, 0x67, 0x78, 0xa9, 0x86, 0x65, 0x89, 0x68, 0x98, 0x01, 0x69, 0x00, 0x00];
+
+// Prediction kinds (the version-3 position contexts).
+const kParallelogram = 0, kMidpoint = 1, kOneKnown = 2, kNoneKnown = 3;
+
+function unzigzag(z) { return z & 1 ? -Math.floor(z / 2) - 1 : Math.floor(z / 2); }
+
+// meshopt's bounds (meshoptimizer.h), for the size checks.
+function encodeIndexBufferBound(indexCount, vertexCount) {
+  let vertexBits = 1;
+  while (vertexBits < 32 && vertexCount > 2 ** vertexBits) vertexBits++;
+  const vertexGroups = Math.floor((vertexBits + 1 + 6) / 7);
+  return 1 + (indexCount / 3) * (2 + 3 * vertexGroups) + 16;
+}
+function encodeIndexSequenceBound(indexCount, vertexCount) {
+  let vertexBits = 1;
+  while (vertexBits < 32 && vertexCount > 2 ** vertexBits) vertexBits++;
+  const vertexGroups = Math.floor((vertexBits + 1 + 1 + 6) / 7);
+  return 1 + indexCount * vertexGroups + 4;
+}
+function encodeVertexBufferBound(vertexCount, vertexSize) {
+  const kVertexBlockMaxSize = 256, kByteGroupSize = 16, kTailMaxSize = 32;
+  let vertexBlockSize = Math.floor(8192 / vertexSize) & ~(kByteGroupSize - 1);
+  vertexBlockSize = Math.min(vertexBlockSize, kVertexBlockMaxSize);
+  const vertexBlockCount = Math.ceil(vertexCount / vertexBlockSize);
+  const vertexBlockHeaderSize = Math.floor((vertexBlockSize / kByteGroupSize + 3) / 4);
+  const vertexBlockDataSize = vertexBlockSize;
+  const tailSize = Math.max(vertexSize, kTailMaxSize);
+  return 1 + vertexBlockCount * vertexSize * (vertexBlockHeaderSize + vertexBlockDataSize) + tailSize;
+}
+
+/** The directed-edge -> opposite-vertex map of the parallelogram rule (a later put replaces). */
+class EdgeMap {
+  constructor(vertexCount) {
+    this.n = vertexCount;
+    this.m = new Map();
+  }
+  put(a, b, c) { this.m.set(a * this.n + b, c); }
+  get(a, b) { return this.m.get(a * this.n + b); }
+}
+
+/**
+ * parallelogramWalk: visits the vertices in first-use order of `indices` and calls
+ * f(v, pred[3], kind) with the prediction of v from already visited vertices; f must set q[v].
+ */
+function parallelogramWalk(indices, vertexCount, q, f) {
+  const known = new Uint8Array(vertexCount);
+  const edges = new EdgeMap(vertexCount);
+  const pred = [0, 0, 0];
+  let last = -1;
+  for (let t = 0; t < indices.length; t += 3) {
+    for (let k = 0; k < 3; ++k) {
+      const v = indices[t + k];
+      if (known[v]) continue;
+      const a = indices[t + (k + 1) % 3], b = indices[t + (k + 2) % 3];
+      let kind = kNoneKnown;
+      pred[0] = pred[1] = pred[2] = 0;
+      if (known[a] && known[b]) {
+        let c = edges.get(b, a);
+        if (c === undefined) c = edges.get(a, b);
+        if (c !== undefined) {
+          for (let x = 0; x < 3; ++x) pred[x] = q[a * 3 + x] + q[b * 3 + x] - q[c * 3 + x];
+          kind = kParallelogram;
+        } else {
+          for (let x = 0; x < 3; ++x) pred[x] = Math.floor((q[a * 3 + x] + q[b * 3 + x]) / 2);
+          kind = kMidpoint;
+        }
+      } else if (known[a] || known[b]) {
+        const s = known[a] ? a : b;
+        for (let x = 0; x < 3; ++x) pred[x] = q[s * 3 + x];
+        kind = kOneKnown;
+      } else if (last >= 0) {
+        for (let x = 0; x < 3; ++x) pred[x] = q[last * 3 + x];
+      }
+      for (let x = 0; x < 3; ++x) pred[x] = Math.min(Math.max(pred[x], 0), kMaxQ);
+      f(v, pred, kind);
+      known[v] = 1;
+      last = v;
+    }
+    const a = indices[t], b = indices[t + 1], c = indices[t + 2];
+    edges.put(a, b, c);
+    edges.put(b, c, a);
+    edges.put(c, a, b);
+  }
+}
+
+/** ResidualModel::decode (version 2): per axis, the bit length as a 6-bit tree, then the mantissa. */
+class ResidualModel {
+  constructor() {
+    this.length = new Uint16Array(3 * 64).fill(1024);
+    this.mantissa = new Uint16Array(3 * 33 * 32).fill(1024);
+  }
+  decode(rc, axis) {
+    let m = 1;
+    for (let i = 0; i < 6; ++i) m = (m << 1) | rc.bit11(this.length, axis * 64 + m);
+    const k = m - 64;
+    if (k > 32) return -1;
+    if (k === 0) return 0;
+    let z = 1;
+    for (let i = k - 1; i-- > 0;) z = z * 2 + rc.bit11(this.mantissa, (axis * 33 + k) * 32 + i);
+    return z;
+  }
+}
+
+/** ContextModel: length[kind][axis][64], mantissa[axis][33][32], counted bits. */
+function contextModel() {
+  return { length: countedBits(4 * 3 * 64), mantissa: countedBits(3 * 33 * 32) };
+}
+
+/** decodeResidual: -1 when the stream names a length above 32 (damaged payload). */
+function decodeResidual(rc, m, kind, axis) {
+  const k = rc.tree(m.length, (kind * 3 + axis) * 64, 6);
+  if (k > 32) return -1;
+  if (k <= 1) return k;
+  const base = (axis * 33 + k) * 32;
+  let z = 1;
+  for (let i = k - 1; i-- > 0;) z = z * 2 + rc.bit(m.mantissa, base + i);
+  return z;
+}
+
+/** decodeIndexCode: the meshopt index code's bytes out of the range-coded stream. */
+function decodeIndexCode(rc, code, triangles) {
+  const bytes = code.length;
+  const standard = countedBits(1);
+  const hi = countedBits(32 * 16), lo = countedBits(32 * 16), data = countedBits(2 * 256);
+  const tail = bytes - 16;
+  if (rc.bit(standard, 0) === 0) {
+    code[0] = kIndexHeaderV1;
+    for (let i = 0; i < 16; ++i) code[tail + i] = kCodeAuxTableV1[i];
+  } else {
+    code[0] = rc.tree(data, 0, 8);
+    for (let i = 0; i < 16; ++i) code[tail + i] = rc.tree(data, 0, 8);
+  }
+  let ctx = 0;
+  for (let t = 0; t < triangles; ++t) {
+    const h = rc.tree(hi, ctx * 16, 4);
+    const l = rc.tree(lo, ((h << 1) | (ctx & 1)) * 16, 4);
+    code[1 + t] = (h << 4) | l;
+    ctx = (h << 1) | (l === 0 ? 1 : 0);
+  }
+  let cont = 0;
+  for (let i = 1 + triangles; i < bytes - 16; ++i) {
+    code[i] = rc.tree(data, cont * 256, 8);
+    cont = code[i] >> 7;
+  }
+}
+
+/** readMeshoptFrame: the zstd frame (or stored bytes) after the payload header. */
+function readMeshoptFrame(data, h, libs) {
+  const size = data.length;
+  let pos = kPayloadHeaderSize;
+  if (size < pos + 8) bad('truncated before the zstd frame');
+  const dv = new DataView(data.buffer, data.byteOffset, data.byteLength);
+  const rawSize = dv.getUint32(pos, true), zSize = dv.getUint32(pos + 4, true);
+  pos += 8;
+  const ranged = (h.flags & kPayloadRangePositions) !== 0;
+  const rangeIndices = (h.flags & kPayloadRangeIndices) !== 0;
+  const contextual = (h.flags & kPayloadPositionContexts) !== 0;
+  if ((rangeIndices || contextual) && !ranged) bad('version-3 flags without range-coded positions');
+  if (rangeIndices && (h.flags & kPayloadStrip)) bad('range-coded indices cannot be a strip');
+  const stored = rangeIndices && zSize === 0;
+  const frameBytes = stored ? rawSize : zSize;
+  if (ranged ? frameBytes > size - pos : size - pos !== zSize) bad(`zstd frame size ${zSize} does not match payload`);
+  const n = h.vertexCount, tri3 = h.triangleCount * 3;
+  const maxRaw = 12 + encodeIndexSequenceBound(tri3 + h.triangleCount, n) + encodeIndexBufferBound(tri3, n) +
+    encodeVertexBufferBound(n, 8) + n * 12;
+  if (rawSize > maxRaw) bad(`raw size ${rawSize} too large for its counts`);
+  let raw;
+  if (stored) {
+    raw = data.slice(pos, pos + rawSize);
+  } else {
+    try {
+      raw = libs.zstd(data.subarray(pos, pos + zSize), rawSize);
+    } catch (e) {
+      bad('zstd frame does not decompress');
+    }
+    if (raw.length !== rawSize) bad('zstd frame does not decompress');
+  }
+  if (rawSize < 12) bad('raw stream too short');
+  const rdv = new DataView(raw.buffer, raw.byteOffset, raw.byteLength);
+  const sizes = [rdv.getUint32(0, true), rdv.getUint32(4, true), rdv.getUint32(8, true)];
+  return { raw, sizes, rangeBegin: pos + frameBytes };
+}
+
+/** meshopt_unstripify (meshoptimizer stripifier.cpp) with restart index ~0u. */
+function unstripify(strip) {
+  const out = [];
+  let start = 0;
+  for (let i = 0; i < strip.length; ++i) {
+    if (strip[i] === 0xffffffff) {
+      start = i + 1;
+    } else if (i - start >= 2) {
+      let a = strip[i - 2], b = strip[i - 1];
+      const c = strip[i];
+      if ((i - start) & 1) { const t = a; a = b; b = t; }
+      if (a !== b && a !== c && b !== c) out.push(a, b, c);
+    }
+  }
+  return Uint32Array.from(out);
+}
+
+/** decodeMeshoptTriangles: the triangle list from the index code `ib` (list, or strip). */
+function decodeMeshoptTriangles(h, ib, sizes, libs) {
+  const n = h.vertexCount, tri3 = h.triangleCount * 3, indexCount = sizes[1];
+  let triangles;
+  if (h.flags & kPayloadStrip) {
+    if (indexCount > tri3 + h.triangleCount + 3) bad('strip too long');
+    const s = new Uint32Array(indexCount);
+    if (indexCount) {
+      try {
+        libs.meshopt.decodeIndexSequence(new Uint8Array(s.buffer), indexCount, 4, ib.subarray(0, sizes[0]));
+      } catch (e) {
+        bad('index sequence does not decode');
+      }
+    }
+    for (const i of s) if (i !== 0xffffffff && i >= n) bad('strip index out of range');
+    triangles = unstripify(s);
+  } else {
+    if (indexCount !== tri3) bad('index count does not match triangle count');
+    triangles = new Uint32Array(indexCount);
+    if (indexCount) {
+      try {
+        libs.meshopt.decodeIndexBuffer(new Uint8Array(triangles.buffer), indexCount, 4, ib.subarray(0, sizes[0]));
+      } catch (e) {
+        bad('index stream does not decode');
+      }
+    }
+  }
+  if (triangles.length !== tri3) bad('triangle count mismatch');
+  for (const i of triangles) if (i >= n) bad(`triangle index ${i} out of range`);
+  return triangles;
+}
+
+/** Octahedral 8-bit normal (mt_format.h) to a unit vector, into out[o..o+2]. */
+export function decodeOctahedral8(x8, y8, out, o) {
+  let x = x8 / 255 * 2 - 1, y = y8 / 255 * 2 - 1;
+  const z = 1 - Math.abs(x) - Math.abs(y);
+  if (z < 0) {
+    const fx = (1 - Math.abs(y)) * (x >= 0 ? 1 : -1);
+    const fy = (1 - Math.abs(x)) * (y >= 0 ? 1 : -1);
+    x = fx;
+    y = fy;
+  }
+  const len = Math.sqrt(x * x + y * y + z * z);
+  out[o] = x / len;
+  out[o + 1] = y / len;
+  out[o + 2] = z / len;
+}
+
+/** decodeMeshoptAttributes: normals (float, 3 a vertex) and colours (RGBA8) from the vertex code. */
+function decodeMeshoptAttributes(h, ab, bytes, libs, out) {
+  const n = h.vertexCount;
+  const stride = attributeStride(h.flags);
+  if (stride === 0) {
+    if (bytes !== 0) bad('attribute stream present without attributes');
+    return;
+  }
+  const attrs = new Uint8Array(n * stride);
+  if (n) {
+    try {
+      libs.meshopt.decodeVertexBuffer(attrs, n, stride, ab.subarray(0, bytes));
+    } catch (e) {
+      bad('attribute stream does not decode');
+    }
+  }
+  if (h.flags & kPayloadNormals) out.normals = new Float32Array(n * 3);
+  if (h.flags & kPayloadColors) out.colors = new Uint8Array(n * 4);
+  for (let v = 0; v < n; ++v) {
+    let d = v * stride;
+    if (h.flags & kPayloadNormals) decodeOctahedral8(attrs[d], attrs[d + 1], out.normals, v * 3), (d += 2);
+    if (h.flags & kPayloadColors) for (let k = 0; k < 4; ++k) out.colors[v * 4 + k] = attrs[d + k];
+  }
+}
+
+/** storeDecodedPositions: checks q and returns it as qRel. */
+function storeDecodedPositions(q, seenCount, n) {
+  if (seenCount !== n) bad('vertices not referenced by any triangle');
+  const qRel = new Uint32Array(n * 3);
+  for (let i = 0; i < n * 3; ++i) {
+    if (!(q[i] >= 0 && q[i] <= kMaxQ)) bad('decoded grid coordinate out of range');
+    qRel[i] = q[i];
+  }
+  return qRel;
+}
+
+/** decodeContextPositions: kPayloadPositionContexts (version 3). */
+function decodeContextPositions(rc, triangles, n) {
+  const q = new Float64Array(n * 3);
+  let seenCount = 0, tooWide = false;
+  const model = contextModel();
+  parallelogramWalk(triangles, n, q, (v, pred, kind) => {
+    for (let x = 0; x < 3; ++x) {
+      let z = decodeResidual(rc, model, kind, x);
+      if (z < 0) tooWide = true, (z = 0);
+      q[v * 3 + x] = pred[x] + unzigzag(z);
+    }
+    ++seenCount;
+  });
+  if (tooWide) bad('position stream names a residual wider than 32 bits');
+  if (rc.overrun > 0) bad('position stream truncated');
+  return storeDecodedPositions(q, seenCount, n);
+}
+
+/** decodeLegacyPositions: version 1 (byte planes in the frame) and version 2 (range-coded per axis). */
+function decodeLegacyPositions(rc, ranged, planes, raw, pbOffset, triangles, n) {
+  let res = null;
+  if (ranged) {
+    res = new Float64Array(n * 3);
+    const model = new ResidualModel();
+    for (let i = 0; i < n * 3; ++i) {
+      const z = model.decode(rc, i % 3);
+      if (z < 0) bad('position stream names a residual wider than 32 bits');
+      res[i] = z;
+    }
+    if (rc.overrun > 0) bad('position stream truncated');
+  }
+  const q = new Float64Array(n * 3);
+  let seenCount = 0;
+  parallelogramWalk(triangles, n, q, (v, pred) => {
+    for (let x = 0; x < 3; ++x) {
+      let z = 0;
+      if (ranged) z = res[v * 3 + x];
+      else for (let b = 0; b < planes; ++b) z += raw[pbOffset + (x * planes + b) * n + v] * 2 ** (8 * b);
+      q[v * 3 + x] = pred[x] + unzigzag(z);
+    }
+    ++seenCount;
+  });
+  return storeDecodedPositions(q, seenCount, n);
+}
+
+/**
+ * decodeMeshopt: fills out.triangles (Uint32Array), out.normals, out.colors; returns qRel.
+ * @param {Uint8Array} data the payload
+ */
+export function decodeMeshopt(data, h, libs, out) {
+  const f = readMeshoptFrame(data, h, libs);
+  const ranged = (h.flags & kPayloadRangePositions) !== 0;
+  const rangeIndices = (h.flags & kPayloadRangeIndices) !== 0;
+  const n = h.vertexCount;
+  const planes = ranged ? 0 : (h.flags & kPayloadWide) ? 4 : 2;
+  const sizes = f.sizes;
+  const rc = new RangeDecoder(data, f.rangeBegin, data.length);
+  let ib = f.raw.subarray(12);
+  let abOffset = 12 + sizes[0];
+  if (rangeIndices) {
+    if (sizes[2] + 12 !== f.raw.length) bad('stream sizes do not add up');
+    if (sizes[0] < 1 + h.triangleCount + 16 || sizes[0] > encodeIndexBufferBound(h.triangleCount * 3, n))
+      bad(`index code size ${sizes[0]} does not fit the triangle count`);
+    const code = new Uint8Array(sizes[0]);
+    decodeIndexCode(rc, code, h.triangleCount);
+    if (rc.overrun > 0) bad('index stream truncated');
+    ib = code;
+    abOffset = 12;
+  } else if (sizes[0] + sizes[2] + 12 + n * 3 * planes !== f.raw.length) {
+    bad('stream sizes do not add up');
+  }
+  out.triangles = decodeMeshoptTriangles(h, ib, sizes, libs);
+  decodeMeshoptAttributes(h, f.raw.subarray(abOffset), sizes[2], libs, out);
+  if (h.flags & kPayloadPositionContexts) return decodeContextPositions(rc, out.triangles, n);
+  return decodeLegacyPositions(rc, ranged, planes, f.raw, abOffset + sizes[2], out.triangles, n);
+}

@@ -1,0 +1,563 @@
+// ExtractRender's cut update in the browser: a port of mtrender/extract.cpp (BMT section 5, figure
+// 9), rule for rule, so that for the same file, view and tolerance both choose the same cut
+// (tests/web_cut_compare checks it). Read extract.h's header comment for the design; the names
+// here are the C++ ones. What differs: the place-holder count of PatchCache is replaced by bytes
+// (the browser's cache is byte-capped, cache.js), so the memory limit of the cut is
+// memoryFraction * cap in decoded bytes rather than in place holders.
+
+import { Heap } from './heap.js';
+
+export const Urgency = Object.freeze({ Prefetch: 0, Needed: 1, UrgentDown: 2, UrgentUp: 3 });
+const now = () => (typeof performance !== 'undefined' ? performance.now() : Date.now());
+
+/** frame ms ~= a + b * triangles, fitted online by least squares over the last 45 frames. */
+export class TimeModel {
+  constructor() {
+    this.a = 2.0;
+    this.b = 1e-4;
+    this.window = [];
+    this.next = 0;
+  }
+  add(triangles, ms) {
+    const t = triangles * 1e-6;
+    const predicted = this.a + this.b * 1e6 * t;
+    ms = Math.min(ms, 2.0 * predicted + 5.0);
+    const kWindow = 45;
+    if (this.window.length < kWindow) this.window.push([t, ms]);
+    else this.window[this.next] = [t, ms];
+    this.next = (this.next + 1) % kWindow;
+    const n = this.window.length;
+    let mt = 0, mm = 0;
+    for (const [x, y] of this.window) mt += x, mm += y;
+    mt /= n, mm /= n;
+    let vt = 0, cov = 0;
+    for (const [x, y] of this.window) vt += (x - mt) * (x - mt), cov += (x - mt) * (y - mm);
+    vt /= n, cov /= n;
+    let bm = this.b * 1e6;
+    if (this.window.length >= 8 && Math.sqrt(vt) > 0.15 * mt && vt > 0) bm = Math.min(Math.max(cov / vt, 20.0), 1e5);
+    this.b = bm * 1e-6;
+    this.a = Math.max(0.0, mm - bm * mt);
+  }
+  predictMs(triangles) { return this.a + this.b * triangles; }
+  trianglesFor(ms) { return Math.max(0, (ms - this.a) / this.b); }
+}
+
+export const defaultExtractOptions = () => ({
+  pixelTolerance: 1.0,
+  budgetMs: 50,
+  fixedTriangles: 0,
+  extractMs: 0,
+  loadBudget: 0,
+  prefetch: true,
+  cull: true,
+  memoryFraction: 0.6,
+});
+
+export class ExtractRender {
+  /**
+   * @param {object} scene buildScene()
+   * @param {object|null} cache PatchCache (cache.js) or null: everything counts as resident
+   * @param {object|null} server PatchServer (server.js) or null
+   * @param {object} options see defaultExtractOptions
+   */
+  constructor(scene, cache, server, options) {
+    this.scene = scene;
+    this.cache = cache;
+    this.server = server;
+    this.options = Object.assign(defaultExtractOptions(), options || {});
+    this.time = new TimeModel();
+    this.lodScale = 1;
+    this.budgetScale = 1;
+    this.frameBudget = 0;
+    this.frozen = false;
+    this.smoothBudget = 0;
+    this.slackFrames = 0;
+    this.frameMsAvg = 0;
+    this.lastFrameMs = 0;
+    this.lastDrawn = 0;
+    this.wanted = new Map();
+    this.consecutive = new Map();
+  }
+
+  collectIn(n, out) {
+    out.length = 0;
+    const { nodes, arcs, inArcs, arcPatches } = this.scene;
+    for (let k = 0; k < nodes.inArcCount[n]; ++k) {
+      const a = inArcs[nodes.firstInArc[n] + k];
+      for (let p = 0; p < arcs.patchCount[a]; ++p) out.push(arcPatches[arcs.firstPatch[a] + p]);
+    }
+    return out;
+  }
+  collectOut(n, out) {
+    out.length = 0;
+    const { nodes, arcs, arcPatches } = this.scene;
+    for (let k = 0; k < nodes.arcCount[n]; ++k) {
+      const a = nodes.firstArc[n] + k;
+      for (let p = 0; p < arcs.patchCount[a]; ++p) out.push(arcPatches[arcs.firstPatch[a] + p]);
+    }
+    return out;
+  }
+  isRefineCandidate(n) { return this.inS[n] && !this.scene.nodes.source[n] && this.succIn[n] === 0; }
+  isCoarsenCandidate(n) { return !this.inS[n] && !this.scene.nodes.sink[n] && this.predOut[n] === 0; }
+  addCutArc(a) {
+    this.cutPos[a] = this.cutArcs.length;
+    this.cutArcs.push(a);
+  }
+  removeCutArc(a) {
+    const pos = this.cutPos[a];
+    const last = this.cutArcs[this.cutArcs.length - 1];
+    this.cutArcs[pos] = last;
+    this.cutPos[last] = pos;
+    this.cutArcs.pop();
+    this.cutPos[a] = 0xffffffff;
+  }
+  patchesBad(ids) {
+    if (!this.cache) return false;
+    for (const id of ids) if (this.cache.isBad(id)) return true;
+    return false;
+  }
+  bytesOf(ids) {
+    let b = 0;
+    for (const id of ids) b += this.scene.decodedBytes[id];
+    return b;
+  }
+
+  /** The coarsest cut; with a cache, asks for its patches (urgently). */
+  start() {
+    const { nodes, arcs } = this.scene;
+    const n = nodes.count;
+    this.inS = new Uint8Array(n);
+    this.badNode = new Uint8Array(n);
+    this.succIn = new Uint32Array(n);
+    this.predOut = new Uint32Array(n);
+    this.cutPos = new Uint32Array(arcs.count).fill(0xffffffff);
+    this.cutArcs = [];
+    this.triangles = 0;
+    this.visibleTriangles = 0;
+    this.cutPatchCount = 0;
+    this.cutBytes = 0;
+    this.scratch = [];
+    this.scratch2 = [];
+    for (let i = 0; i < n; ++i) this.inS[i] = nodes.sink[i] ? 0 : 1;
+    const start = [];
+    for (let a = 0; a < arcs.count; ++a) {
+      const from = arcs.from[a], to = arcs.to[a];
+      if (this.inS[to]) ++this.succIn[from];
+      if (!this.inS[from]) ++this.predOut[to];
+      if (this.inS[from] && !this.inS[to]) {
+        this.addCutArc(a);
+        this.triangles += arcs.triangles[a];
+        this.cutPatchCount += arcs.patchCount[a];
+        for (let p = 0; p < arcs.patchCount[a]; ++p) start.push(this.scene.arcPatches[arcs.firstPatch[a] + p]);
+      }
+    }
+    this.cutBytes = this.bytesOf(start);
+    this.startPatches = start;
+    if (!this.cache) return;
+    this.server.submit(start.map((id) => ({ id, urgency: Urgency.UrgentUp })), 0);
+  }
+  /** Pins the coarsest cut's patches that arrived (call once start()'s loads are done). */
+  pinStart() {
+    if (!this.cache) return;
+    for (const id of this.startPatches) this.cache.pinAll([id]);
+  }
+
+  arcVisible(arc, view) {
+    if (!this.options.cull) return true;
+    const { nodes, arcs } = this.scene;
+    const s = arcs.cullNode[arc];
+    const c0 = nodes.center[3 * s], c1 = nodes.center[3 * s + 1], c2 = nodes.center[3 * s + 2];
+    const radius = nodes.radius[s];
+    for (const p of view.planes) if (p[0] * c0 + p[1] * c1 + p[2] * c2 + p[3] < -radius) return false;
+    if (s === arcs.from[arc] && nodes.coneCutoff[s] > 0) {
+      if (this.coneAway(s, c0, c1, c2, radius, view)) return false;
+    }
+    return true;
+  }
+  // Every triangle of the node's fragment faces away from the eye (normal-cone culling).
+  coneAway(s, c0, c1, c2, radius, view) {
+    const { nodes } = this.scene;
+    const v0 = c0 - view.eye[0], v1 = c1 - view.eye[1], v2 = c2 - view.eye[2];
+    const d = Math.sqrt(v0 * v0 + v1 * v1 + v2 * v2);
+    if (!(d > radius)) return false;
+    const ax = nodes.coneAxis;
+    const cosA = ax[3 * s] * (v0 / d) + ax[3 * s + 1] * (v1 / d) + ax[3 * s + 2] * (v2 / d);
+    const ang = Math.acos(Math.min(Math.max(cosA, -1), 1));
+    const alpha = Math.acos(nodes.coneCutoff[s]), beta = Math.asin(radius / d);
+    return ang + alpha + beta < 1.5707963267948966;
+  }
+
+  screenError(node, view) {
+    const { nodes } = this.scene;
+    if (nodes.sink[node]) return Number.POSITIVE_INFINITY;
+    const c0 = nodes.center[3 * node], c1 = nodes.center[3 * node + 1], c2 = nodes.center[3 * node + 2];
+    const radius = nodes.radius[node];
+    if (this.options.cull) {
+      for (const p of view.planes) if (p[0] * c0 + p[1] * c1 + p[2] * c2 + p[3] < -radius) return 0;
+      if (nodes.coneCutoff[node] > 0 && this.coneAway(node, c0, c1, c2, radius, view)) return 0;
+    }
+    const v0 = c0 - view.eye[0], v1 = c1 - view.eye[1], v2 = c2 - view.eye[2];
+    let d = Math.sqrt(v0 * v0 + v1 * v1 + v2 * v2) - radius;
+    d = Math.max(d, view.nearPlane);
+    return nodes.error[node] * view.pixelsPerUnit / d;
+  }
+
+  tryRefine(n) {
+    const { nodes, arcs, inArcs } = this.scene;
+    const inP = this.collectIn(n, this.scratch);
+    if (this.cache && !this.cache.pinAll(inP)) return false;
+    const outP = this.collectOut(n, this.scratch2);
+    if (this.cache) this.cache.unpinAll(outP);
+    this.inS[n] = 0;
+    for (let k = 0; k < nodes.arcCount[n]; ++k) {
+      const a = nodes.firstArc[n] + k;
+      this.removeCutArc(a);
+      ++this.predOut[arcs.to[a]];
+    }
+    for (let k = 0; k < nodes.inArcCount[n]; ++k) {
+      const a = inArcs[nodes.firstInArc[n] + k];
+      --this.succIn[arcs.from[a]];
+      this.addCutArc(a);
+    }
+    this.triangles += nodes.inTriangles[n] - nodes.outTriangles[n];
+    this.cutPatchCount += inP.length - outP.length;
+    this.cutBytes += this.bytesOf(inP) - this.bytesOf(outP);
+    return true;
+  }
+  tryCoarsen(n) {
+    const { nodes, arcs, inArcs } = this.scene;
+    const outP = this.collectOut(n, this.scratch);
+    if (this.cache && !this.cache.pinAll(outP)) return false;
+    const inP = this.collectIn(n, this.scratch2);
+    if (this.cache) this.cache.unpinAll(inP);
+    this.inS[n] = 1;
+    for (let k = 0; k < nodes.inArcCount[n]; ++k) {
+      const a = inArcs[nodes.firstInArc[n] + k];
+      ++this.succIn[arcs.from[a]];
+      this.removeCutArc(a);
+    }
+    for (let k = 0; k < nodes.arcCount[n]; ++k) {
+      const a = nodes.firstArc[n] + k;
+      --this.predOut[arcs.to[a]];
+      this.addCutArc(a);
+    }
+    this.triangles += nodes.outTriangles[n] - nodes.inTriangles[n];
+    this.cutPatchCount += outP.length - inP.length;
+    this.cutBytes += this.bytesOf(outP) - this.bytesOf(inP);
+    return true;
+  }
+  visibleDelta(n, refine, view) {
+    const { nodes, arcs, inArcs } = this.scene;
+    let i = 0, o = 0;
+    for (let k = 0; k < nodes.inArcCount[n]; ++k) {
+      const a = inArcs[nodes.firstInArc[n] + k];
+      if (this.arcVisible(a, view)) i += arcs.triangles[a];
+    }
+    for (let k = 0; k < nodes.arcCount[n]; ++k) {
+      const a = nodes.firstArc[n] + k;
+      if (this.arcVisible(a, view)) o += arcs.triangles[a];
+    }
+    return refine ? i - o : o - i;
+  }
+  want(ids, u) {
+    for (const id of ids) {
+      const w = this.wanted.get(id);
+      if (w === undefined || u > w) this.wanted.set(id, u);
+    }
+  }
+  frameDone(drawnTriangles, frameMs) {
+    this.time.add(drawnTriangles, frameMs);
+    this.frameMsAvg = this.frameMsAvg === 0 ? frameMs : 0.9 * this.frameMsAvg + 0.1 * frameMs;
+    this.lastFrameMs = frameMs;
+    this.lastDrawn = drawnTriangles;
+    ++this.slackFrames;
+  }
+  nextBudget(extractMs) {
+    const kAim = 0.7;
+    let budget;
+    if (this.options.fixedTriangles) {
+      budget = this.options.fixedTriangles;
+    } else {
+      const aimMs = kAim * this.options.budgetMs;
+      const target = this.time.trianglesFor(aimMs - extractMs);
+      if (this.smoothBudget === 0) this.smoothBudget = Math.min(target, 20000.0);
+      else if (target < this.smoothBudget) this.smoothBudget = Math.max(target, 0.7 * this.smoothBudget);
+      else if (this.budgetScale === 1) this.smoothBudget = Math.min(this.smoothBudget + 0.25 * (target - this.smoothBudget), 1.25 * this.smoothBudget);
+      else this.smoothBudget = Math.min(this.smoothBudget + 0.5 * (target - this.smoothBudget), 1.5 * this.smoothBudget);
+      if (this.lastDrawn > 0 && this.lastFrameMs > 0 && (this.lastFrameMs > aimMs || this.lastDrawn >= 0.5 * this.frameBudget))
+        this.smoothBudget = Math.min(this.smoothBudget, this.lastDrawn * aimMs / this.lastFrameMs);
+      budget = Math.max(this.smoothBudget, 1000.0);
+    }
+    this.frameBudget = budget;
+    return budget * this.budgetScale;
+  }
+  submitRequests(frame, st) {
+    if (!this.cache) return;
+    const reqs = [];
+    const nextConsecutive = new Map();
+    const touched = [];
+    for (const [id, u] of this.wanted) {
+      const s = this.cache.state(id);
+      if (s === 'ready') { touched.push(id); continue; }
+      if (s === 'bad') continue;
+      if (u !== Urgency.Prefetch) ++st.misses;
+      if (s === 'loading') continue;
+      const c = (this.consecutive.get(id) || 0) + 1;
+      nextConsecutive.set(id, c);
+      reqs.push({ id, urgency: u, consecutive: c });
+    }
+    this.consecutive = nextConsecutive;
+    this.cache.touch(touched, frame);
+    reqs.sort((a, b) => (a.urgency !== b.urgency ? b.urgency - a.urgency : a.consecutive !== b.consecutive ? b.consecutive - a.consecutive : a.id - b.id));
+    let loadBudget = this.options.loadBudget;
+    if (!loadBudget) {
+      const ms = this.server.meanLoadMs();
+      loadBudget = Math.floor(Math.min(Math.max(ms > 0 ? this.options.budgetMs / ms : 64, 8), 512));
+    }
+    const out = [];
+    for (const r of reqs) {
+      if (out.length >= loadBudget) break;
+      out.push({ id: r.id, urgency: r.urgency });
+      if (r.urgency === Urgency.Prefetch) ++st.prefetches;
+      else ++st.requests;
+    }
+    this.server.submit(out, frame);
+  }
+
+  /**
+   * For a frame that leaves the cut as it is (it draws part of a still image): advances the render
+   * budget and asks for what the refinements of the cut beyond it would need, as if applied (the
+   * best first, two levels deep, within the scaled budget; up to twice it at prefetch priority).
+   */
+  requestAhead(frame, view) {
+    const t0 = now();
+    const st = this.newStats();
+    this.wanted.clear();
+    const extractMs = this.options.extractMs > 0 ? this.options.extractMs : Math.min(2.0, this.options.budgetMs / 20);
+    const budget = this.nextBudget(extractMs);
+    const tau = this.options.pixelTolerance * this.lodScale;
+    const { nodes, arcs, inArcs } = this.scene;
+    const heap = new Heap(true);
+    const depth = new Map();
+    for (let n = 0; n < nodes.count; ++n)
+      if (this.isRefineCandidate(n) && !this.badNode[n]) heap.push(this.screenError(n, view), n), depth.set(n, 0);
+    let triangles = this.visibleTriangles;
+    const seen = new Uint8Array(nodes.count);
+    while (!heap.empty()) {
+      const err = heap.topErr(), node = heap.topNode();
+      heap.pop();
+      if (err <= tau || seen[node]) continue;
+      seen[node] = 1;
+      const d = depth.get(node) || 0;
+      triangles += this.visibleDelta(node, true, view);
+      if (triangles > 2 * budget) break;
+      this.want(this.collectIn(node, this.scratch), d === 0 && triangles <= budget ? Urgency.Needed : Urgency.Prefetch);
+      if (d >= 1) continue;
+      for (let k = 0; k < nodes.inArcCount[node]; ++k) {
+        const p = arcs.from[inArcs[nodes.firstInArc[node] + k]];
+        if (!nodes.source[p] && !this.badNode[p]) heap.push(this.screenError(p, view), p), depth.set(p, d + 1);
+      }
+    }
+    this.submitRequests(frame, st);
+    st.budgetTriangles = budget;
+    st.triangles = this.triangles;
+    st.patches = this.cutPatchCount;
+    st.lodScale = this.lodScale;
+    st.extractMs = now() - t0;
+    return st;
+  }
+
+  newStats() {
+    return {
+      extractMs: 0, triangles: 0, patches: 0, drawnPatches: 0, drawnTriangles: 0, misses: 0, requests: 0,
+      prefetches: 0, refinements: 0, coarsenings: 0, maxScreenError: 0, budgetTriangles: 0, lodScale: 1,
+      memoryFull: false, interrupted: false, modelA: 0, modelB: 0,
+    };
+  }
+
+  /** One frame's cut update for `view`; `predicted` is the view extrapolated 10 frames ahead. */
+  update(frame, view, predicted) {
+    const st = this.newStats();
+    const t0 = now();
+    this.wanted.clear();
+    const extractMs = this.options.extractMs > 0 ? this.options.extractMs : Math.min(2.0, this.options.budgetMs / 20);
+    const p = {
+      view, st, t0, deadline: t0 + extractMs, tau: this.options.pixelTolerance * this.lodScale, budget: 0, pinLimit: 0,
+      refine: new Heap(true), coarse: new Heap(false), maxErr: 0, ops: 0, urgentLeft: 4, memoryFull: false,
+    };
+    p.timeUp = () => {
+      if ((++p.ops & 7) !== 0) return false;
+      if (now() < p.deadline) return false;
+      st.interrupted = true;
+      return true;
+    };
+    p.budget = this.nextBudget(extractMs);
+    st.budgetTriangles = p.budget;
+    st.modelA = this.time.a;
+    st.modelB = this.time.b * 1e6;
+    this.visibleTriangles = 0;
+    for (const a of this.cutArcs) if (this.arcVisible(a, view)) this.visibleTriangles += this.scene.arcs.triangles[a];
+    p.pinLimit = this.cache ? this.options.memoryFraction * this.cache.capBytes : Number.POSITIVE_INFINITY;
+    this.fillHeaps(p);
+    if (!this.frozen) {
+      this.coarsenOverBudget(p);
+      this.refineWithinBudget(p);
+      this.coarsenFarBelow(p);
+    }
+    while (!p.refine.empty() && !this.isRefineCandidate(p.refine.topNode())) p.refine.pop();
+    if (!p.refine.empty()) p.maxErr = Math.max(p.maxErr, p.refine.topErr());
+    st.maxScreenError = p.maxErr;
+    if (this.cache && this.options.prefetch && !this.frozen && now() < p.deadline + (p.deadline - p.t0)) this.prefetch(p, predicted);
+    this.submitRequests(frame, st);
+    if (p.memoryFull) this.lodScale = Math.min(this.lodScale * 1.1, 64.0);
+    else if (this.lodScale > 1 && this.cutBytes < 0.8 * p.pinLimit) this.lodScale = Math.max(1.0, this.lodScale * 0.97);
+    st.memoryFull = p.memoryFull;
+    st.lodScale = this.lodScale;
+    st.triangles = this.triangles;
+    st.patches = this.cutPatchCount;
+    st.extractMs = now() - t0;
+    return st;
+  }
+
+  fillHeaps(p) {
+    const { nodes } = this.scene;
+    for (let n = 0; n < nodes.count; ++n) {
+      if (this.isRefineCandidate(n)) p.refine.push(this.screenError(n, p.view), n);
+      else if (this.isCoarsenCandidate(n)) p.coarse.push(this.screenError(n, p.view), n);
+      else if (nodes.source[n] && this.succIn[n] === 0) p.maxErr = Math.max(p.maxErr, this.screenError(n, p.view));
+    }
+  }
+  pushAround(p, n) {
+    const { nodes, arcs, inArcs } = this.scene;
+    if (this.isRefineCandidate(n)) p.refine.push(this.screenError(n, p.view), n);
+    if (this.isCoarsenCandidate(n)) p.coarse.push(this.screenError(n, p.view), n);
+    for (let k = 0; k < nodes.inArcCount[n]; ++k) {
+      const m = arcs.from[inArcs[nodes.firstInArc[n] + k]];
+      if (this.isRefineCandidate(m)) p.refine.push(this.screenError(m, p.view), m);
+    }
+    for (let k = 0; k < nodes.arcCount[n]; ++k) {
+      const m = arcs.to[nodes.firstArc[n] + k];
+      if (this.isCoarsenCandidate(m)) p.coarse.push(this.screenError(m, p.view), m);
+    }
+  }
+  popStaleCoarse(p) {
+    while (!p.coarse.empty() && (!this.isCoarsenCandidate(p.coarse.topNode()) || (this.badNode[p.coarse.topNode()] & 2))) p.coarse.pop();
+  }
+  coarsenTop(p, u) {
+    const node = p.coarse.topNode();
+    p.coarse.pop();
+    const dc = this.visibleDelta(node, false, p.view);
+    if (this.tryCoarsen(node)) {
+      this.visibleTriangles += dc;
+      ++p.st.coarsenings;
+      this.pushAround(p, node);
+      return;
+    }
+    const ids = this.collectOut(node, this.scratch);
+    if (this.patchesBad(ids)) this.badNode[node] |= 2;
+    else this.want(ids, u);
+  }
+  coarsenOverBudget(p) {
+    while (this.visibleTriangles > p.budget && !p.st.interrupted) {
+      this.popStaleCoarse(p);
+      if (p.coarse.empty() || p.timeUp()) break;
+      this.coarsenTop(p, Urgency.UrgentUp);
+    }
+  }
+  probeAllowed(after, budget) {
+    const b = this.options.budgetMs;
+    return after > budget && !this.options.fixedTriangles && this.budgetScale === 1 && this.slackFrames >= 30 &&
+      this.frameMsAvg < 0.6 * b && this.lastFrameMs < 0.6 * b && after <= 2 * budget;
+  }
+  refineWithinBudget(p) {
+    while (!p.refine.empty() && !p.st.interrupted) {
+      const node = p.refine.topNode(), err = p.refine.topErr();
+      if (!this.isRefineCandidate(node) || (this.badNode[node] & 1)) {
+        p.refine.pop();
+        continue;
+      }
+      if (err <= p.tau || p.timeUp()) break;
+      const dv = this.visibleDelta(node, true, p.view);
+      const after = this.visibleTriangles + dv;
+      if (this.probeAllowed(after, p.budget)) {
+        this.slackFrames = 0;
+        p.budget = after;
+        p.st.budgetTriangles = p.budget;
+      }
+      if (after > p.budget) {
+        this.popStaleCoarse(p);
+        const trade = !p.coarse.empty() && p.coarse.topErr() * 2 < err;
+        if (!trade) break;
+        this.coarsenTop(p, Urgency.Needed);
+        continue;
+      }
+      const ids = this.collectIn(node, this.scratch);
+      if (this.cutBytes + this.bytesOf(ids) > p.pinLimit) {
+        p.memoryFull = true;
+        break;
+      }
+      p.refine.pop();
+      this.refineOrRequest(p, node, err, dv);
+    }
+  }
+  refineOrRequest(p, node, err, dv) {
+    if (this.tryRefine(node)) {
+      this.visibleTriangles += dv;
+      ++p.st.refinements;
+      this.pushAround(p, node);
+      return;
+    }
+    const ids = this.collectIn(node, this.scratch);
+    if (this.patchesBad(ids)) {
+      this.badNode[node] |= 1;
+      return;
+    }
+    this.want(ids, p.urgentLeft > 0 ? Urgency.UrgentDown : Urgency.Needed);
+    if (p.urgentLeft > 0) --p.urgentLeft;
+    p.maxErr = Math.max(p.maxErr, err);
+  }
+  coarsenFarBelow(p) {
+    while (!p.st.interrupted) {
+      this.popStaleCoarse(p);
+      if (p.coarse.empty() || p.coarse.topErr() >= p.tau * 0.5 || p.timeUp()) break;
+      this.coarsenTop(p, Urgency.Needed);
+    }
+  }
+  prefetch(p, predicted) {
+    const { nodes, arcs, inArcs } = this.scene;
+    for (let k = 0; !p.refine.empty() && k < 24;) {
+      const node = p.refine.topNode(), err = p.refine.topErr();
+      p.refine.pop();
+      if (!this.isRefineCandidate(node) || this.badNode[node] || err <= p.tau * 0.5) continue;
+      this.want(this.collectIn(node, this.scratch), Urgency.Prefetch);
+      for (let j = 0; j < nodes.inArcCount[node] && k < 8; ++j) {
+        const m = arcs.from[inArcs[nodes.firstInArc[node] + j]];
+        if (!nodes.source[m] && this.screenError(m, p.view) > p.tau) this.want(this.collectIn(m, this.scratch), Urgency.Prefetch);
+      }
+      ++k;
+    }
+    for (let k = 0; !p.coarse.empty() && k < 16;) {
+      const node = p.coarse.topNode();
+      p.coarse.pop();
+      if (!this.isCoarsenCandidate(node) || this.badNode[node]) continue;
+      this.want(this.collectOut(node, this.scratch), Urgency.Prefetch);
+      ++k;
+    }
+    if (!predicted) return;
+    const ahead = [];
+    for (let n = 0; n < nodes.count; ++n)
+      if (this.isRefineCandidate(n) && !this.badNode[n]) {
+        const e = this.screenError(n, predicted);
+        if (e > p.tau) ahead.push([e, n]);
+      }
+    ahead.sort((a, b) => b[0] - a[0]);
+    for (let i = 0; i < ahead.length && i < 32; ++i) this.want(this.collectIn(ahead[i][1], this.scratch), Urgency.Prefetch);
+  }
+
+  /** Nodes of the cut's set S (sorted): what the cut comparison prints. */
+  nodeSet() {
+    const out = [];
+    for (let n = 0; n < this.inS.length; ++n) if (this.inS[n]) out.push(n);
+    return out;
+  }
+}

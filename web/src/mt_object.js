@@ -1,0 +1,277 @@
+// MTObject: an MT file as a three.js scene object. Add it to a scene like any other Object3D and
+// call `update(camera, renderer)` once a frame before rendering: the cut follows the camera under
+// the frame-time budget (extract.js), patches stream in by range requests (server.js) and are
+// decoded by workers into a byte-capped cache (cache.js). Its children are one Mesh per patch of
+// the cut; the object is placed at the model's centre (the patches' positions are relative to it,
+// so float32 keeps its precision on georeferenced coordinates).
+
+import * as THREE from 'three';
+import { HttpSource } from './source.js';
+import { openMtFile } from './mtfile.js';
+import { makeView, extrapolate } from './camera.js';
+import { ExtractRender, Urgency } from './extract.js';
+import { PatchCache } from './cache.js';
+import { PatchServer } from './server.js';
+import { defaultLibUrls } from './libs.js';
+
+export { Urgency };
+
+export class MTObject extends THREE.Group {
+  /**
+   * Opens an MT file by URL and loads its coarsest cut.
+   * @param {string} url
+   * @param {{pixelTolerance?:number, budgetMs?:number, cacheBytes?:number, workers?:number,
+   *          libs?:object, material?:THREE.Material, onWarning?:(msg:string)=>void, source?:object}} [options]
+   */
+  static async open(url, options = {}) {
+    const source = options.source || new HttpSource(url);
+    const libs = Object.assign(defaultLibUrls(), options.libs || {});
+    const pool = PatchServer.spawnWorkers(libs, options.workers);  // load the decoders meanwhile
+    let scene;
+    try {
+      scene = await openMtFile(source);
+    } catch (e) {
+      for (const w of pool) w.terminate();
+      throw e;
+    }
+    const obj = new MTObject(scene, Object.assign({}, options, { libs, pool }));
+    await obj._start();
+    return obj;
+  }
+
+  constructor(scene, options) {
+    super();
+    this.name = 'MTObject';
+    this.mt = scene;
+    this.options = options;
+    this.position.set(scene.center[0], scene.center[1], scene.center[2]);
+    this.material = options.material || new THREE.MeshLambertMaterial({ color: scene.hasColors ? 0xffffff : 0xd8cfc0, vertexColors: scene.hasColors });
+    this.cache = new PatchCache(options.cacheBytes || 256 * 2 ** 20, (id, e) => this._evicted(id, e));
+    this.warnings = [];
+    this.fatal = null;
+    this.server = new PatchServer(scene, this.cache, {
+      workers: options.workers,
+      pool: options.pool,
+      libs: options.libs || defaultLibUrls(),
+      makeGeometry: (r) => this._geometry(r),
+      onWarning: (m) => {
+        this.warnings.push(m);
+        console.warn(m);
+        if (options.onWarning) options.onWarning(m);
+      },
+      onFatal: (e) => { this.fatal = e; },
+    });
+    this.extract = new ExtractRender(scene, this.cache, this.server, {
+      pixelTolerance: options.pixelTolerance ?? 1,
+      budgetMs: options.budgetMs ?? 33,
+      fixedTriangles: options.fixedTriangles || 0,
+    });
+    this.meshes = new Map();  // patch id -> Mesh (patches of the cut)
+    this.frame = 0;
+    this.lastTime = 0;
+    this.prevPose = null;
+    this.stats = null;
+    this.drawnTriangles = 0;
+    // Progressive refinement of a still view (mtrender/engine.h): once the camera stops, the cut may
+    // grow to stillFrames frames' worth of the render budget and is drawn over that many frames into
+    // an accumulation target, at most one frame's budget a frame; the screen keeps the last
+    // complete image meanwhile. render() does this; update() + renderer.render() draws plainly.
+    this.stillFrames = options.stillFrames ?? 16;
+    this.stillCount = 0;
+    this.accum = null;  // {list: Mesh[], next, err}
+    this.shownErr = 0;
+  }
+
+  async _start() {
+    await this.server.ready;
+    this.extract.start();
+    await new Promise((resolve, reject) => {
+      const poll = () => {
+        if (this.fatal) return reject(this.fatal);
+        if (this.server.idle()) return resolve();
+        setTimeout(poll, 5);
+      };
+      poll();
+    });
+    this.extract.pinStart();
+  }
+
+  _geometry(r) {
+    const g = new THREE.BufferGeometry();
+    g.setAttribute('position', new THREE.BufferAttribute(r.positions, 3));
+    g.setAttribute('normal', new THREE.BufferAttribute(r.normals, 3, true));
+    if (r.colors) g.setAttribute('color', new THREE.BufferAttribute(r.colors, 4, true));
+    g.setIndex(new THREE.BufferAttribute(r.indices, 1));
+    return g;
+  }
+  _evicted(id, e) {
+    const m = this.meshes.get(id);
+    if (m) {
+      this.remove(m);
+      this.meshes.delete(id);
+    }
+    if (e.data) e.data.dispose();
+  }
+
+  /** The camera as an MT view (object space of the file). */
+  _pose(camera) {
+    camera.updateMatrixWorld();
+    this.updateMatrixWorld();
+    const inv = new THREE.Matrix4().copy(this.matrixWorld).invert();
+    const c = this.mt.center;
+    const eye = new THREE.Vector3().setFromMatrixPosition(camera.matrixWorld).applyMatrix4(inv);
+    const dir = new THREE.Vector3(0, 0, -1).transformDirection(camera.matrixWorld).transformDirection(inv);
+    const up = new THREE.Vector3(0, 1, 0).transformDirection(camera.matrixWorld).transformDirection(inv);
+    const e = [eye.x + c[0], eye.y + c[1], eye.z + c[2]];
+    return { eye: e, target: [e[0] + dir.x, e[1] + dir.y, e[2] + dir.z], up: [up.x, up.y, up.z], fovDeg: camera.fov };
+  }
+
+  /**
+   * The frame's cut update and the meshes that draw it. `width`/`height`: the drawing buffer's
+   * size in pixels (the screen errors are measured in them).
+   */
+  update(camera, width, height) {
+    const t = performance.now();
+    if (this.lastTime && this.frame > 1) this.extract.frameDone(this.drawnTriangles, t - this.lastTime);
+    this.lastTime = t;
+    ++this.frame;
+    const pose = this._pose(camera);
+    const prev = this.prevPose || pose;
+    this.prevPose = pose;
+    const still = this.frame > 1 && ['eye', 'target', 'up'].every((k) => pose[k].every((x, i) => Math.abs(x - prev[k][i]) <= 1e-9 * this.mt.radius));
+    this.stillCount = still ? this.stillCount + 1 : 0;
+    const view = makeView(pose, width, height, this.mt.center, this.mt.radius);
+    const ahead = makeView(extrapolate(prev, pose, 10), width, height, this.mt.center, this.mt.radius);
+    this.progressiveNow = this.progressive && this.stillCount >= 2 && this.stillFrames > 1;
+    let st;
+    if (!this.progressiveNow) {
+      this.accum = null;
+      this.extract.budgetScale = 1;
+      st = this.extract.update(this.frame, view, ahead);
+    } else if (this.accum && this.accum.next < this.accum.list.length) {
+      st = this.extract.requestAhead(this.frame, view);  // the image being drawn keeps its cut
+      st.maxScreenError = this.shownErr;
+    } else {
+      this.extract.budgetScale = this.stillFrames;
+      st = this.extract.update(this.frame, view, ahead);
+      this.cutChanged = st.refinements + st.coarsenings > 0 || !this.accum;
+    }
+    this.lastView = view;
+    // The meshes: one per patch of the cut's visible arcs.
+    const { arcs, arcPatches } = this.mt;
+    const keep = new Set();
+    let drawnTriangles = 0, drawnPatches = 0;
+    for (const a of this.extract.cutArcs) {
+      if (!this.extract.arcVisible(a, view)) continue;
+      for (let k = 0; k < arcs.patchCount[a]; ++k) {
+        const id = arcPatches[arcs.firstPatch[a] + k];
+        const e = this.cache.get(id);
+        if (!e || e.state !== 'ready') continue;
+        keep.add(id);
+        let m = this.meshes.get(id);
+        if (!m) {
+          m = new THREE.Mesh(e.data, this.material);
+          m.frustumCulled = false;  // culled per arc above, by the DAG's spheres and normal cones
+          m.matrixAutoUpdate = false;
+          this.meshes.set(id, m);
+          this.add(m);
+        }
+        drawnTriangles += e.data.index.count / 3;
+        ++drawnPatches;
+      }
+    }
+    for (const [id, m] of this.meshes)
+      if (!keep.has(id)) {
+        this.remove(m);
+        this.meshes.delete(id);
+      }
+    if (this.progressiveNow && this.cutChanged && (!this.accum || this.accum.next >= this.accum.list.length)) {
+      this.accum = { list: [...this.meshes.values()], next: 0, err: st.maxScreenError, fresh: true };
+      this.cutChanged = false;
+    }
+    this.drawnTriangles = drawnTriangles;
+    st.drawnTriangles = drawnTriangles;
+    st.drawnPatches = drawnPatches;
+    st.cacheBytes = this.cache.usedBytes;
+    st.cacheCap = this.cache.capBytes;
+    st.evictions = this.cache.evictions;
+    st.givenUp = this.cache.givenUp;
+    st.loads = this.server.loads;
+    st.bytesRead = this.mt.source.bytesFetched;
+    st.badPatches = this.server.bad;
+    st.loadsPending = this.server.queue.length + this.server.inFlight;
+    this.stats = st;
+    return st;
+  }
+
+  /**
+   * Draws the frame: the whole cut while the camera moves; once it is still, the next chunk of the
+   * still image (within one frame's render budget) into an accumulation target, shown when complete
+   * (meanwhile the screen keeps the last image). Call after update(). Returns the triangles drawn.
+   */
+  render(renderer, scene, camera) {
+    this.progressive = true;
+    let drawn = 0;
+    if (!this.progressiveNow || !this.accum) {
+      // Moving: the whole cut, straight to the screen.
+      renderer.setRenderTarget(null);
+      renderer.render(scene, camera);
+      drawn = this.drawnTriangles;
+      this.shownErr = this.stats ? this.stats.maxScreenError : 0;
+    } else if (this.accum.next < this.accum.list.length) {
+      // Still, an image in progress: its next chunk into the accumulation target. The screen is
+      // not touched, so the browser keeps showing the last image presented.
+      const size = renderer.getDrawingBufferSize(new THREE.Vector2());
+      if (!this.target || this.target.width !== size.x || this.target.height !== size.y) {
+        if (this.target) this.target.dispose();
+        this.target = new THREE.WebGLRenderTarget(size.x, size.y, { depthBuffer: true, colorSpace: THREE.SRGBColorSpace });
+        this.blit = new THREE.Mesh(new THREE.PlaneGeometry(2, 2), new THREE.MeshBasicMaterial({ map: this.target.texture, depthTest: false, depthWrite: false, transparent: true }));
+        this.blitScene = new THREE.Scene();
+        this.blitScene.add(this.blit);
+        this.blitCamera = new THREE.OrthographicCamera(-1, 1, 1, -1, 0, 1);
+      }
+      const a = this.accum;
+      const budget = Math.max(this.extract.frameBudget, 1000);
+      const chunk = new Set();
+      while (a.next < a.list.length && (chunk.size === 0 || drawn + a.list[a.next].geometry.index.count / 3 <= budget)) {
+        const m = a.list[a.next++];
+        chunk.add(m);
+        drawn += m.geometry.index.count / 3;
+      }
+      const visible = new Map();
+      for (const m of this.children) visible.set(m, m.visible), (m.visible = chunk.has(m));
+      const auto = renderer.autoClear;
+      renderer.autoClear = false;
+      renderer.setRenderTarget(this.target);
+      if (a.fresh) {
+        // Cleared transparent: the blit draws the model over the screen's own clear, so the
+        // background colour is converted exactly as a direct render's is.
+        const alpha = renderer.getClearAlpha();
+        renderer.setClearAlpha(0);
+        renderer.clear();
+        renderer.setClearAlpha(alpha);
+        a.fresh = false;
+      }
+      renderer.render(scene, camera);
+      renderer.autoClear = auto;
+      for (const [m, v] of visible) m.visible = v;
+      renderer.setRenderTarget(null);
+      if (a.next >= a.list.length) {
+        renderer.render(this.blitScene, this.blitCamera);  // the complete image, shown once
+        this.shownErr = a.err;
+      }
+    }
+    // Still and complete: nothing to draw; the screen keeps the image.
+    this.drawnTriangles = drawn;
+    if (this.stats) {
+      this.stats.drawnTriangles = drawn;
+      if (this.progressiveNow) this.stats.maxScreenError = this.shownErr;
+    }
+    return drawn;
+  }
+
+  dispose() {
+    this.server.dispose();
+    for (const [, e] of this.cache.entries) if (e.data) e.data.dispose();
+  }
+}

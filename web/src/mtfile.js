@@ -1,0 +1,45 @@
+// Opening an MT file from a byte source (source.js): footer, header, then the DAG and the index in
+// one range read, the footer checksum checked (XXH64 over header + index), the records
+// cross-checked (format.js), the scene built (scene.js). Payloads are read later, on demand.
+
+import xxhash from 'xxhash-wasm';
+import { kHeaderSize, kFooterSize, readHeaderAndFooter, indexRange, readIndex, checkIndex, MtError } from './format.js';
+import { buildScene } from './scene.js';
+
+let hasherPromise = null;
+/** xxhash-wasm, instantiated once per realm. */
+export function hasher() {
+  if (!hasherPromise) hasherPromise = xxhash();
+  return hasherPromise;
+}
+
+/**
+ * @param {{path:string, size:number, openTail:Function, read:Function}} source
+ * @returns {Promise<object>} the scene (scene.js) with `source` attached
+ */
+export async function openMtFile(source) {
+  // One suffix read gives the size and the footer; the header follows.
+  const tail = await source.openTail(kFooterSize);
+  const size = source.size;
+  if (size < kHeaderSize + kFooterSize)
+    throw new MtError(source.path, `not an MT file: ${size} bytes is shorter than header + footer (truncated?)`);
+  const headerBuf = await source.read(0, kHeaderSize);
+  const { header, footer } = readHeaderAndFooter(source.path, size, headerBuf, tail);
+  const range = indexRange(source.path, size, header);
+  const meta = await source.read(range.begin, range.end);
+  const { create64 } = await hasher();
+  const h = create64(0n);
+  h.update(new Uint8Array(headerBuf));
+  h.update(new Uint8Array(meta));
+  const sum = h.digest();
+  const want = (BigInt(footer.checksumHi) << 32n) | BigInt(footer.checksumLo);
+  if (sum !== want)
+    throw new MtError(source.path, `checksum mismatch over header + DAG + index (bytes 0-${kHeaderSize} and ${range.begin}-${range.end})`);
+  const idx = readIndex(header, meta);
+  checkIndex(source.path, header, idx);
+  const scene = buildScene(header, idx);
+  scene.source = source;
+  scene.path = source.path;
+  scene.fileSize = size;
+  return scene;
+}

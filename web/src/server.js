@@ -1,0 +1,154 @@
+// The PatchServer of the browser (mtrender/patch_server.h's role): takes the cut's request list
+// each frame (it replaces the previous one), reads the payloads by HTTP range requests, a few in
+// flight, neighbouring payloads of the file coalesced into one request, and has them checked and
+// decoded by Web Workers into the cache. A damaged patch is reported once (a warning), marked bad
+// and never asked for again. The measured load time per patch sets the load budget (extract.js).
+
+import { NoRangeError } from './source.js';
+
+export class PatchServer {
+  /**
+   * @param {object} scene openMtFile()'s scene
+   * @param {import('./cache.js').PatchCache} cache
+   * @param {{workers?:number, inFlight?:number, libs:object, makeGeometry:Function,
+   *          onWarning?:Function, onFatal?:Function}} opt
+   */
+  constructor(scene, cache, opt) {
+    this.scene = scene;
+    this.cache = cache;
+    this.opt = opt;
+    this.queue = [];
+    this.inFlight = 0;
+    this.maxInFlight = opt.inFlight || 4;
+    this.loads = 0;
+    this.bad = 0;
+    this.bytesRead = 0;
+    this.requests = 0;
+    this.loadMsAvg = 0;
+    this.warnings = [];
+    this.jobs = new Map();
+    this.nextJob = 1;
+    this.nextWorker = 0;
+    const h = scene.header;
+    this.workers = opt.pool || PatchServer.spawnWorkers(opt.libs, opt.workers);
+    const init = { type: 'init', libs: opt.libs, codec: h.codec, gridBits: h.gridBits, gridOrigin: h.gridOrigin, gridStep: h.gridStep, center: scene.center };
+    this.ready = Promise.all(this.workers.map((w) => {
+      return new Promise((resolve, reject) => {
+        w.onmessage = (e) => {
+          if (e.data.type === 'ready') {
+            if (e.data.error) reject(new Error(e.data.error));
+            else resolve();
+            w.onmessage = (ev) => this.onDecoded(ev.data);
+          }
+        };
+        w.onerror = (e) => reject(new Error(`decoder worker: ${e.message}`));
+        w.postMessage(init);
+      });
+    }));
+  }
+  /** Starts the decoding workers and has them load the npm decoders (before the file is open). */
+  static spawnWorkers(libs, workers) {
+    const count = workers || Math.max(1, Math.min(4, ((typeof navigator !== 'undefined' && navigator.hardwareConcurrency) || 2) - 1));
+    return Array.from({ length: count }, () => {
+      const w = new Worker(new URL('./worker.js', import.meta.url), { type: 'module' });
+      w.postMessage({ type: 'libs', libs });
+      return w;
+    });
+  }
+  meanLoadMs() { return this.loadMsAvg; }
+  /** Replaces the pending requests ({id, urgency}[], in priority order). */
+  submit(requests, frame) {
+    this.queue = requests.slice();
+    this.frame = frame;
+    this.pump();
+  }
+  idle() { return this.queue.length === 0 && this.inFlight === 0; }
+  warn(msg) {
+    this.warnings.push(msg);
+    if (this.opt.onWarning) this.opt.onWarning(msg);
+    else console.warn(msg);
+  }
+  // Takes the next request and its file neighbours among the queued ones (gaps up to 16 KiB, up to
+  // 512 KiB a request): one range read for a run of payloads written together.
+  nextBatch() {
+    const p = this.scene.patches;
+    while (this.queue.length) {
+      const head = this.queue.shift();
+      if (this.cache.state(head.id) !== 'absent') continue;
+      const near = this.queue.filter((r) => this.cache.state(r.id) === 'absent' && Math.abs(p.offset[r.id] - p.offset[head.id]) < 524288);
+      near.push(head);
+      near.sort((a, b) => p.offset[a.id] - p.offset[b.id]);
+      let i = near.indexOf(head), lo = i, hi = i;
+      const gap = (a, b) => p.offset[near[b].id] - (p.offset[near[a].id] + p.size[near[a].id]);
+      const span = () => p.offset[near[hi].id] + p.size[near[hi].id] - p.offset[near[lo].id];
+      while (hi + 1 < near.length && gap(hi, hi + 1) <= 16384 && span() < 524288) ++hi;
+      while (lo > 0 && gap(lo - 1, lo) <= 16384 && span() < 524288) --lo;
+      const batch = [];
+      for (let k = lo; k <= hi; ++k) {
+        const id = near[k].id;
+        if (this.cache.reserve(id, this.scene.decodedBytes[id])) batch.push(id);
+        else if (id === head.id) return batch.length ? batch : null;  // no room: try again next frame
+      }
+      const taken = new Set(batch);
+      this.queue = this.queue.filter((r) => !taken.has(r.id));
+      if (batch.length) return batch;
+    }
+    return null;
+  }
+  pump() {
+    while (this.inFlight < this.maxInFlight && this.queue.length) {
+      const batch = this.nextBatch();
+      if (!batch) break;
+      this.load(batch);
+    }
+  }
+  async load(batch) {
+    ++this.inFlight;
+    const p = this.scene.patches;
+    const t0 = performance.now();
+    const begin = p.offset[batch[0]];
+    const last = batch[batch.length - 1];
+    const end = p.offset[last] + p.size[last];
+    let buf;
+    try {
+      buf = await this.scene.source.read(begin, end);
+    } catch (e) {
+      for (const id of batch) this.cache.cancel(id);
+      --this.inFlight;
+      if (e instanceof NoRangeError && this.opt.onFatal) this.opt.onFatal(e);
+      else this.warn(`${this.scene.path}: reading patches ${batch.join(', ')}: ${e.message}`);
+      return;
+    }
+    this.bytesRead += end - begin;
+    ++this.requests;
+    const items = batch.map((id) => ({
+      id, offset: p.offset[id], triangles: p.triangles[id], checksumLo: p.checksumLo[id], checksumHi: p.checksumHi[id],
+      buffer: buf.slice(p.offset[id] - begin, p.offset[id] - begin + p.size[id]),
+    }));
+    const job = this.nextJob++;
+    this.jobs.set(job, { t0, count: batch.length });
+    const w = this.workers[this.nextWorker++ % this.workers.length];
+    w.postMessage({ type: 'decode', job, items }, items.map((it) => it.buffer));
+  }
+  onDecoded(msg) {
+    const j = this.jobs.get(msg.job);
+    this.jobs.delete(msg.job);
+    for (const r of msg.results) {
+      if (r.error) {
+        ++this.bad;
+        this.cache.markBad(r.id);
+        this.warn(`${this.scene.path}: ${r.error}; the patch is skipped`);
+        continue;
+      }
+      this.cache.commit(r.id, this.opt.makeGeometry(r));
+      ++this.loads;
+    }
+    const ms = (performance.now() - j.t0) / Math.max(1, j.count);
+    this.loadMsAvg = this.loadMsAvg === 0 ? ms : 0.9 * this.loadMsAvg + 0.1 * ms;
+    --this.inFlight;
+    this.pump();
+  }
+  dispose() {
+    for (const w of this.workers) w.terminate();
+  }
+}

@@ -1,0 +1,107 @@
+// The decoding worker: checks each payload's XXH64 and decodes it (patch_codec.js) into the
+// arrays three.js draws: positions relative to the scene centre (float32), normals (int8,
+// normalized; area-weighted from the triangles when the file stores none), colours (RGBA8),
+// indices (uint16 when they fit). A damaged payload comes back as an error naming the patch.
+import { decodePatch } from './patch_codec.js';
+
+let libs = null, cfg = null, h64Raw = null;
+
+// Two steps, so the decoders load while the page still reads the file's index: 'libs' (the npm
+// decoders), then 'init' (the file's codec and grid; Draco's decoder when the file needs it).
+let libsPromise = null;
+function loadLibs(urls) {
+  if (!libsPromise)
+    libsPromise = Promise.all([import(urls.zstd), import(urls.meshopt), import(urls.xxhash)]).then(async ([zstdMod, meshoptMod, xxMod]) => {
+      const meshopt = meshoptMod.MeshoptDecoder;
+      await meshopt.ready;
+      const xx = await xxMod.default();
+      return { zstdMod, meshopt, xx };
+    });
+  return libsPromise;
+}
+
+async function init(msg) {
+  cfg = msg;
+  const { zstdMod, meshopt, xx } = await loadLibs(msg.libs);
+  h64Raw = xx.h64Raw;
+  let draco = null;
+  if (msg.codec === 2) {
+    const text = await (await fetch(msg.libs.dracoWrapper)).text();
+    (0, eval)(text);  // defines DracoDecoderModule (an Emscripten wrapper, not an ES module)
+    const wasmBinary = await (await fetch(msg.libs.dracoWasm)).arrayBuffer();
+    draco = await new Promise((resolve) => {
+      self.DracoDecoderModule({ wasmBinary, onModuleLoaded: (m) => resolve(m) });
+    });
+  }
+  libs = { zstd: (b, n) => zstdMod.decompress(b, new Uint8Array(n)), meshopt, draco };
+}
+
+function toRender(d) {
+  const n = d.q.length / 3;
+  const positions = new Float32Array(n * 3);
+  const o = cfg.gridOrigin, s = cfg.gridStep, c = cfg.center;
+  for (let i = 0; i < n; ++i)
+    for (let a = 0; a < 3; ++a) positions[3 * i + a] = o[a] + s * d.q[3 * i + a] - c[a];
+  let nf = d.normals;
+  if (!nf) {
+    nf = new Float32Array(n * 3);
+    const t = d.triangles;
+    for (let k = 0; k < t.length; k += 3) {
+      const a = 3 * t[k], b = 3 * t[k + 1], cc = 3 * t[k + 2];
+      const e1 = [positions[b] - positions[a], positions[b + 1] - positions[a + 1], positions[b + 2] - positions[a + 2]];
+      const e2 = [positions[cc] - positions[a], positions[cc + 1] - positions[a + 1], positions[cc + 2] - positions[a + 2]];
+      const fn = [e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]];
+      for (const v of [a, b, cc]) for (let x = 0; x < 3; ++x) nf[v + x] += fn[x];
+    }
+  }
+  const normals = new Int8Array(n * 3);
+  for (let i = 0; i < n; ++i) {
+    const x = nf[3 * i], y = nf[3 * i + 1], z = nf[3 * i + 2];
+    const l = Math.sqrt(x * x + y * y + z * z) || 1;
+    normals[3 * i] = Math.round((x / l) * 127);
+    normals[3 * i + 1] = Math.round((y / l) * 127);
+    normals[3 * i + 2] = Math.round((z / l) * 127);
+  }
+  const indices = n <= 65536 ? Uint16Array.from(d.triangles) : d.triangles;
+  return { positions, normals, colors: d.colors, indices };
+}
+
+self.onmessage = async (e) => {
+  const msg = e.data;
+  if (msg.type === 'libs') {
+    loadLibs(msg.libs).catch(() => {});  // errors are reported by 'init'
+    return;
+  }
+  if (msg.type === 'init') {
+    try {
+      await init(msg);
+      self.postMessage({ type: 'ready' });
+    } catch (err) {
+      self.postMessage({ type: 'ready', error: `decoder set-up failed: ${err.message}` });
+    }
+    return;
+  }
+  if (msg.type !== 'decode') return;
+  const results = [], transfer = [];
+  for (const it of msg.items) {
+    const data = new Uint8Array(it.buffer);
+    const sum = h64Raw(data, 0n);
+    const want = (BigInt(it.checksumHi) << 32n) | BigInt(it.checksumLo);
+    if (sum !== want) {
+      results.push({ id: it.id, error: `patch ${it.id} is damaged: checksum mismatch in payload at byte offset ${it.offset} (${data.length} bytes)` });
+      continue;
+    }
+    try {
+      const d = decodePatch(data, cfg.codec, { bits: cfg.gridBits }, libs);
+      if (d.triangles.length / 3 !== it.triangles)
+        throw new Error(`triangle count ${d.triangles.length / 3} differs from the index (${it.triangles})`);
+      const r = toRender(d);
+      results.push({ id: it.id, ...r });
+      transfer.push(r.positions.buffer, r.normals.buffer, r.indices.buffer);
+      if (r.colors) transfer.push(r.colors.buffer);
+    } catch (err) {
+      results.push({ id: it.id, error: `patch ${it.id} at byte offset ${it.offset}: ${err.message}` });
+    }
+  }
+  self.postMessage({ type: 'decoded', job: msg.job, results }, transfer);
+};

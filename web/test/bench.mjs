@@ -1,0 +1,84 @@
+// node test/bench.mjs BIN_DIR FILE.mt [--frames 600] [--budget 33] [--tol 1] [--cache 256] [--shots DIR]
+// The web viewer's figures on one MT file served by mtserve, in headless Chromium at 1280x720
+// (bench/web.sh runs it): time to the first image after page load, the share of frames within the
+// page's budget over a 600-frame orbit path, the cache against its cap, bytes fetched per frame and
+// in total against the file size, and the time the screen error takes to reach the tolerance once
+// the camera stops (the path's last 15% is still).
+import fs from 'node:fs';
+import path from 'node:path';
+import os from 'node:os';
+import { spawn } from 'node:child_process';
+import { fileURLToPath } from 'node:url';
+import { chromium } from 'playwright-core';
+
+const here = path.dirname(fileURLToPath(import.meta.url));
+const args = process.argv.slice(2);
+const opt = (name, def) => {
+  const i = args.indexOf(name);
+  return i >= 0 ? args[i + 1] : def;
+};
+const [binDir, file] = args;
+const frames = Number(opt('--frames', 600)), budget = Number(opt('--budget', 33)), tol = Number(opt('--tol', 1));
+const cacheMiB = Number(opt('--cache', 256)), shots = opt('--shots', '');
+const root = fs.mkdtempSync(path.join(os.tmpdir(), 'mtbench-'));
+fs.symlinkSync(path.resolve(here, '..'), path.join(root, 'web'));
+fs.symlinkSync(path.resolve(file), path.join(root, 'model.mt'));
+const srv = await new Promise((resolve, reject) => {
+  const p = spawn(path.join(binDir, 'mtserve'), [root, '--port', '0', '-q'], { stdio: ['ignore', 'pipe', 'inherit'] });
+  p.stdout.on('data', (d) => {
+    const m = /:(\d+)\//.exec(String(d));
+    if (m) resolve({ proc: p, base: `http://127.0.0.1:${m[1]}` });
+  });
+  p.on('exit', (c) => reject(new Error(`mtserve exited ${c}`)));
+});
+const browser = await chromium.launch({
+  executablePath: '/usr/bin/chromium', headless: true,
+  args: ['--no-sandbox', '--disable-gpu', '--disable-background-networking', '--disable-component-update', '--disable-sync',
+    '--no-first-run', '--use-angle=swiftshader', '--enable-unsafe-swiftshader'],
+});
+const page = await browser.newPage({ viewport: { width: 1280, height: 720 } });
+page.on('pageerror', (e) => console.error('pageerror:', e.message));
+const q = `file=/model.mt&tol=${tol}&budget=${budget}&cache=${cacheMiB}&path=orbit&frames=${frames}`;
+await page.goto(`${srv.base}/web/viewer.html?${q}`);
+const loadMs = await page.evaluate(() => performance.timing.loadEventEnd - performance.timing.navigationStart);
+await page.waitForFunction(() => window.mtViewer.firstImageMs !== null || window.mtViewer.error, null, { timeout: 60000 });
+if (shots) {
+  await page.waitForTimeout(1500);
+  await page.screenshot({ path: path.join(shots, 'web-viewer-moving.png') });
+}
+await page.waitForFunction(() => window.mtViewer.done || window.mtViewer.error, null, { timeout: 600000, polling: 250 });
+// Hold still until the screen error reaches the tolerance and nothing loads (or 20 s).
+const stillFrom = await page.evaluate(() => window.mtViewer.frames.find((f) => f.still).t);
+await page.waitForFunction((tol) => {
+  const f = window.mtViewer.frames.at(-1);
+  return f.err <= tol && f.pending === 0;
+}, tol, { timeout: 20000, polling: 50 }).catch(() => {});
+if (shots) await page.screenshot({ path: path.join(shots, 'web-viewer-still.png') });
+const s = await page.evaluate(() => ({ frames: window.mtViewer.frames, first: window.mtViewer.firstImageMs, fileSize: window.mtViewer.fileSize,
+  openBytes: window.mtViewer.openBytes, error: window.mtViewer.error, warnings: window.mtViewer.warnings.length }));
+await browser.close();
+srv.proc.kill();
+fs.rmSync(root, { recursive: true, force: true });
+if (s.error) {
+  console.error(`bench: ${s.error}`);
+  process.exit(1);
+}
+const f = s.frames;
+const pathFrames = f.slice(1, frames);
+const ms = pathFrames.map((x) => x.frameMs).sort((a, b) => a - b);
+const within = ms.filter((x) => x <= budget).length / ms.length;
+const cap = f[0].cacheCap, maxCache = Math.max(...f.map((x) => x.cacheBytes));
+const reach = f.find((x) => x.t >= stillFrom && x.err <= tol);
+const bytesPath = f[frames - 1].bytesRead;
+const mib = (b) => (b / 2 ** 20).toFixed(2);
+console.log(`file                      ${file} (${mib(s.fileSize)} MiB)`);
+console.log(`page load                 ${loadMs} ms (load event)`);
+console.log(`first image               ${s.first.toFixed(0)} ms after navigation start (header+DAG+index ${mib(s.openBytes)} MiB, coarsest cut loaded)`);
+console.log(`frames within ${budget} ms     ${(100 * within).toFixed(1)}% of ${ms.length} path frames (median ${ms[ms.length >> 1].toFixed(1)} ms, p95 ${ms[Math.floor(0.95 * ms.length)].toFixed(1)} ms, max ${ms.at(-1).toFixed(1)} ms)`);
+const med = (k) => pathFrames.map((x) => x[k]).sort((a, b) => a - b)[pathFrames.length >> 1];
+console.log(`page's own work         median cut update ${med('updateMs').toFixed(1)} ms, render calls ${med('renderMs').toFixed(1)} ms a frame (the rest of a frame is the browser's: SwiftShader, compositing)`);
+console.log(`triangles drawn           median ${pathFrames.map((x) => x.drawn).sort((a, b) => a - b)[pathFrames.length >> 1]}, max ${Math.max(...f.map((x) => x.drawn))}`);
+console.log(`cache                     max ${mib(maxCache)} MiB of a ${mib(cap)} MiB cap (${maxCache <= cap ? 'never above' : 'ABOVE'} the cap)`);
+console.log(`bytes fetched             ${mib(bytesPath)} MiB over the path (${(bytesPath / frames / 1024).toFixed(1)} KiB/frame), ${mib(f.at(-1).bytesRead)} MiB in all = ${(100 * f.at(-1).bytesRead / s.fileSize).toFixed(1)}% of the file`);
+console.log(`screen error after stop   ${reach ? `reached ${tol} px ${(reach.t - stillFrom).toFixed(0)} ms after the camera stopped` : `not at ${tol} px within 20 s (last ${f.at(-1).err.toFixed(2)} px, ${f.at(-1).drawn} triangles)`}`);
+console.log(`damaged patches skipped   ${s.warnings}`);

@@ -1,0 +1,208 @@
+// The web viewer in a real browser: Debian's chromium, headless, driven by playwright-core, WebGL
+// on SwiftShader, the MT files served by mtserve.
+//   node test/browser.mjs BIN_DIR DATA_DIR [--update-golden]
+// DATA_DIR holds t.mt and t-draco.mt (tests/web_browser.sh builds them). Tests:
+//   golden        a fixed view at a fixed tolerance, converged, against test/golden/torus.png
+//                 (at most 2% of the pixels differ by more than 48 in RGB);
+//   cracks        several views and tolerances, converged: no background pixel enclosed by the
+//                 surface in a component under 400 pixels (the torus' own hole is far larger);
+//   draco         the same surface coded with Draco: decoded by Draco's wasm decoder, no crack;
+//   path          a recorded camera path (orbit, 240 frames) under a 2 MiB cache: the cache never
+//                 above its cap, the cut never above the frame's render budget, loads evicted and
+//                 redone; the frame times are printed (the timed figures are bench/web.sh's);
+//   corrupted     a copy of the file with damaged payloads: warnings naming the patches, the page
+//                 keeps drawing frames;
+//   no-ranges     mtserve --no-ranges (200 instead of 206): the page shows the clear message.
+// Prints one line per test and "N passed, M failed"; exits 1 on any failure.
+import fs from 'node:fs';
+import path from 'node:path';
+import os from 'node:os';
+import { spawn } from 'node:child_process';
+import { fileURLToPath } from 'node:url';
+import { chromium } from 'playwright-core';
+import { FileSource } from '../src/source.js';
+import { openMtFile } from '../src/mtfile.js';
+
+const here = path.dirname(fileURLToPath(import.meta.url));
+const webDir = path.resolve(here, '..');
+const [binDir, dataDir] = process.argv.slice(2);
+const update = process.argv.includes('--update-golden');
+if (!dataDir) {
+  console.error('usage: node test/browser.mjs BIN_DIR DATA_DIR [--update-golden]');
+  process.exit(2);
+}
+export const chromiumArgs = ['--no-sandbox', '--disable-gpu', '--disable-background-networking', '--disable-component-update',
+  '--disable-sync', '--no-first-run', '--use-angle=swiftshader', '--enable-unsafe-swiftshader'];
+
+// A served directory: web/ and the data, linked (mtserve follows links placed inside its DIR).
+const root = fs.mkdtempSync(path.join(os.tmpdir(), 'mtweb-'));
+fs.symlinkSync(webDir, path.join(root, 'web'));
+fs.symlinkSync(path.resolve(dataDir), path.join(root, 'data'));
+
+function serve(extra) {
+  return new Promise((resolve, reject) => {
+    const p = spawn(path.join(binDir, 'mtserve'), [root, '--port', '0', '-q', ...extra], { stdio: ['ignore', 'pipe', 'inherit'] });
+    p.stdout.on('data', (d) => {
+      const m = /http:\/\/[\d.]+:(\d+)\//.exec(String(d));
+      if (m) resolve({ proc: p, base: `http://127.0.0.1:${m[1]}` });
+    });
+    p.on('error', reject);
+    p.on('exit', (code) => reject(new Error(`mtserve exited with ${code}`)));
+  });
+}
+
+const results = [];
+async function test(name, fn) {
+  const t0 = Date.now();
+  try {
+    const note = await fn();
+    results.push(true);
+    console.log(`PASS ${name} (${((Date.now() - t0) / 1000).toFixed(1)} s)${note ? ': ' + note : ''}`);
+  } catch (e) {
+    results.push(false);
+    console.log(`FAIL ${name} (${((Date.now() - t0) / 1000).toFixed(1)} s): ${e.message}`);
+  }
+}
+const check = (cond, msg) => { if (!cond) throw new Error(msg); };
+
+const srv = await serve([]);
+const noRange = await serve(['--no-ranges']);
+const browser = await chromium.launch({ executablePath: '/usr/bin/chromium', headless: true, args: chromiumArgs });
+const W = 640, H = 360;
+
+async function open(query, base = srv.base) {
+  const page = await browser.newPage({ viewport: { width: W, height: H } });
+  const log = [];
+  page.on('console', (m) => log.push(m.text()));
+  page.on('pageerror', (e) => log.push('pageerror: ' + e.message));
+  await page.goto(`${base}/web/viewer.html?capture&${query}`);
+  await page.waitForFunction(() => window.mtViewer && (window.mtViewer.ready || window.mtViewer.error), null, { timeout: 60000 });
+  return { page, log };
+}
+// Waits until the cut has stopped moving and nothing is loading for 8 frames.
+async function converge(page, timeout = 60000) {
+  await page.waitForFunction(() => {
+    const f = window.mtViewer.frames;
+    if (f.length < 10) return false;
+    return f.slice(-8).every((x) => x.moves === 0 && x.pending === 0);
+  }, null, { timeout, polling: 100 });
+}
+
+await test('golden', async () => {
+  const { page } = await open('file=/data/t.mt&tol=2&fixed=3000000&view=0.4,-1.6,0.9,0,0,0');
+  await converge(page);
+  await page.waitForTimeout(200);
+  const golden = path.join(here, 'golden', 'torus.png');
+  if (update || !fs.existsSync(golden)) {
+    const url = await page.evaluate(() => window.mtViewer.png());
+    fs.mkdirSync(path.dirname(golden), { recursive: true });
+    fs.writeFileSync(golden, Buffer.from(url.split(',')[1], 'base64'));
+    await page.close();
+    if (!update) throw new Error(`no golden image: wrote ${golden}; check it and commit it`);
+    return `wrote ${golden}`;
+  }
+  const r = await page.evaluate(() => window.mtViewer.compare('/web/test/golden/torus.png'));
+  await page.close();
+  check(!r.error, r.error);
+  check(r.differing <= 0.02, `${(100 * r.differing).toFixed(2)}% of the pixels differ from the golden image (mean ${r.mean.toFixed(2)})`);
+  return `${(100 * r.differing).toFixed(3)}% pixels differ, mean difference ${r.mean.toFixed(2)}`;
+});
+
+await test('cracks', async () => {
+  const notes = [];
+  for (const [view, tol] of [['0.4,-1.6,0.9,0,0,0', 1], ['0.2,-0.9,0.35,0,0,0', 3], ['1.4,0.3,0.2,0,0,0', 8], ['0,-0.7,0.15,0.6,0.6,0', 2]]) {
+    const { page } = await open(`file=/data/t.mt&tol=${tol}&fixed=3000000&bg=ff00ff&view=${view}`);
+    await converge(page);
+    const r = await page.evaluate(() => window.mtViewer.cracks('ff00ff'));
+    const f = await page.evaluate(() => window.mtViewer.frames.at(-1));
+    // The detector finds a 20-pixel slit painted into the middle of the same image.
+    const slit = await page.evaluate(() => window.mtViewer.cracks('ff00ff', 400, true));
+    await page.close();
+    check(slit.crackPixels >= 20, `view ${view}: the detector missed a painted 20-pixel slit (${slit.crackPixels})`);
+    check(r.surfacePixels > 1000, `view ${view}: the surface covers only ${r.surfacePixels} pixels`);
+    check(r.crackPixels === 0, `view ${view} tolerance ${tol}: ${r.crackPixels} background pixels in ${r.components} holes inside the silhouette`);
+    check(f.triangles > 20000, `view ${view}: the cut has only ${f.triangles} triangles`);
+    notes.push(`${f.triangles} triangles`);
+  }
+  return `4 cuts, no crack (${notes.join(', ')})`;
+});
+
+await test('draco', async () => {
+  const { page, log } = await open('file=/data/t-draco.mt&tol=1&fixed=3000000&bg=ff00ff&view=0.4,-1.6,0.9,0,0,0');
+  await converge(page);
+  const r = await page.evaluate(() => window.mtViewer.cracks('ff00ff'));
+  const st = await page.evaluate(() => ({ f: window.mtViewer.frames.at(-1), w: window.mtViewer.warnings }));
+  await page.close();
+  check(st.w.length === 0, `warnings: ${st.w[0]}`);
+  check(!log.some((m) => m.startsWith('pageerror')), `page error: ${log.find((m) => m.startsWith('pageerror'))}`);
+  check(st.f.triangles > 20000 && r.surfacePixels > 1000, `the Draco file's cut has ${st.f.triangles} triangles, ${r.surfacePixels} pixels`);
+  check(r.crackPixels === 0, `${r.crackPixels} background pixels enclosed by the surface`);
+  return `${st.f.triangles} triangles decoded by Draco's decoder, no crack`;
+});
+
+await test('path', async () => {
+  const cap = 2 * 2 ** 20;
+  const { page } = await open(`file=/data/t.mt&tol=1&budget=50&cache=2&path=orbit&frames=240`);
+  await page.waitForFunction(() => window.mtViewer.done, null, { timeout: 240000, polling: 200 });
+  const f = await page.evaluate(() => window.mtViewer.frames);
+  await page.close();
+  const over = f.filter((x) => x.cacheBytes > cap);
+  check(over.length === 0, `cache above its cap of ${cap} bytes in ${over.length} frames (max ${Math.max(...f.map((x) => x.cacheBytes))})`);
+  const overBudget = f.filter((x) => x.drawn > Math.max(x.budget, f[0].drawn) * 1.001);
+  check(overBudget.length === 0, `the drawn cut exceeded the render budget in ${overBudget.length} frames`);
+  const ms = f.slice(1).map((x) => x.frameMs).sort((a, b) => a - b);
+  const within = ms.filter((x) => x <= 50).length / ms.length;
+  const maxCache = Math.max(...f.map((x) => x.cacheBytes));
+  check(f.at(-1).evictions > 0, `nothing was evicted (cache max ${Math.max(...f.map((x) => x.cacheBytes))}, ${f.at(-1).loads} loads, given up ${f.at(-1).givenUp}): the test tests nothing`);
+  return `${f.length} frames, cache max ${(maxCache / 2 ** 20).toFixed(2)} MiB of 2, ${f.at(-1).evictions} evictions, frame ms median ${ms[ms.length >> 1].toFixed(1)} p95 ${ms[Math.floor(ms.length * 0.95)].toFixed(1)}, ${(100 * within).toFixed(1)}% within 50 ms, fetched ${(f.at(-1).bytesRead / 2 ** 20).toFixed(2)} MiB`;
+});
+
+await test('corrupted', async () => {
+  // Damage one byte in the middle of every 3rd payload of the finest two levels.
+  const src = path.join(dataDir, 't.mt'), dst = path.join(dataDir, 't-bad.mt');
+  fs.copyFileSync(src, dst);
+  const s = await openMtFile(new FileSource(src, fs));
+  const fd = fs.openSync(dst, 'r+');
+  let damaged = 0;
+  for (let i = 0; i < s.patches.count; i += 3) {
+    const arc = s.patches.arc[i];
+    if (s.nodes.level[s.arcs.from[arc]] > 1) continue;
+    const at = s.patches.offset[i] + Math.floor(s.patches.size[i] / 2);
+    const b = Buffer.alloc(1);
+    fs.readSync(fd, b, 0, 1, at);
+    b[0] ^= 0x5a;
+    fs.writeSync(fd, b, 0, 1, at);
+    ++damaged;
+  }
+  fs.closeSync(fd);
+  const { page, log } = await open('file=/data/t-bad.mt&tol=0.5&fixed=3000000&view=0.2,-0.9,0.35,0,0,0');
+  await page.waitForFunction(() => window.mtViewer.warnings.length > 0, null, { timeout: 60000 });
+  const n0 = await page.evaluate(() => window.mtViewer.frames.length);
+  await page.waitForTimeout(1500);
+  const st = await page.evaluate(() => ({ n: window.mtViewer.frames.length, w: window.mtViewer.warnings, err: window.mtViewer.error, drawn: window.mtViewer.frames.at(-1).drawn }));
+  await page.close();
+  fs.unlinkSync(dst);
+  check(!st.err, `the page stopped: ${st.err}`);
+  check(st.n > n0 + 3, `the page stopped drawing frames after the warning (${n0} -> ${st.n})`);
+  check(st.w.every((m) => /patch \d+ is damaged: checksum mismatch/.test(m)), `unexpected warning: ${st.w[0]}`);
+  check(log.some((m) => /damaged/.test(m)), 'no warning on the console');
+  check(!log.some((m) => m.startsWith('pageerror')), `page error: ${log.find((m) => m.startsWith('pageerror'))}`);
+  return `${damaged} payloads damaged, ${st.w.length} skipped with a warning ("${st.w[0].replace(/^.*?: /, '').slice(0, 70)}..."), still drawing`;
+});
+
+await test('no-ranges', async () => {
+  const { page } = await open('file=/data/t.mt', noRange.base);
+  const st = await page.evaluate(() => ({ err: window.mtViewer.error, shown: getComputedStyle(document.getElementById('error')).display }));
+  await page.close();
+  check(st.err && /instead of 206/.test(st.err) && /Range/.test(st.err), `no clear message: ${st.err}`);
+  check(st.shown === 'block', 'the message is not shown on the page');
+  return `"${st.err.slice(0, 90)}..."`;
+});
+
+await browser.close();
+srv.proc.kill();
+noRange.proc.kill();
+fs.rmSync(root, { recursive: true, force: true });
+const passed = results.filter((x) => x).length;
+console.log(`${passed} passed, ${results.length - passed} failed`);
+process.exit(passed === results.length ? 0 : 1);

@@ -1,0 +1,221 @@
+// The standalone viewer page: viewer.html?file=URL[&tol=1][&budget=33][&cache=256][&bg=20242a]
+// [&path=orbit|fixed&frames=600][&view=EX,EY,EZ,TX,TY,TZ (unit space)]. Orbit/pan/zoom with the
+// mouse (three's OrbitControls); the HUD shows fps, triangles, cache, loads and the screen error.
+// `plain` draws with renderer.render (no progressive still image). `capture` keeps the drawing buffer for reading the image back (the tests). `path` plays a recorded camera path frame by frame (the browser tests and bench/web.sh); the
+// per-frame figures are in window.mtViewer.frames.
+import * as THREE from 'three';
+import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
+import { MTObject } from './src/mt_object.js';
+
+const q = new URLSearchParams(location.search);
+const hud = document.getElementById('hud');
+const errBox = document.getElementById('error');
+const warnBox = document.getElementById('warn');
+const state = (window.mtViewer = { ready: false, error: null, warnings: [], frames: [], firstImageMs: null, done: false });
+
+function showError(msg) {
+  state.error = msg;
+  errBox.textContent = msg;
+  errBox.style.display = 'block';
+  hud.textContent = 'error';
+}
+
+// A camera path in unit space (p = centre + radius * v): one turn with elevation changes and
+// zooms, the last 15% of the frames still.
+function orbitPose(i, frames) {
+  const moving = Math.floor(frames * 0.85);
+  const f = Math.min(i, moving) / moving;
+  const a = 2 * Math.PI * f - Math.PI / 2;
+  const d = 2.3 + 1.1 * Math.cos(3 * Math.PI * f);
+  const el = 0.25 + 0.35 * Math.sin(2 * Math.PI * f);
+  return { eye: [d * Math.cos(a), d * Math.sin(a), d * el], target: [0.15 * Math.sin(4 * Math.PI * f), 0, 0] };
+}
+
+async function main() {
+  const file = q.get('file');
+  if (!file) return showError('viewer.html?file=URL: no MT file given');
+  const width = window.innerWidth, height = window.innerHeight;
+  const renderer = new THREE.WebGLRenderer({ antialias: false, preserveDrawingBuffer: q.has('capture'), powerPreference: 'high-performance' });
+  renderer.setPixelRatio(1);
+  renderer.setSize(width, height);
+  document.body.appendChild(renderer.domElement);
+  const bg = new THREE.Color('#' + (q.get('bg') || '20242a'));
+  renderer.setClearColor(bg);
+  const scene = new THREE.Scene();
+  const camera = new THREE.PerspectiveCamera(45, width / height, 0.01, 100);
+  camera.up.set(0, 0, 1);
+  scene.add(new THREE.HemisphereLight(0xffffff, 0x404040, 1.2));
+  const sun = new THREE.DirectionalLight(0xffffff, 1.6);
+  camera.add(sun);
+  sun.position.set(0.5, 1, 0.3);
+  scene.add(camera);
+
+  let mt;
+  try {
+    mt = await MTObject.open(file, {
+      pixelTolerance: Number(q.get('tol') || 1),
+      budgetMs: Number(q.get('budget') || 33),
+      fixedTriangles: Number(q.get('fixed') || 0),
+      cacheBytes: Number(q.get('cache') || 256) * 2 ** 20,
+      onWarning: (m) => {
+        state.warnings.push(m);
+        warnBox.textContent = `${state.warnings.length} damaged patch(es) skipped: ${m}`;
+      },
+    });
+  } catch (e) {
+    return showError(e.message);
+  }
+  scene.add(mt);
+  const r = mt.mt.radius;
+  const c = new THREE.Vector3(...mt.mt.center);
+  const unit = (v) => new THREE.Vector3(v[0], v[1], v[2]).multiplyScalar(r).add(c);
+  camera.near = r * 1e-3;
+  camera.far = r * 20;
+  camera.updateProjectionMatrix();
+  const controls = new OrbitControls(camera, renderer.domElement);
+  const setPose = (p) => {
+    camera.position.copy(unit(p.eye));
+    controls.target.copy(unit(p.target));
+    camera.lookAt(controls.target);
+  };
+  const v = (q.get('view') || '').split(',').map(Number);
+  setPose(v.length === 6 && v.every(Number.isFinite) ? { eye: v.slice(0, 3), target: v.slice(3) } : { eye: [0, -2.2, 1.1], target: [0, 0, 0] });
+  controls.update();
+  const path = q.get('path');
+  const frames = Number(q.get('frames') || 600);
+  state.canvas = renderer.domElement;
+  state.ready = true;
+  state.fileSize = mt.mt.fileSize;
+  state.openBytes = mt.mt.source.bytesFetched;
+  state.budgetMs = mt.extract.options.budgetMs;
+  state.tolerance = mt.extract.options.pixelTolerance;
+  let i = 0, fpsAvg = 0, last = performance.now();
+  const loop = () => {
+    if (mt.fatal) return showError(mt.fatal.message);
+    const now = performance.now();
+    const dt = now - last;
+    last = now;
+    if (path === 'orbit') setPose(orbitPose(i, frames));
+    else controls.update();
+    const tu = performance.now();
+    const st = mt.update(camera, width, height);
+    const updateMs = performance.now() - tu;
+    // Near/far hug the model so depth precision holds close to the surface.
+    const dist = camera.position.distanceTo(c);
+    camera.near = Math.max(r * 5e-4, (dist - r) * 0.9);
+    camera.far = dist + r * 1.01;
+    camera.updateProjectionMatrix();
+    const tr = performance.now();
+    if (q.has('plain')) renderer.render(scene, camera);
+    else mt.render(renderer, scene, camera);
+    const renderMs = performance.now() - tr;
+    if (state.firstImageMs === null) state.firstImageMs = performance.now();
+    if (i > 0) fpsAvg = fpsAvg ? 0.9 * fpsAvg + 0.1 * (1000 / dt) : 1000 / dt;
+    state.frames.push({
+      t: now, frameMs: i > 0 ? dt : 0, updateMs, renderMs, drawn: st.drawnTriangles, patches: st.drawnPatches, cacheBytes: st.cacheBytes,
+      cacheCap: st.cacheCap, bytesRead: st.bytesRead, err: st.maxScreenError, pending: st.loadsPending,
+      budget: st.budgetTriangles, loads: st.loads, moves: st.refinements + st.coarsenings, evictions: st.evictions, givenUp: st.givenUp, triangles: st.triangles, still: path === 'orbit' ? i >= Math.floor(frames * 0.85) : null,
+    });
+    if (state.frames.length > 5000) state.frames.shift();
+    if (i % 10 === 0) hud.textContent =
+      `fps ${fpsAvg.toFixed(1)}  (budget ${state.budgetMs} ms)\n` +
+      `triangles ${(st.triangles / 1e6).toFixed(2)} M in the cut, ${(st.drawnTriangles / 1e6).toFixed(2)} M drawn this frame, ${st.drawnPatches} patches\n` +
+      `cache ${(st.cacheBytes / 2 ** 20).toFixed(1)} / ${(st.cacheCap / 2 ** 20).toFixed(0)} MiB\n` +
+      `loads ${st.loads}, pending ${st.loadsPending}, fetched ${(st.bytesRead / 2 ** 20).toFixed(1)} MiB of ${(mt.mt.fileSize / 2 ** 20).toFixed(1)}\n` +
+      `screen error ${st.maxScreenError.toFixed(2)} px (tolerance ${state.tolerance})`;
+    ++i;
+    if (path && i >= frames) state.done = true;
+    requestAnimationFrame(loop);
+  };
+  requestAnimationFrame(loop);
+}
+// The image as RGBA bytes (the drawing buffer is preserved).
+function pixels() {
+  const cv = state.canvas;
+  const c2 = document.createElement('canvas');
+  c2.width = cv.width;
+  c2.height = cv.height;
+  const g = c2.getContext('2d');
+  g.drawImage(cv, 0, 0);
+  return g.getImageData(0, 0, cv.width, cv.height);
+}
+// Background pixels not connected to the image border through background: holes inside the
+// silhouette. Components under `maxArea` pixels are counted as cracks (a real hole of the surface,
+// or the torus' middle, is large). Returns {crackPixels, components, surfacePixels}.
+// inject: paint a 1x20-pixel slit of background into a solid part of the surface first (the check
+// of the detector itself: it must find it).
+state.cracks = (bgHex, maxArea = 400, inject = false) => {
+  const img = pixels();
+  const { width: w, height: h, data } = img;
+  const bg = [parseInt(bgHex.slice(0, 2), 16), parseInt(bgHex.slice(2, 4), 16), parseInt(bgHex.slice(4, 6), 16)];
+  const isBg = new Uint8Array(w * h);
+  let surface = 0;
+  for (let i = 0; i < w * h; ++i) {
+    const d = Math.abs(data[4 * i] - bg[0]) + Math.abs(data[4 * i + 1] - bg[1]) + Math.abs(data[4 * i + 2] - bg[2]);
+    isBg[i] = d < 12 ? 1 : 0;
+    if (!isBg[i]) ++surface;
+  }
+  if (inject) {
+    // The first place (scanning from the middle row down) with a 3x22 block of surface.
+    const solid = (x, y) => { for (let yy = y - 1; yy < y + 21; ++yy) for (let xx = x - 1; xx <= x + 1; ++xx) if (isBg[yy * w + xx]) return false; return true; };
+    let done = false;
+    for (let y = h >> 2; y < h - 22 && !done; y += 4)
+      for (let x = 2; x < w - 2 && !done; x += 2)
+        if (solid(x, y)) {
+          for (let yy = y; yy < y + 20; ++yy) isBg[yy * w + x] = 1;
+          done = true;
+        }
+  }
+  const seen = new Uint8Array(w * h);
+  const stack = [];
+  const fill = (start) => {
+    let area = 0;
+    stack.push(start);
+    seen[start] = 1;
+    let border = false;
+    while (stack.length) {
+      const i = stack.pop();
+      ++area;
+      const x = i % w, y = (i / w) | 0;
+      if (x === 0 || y === 0 || x === w - 1 || y === h - 1) border = true;
+      for (const j of [x > 0 ? i - 1 : -1, x < w - 1 ? i + 1 : -1, y > 0 ? i - w : -1, y < h - 1 ? i + w : -1])
+        if (j >= 0 && isBg[j] && !seen[j]) seen[j] = 1, stack.push(j);
+    }
+    return { area, border };
+  };
+  let crackPixels = 0, components = 0;
+  for (let i = 0; i < w * h; ++i)
+    if (isBg[i] && !seen[i]) {
+      const c = fill(i);
+      if (!c.border && c.area < maxArea) crackPixels += c.area, ++components;
+    }
+  return { crackPixels, components, surfacePixels: surface };
+};
+// The image against a PNG at `url`: the share of pixels whose RGB differs by more than `tol`
+// (sum of absolute differences), and the mean absolute difference per channel.
+state.compare = async (url, tol = 48) => {
+  const img = pixels();
+  const ref = await new Promise((resolve, reject) => {
+    const im = new Image();
+    im.onload = () => resolve(im);
+    im.onerror = () => reject(new Error(`cannot load ${url}`));
+    im.src = url;
+  });
+  if (ref.width !== img.width || ref.height !== img.height) return { error: `size ${ref.width}x${ref.height} vs ${img.width}x${img.height}` };
+  const c2 = document.createElement('canvas');
+  c2.width = ref.width;
+  c2.height = ref.height;
+  const g = c2.getContext('2d');
+  g.drawImage(ref, 0, 0);
+  const r = g.getImageData(0, 0, ref.width, ref.height).data;
+  let off = 0, sum = 0;
+  const n = img.width * img.height;
+  for (let i = 0; i < n; ++i) {
+    const d = Math.abs(img.data[4 * i] - r[4 * i]) + Math.abs(img.data[4 * i + 1] - r[4 * i + 1]) + Math.abs(img.data[4 * i + 2] - r[4 * i + 2]);
+    sum += d;
+    if (d > tol) ++off;
+  }
+  return { differing: off / n, mean: sum / (3 * n) };
+};
+state.png = () => state.canvas.toDataURL('image/png');
+main().catch((e) => showError(e.stack || e.message));
