@@ -4,6 +4,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -149,28 +150,26 @@ TilesReport exportTiles(const MtFileReader& r, const std::string& dir, const Til
         std::fprintf(stderr, "mtexport: %llu of %zu contents\n", (unsigned long long)k, contents.size());
     });
 
-    // tileset.json: spheres relative to the frame, grown by a grid step (and a relative epsilon,
-    // which keeps the nesting: |c_p - c_n| + r_p <= r_n implies it for the grown radii).
-    auto sphere = [&](uint32_t n) {
+    // tileset.json: spheres relative to the frame. A node's sphere contains its predecessors'
+    // (mt_format.h) up to float rounding of the radii; the exported radius is grown to contain
+    // every child's exported sphere exactly (computed bottom-up), and by a grid step.
+    auto sphereOf = [&](uint32_t n) {
       const auto& node = nodes[n];
-      const double rad = double(node.radius) * (1 + 1e-6) + h.gridStep;
-      return json::array({node.center[0] - origin[0], node.center[1] - origin[1], node.center[2] - origin[2], rad});
+      return std::array<double, 4>{node.center[0] - origin[0], node.center[1] - origin[1], node.center[2] - origin[2],
+                                   double(node.radius) * (1 + 1e-6) + h.gridStep};
     };
+    auto enclose = [](std::array<double, 4>& s, const json& child) {
+      const json& c = child["boundingVolume"]["sphere"];
+      const double d = std::hypot(c[0].get<double>() - s[0], c[1].get<double>() - s[1], c[2].get<double>() - s[2]);
+      const double need = d + c[3].get<double>();
+      if (need > s[3]) s[3] = std::nextafter(need * (1 + 1e-12), INFINITY);
+    };
+    auto volume = [](const std::array<double, 4>& s) { return json{{"sphere", {s[0], s[1], s[2], s[3]}}}; };
     uint32_t depth = 0;
     // Recursion depth is the DAG's level count (tens): a plain recursive walk.
     std::function<json(uint32_t, uint32_t)> tile = [&](uint32_t n, uint32_t d) -> json {
       depth = std::max(depth, d);
       ++report.tiles;
-      json t = {{"boundingVolume", {{"sphere", sphere(n)}}}};
-      if (n == sink) {
-        t["geometricError"] = 2.0 * double(nodes[n].radius);
-        t["refine"] = "REPLACE";
-        t["transform"] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, origin[0], origin[1], origin[2], 1};
-      } else {
-        t["geometricError"] = double(nodes[n].error);
-        const Content& c = contents[size_t(tree.content[n])];
-        if (!c.empty) t["content"] = {{"uri", c.uri}};
-      }
       json kids = json::array();
       for (auto [id, kind] : tree.children[n]) {
         if (kind == 0) {
@@ -180,18 +179,31 @@ TilesReport exportTiles(const MtFileReader& r, const std::string& dir, const Til
         depth = std::max(depth, d + 1);
         ++report.tiles;
         if (kind == 1) {
+          // A leaf copy of a node whose subtree hangs elsewhere: the same GLB, no children.
           ++report.copies;
-          json leaf = {{"boundingVolume", {{"sphere", sphere(uint32_t(id))}}}, {"geometricError", double(nodes[id].error)}};
+          json leaf = {{"boundingVolume", volume(sphereOf(uint32_t(id)))}, {"geometricError", double(nodes[id].error)}};
           const Content& c = contents[size_t(tree.content[id])];
           if (!c.empty) leaf["content"] = {{"uri", c.uri}};
           kids.push_back(leaf);
         } else {
           // The source's piece in n's floor: full resolution, inside n's sphere.
-          json leaf = {{"boundingVolume", {{"sphere", sphere(n)}}}, {"geometricError", 0.0}};
+          json leaf = {{"boundingVolume", volume(sphereOf(n))}, {"geometricError", 0.0}};
           const Content& c = contents[id];
           if (!c.empty) leaf["content"] = {{"uri", c.uri}};
           kids.push_back(leaf);
         }
+      }
+      std::array<double, 4> s = sphereOf(n);
+      for (const json& k : kids) enclose(s, k);
+      json t = {{"boundingVolume", volume(s)}};
+      if (n == sink) {
+        t["geometricError"] = 2.0 * s[3];
+        t["refine"] = "REPLACE";
+        t["transform"] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, origin[0], origin[1], origin[2], 1};
+      } else {
+        t["geometricError"] = double(nodes[n].error);
+        const Content& c = contents[size_t(tree.content[n])];
+        if (!c.empty) t["content"] = {{"uri", c.uri}};
       }
       if (!kids.empty()) t["children"] = kids;
       return t;
