@@ -202,7 +202,6 @@ GltfBytes buildGltf(const GltfMeshView& m, const GltfOptions& o, const std::stri
     if (idx.stride == 2) put<uint16_t>(idx.bytes, uint16_t(m.triangles[i]));
     else put<uint32_t>(idx.bytes, m.triangles[i]);
   }
-  pad4(idx.bytes);  // a uint16 index view of odd length: the fallback layout stays aligned
   streams.push_back(std::move(idx));
 
   Views views(o.meshopt, out.bin);

@@ -2,7 +2,8 @@
 # The checks of interop/checks (npm ci there first; scripts/setup.sh does it) on files the tools write:
 #   tests/interop_checks.sh validate BIN_DIR   every glTF variant mtextract writes and a 3D Tiles export,
 #                                              through the Khronos glTF-Validator (no error, no warning)
-#                                              and the tileset rules (interop/checks/validate.mjs)
+#                                              and the tileset rules (interop/checks/validate.mjs); meshopt
+#                                              files also decoded and validated again
 #   tests/interop_checks.sh cesium BIN_DIR     a scan at UTM-like coordinates, built with a CRS and exported
 #                                              to 3D Tiles, drawn by CesiumJS in headless Chromium where the
 #                                              MT file says it is (interop/checks/cesium_check.mjs); the
@@ -24,8 +25,12 @@ case "$mode" in
       "$bin/mtextract" "$t/$mt.mt" --error 0 -o "$t/$mt-full.glb" 2>/dev/null
       "$bin/mtextract" "$t/$mt.mt" --triangles 5000 -o "$t/$mt-coarse.gltf" 2>/dev/null
       "$bin/mtextract" "$t/$mt.mt" --error 0 --quantize -o "$t/$mt-quantized.glb" 2>/dev/null
+      "$bin/mtextract" "$t/$mt.mt" --error 0 --meshopt -o "$t/$mt-meshopt.glb" 2>/dev/null
+      "$bin/mtextract" "$t/$mt.mt" --triangles 5000 --quantize --meshopt -o "$t/$mt-qm.gltf" 2>/dev/null
       "$bin/mtexport" tiles "$t/$mt.mt" "$t/$mt-tiles" 2>/dev/null
-      files+=("$t/$mt-full.glb" "$t/$mt-coarse.gltf" "$t/$mt-quantized.glb" "$t/$mt-tiles")
+      "$bin/mtexport" tiles "$t/$mt.mt" "$t/$mt-tiles-meshopt" --meshopt 2>/dev/null
+      files+=("$t/$mt-full.glb" "$t/$mt-coarse.gltf" "$t/$mt-quantized.glb" "$t/$mt-meshopt.glb" "$t/$mt-qm.gltf"
+              "$t/$mt-tiles" "$t/$mt-tiles-meshopt")
     done
     node "$checks/validate.mjs" "${files[@]}"
     ;;

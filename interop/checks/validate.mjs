@@ -4,22 +4,86 @@
 //    3d-tiles-validator package): asset.version "1.1", geometricError >= 0 and never above the
 //    parent's, refine REPLACE/ADD, a bounding volume per tile, every child's sphere inside its
 //    parent's (same frame), every content uri an existing file.
+// The validator cannot look inside EXT_meshopt_compression (it says so as an info): such a file is
+// also decoded (meshoptimizer's JS decoder) into a plain GLB, which must validate clean too.
 // Prints one line per file; exit 1 on any problem.
 import fs from 'node:fs';
 import path from 'node:path';
 import validator from 'gltf-validator';
+import { MeshoptDecoder } from 'meshoptimizer';
 
 let problems = 0;
 const complain = (msg) => { console.error(msg); problems++; };
 
+// GLB or .gltf -> { json, bin } (bin: buffer 0's bytes).
+function load(file) {
+  const data = fs.readFileSync(file);
+  if (data.readUInt32LE(0) === 0x46546c67) {
+    const jsonLength = data.readUInt32LE(12);
+    const json = JSON.parse(data.subarray(20, 20 + jsonLength).toString('utf8'));
+    const at = 20 + jsonLength;
+    const bin = at < data.length ? data.subarray(at + 8, at + 8 + data.readUInt32LE(at)) : Buffer.alloc(0);
+    return { json, bin };
+  }
+  const json = JSON.parse(data.toString('utf8'));
+  return { json, bin: fs.readFileSync(path.join(path.dirname(file), json.buffers[0].uri)) };
+}
+
+// The same document with every meshopt-compressed view decoded, as a GLB.
+async function decodeMeshopt(file) {
+  await MeshoptDecoder.ready;
+  const { json, bin } = load(file);
+  const parts = [];
+  let size = 0;
+  json.bufferViews = json.bufferViews.map((v) => {
+    const e = v.extensions && v.extensions.EXT_meshopt_compression;
+    let bytes;
+    if (e) {
+      bytes = new Uint8Array(Math.max(e.count * e.byteStride, v.byteLength));
+      const src = new Uint8Array(bin.buffer, bin.byteOffset + (e.byteOffset || 0), e.byteLength);
+      MeshoptDecoder.decodeGltfBuffer(bytes, e.count, e.byteStride, src, e.mode, e.filter || 'NONE');
+    } else {
+      bytes = new Uint8Array(bin.buffer, bin.byteOffset + (v.byteOffset || 0), v.byteLength);
+    }
+    const nv = { ...v, buffer: 0, byteOffset: size, byteLength: v.byteLength };
+    delete nv.extensions;
+    parts.push(bytes.subarray(0, v.byteLength));
+    size += v.byteLength;
+    while (size % 4) { parts.push(new Uint8Array(1)); size++; }
+    return nv;
+  });
+  const out = Buffer.concat(parts.map((p) => Buffer.from(p.buffer, p.byteOffset, p.byteLength)));
+  json.buffers = [{ byteLength: out.length }];
+  const drop = (list) => (list || []).filter((x) => x !== 'EXT_meshopt_compression');
+  json.extensionsUsed = drop(json.extensionsUsed);
+  json.extensionsRequired = drop(json.extensionsRequired);
+  if (!json.extensionsUsed.length) delete json.extensionsUsed;
+  if (!json.extensionsRequired.length) delete json.extensionsRequired;
+  let text = Buffer.from(JSON.stringify(json));
+  text = Buffer.concat([text, Buffer.alloc((4 - (text.length % 4)) % 4, 0x20)]);
+  const header = Buffer.alloc(20);
+  header.writeUInt32LE(0x46546c67, 0); header.writeUInt32LE(2, 4);
+  header.writeUInt32LE(12 + 8 + text.length + 8 + out.length, 8);
+  header.writeUInt32LE(text.length, 12); header.writeUInt32LE(0x4e4f534a, 16);
+  const binHeader = Buffer.alloc(8);
+  binHeader.writeUInt32LE(out.length, 0); binHeader.writeUInt32LE(0x004e4942, 4);
+  return new Uint8Array(Buffer.concat([header, text, binHeader, out]));
+}
+
 async function validateGltf(file) {
-  const data = new Uint8Array(fs.readFileSync(file));
+  await validateBytes(file, new Uint8Array(fs.readFileSync(file)));
+  const { json } = load(file);
+  if ((json.extensionsUsed || []).includes('EXT_meshopt_compression'))
+    await validateBytes(`${file} (meshopt decoded)`, await decodeMeshopt(file));
+}
+
+async function validateBytes(file, data) {
   const report = await validator.validateBytes(data, {
-    uri: path.basename(file),
+    uri: path.basename(file.split(' ')[0]),
     maxIssues: 50,
     externalResourceFunction: (uri) =>
       new Promise((resolve, reject) => {
-        try { resolve(new Uint8Array(fs.readFileSync(path.join(path.dirname(file), decodeURIComponent(uri))))); }
+        try { resolve(new Uint8Array(fs.readFileSync(path.join(path.dirname(file.split(' ')[0]), decodeURIComponent(uri))))); }
         catch (e) { reject(e.toString()); }
       }),
   });
