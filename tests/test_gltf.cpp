@@ -288,6 +288,14 @@ TEST(GltfRoundTrip, FullResolutionCutEqualsTheInputOnTheGrid) {
     std::string bytes = test::readFile(out);
     EXPECT_NE(bytes.find("\"crs\":\"EPSG:32633\""), std::string::npos);
   }
+  // The glTF options are refused for PLY, and unknown extensions still are.
+  auto ply = runTool("mtextract", dir.file("scene.mt") + " --error 0 --meshopt -o " + dir.file("cut.ply"));
+  EXPECT_EQ(ply.exitCode, 1);
+  EXPECT_NE(ply.output.find("--meshopt and --quantize are for glTF output"), std::string::npos) << ply.output;
+  auto xyz = runTool("mtextract", dir.file("scene.mt") + " --error 0 -o " + dir.file("cut.xyz"));
+  EXPECT_EQ(xyz.exitCode, 1);
+  EXPECT_NE(xyz.output.find("supported: .ply, .glb, .gltf"), std::string::npos) << xyz.output;
+  EXPECT_FALSE(test::fileExists(dir.file("cut.ply")));
   // A coarser cut is smaller and still reads.
   auto coarse = runTool("mtextract", dir.file("scene.mt") + " --triangles 2000 -o " + dir.file("coarse.glb"));
   ASSERT_EQ(coarse.exitCode, 0) << coarse.output;
@@ -321,6 +329,23 @@ TEST(MtMetadata, NoCrsMeansNoBlockAndADamagedBlockIsRefused) {
   }
   auto help = runTool("mtbuild", "--help");
   EXPECT_NE(help.output.find("--crs"), std::string::npos);
+  // mtgen --offset: positions moved in double; only binary PLY can hold them.
+  ASSERT_EQ(runTool("mtgen", "-o " + dir.file("a.ply") + " --triangles 2k").exitCode, 0);
+  ASSERT_EQ(runTool("mtgen", "-o " + dir.file("b.ply") + " --triangles 2k --offset 500000,4000000,100.5").exitCode, 0);
+  Soup a = readMesh(dir.file("a.ply")), b = readMesh(dir.file("b.ply"));
+  ASSERT_EQ(a.v.size(), b.v.size());
+  EXPECT_TRUE(b.header.doublePrecision);
+  for (size_t i = 0; i < a.v.size(); i += 97) {
+    EXPECT_NEAR(b.v[i].p[0] - 500000.0, a.v[i].p[0], 1e-6);
+    EXPECT_NEAR(b.v[i].p[1] - 4000000.0, a.v[i].p[1], 1e-6);
+    EXPECT_NEAR(b.v[i].p[2] - 100.5, a.v[i].p[2], 1e-6);
+  }
+  auto obj = runTool("mtgen", "-o " + dir.file("c.obj") + " --triangles 2k --offset 1,2,3");
+  EXPECT_EQ(obj.exitCode, 1);
+  EXPECT_NE(obj.output.find("--offset needs --format ply"), std::string::npos) << obj.output;
+  auto bad = runTool("mtgen", "-o " + dir.file("d.ply") + " --triangles 2k --offset 1,2");
+  EXPECT_EQ(bad.exitCode, 1);
+  EXPECT_NE(bad.output.find("--offset wants X,Y,Z"), std::string::npos) << bad.output;
 }
 
 // Damaged and wrong files: one clear error naming the file and where.
