@@ -70,6 +70,16 @@ try {
     viewer.scene.backgroundColor = Cesium.Color.BLACK;
     viewer.scene.light = new Cesium.DirectionalLight({ direction: new Cesium.Cartesian3(0.3, -0.5, -0.8) });
     const tileset = await Cesium.Cesium3DTileset.fromUrl('/tiles/tileset.json', { maximumScreenSpaceError: 4 });
+    // Shading from the screen-space derivatives of the position (the GLBs carry normals only when
+    // the MT has them): the picture shows the surface, not only its silhouette.
+    tileset.customShader = new Cesium.CustomShader({
+      lightingModel: Cesium.LightingModel.UNLIT,
+      fragmentShaderText: `void fragmentMain(FragmentInput fsInput, inout czm_modelMaterial material) {
+        vec3 p = fsInput.attributes.positionEC;
+        vec3 n = normalize(cross(dFdx(p), dFdy(p)));
+        material.diffuse = vec3(0.25 + 0.75 * abs(n.z));
+      }`,
+    });
     viewer.scene.primitives.add(tileset);
     const target = new Cesium.Cartesian3(center[0], center[1], center[2]);
     viewer.camera.lookAt(target, new Cesium.HeadingPitchRange(0.3, -0.6, radius * 3.2));
