@@ -66,6 +66,9 @@ struct BuildOptions {
   // When set, one CSV line per region (level, region, triangles, seconds of load/process/commit,
   // bytes a cluster would move) is written here: the input of the scaling model in docs/cluster.md.
   std::string taskTimesPath;
+  // The coordinate reference system of the input's positions (--crs), stored in the MT file's
+  // metadata block (mtfile/mt_format.h); empty: none. Not interpreted by the build.
+  std::string crs;
   // The tool's name in messages ("mtbuild", "mtcluster").
   std::string toolName = "mtbuild";
 };

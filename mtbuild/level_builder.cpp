@@ -491,6 +491,7 @@ BuildReport LevelBuilder::finish() {
   for (const DagArc& a : arcs) onArcs += a.patches.size();
   assert(onArcs == s.writer->patchCount() && "every MT patch is on exactly one arc");
 #endif
+  if (!s.options.crs.empty()) s.writer->setMetadata(format::kMetadataCrs, s.options.crs);
   s.writer->finish(std::move(s.nodes), std::move(arcs));
   report.fileBytes = fs::file_size(s.output);
   s.store.reset();

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cassert>
 #include <cmath>
+#include <cstddef>
 #include <cstring>
 #include <type_traits>
 #include <string>
@@ -193,8 +194,14 @@ void MtFileWriter::fillHeader(size_t nodeCount, const Stars& s) {
   h.backArcsOffset = h.arcsOffset + s.arcs.size() * sizeof(ArcRecord);
   h.patchRefsOffset = h.backArcsOffset + s.backArcs.size() * 4;
   h.patchesOffset = h.patchRefsOffset + s.patchRefs.size() * 4;
-  std::memset(h.reserved, 0, sizeof h.reserved);
-  h.reserved0 = 0;
+  h.metadataOffset = 0;
+  h.metadataSize = 0;
+}
+
+void MtFileWriter::setMetadata(const std::string& key, const std::string& value) {
+  if (key.empty() || key.size() > kMaxMetadataKey) fail(path_, "metadata key '" + key + "': 1 to 255 bytes");
+  if (value.empty()) metadata_.erase(key);
+  else metadata_[key] = value;
 }
 
 void MtFileWriter::writeTail(const std::vector<uint8_t>& meta) {
@@ -231,6 +238,22 @@ void MtFileWriter::finish(std::vector<NodeRecord> nodes, std::vector<DagArc> arc
   appendVec(meta, stars.patchRefs);
   appendVec(meta, patches_);
   assert(header_.metaOffset + meta.size() == header_.patchesOffset + patches_.size() * sizeof(PatchRecord));
+  if (!metadata_.empty()) {
+    // The metadata block, after the patch index, inside the checksummed range (mt_format.h).
+    std::vector<uint8_t> block;
+    auto put = [&](const std::string& text) {
+      const uint32_t n = uint32_t(text.size());
+      block.insert(block.end(), reinterpret_cast<const uint8_t*>(&n), reinterpret_cast<const uint8_t*>(&n) + 4);
+      block.insert(block.end(), text.begin(), text.end());
+    };
+    for (const auto& [key, value] : metadata_) put(key), put(value);
+    if (block.size() > kMaxMetadataSize)
+      fail(path_, "metadata block of " + std::to_string(block.size()) + " bytes is larger than " +
+                      std::to_string(kMaxMetadataSize));
+    header_.metadataOffset = header_.metaOffset + meta.size();
+    header_.metadataSize = uint32_t(block.size());
+    meta.insert(meta.end(), block.begin(), block.end());
+  }
   writeTail(meta);
   try {
     env_->renameFile(tmp_, path_);
@@ -310,6 +333,9 @@ void MtFileReader::readIndex(const Footer& f) {
   section(h.backArcsOffset, h.arcCount * 4, "backward-star array");
   section(h.patchRefsOffset, h.patchRefCount * 4, "patch reference array");
   section(h.patchesOffset, h.patchCount * sizeof(PatchRecord), "patch index");
+  if (h.metadataSize > kMaxMetadataSize || (h.metadataSize == 0 && h.metadataOffset != 0))
+    failCorrupt(path, "bad metadata block size " + std::to_string(h.metadataSize) + " in header (byte offset " + std::to_string(offsetof(FileHeader, metadataSize)) + ")");
+  if (h.metadataSize) section(h.metadataOffset, h.metadataSize, "metadata block");
   if (expect != footerAt)
     failCorrupt(path, "index section is " + std::to_string(metaSize) + " bytes, header describes " +
                    std::to_string(expect - h.metaOffset) + " (truncated or damaged)");
@@ -330,6 +356,35 @@ void MtFileReader::readIndex(const Footer& f) {
   take(h.backArcsOffset, &backArcs_, h.arcCount);
   take(h.patchRefsOffset, &patchRefs_, h.patchRefCount);
   take(h.patchesOffset, &patches_, h.patchCount);
+  if (h.metadataSize) {
+    // Entries: uint32 length + key, uint32 length + value, filling the block exactly.
+    const uint8_t* p = meta.data() + (h.metadataOffset - h.metaOffset);
+    const uint8_t* end = p + h.metadataSize;
+    auto text = [&](uint32_t maxLength, const char* what) {
+      uint32_t n;
+      const uint64_t at = h.metadataOffset + uint64_t(p - (meta.data() + (h.metadataOffset - h.metaOffset)));
+      if (end - p < 4) failCorrupt(path, std::string("metadata block: truncated ") + what + " length at byte offset " + std::to_string(at));
+      std::memcpy(&n, p, 4);
+      p += 4;
+      if (n > uint64_t(end - p) || n > maxLength || (n == 0 && maxLength == kMaxMetadataKey))
+        failCorrupt(path, std::string("metadata block: bad ") + what + " length " + std::to_string(n) + " at byte offset " +
+                              std::to_string(at));
+      std::string s(reinterpret_cast<const char*>(p), n);
+      p += n;
+      return s;
+    };
+    while (p < end) {
+      std::string key = text(kMaxMetadataKey, "key");
+      std::string value = text(kMaxMetadataSize, "value");
+      if (!metadata_.emplace(std::move(key), std::move(value)).second)
+        failCorrupt(path, "metadata block: a key appears twice");
+    }
+  }
+}
+
+std::string MtFileReader::crs() const {
+  auto it = metadata_.find(kMetadataCrs);
+  return it == metadata_.end() ? std::string() : it->second;
 }
 
 // Cross-checks: a valid checksum says the writer wrote it, these say the writer was right.

@@ -17,6 +17,7 @@
 #pragma once
 
 #include <cstdint>
+#include <map>
 #include <memory>
 #include <string>
 #include <vector>
@@ -48,6 +49,9 @@ class MtFileWriter {
   // Appends one payload (aligned); returns its patch id (0, 1, 2, ... in call order).
   uint32_t appendPatch(const uint8_t* data, size_t size, uint32_t triangles, uint32_t vertices);
   uint32_t patchCount() const { return uint32_t(patches_.size()); }
+  // An entry of the file's metadata block (mt_format.h "The metadata block"), e.g. "crs"; an empty
+  // value removes the key. No entries: no block (the file is as without this call).
+  void setMetadata(const std::string& key, const std::string& value);
   // Header fields known only at the end of a build (levelCount, input counts) may be set here
   // before finish(); finish() fills the counts and offsets itself.
   format::FileHeader& header() { return header_; }
@@ -95,6 +99,7 @@ class MtFileWriter {
   uint64_t offset_ = 0;
   format::FileHeader header_;
   std::vector<format::PatchRecord> patches_;
+  std::map<std::string, std::string> metadata_;
 };
 
 class MtFileReader {
@@ -113,6 +118,10 @@ class MtFileReader {
   const std::vector<uint32_t>& backArcs() const { return backArcs_; }
   const std::vector<uint32_t>& patchRefs() const { return patchRefs_; }
   const std::vector<format::PatchRecord>& patches() const { return patches_; }
+  // The metadata block's entries (every key, known or not), and the coordinate reference system
+  // given to the builder ("" when none).
+  const std::map<std::string, std::string>& metadata() const { return metadata_; }
+  std::string crs() const;
 
   // The payload bytes of patch i, checksum verified. Thread-safe (positional reads).
   std::vector<uint8_t> readPayload(uint32_t patch) const;
@@ -135,6 +144,7 @@ class MtFileReader {
   std::vector<format::ArcRecord> arcs_;
   std::vector<uint32_t> backArcs_, patchRefs_;
   std::vector<format::PatchRecord> patches_;
+  std::map<std::string, std::string> metadata_;
 };
 
 }  // namespace mt

@@ -15,6 +15,7 @@
 //                       uint32 backArcs[arcCount]    arc ids sorted by (to, from): backward stars
 //                       uint32 patchRefs[patchRefCount]  arc -> its patches
 //                       PatchRecord[patchCount]      the patch index
+//   header.metadataOffset  metadata block (metadataSize bytes; optional, absent when 0)
 //   end - kFooterSize   Footer
 //
 // The section offsets in the header are absolute and must tile [metaOffset, footer) exactly in
@@ -94,7 +95,7 @@ struct FileHeader {
   double gridStep;
   double quantizationError;  // gridStep * sqrt(3) / 2, included in every node error
   uint32_t gridBits;         // every q component is < 2^gridBits (<= 31)
-  uint32_t reserved0;
+  uint32_t metadataSize;     // bytes of the metadata block (0: none; was reserved, zero, before)
   uint64_t metaOffset;       // start of the DAG + index section (end of payloads)
   uint64_t nodesOffset;
   uint64_t arcsOffset;
@@ -106,9 +107,10 @@ struct FileHeader {
   // cut has inputTriangles - weldedTriangles triangles. Zero in files written before the weld.
   uint64_t weldedVertices;
   uint64_t weldedTriangles;
-  uint8_t reserved[8];       // zero
+  uint64_t metadataOffset;   // the metadata block's offset (0 when metadataSize is 0; was reserved, zero)
 };
 static_assert(sizeof(FileHeader) == kHeaderSize, "FileHeader is the first 256 bytes of the file");
+static_assert(offsetof(FileHeader, metadataSize) == 180 && offsetof(FileHeader, metadataOffset) == 248, "metadata fields");
 
 // A DAG node: one fragment (BMT 3.1). Invariants (checked by the reader only where cheap, by
 // mtverify in full): error >= every predecessor's error (monotone towards the sink), the sphere
@@ -156,6 +158,28 @@ struct Footer {
   char magic[8];         // kFooterMagic
 };
 static_assert(sizeof(Footer) == kFooterSize, "Footer is the last 32 bytes of the file");
+
+// ---- The metadata block (optional) ----
+//
+// Text facts about the model that no reader needs to decode the geometry: today the coordinate
+// reference system of a georeferenced scan ("crs"). The block was added without a version change:
+// the two header fields that locate it were reserved and zero before, so every older file reads as
+// "no block". Rules:
+//  - metadataSize == 0: no block, metadataOffset must be 0, and the index section tiles
+//    [metaOffset, footer) exactly as above (every file written without metadata is byte-identical
+//    to what writers produced before the block existed).
+//  - metadataSize > 0: the block starts right after the patch index (metadataOffset ==
+//    patchesOffset + patchCount * sizeof(PatchRecord)) and ends at the footer, so it lies inside
+//    the range the footer checksum covers; metadataSize <= kMaxMetadataSize.
+//  - The block is a sequence of entries, each uint32 keyLength, key bytes (UTF-8, 1..255 bytes),
+//    uint32 valueLength, value bytes (UTF-8); the entries fill the block exactly; keys are unique.
+//  - Readers ignore entries whose key they do not know (so later keys need no version change), and
+//    refuse a block that breaks the rules above as damage (Corruption).
+// Known keys: "crs": the coordinate reference system of the positions, as the user gave it to the
+// builder (an EPSG code like "EPSG:32633", a WKT or PROJJSON string); not interpreted here.
+constexpr uint32_t kMaxMetadataSize = 1u << 20;
+constexpr uint32_t kMaxMetadataKey = 255;
+constexpr char kMetadataCrs[] = "crs";
 
 // ---- Patch payloads (the bytes a PatchRecord points at) ----
 //

@@ -13,7 +13,7 @@ PACKAGES=(
   libcli11-dev libgtest-dev libgmock-dev libbenchmark-dev libnanoflann-dev
   xvfb xauth gnuplot-nox time
   libimgui-dev libpng-dev libopengl-dev
-  nodejs chromium
+  nlohmann-json3-dev nodejs chromium
 )
 
 missing=()
@@ -41,6 +41,17 @@ if ((${#missing[@]})); then
   $SUDO apt-get update -qq -o DPkg::Lock::Timeout=600
   apt_wait
   $SUDO apt-get install -y -qq --no-install-recommends -o DPkg::Lock::Timeout=600 "${missing[@]}" >/dev/null
+fi
+
+# The interop checks' npm project (glTF-Validator, CesiumJS, playwright-core driving Debian's chromium):
+# from its lockfile, never a browser download.
+if [[ -f interop/checks/package-lock.json ]]; then
+  if ! command -v npm >/dev/null; then  # Debian's nodejs comes without npm (NodeSource's has it)
+    SUDO=""; [[ $(id -u) -ne 0 ]] && SUDO="sudo"
+    apt_wait
+    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends -o DPkg::Lock::Timeout=600 npm >/dev/null
+  fi
+  (cd interop/checks && PLAYWRIGHT_SKIP_BROWSER_DOWNLOAD=1 npm ci --no-audit --no-fund --loglevel=error >/dev/null)
 fi
 
 [[ "${1:-}" == "--no-build" ]] && exit 0

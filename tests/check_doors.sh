@@ -18,10 +18,11 @@ declare -A allowed=(
   [mtbuild]="base mtfile patchstore/io patchstore patchstore/heal vpartition"
   [cluster]="base mtfile patchstore/io patchstore vpartition mtbuild tools"
   [mtrender]="base mtfile"
+  [interop]="base mtfile"
   [testing]="base mtfile patchstore/io patchstore vpartition mtbuild"
 )
-readers="mtinfo mtverify mtextract"
-reader_allowed="base mtfile patchstore/io tools"
+readers="mtinfo mtverify mtextract mtexport"
+reader_allowed="base mtfile patchstore/io interop tools"
 bad=0 checked=0
 check() {  # file folder allowed-list
   local file="$1" folder="$2" list="$3" n inc dir

@@ -13,7 +13,7 @@ namespace {
 
 TEST(Doors, MtFileReadersLinkNeitherThePatchStoreNorThePartitions) {
   ASSERT_EQ(runShell("command -v nm").exitCode, 0) << "nm (binutils) is needed for this check";
-  for (const std::string tool : {"mtinfo", "mtverify", "mtextract", "mtrender"}) {
+  for (const std::string tool : {"mtinfo", "mtverify", "mtextract", "mtexport", "mtrender"}) {
     const std::string bin = binDir() + "/" + tool;
     CommandResult all = runShell("nm -C " + bin + " | wc -l");
     ASSERT_EQ(all.exitCode, 0) << all.output;
@@ -31,7 +31,7 @@ TEST(Doors, MtFileReadersLinkNeitherThePatchStoreNorThePartitions) {
 TEST(Doors, ProductionBinariesCarryNothingOfTesting) {
   ASSERT_EQ(runShell("command -v nm").exitCode, 0) << "nm (binutils) is needed for this check";
   const std::string pattern = "' (mtgen::ScanGenerator|mt::makeScanGrid|mt::test::)'";
-  for (const std::string tool : {"mtinfo", "mtverify", "mtextract", "mtrender", "mtbuild", "mtstore"}) {
+  for (const std::string tool : {"mtinfo", "mtverify", "mtextract", "mtexport", "mtrender", "mtbuild", "mtstore"}) {
     CommandResult r = runShell("nm -C " + binDir() + "/" + tool + " | grep -E " + pattern + " | head -5");
     EXPECT_EQ(r.exitCode, 0) << r.output;
     EXPECT_EQ(r.output, "") << tool << " links testing/:\n" << r.output;

@@ -524,7 +524,7 @@ TEST(Detection, ExtensionWhenContentIsInconclusive) {
   EXPECT_EQ(c.header.format, mt::MeshFormat::Obj);
   EXPECT_EQ(c.t.size(), 3u);
   writeFile(dir.file("long.txt"), comments);
-  EXPECT_THAT(errorOf(dir.file("long.txt")), HasSubstr("unknown mesh format (expected PLY, OBJ, OFF or STL)"));
+  EXPECT_THAT(errorOf(dir.file("long.txt")), HasSubstr("unknown mesh format (expected PLY, OBJ, OFF, STL or glTF)"));
 }
 
 // ---------------------------------------------------------------- errors
@@ -536,7 +536,7 @@ TEST(ReaderErrors, OpenFailures) {
   EXPECT_EQ(errorOf(dir.file("empty.ply")), dir.file("empty.ply") + ": empty file");
   writeFile(dir.file("what.bin"), "hello world\n");
   EXPECT_EQ(errorOf(dir.file("what.bin")),
-            dir.file("what.bin") + ": unknown mesh format (expected PLY, OBJ, OFF or STL)");
+            dir.file("what.bin") + ": unknown mesh format (expected PLY, OBJ, OFF, STL or glTF)");
 }
 
 TEST(ReaderErrors, PlyTruncatedAndLyingCounts) {

@@ -181,8 +181,8 @@ TEST_F(ToolOptions, MtextractNumericOptionsHaveRanges) {
 
 TEST_F(ToolOptions, MtextractWritesPlyOnlyAndOnlyWhenComplete) {
   TempDir dir;
-  for (const std::string name : {"cut.xyz", "cut.glb", "cut.gltf", "cut.obj", "cut", "cut.ply.tmp", ".ply"}) {
-    expectRefused("mtextract", mt() + " --error 0 -o " + dir.file(name), {"supported: .ply"});
+  for (const std::string name : {"cut.xyz", "cut.obj", "cut", "cut.ply.tmp", ".ply"}) {
+    expectRefused("mtextract", mt() + " --error 0 -o " + dir.file(name), {"supported: .ply, .glb, .gltf"});
     EXPECT_FALSE(fileExists(dir.file(name))) << name;
   }
   EXPECT_TRUE(entries(dir.path()).empty());
@@ -209,6 +209,12 @@ TEST_F(ToolOptions, MtextractWritesPlyOnlyAndOnlyWhenComplete) {
   EXPECT_EQ(r.exitCode, 1) << r.output;
   EXPECT_NE(r.output.find("patch 0 is damaged"), std::string::npos) << r.output;
   EXPECT_EQ(readFile(dir.file("cut.ply")), old);
+  EXPECT_EQ(entries(dir.path()), (std::vector<std::string>{"CUT.PLY", "broken.mt", "cut.ply"}));
+  // The same for glTF output (.glb, and .gltf with its .bin): nothing under either name.
+  for (const std::string name : {"cut.glb", "cut.gltf"}) {
+    r = runLimited("mtextract", broken + " --error 0 -o " + dir.file(name));
+    EXPECT_EQ(r.exitCode, 1) << r.output;
+  }
   EXPECT_EQ(entries(dir.path()), (std::vector<std::string>{"CUT.PLY", "broken.mt", "cut.ply"}));
 }
 

@@ -60,7 +60,7 @@ inline uint64_t parseBuildMemory(const std::string& text) {
 }
 
 struct BuildCli {
-  std::string input, output, memory = "1G", partition = "irregular", codec = "meshopt", indexOrder = "list", simplifier = "meshopt", statsJson, workDir, taskTimes;
+  std::string input, output, crs, memory = "1G", partition = "irregular", codec = "meshopt", indexOrder = "list", simplifier = "meshopt", statsJson, workDir, taskTimes;
   int64_t threads = 0, patchTriangles = 0;  // signed, so that -1 is refused with the range, not wrapped
   bool normals = false, noNormals = false, resume = false, quiet = false;
   CLI::Option *threadsOption = nullptr, *patchTrianglesOption = nullptr;  // given explicitly: 0 is refused
@@ -120,6 +120,9 @@ struct BuildCli {
                        "and marked (" + kWorkMarker +
                        ") by the build, removed when it completes. An existing directory the build did not\n"
                        "make (\".\", the input's folder) is never emptied: the build works in DIR/OUT.work inside it");
+    app.add_option("--crs", crs,
+                   "Coordinate reference system of the input's positions (e.g. EPSG:32633, or a WKT string; 1 to 65536 bytes,\n"
+                   "no NUL), stored in the MT file and printed by mtinfo; not interpreted (positions are kept as given)");
     app.add_flag("-q,--quiet", quiet, "No progress lines on stderr");
   }
 
@@ -127,6 +130,9 @@ struct BuildCli {
   BuildOptions options(const std::string& tool) const {
     if (normals && noNormals) throw Error("--normals and --no-normals contradict each other");
     BuildOptions o;
+    if (crs.size() > 65536 || crs.find('\0') != std::string::npos)
+      throw Error("--crs: 1 to 65536 bytes without NUL (got " + std::to_string(crs.size()) + " bytes)");
+    o.crs = crs;
     o.memoryBytes = parseBuildMemory(memory);
     o.levelLoopBytes = planMemory(o.memoryBytes, 1).levelLoop;  // the plan's share for the regions in flight
     const bool threadsGiven = threadsOption && threadsOption->count() > 0;

@@ -31,6 +31,7 @@
 #include "mtfile/mt_file.h"
 #include "patchstore/io/ply_writer.h"
 #include "base/cli_checks.h"
+#include "interop/gltf_writer.h"
 
 namespace {
 
@@ -42,6 +43,7 @@ struct Options {
   uint64_t memoryBytes = uint64_t(1) << 30;
   double fov = 60, width = 1920, pixels = 1;
   bool hasError = false, hasTriangles = false, hasEye = false, hasTarget = false;
+  bool meshopt = false, quantize = false;  // glTF output only
 };
 
 void parseVector(const std::string& text, const char* option, double out[3]) {
@@ -72,22 +74,17 @@ const mt::cli::Interval kFovRange{0, 180, true, true, "degrees"};
 const mt::cli::Interval kWidthRange{1, 1e6, false, false, "pixels"};
 const mt::cli::Interval kPixelsRange{0, 1e6, true, false, "pixels"};
 
-// The output's format by its extension (case-insensitive): only binary PLY is written, so any
-// other name (.xyz, .glb, none) is refused rather than given PLY bytes under a misleading name.
-void checkOutputFormat(const std::string& output) {
+// The output's format by its extension (case-insensitive): binary PLY or glTF (.glb, .gltf); any
+// other name (.xyz, none) is refused rather than given bytes under a misleading name. True: glTF.
+bool checkOutputFormat(const std::string& output) {
   const std::string name = output.substr(output.find_last_of('/') + 1);
   const size_t dot = name.find_last_of('.');
   std::string ext = dot == std::string::npos || dot == 0 ? "" : name.substr(dot);
   for (auto& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
-  if (ext == ".ply") return;
-  if (ext.empty()) mt::fail(output, "the output name has no extension: cannot choose its format (supported: .ply)");
-  mt::fail(output, "cannot write the format " + name.substr(dot) + " (supported: .ply)");
-}
-
-bool isPlyOutput(const std::string& output) {
-  std::string ext = output.size() >= 4 ? output.substr(output.size() - 4) : "";
-  for (auto& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
-  return ext == ".ply";
+  if (ext == ".ply") return false;
+  if (ext == ".glb" || ext == ".gltf") return true;
+  if (ext.empty()) mt::fail(output, "the output name has no extension: cannot choose its format (supported: .ply, .glb, .gltf)");
+  mt::fail(output, "cannot write the format " + name.substr(dot) + " (supported: .ply, .glb, .gltf)");
 }
 
 // The PLY writer as the streamed weld's sink: the header's choices made as assembleCut's path
@@ -174,7 +171,8 @@ int run(const Options& o) {
   // the input.
   mt::requireRegularFile(o.input, "an MT file");
   mt::checkOutputPath(o.output, {o.input});
-  checkOutputFormat(o.output);
+  const bool gltf = checkOutputFormat(o.output);
+  if ((o.meshopt || o.quantize) && !gltf) throw mt::Error("--meshopt and --quantize are for glTF output (.glb, .gltf)");
 
   auto reader = mt::MtFileReader::open(o.input);
   const mt::MtFileReader& r = *reader;
@@ -193,12 +191,40 @@ int run(const Options& o) {
 
   // A cut whose assembled mesh would not fit --memory is welded through external sorts and
   // streamed to the PLY (same bytes, mtfile/mt_cut_writer.h).
-  if (const std::vector<uint32_t> arcs = mt::cutArcs(r, cut.inSet);
-      isPlyOutput(o.output) && mt::assembledCutBytes(r, arcs) > o.memoryBytes)
-    return writeStreamedPly(o, r, arcs, stats, view);
+  // glTF output is assembled in RAM (its buffers are sized before they are written), so a cut too
+  // large for --memory is refused there rather than let the tool exceed its cap.
+  if (const std::vector<uint32_t> arcs = mt::cutArcs(r, cut.inSet); mt::assembledCutBytes(r, arcs) > o.memoryBytes) {
+    if (!gltf) return writeStreamedPly(o, r, arcs, stats, view);
+    throw mt::Error(o.output + ": this cut needs about " + std::to_string(mt::assembledCutBytes(r, arcs) >> 20) +
+                        " MiB to write as glTF, more than --memory (" + std::to_string(o.memoryBytes >> 20) +
+                        " MiB): raise --memory, choose a coarser cut, or write .ply (streamed within the cap)",
+                    mt::ErrorKind::Resource);
+  }
   mt::WeldedMesh mesh = mt::assembleCut(r, mt::cutArcs(r, cut.inSet));
   mt::checkInterrupt(o.output);
 
+  if (gltf) {
+    // The whole cut as one glTF mesh; positions relative to a grid point (gltf_writer.h).
+    mt::interop::GltfMeshView meshView;
+    meshView.vertexCount = mesh.vertexCount();
+    meshView.triangleCount = mesh.triangleCount();
+    meshView.positions = mesh.positions.data();
+    meshView.triangles = mesh.triangles.data();
+    meshView.normals = mesh.normals.empty() ? nullptr : mesh.normals.data();
+    meshView.colors = mesh.colors.empty() ? nullptr : mesh.colors.data();
+    meshView.q = mesh.q.data();
+    for (int a = 0; a < 3; ++a) meshView.gridOrigin[a] = r.header().gridOrigin[a];
+    meshView.gridStep = r.header().gridStep;
+    mt::interop::GltfOptions go;
+    go.meshopt = o.meshopt;
+    go.quantize = o.quantize;
+    go.generator = "batched-mt mtextract";
+    go.crs = r.crs();
+    mt::interop::GltfInfo info = mt::interop::writeGltfFile(o.output, meshView, go);
+    if (o.quantize && !info.quantized)
+      std::fprintf(stderr, "mtextract: warning: %s: float positions, not KHR_mesh_quantization: %s\n", o.output.c_str(),
+                   info.fallbackReason.c_str());
+  } else {
   // Float coordinates unless the grid is finer than float spacing at this distance from the
   // origin (distinct grid points must stay distinct in the PLY: it is "welded").
   double maxAbs = 0;
@@ -220,6 +246,7 @@ int run(const Options& o) {
     ply.addTriangle(mesh.triangles[3 * t], mesh.triangles[3 * t + 1], mesh.triangles[3 * t + 2]);
   }
   ply.finish();
+  }
 
   std::fprintf(stderr, "mtextract: %s: %u triangles, %u vertices from %" PRIu64 " patches; %u nodes in the set, %u on the "
                "front; max error %.9g", o.output.c_str(), mesh.triangleCount(), mesh.vertexCount(), mesh.patches,
@@ -239,7 +266,7 @@ int run(const Options& o) {
 
 int main(int argc, char** argv) {
   CLI::App app{"mtextract: extract one cut of a batched Multi-Triangulation file (.mt) as a single welded binary\n"
-               "PLY. Choose the cut with exactly one of:\n"
+               "PLY, GLB or glTF (by the output's extension). Choose the cut with exactly one of:\n"
                "  --error E      every rendered node within object-space error E (the coarsest such cut)\n"
                "  --triangles N  the best cut of at most N triangles (refine largest error first)\n"
                "  --eye/--target view-dependent: refine while a node's error, projected at its bounding sphere's\n"
@@ -249,8 +276,8 @@ int main(int argc, char** argv) {
   Options o;
   app.add_option("file", o.input, "The MT file")->required();
   app.add_option("-o,--output", o.output,
-                 "The PLY file to write (binary little-endian, welded); the name must end in .ply, and may not be "
-                 "the input")
+                 "The file to write, by its extension: .ply (binary little-endian, welded), .glb or .gltf (+ .bin "
+                 "beside it); may not be the input")
       ->required();
   auto* err = app.add_option("--error", o.error, "Maximum object-space error of the cut")
                   ->check(mt::cli::numberIn(kErrorRange));
@@ -273,6 +300,11 @@ int main(int argc, char** argv) {
                  "welded mesh (about 60 bytes per triangle) would not fit is welded through external sorts in a folder "
                  "beside the output, streamed, same bytes")
       ->capture_default_str();
+  app.add_flag("--meshopt", o.meshopt,
+               "glTF output: compress every buffer view with EXT_meshopt_compression (meshoptimizer's codecs)");
+  app.add_flag("--quantize", o.quantize,
+               "glTF output: KHR_mesh_quantization: positions as the MT grid's uint16 coordinates (exact), normals as int16;\n"
+               "falls back to float positions, with a warning, when the cut spans more than 65536 grid steps on an axis");
   if (int code = mt::cli::parse(app, argc, argv, "mtextract"); code >= 0) return code;
   o.hasError = err->count() > 0;
   o.hasTriangles = tri->count() > 0;

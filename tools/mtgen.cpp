@@ -20,6 +20,7 @@
 #include <cctype>
 #include <cerrno>
 #include <cmath>
+#include <sstream>
 #include <cstdarg>
 #include <chrono>
 #include <cstdio>
@@ -56,6 +57,8 @@ struct OutputSettings {
   bool normals = false;
   bool colors = false;
   bool doublePrecision = false;
+  // --offset: added (in double) to every position, e.g. UTM-like metres for a georeferenced scan.
+  double offset[3] = {0, 0, 0};
 };
 
 // The temporary file of the current run, removed if the process is interrupted.
@@ -83,15 +86,19 @@ class MeshOutput {
 class BinaryPlyOutput final : public MeshOutput {
  public:
   BinaryPlyOutput(const OutputSettings& s)
-      : writer_(s.path, mt::PlyWriteOptions{s.doublePrecision, s.normals, s.colors}, s.tmpPath) {}
+      : writer_(s.path, mt::PlyWriteOptions{s.doublePrecision, s.normals, s.colors}, s.tmpPath) {
+    for (int a = 0; a < 3; ++a) offset_[a] = s.offset[a];
+  }
   void vertex(const double p[3], const float* normal, const uint8_t* color) override {
-    writer_.addVertex(p, normal, color);
+    const double q[3] = {p[0] + offset_[0], p[1] + offset_[1], p[2] + offset_[2]};
+    writer_.addVertex(q, normal, color);
   }
   void triangle(const uint32_t t[3], const float*) override { writer_.addTriangle(t[0], t[1], t[2]); }
   void finish() override { writer_.finish(); }  // renames the temporary file over the output
 
  private:
   mt::PlyWriter writer_;
+  double offset_[3] = {0, 0, 0};
 };
 
 // Text formats for small meshes. Coordinates are printed with %.9g of their float32 value, which a
@@ -526,7 +533,7 @@ uint64_t parseCount(const std::string& text) {
 // The command line, as parsed.
 struct Cli {
   OutputSettings settings;
-  std::string trianglesText = "1M", formatText = "ply", densityText = "uniform", pathologyText;
+  std::string trianglesText = "1M", formatText = "ply", densityText = "uniform", pathologyText, offsetText;
   mtgen::GeneratorOptions gen;
   bool shuffle = false;
   unsigned threads = 0;
@@ -582,6 +589,9 @@ void addOutputOptions(CLI::App& app, Cli& c) {
                      "their coordinates are the float32 values printed with %.9g")
           ->check(CLI::IsMember({"ply", "ply-ascii", "obj", "off", "stl"}))
           ->default_str("from the extension");
+  app.add_option("--offset", c.offsetText,
+                 "X,Y,Z added to every position in double, each within +-1e9 (e.g. 500000,4000000,100: UTM-like metres\n"
+                 "for a georeferenced scan); implies --double [ply only]");
   app.add_flag("--double", c.settings.doublePrecision,
                "Binary PLY with double x,y,z (the full-precision generated values) [ply only]");
   app.add_option("--threads", c.threads, "Worker threads (0 = all cores); the output does not depend on it")
@@ -637,6 +647,27 @@ bool chooseFormat(Cli& c) {
                   : f == "off" ? Format::Off : Format::Stl;
   bool anyPly = settings.format == Format::PlyBinary || settings.format == Format::PlyAscii;
   if (settings.doublePrecision && settings.format != Format::PlyBinary) return refuse("--double needs --format ply");
+  if (!c.offsetText.empty()) {
+    // X,Y,Z, three finite numbers; the coordinates then need doubles (binary PLY only).
+    std::stringstream in(c.offsetText);
+    std::string part;
+    int n = 0;
+    while (std::getline(in, part, ',')) {
+      size_t used = 0;
+      double v = 0;
+      try {
+        v = std::stod(part, &used);
+      } catch (const std::exception&) {
+        used = 0;
+      }
+      if (n == 3 || used == 0 || used != part.size() || !std::isfinite(v) || std::abs(v) > 1e9)
+        return refuse("--offset wants X,Y,Z, three numbers within +-1e9 (got '%s')", c.offsetText.c_str());
+      settings.offset[n++] = v;
+    }
+    if (n != 3) return refuse("--offset wants X,Y,Z, three numbers within +-1e9 (got '%s')", c.offsetText.c_str());
+    if (settings.format != Format::PlyBinary) return refuse("--offset needs --format ply (binary, double coordinates)");
+    settings.doublePrecision = true;
+  }
   if (settings.colors && !anyPly) return refuse("--colors needs --format ply or ply-ascii");
   if (settings.normals && !anyPly && settings.format != Format::Obj)
     return refuse("--normals needs --format ply, ply-ascii or obj");

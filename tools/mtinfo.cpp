@@ -119,6 +119,10 @@ int run(const std::string& path, bool json, bool check) {
                 h.inputTriangles, h.inputVertices, h.storedTriangles);
     std::printf("  \"bytesPerInputTriangle\": %s,\n  \"bytesPerStoredTriangle\": %s,\n",
                 num(per(reader->fileSize(), h.inputTriangles)).c_str(), num(per(reader->fileSize(), h.storedTriangles)).c_str());
+    // The CRS (mtbuild --crs) and the grid's origin at full double precision (georeferenced scans).
+    std::printf("  \"crs\": %s,\n  \"gridOrigin\": [%.17g, %.17g, %.17g],\n",
+                reader->crs().empty() ? "null" : ("\"" + jsonEscape(reader->crs()) + "\"").c_str(), h.gridOrigin[0],
+                h.gridOrigin[1], h.gridOrigin[2]);
     std::printf("  \"gridStep\": %s,\n  \"quantizationError\": %s,\n  \"gridBits\": %u,\n", num(h.gridStep).c_str(),
                 num(h.quantizationError).c_str(), h.gridBits);
     std::printf("  \"boundsMin\": [%s, %s, %s],\n  \"boundsMax\": [%s, %s, %s],\n", num(h.boundsMin[0]).c_str(),
@@ -144,6 +148,8 @@ int run(const std::string& path, bool json, bool check) {
     std::printf("stored            %" PRIu64 " triangles in %zu patches\n", h.storedTriangles, reader->patches().size());
     std::printf("bytes/triangle    %.3f per input triangle, %.3f per stored triangle\n", per(reader->fileSize(), h.inputTriangles),
                 per(reader->fileSize(), h.storedTriangles));
+    std::printf("crs               %s\n", reader->crs().empty() ? "(none)" : reader->crs().c_str());
+    std::printf("grid origin       (%.17g, %.17g, %.17g)\n", h.gridOrigin[0], h.gridOrigin[1], h.gridOrigin[2]);
     std::printf("grid              step %.9g, quantization error %.9g, %u bits\n", h.gridStep, h.quantizationError, h.gridBits);
     std::printf("bounding box      (%.9g, %.9g, %.9g) - (%.9g, %.9g, %.9g)\n", h.boundsMin[0], h.boundsMin[1], h.boundsMin[2],
                 h.boundsMax[0], h.boundsMax[1], h.boundsMax[2]);

@@ -24,6 +24,8 @@ const char* formatName(MeshFormat f) {
     case MeshFormat::Off: return "OFF";
     case MeshFormat::StlAscii: return "STL (ascii)";
     case MeshFormat::StlBinary: return "STL (binary)";
+    case MeshFormat::Gltf: return "glTF (JSON)";
+    case MeshFormat::Glb: return "glTF (binary, GLB)";
     case MeshFormat::Unknown: break;
   }
   return "unknown";
@@ -31,7 +33,7 @@ const char* formatName(MeshFormat f) {
 
 namespace {
 
-enum class Kind { Unknown, Ply, Obj, Off, StlAscii, StlBinary };
+enum class Kind { Unknown, Ply, Obj, Off, StlAscii, StlBinary, Gltf, Glb };
 
 // [ST][C][N][4][n]OFF, Geomview's family of OFF keywords; the OFF reader rejects the variants it
 // cannot read (4D, n-dimensional) with a clear message instead of "unknown format".
@@ -66,6 +68,7 @@ bool isObjStatement(std::string_view w) {
 
 Kind byContent(std::string_view sample, uint64_t size) {
   if (sample.substr(0, 4) == "ply\n" || sample.substr(0, 5) == "ply\r\n") return Kind::Ply;
+  if (sample.substr(0, 4) == "glTF") return Kind::Glb;
   if (size >= 84 && sample.size() >= 84) {
     uint32_t count;
     std::memcpy(&count, sample.data() + 80, 4);  // STL is little-endian; so are the hosts we run on
@@ -91,7 +94,9 @@ Kind byExtension(const std::string& path) {
   if (ext == "ply") return Kind::Ply;
   if (ext == "obj") return Kind::Obj;
   if (ext == "off") return Kind::Off;
-  if (ext == "stl") return Kind::StlBinary;  // an ascii STL starts with "solid" and is found by content
+  if (ext == "stl") return Kind::StlBinary;
+  if (ext == "gltf") return Kind::Gltf;
+  if (ext == "glb") return Kind::Glb;  // an ascii STL starts with "solid" and is found by content
   return Kind::Unknown;
 }
 
@@ -112,9 +117,11 @@ std::unique_ptr<MeshReader> openMesh(const std::string& path) {
     case Kind::Off: return io::openOff(std::move(in));
     case Kind::StlAscii: return io::openStl(std::move(in), false);
     case Kind::StlBinary: return io::openStl(std::move(in), true);
+    case Kind::Gltf: in.reset(); return io::openGltf(path, false);
+    case Kind::Glb: in.reset(); return io::openGltf(path, true);
     case Kind::Unknown: break;
   }
-  fail(path, "unknown mesh format (expected PLY, OBJ, OFF or STL)");
+  fail(path, "unknown mesh format (expected PLY, OBJ, OFF, STL or glTF)");
 }
 
 }  // namespace mt

@@ -21,7 +21,7 @@
 
 namespace mt {
 
-enum class MeshFormat { Unknown, PlyAscii, PlyBinaryLE, PlyBinaryBE, Obj, Off, StlAscii, StlBinary };
+enum class MeshFormat { Unknown, PlyAscii, PlyBinaryLE, PlyBinaryBE, Obj, Off, StlAscii, StlBinary, Gltf, Glb };
 const char* formatName(MeshFormat f);
 
 // What the file declares before its data (counts are -1 when the format does not declare them).
@@ -71,7 +71,8 @@ class MeshReader {
   virtual ReadStats read(MeshSink& sink) = 0;
 };
 
-// Picks the format by content (magic bytes, "ply"/"OFF"/"solid" headers, STL size check) and then
+// Picks the format by content (magic bytes, "ply"/"OFF"/"solid" headers, the GLB magic "glTF", STL
+// size check) and then
 // by extension; unknown formats are an error naming the file. Opens and parses the header only.
 std::unique_ptr<MeshReader> openMesh(const std::string& path);
 

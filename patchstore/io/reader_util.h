@@ -307,5 +307,7 @@ std::unique_ptr<MeshReader> openPly(std::unique_ptr<InputFile> in);
 std::unique_ptr<MeshReader> openObj(std::unique_ptr<InputFile> in);
 std::unique_ptr<MeshReader> openOff(std::unique_ptr<InputFile> in);
 std::unique_ptr<MeshReader> openStl(std::unique_ptr<InputFile> in, bool binary);
+// glTF reads its buffers with positional reads (base/env.h), not through InputFile.
+std::unique_ptr<MeshReader> openGltf(const std::string& path, bool glb);
 
 }  // namespace mt::io

@@ -1,0 +1,362 @@
+// glTF 2.0 writer (layout and precision: gltf_writer.h).
+#include "interop/gltf_writer.h"
+
+#include <meshoptimizer.h>
+
+#include <algorithm>
+#include <cassert>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <nlohmann/json.hpp>
+
+#include "base/error.h"
+#include "base/output_path.h"
+
+namespace mt::interop {
+
+namespace {
+
+using nlohmann::json;
+
+constexpr int kFloat = 5126, kUnsignedShort = 5123, kShort = 5122, kUnsignedByte = 5121, kUnsignedInt = 5125;
+constexpr int kArrayBuffer = 34962, kElementArrayBuffer = 34963;
+
+void pad4(std::vector<uint8_t>& v, uint8_t fill = 0) {
+  while (v.size() % 4) v.push_back(fill);
+}
+
+// One stream of the mesh (a vertex attribute or the indices) in its uncompressed layout.
+struct Stream {
+  std::vector<uint8_t> bytes;
+  uint32_t stride = 0;  // element size in bytes (a multiple of 4 for attributes, 2 or 4 for indices)
+  size_t count = 0;     // elements
+  bool indices = false;
+};
+
+// Appends a stream as a buffer view (compressed when asked) and returns its index.
+class Views {
+ public:
+  Views(bool meshopt, std::vector<uint8_t>& bin) : meshopt_(meshopt), bin_(bin) {}
+
+  int add(const Stream& s) {
+    json view;
+    if (!meshopt_) {
+      pad4(bin_);
+      view = {{"buffer", 0}, {"byteOffset", bin_.size()}, {"byteLength", s.bytes.size()}};
+      bin_.insert(bin_.end(), s.bytes.begin(), s.bytes.end());
+    } else {
+      // The fallback buffer (no data) holds the decoded layout; buffer 0 the compressed bytes.
+      fallback_ = (fallback_ + 3) & ~size_t(3);
+      view = {{"buffer", 1}, {"byteOffset", fallback_}, {"byteLength", s.bytes.size()}};
+      fallback_ += s.bytes.size();
+      std::vector<uint8_t> code;
+      if (s.indices) {
+        assert(s.count % 3 == 0);
+        code.resize(meshopt_encodeIndexBufferBound(s.count, s.count ? s.count : 1));
+        size_t n = s.stride == 4
+                       ? meshopt_encodeIndexBuffer(code.data(), code.size(), reinterpret_cast<const uint32_t*>(s.bytes.data()), s.count)
+                       : meshopt_encodeIndexBuffer(code.data(), code.size(), reinterpret_cast<const uint16_t*>(s.bytes.data()), s.count);
+        code.resize(n);
+      } else {
+        code.resize(meshopt_encodeVertexBufferBound(s.count, s.stride));
+        code.resize(meshopt_encodeVertexBuffer(code.data(), code.size(), s.bytes.data(), s.count, s.stride));
+      }
+      if (code.empty()) throw Error("glTF writer: meshopt encoding failed");
+      pad4(bin_);
+      view["extensions"]["EXT_meshopt_compression"] = {
+          {"buffer", 0}, {"byteOffset", bin_.size()}, {"byteLength", code.size()}, {"byteStride", s.stride},
+          {"count", s.count}, {"mode", s.indices ? "TRIANGLES" : "ATTRIBUTES"}};
+      bin_.insert(bin_.end(), code.begin(), code.end());
+    }
+    if (s.indices) {
+      view["target"] = kElementArrayBuffer;
+    } else {
+      view["target"] = kArrayBuffer;
+      view["byteStride"] = s.stride;
+    }
+    views_.push_back(std::move(view));
+    return int(views_.size() - 1);
+  }
+  json& views() { return views_; }
+  size_t fallbackBytes() const { return fallback_; }
+
+ private:
+  bool meshopt_;
+  std::vector<uint8_t>& bin_;
+  json views_ = json::array();
+  size_t fallback_ = 0;
+};
+
+template <class T>
+void put(std::vector<uint8_t>& out, T v) {
+  const size_t at = out.size();
+  out.resize(at + sizeof v);
+  std::memcpy(out.data() + at, &v, sizeof v);
+}
+
+}  // namespace
+
+GltfBytes buildGltf(const GltfMeshView& m, const GltfOptions& o, const std::string& binUri) {
+  if (m.vertexCount == 0 || m.triangleCount == 0) throw Error("glTF writer: the mesh has no triangles");
+  if (m.vertexCount > 0xFFFFFFFEu) throw Error("glTF writer: more vertices than 32-bit indices address");
+  GltfBytes out;
+  GltfInfo& info = out.info;
+  const size_t n = m.vertexCount;
+
+  // The grid box of the mesh, when it is on a grid.
+  uint32_t qMin[3] = {UINT32_MAX, UINT32_MAX, UINT32_MAX}, qMax[3] = {0, 0, 0};
+  if (m.q)
+    for (size_t v = 0; v < n; ++v)
+      for (int a = 0; a < 3; ++a) qMin[a] = std::min(qMin[a], m.q[3 * v + a]), qMax[a] = std::max(qMax[a], m.q[3 * v + a]);
+  bool quantized = false;
+  if (o.quantize) {
+    if (!m.q || !(m.gridStep > 0)) {
+      info.fallbackReason = "the mesh is not on a grid";
+    } else {
+      quantized = true;
+      for (int a = 0; a < 3; ++a)
+        if (qMax[a] - qMin[a] > 65535) {
+          quantized = false;
+          info.fallbackReason = "the mesh spans " + std::to_string(qMax[a] - qMin[a] + 1ull) + " grid steps on axis " +
+                                std::to_string(a) + " (KHR_mesh_quantization holds 65536)";
+        }
+    }
+  }
+  info.quantized = quantized;
+
+  // The node translation: a grid point (exact in double) near the mesh, so the stored differences
+  // are small; the bounding box's centre when there is no grid.
+  double t[3];
+  if (quantized) {
+    for (int a = 0; a < 3; ++a) t[a] = m.gridOrigin[a] + m.gridStep * double(qMin[a]);
+  } else if (m.q && m.gridStep > 0) {
+    for (int a = 0; a < 3; ++a) t[a] = m.gridOrigin[a] + m.gridStep * double(qMin[a] + (qMax[a] - qMin[a]) / 2);
+  } else {
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (size_t v = 0; v < n; ++v)
+      for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], m.positions[3 * v + a]), hi[a] = std::max(hi[a], m.positions[3 * v + a]);
+    for (int a = 0; a < 3; ++a) t[a] = 0.5 * (lo[a] + hi[a]);
+  }
+  for (int a = 0; a < 3; ++a) info.translation[a] = t[a];
+
+  std::vector<Stream> streams;
+  json posMin = json::array(), posMax = json::array();
+  Stream pos;
+  pos.count = n;
+  if (quantized) {
+    pos.stride = 8;  // uint16 x 3, padded: meshopt and glTF want 4-byte aligned vertex strides
+    pos.bytes.reserve(n * 8);
+    for (size_t v = 0; v < n; ++v) {
+      for (int a = 0; a < 3; ++a) put<uint16_t>(pos.bytes, uint16_t(m.q[3 * v + a] - qMin[a]));
+      put<uint16_t>(pos.bytes, 0);
+    }
+    for (int a = 0; a < 3; ++a) posMin.push_back(0), posMax.push_back(qMax[a] - qMin[a]);
+  } else {
+    pos.stride = 12;
+    pos.bytes.reserve(n * 12);
+    float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (size_t v = 0; v < n; ++v)
+      for (int a = 0; a < 3; ++a) {
+        const float f = float(m.positions[3 * v + a] - t[a]);
+        lo[a] = std::min(lo[a], f), hi[a] = std::max(hi[a], f);
+        put<float>(pos.bytes, f);
+      }
+    for (int a = 0; a < 3; ++a) posMin.push_back(lo[a]), posMax.push_back(hi[a]);
+  }
+  streams.push_back(std::move(pos));
+
+  if (m.normals) {
+    Stream nor;
+    nor.count = n;
+    nor.stride = quantized ? 8 : 12;
+    for (size_t v = 0; v < n; ++v) {
+      double x = m.normals[3 * v], y = m.normals[3 * v + 1], z = m.normals[3 * v + 2];
+      double len = std::sqrt(x * x + y * y + z * z);
+      // A zero (or broken) normal is not a unit vector; the validator refuses it. +Z stands in.
+      if (!(len > 1e-12) || !std::isfinite(len)) x = 0, y = 0, z = 1, len = 1;
+      x /= len, y /= len, z /= len;
+      if (quantized) {
+        for (double c : {x, y, z}) put<int16_t>(nor.bytes, int16_t(std::lround(c * 32767.0)));
+        put<int16_t>(nor.bytes, 0);
+      } else {
+        for (double c : {x, y, z}) put<float>(nor.bytes, float(c));
+      }
+    }
+    streams.push_back(std::move(nor));
+  }
+  if (m.colors) {
+    Stream col;
+    col.count = n;
+    col.stride = 4;
+    col.bytes.assign(m.colors, m.colors + 4 * n);
+    streams.push_back(std::move(col));
+  }
+  Stream idx;
+  idx.indices = true;
+  idx.count = 3 * m.triangleCount;
+  idx.stride = n <= 65535 ? 2 : 4;
+  idx.bytes.reserve(idx.count * idx.stride);
+  for (size_t i = 0; i < idx.count; ++i) {
+    assert(m.triangles[i] < n);
+    if (idx.stride == 2) put<uint16_t>(idx.bytes, uint16_t(m.triangles[i]));
+    else put<uint32_t>(idx.bytes, m.triangles[i]);
+  }
+  streams.push_back(std::move(idx));
+
+  Views views(o.meshopt, out.bin);
+  json accessors = json::array();
+  json attributes = json::object();
+  size_t s = 0;
+  {
+    json a = {{"bufferView", views.add(streams[s++])}, {"componentType", quantized ? kUnsignedShort : kFloat},
+              {"count", n}, {"type", "VEC3"}, {"min", posMin}, {"max", posMax}};
+    accessors.push_back(a);
+    attributes["POSITION"] = accessors.size() - 1;
+  }
+  if (m.normals) {
+    json a = {{"bufferView", views.add(streams[s++])}, {"componentType", quantized ? kShort : kFloat},
+              {"count", n}, {"type", "VEC3"}};
+    if (quantized) a["normalized"] = true;
+    accessors.push_back(a);
+    attributes["NORMAL"] = accessors.size() - 1;
+  }
+  if (m.colors) {
+    json a = {{"bufferView", views.add(streams[s++])}, {"componentType", kUnsignedByte}, {"normalized", true},
+              {"count", n}, {"type", "VEC4"}};
+    accessors.push_back(a);
+    attributes["COLOR_0"] = accessors.size() - 1;
+  }
+  {
+    const Stream& is = streams[s];
+    json a = {{"bufferView", views.add(is)}, {"componentType", is.stride == 2 ? kUnsignedShort : kUnsignedInt},
+              {"count", is.count}, {"type", "SCALAR"}};
+    accessors.push_back(a);
+  }
+  pad4(out.bin);
+
+  json doc;
+  doc["asset"] = {{"version", "2.0"}, {"generator", o.generator}};
+  if (!o.crs.empty()) doc["asset"]["extras"] = {{"crs", o.crs}};
+  json used = json::array();
+  if (quantized) used.push_back("KHR_mesh_quantization");
+  if (o.meshopt) used.push_back("EXT_meshopt_compression");
+  if (!used.empty()) {
+    doc["extensionsUsed"] = used;
+    doc["extensionsRequired"] = used;
+  }
+  json buffers = json::array();
+  json b0 = {{"byteLength", out.bin.size()}};
+  if (!binUri.empty()) b0["uri"] = binUri;
+  buffers.push_back(b0);
+  if (o.meshopt)
+    buffers.push_back({{"byteLength", views.fallbackBytes()}, {"extensions", {{"EXT_meshopt_compression", {{"fallback", true}}}}}});
+  doc["buffers"] = buffers;
+  doc["bufferViews"] = views.views();
+  doc["accessors"] = accessors;
+  doc["meshes"] = json::array({{{"primitives", json::array({{{"attributes", attributes},
+                                                              {"indices", accessors.size() - 1},
+                                                              {"mode", 4}}})}}});
+  json meshNode = {{"mesh", 0}};
+  double local[3];
+  for (int a = 0; a < 3; ++a) local[a] = t[a] - o.frame[a];
+  if (local[0] != 0 || local[1] != 0 || local[2] != 0) meshNode["translation"] = {local[0], local[1], local[2]};
+  if (quantized) meshNode["scale"] = {m.gridStep, m.gridStep, m.gridStep};
+  json nodes = json::array();
+  if (o.zUpToYUp) {
+    // Column-major: (x, y, z) -> (x, z, -y), exact; the 3D Tiles runtime applies the inverse.
+    nodes.push_back({{"matrix", {1, 0, 0, 0, 0, 0, -1, 0, 0, 1, 0, 0, 0, 0, 0, 1}}, {"children", json::array({1})}});
+  }
+  nodes.push_back(meshNode);
+  doc["nodes"] = nodes;
+  doc["scenes"] = json::array({{{"nodes", json::array({0})}}});
+  doc["scene"] = 0;
+  out.json = doc.dump();
+  return out;
+}
+
+std::vector<uint8_t> encodeGlb(const GltfBytes& g) {
+  std::vector<uint8_t> jsonChunk(g.json.begin(), g.json.end());
+  pad4(jsonChunk, ' ');
+  std::vector<uint8_t> out;
+  const uint64_t total = 12 + 8 + jsonChunk.size() + (g.bin.empty() ? 0 : 8 + ((g.bin.size() + 3) & ~size_t(3)));
+  if (total > 0xFFFFFFFFull) throw Error("glTF writer: a GLB holds at most 4 GiB (" + std::to_string(total) + " bytes); write .gltf");
+  out.reserve(size_t(total));
+  put<uint32_t>(out, 0x46546C67u);  // "glTF"
+  put<uint32_t>(out, 2);
+  put<uint32_t>(out, uint32_t(total));
+  put<uint32_t>(out, uint32_t(jsonChunk.size()));
+  put<uint32_t>(out, 0x4E4F534Au);  // "JSON"
+  out.insert(out.end(), jsonChunk.begin(), jsonChunk.end());
+  if (!g.bin.empty()) {
+    put<uint32_t>(out, uint32_t((g.bin.size() + 3) & ~size_t(3)));
+    put<uint32_t>(out, 0x004E4942u);  // "BIN\0"
+    out.insert(out.end(), g.bin.begin(), g.bin.end());
+    pad4(out);
+  }
+  assert(out.size() == total);
+  return out;
+}
+
+namespace {
+
+void writeTemp(const std::string& tmp, const void* data, size_t size, Env* env) {
+  auto f = env->newWritableFile(tmp);
+  f->append(data, size);
+  f->sync();
+  f->close();
+}
+
+void removeQuietly(Env* env, const std::string& path) {
+  try {
+    env->removeFile(path);
+  } catch (const Error&) {
+  }
+}
+
+}  // namespace
+
+void writeFileAtomic(const std::string& path, const void* data, size_t size, Env* env) {
+  const std::string tmp = uniqueTempName(path);
+  try {
+    writeTemp(tmp, data, size, env);
+    env->renameFile(tmp, path);
+  } catch (...) {
+    removeQuietly(env, tmp);
+    throw;
+  }
+}
+
+GltfInfo writeGltfFile(const std::string& path, const GltfMeshView& mesh, const GltfOptions& options, Env* env) {
+  const std::string name = path.substr(path.find_last_of('/') + 1);
+  const size_t dot = name.find_last_of('.');
+  std::string ext = dot == std::string::npos ? "" : name.substr(dot);
+  for (auto& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+  if (ext == ".glb") {
+    GltfBytes g = buildGltf(mesh, options);
+    std::vector<uint8_t> glb = encodeGlb(g);
+    writeFileAtomic(path, glb.data(), glb.size(), env);
+    return g.info;
+  }
+  if (ext != ".gltf") fail(path, "not a glTF name (.glb or .gltf)");
+  // The JSON and its buffer: both complete under temporary names before either is renamed.
+  const std::string binPath = path.substr(0, path.size() - ext.size()) + ".bin";
+  const std::string binName = binPath.substr(binPath.find_last_of('/') + 1);
+  GltfBytes g = buildGltf(mesh, options, binName);
+  const std::string binTmp = uniqueTempName(binPath), jsonTmp = uniqueTempName(path);
+  bool binRenamed = false;
+  try {
+    writeTemp(binTmp, g.bin.data(), g.bin.size(), env);
+    writeTemp(jsonTmp, g.json.data(), g.json.size(), env);
+    env->renameFile(binTmp, binPath);
+    binRenamed = true;
+    env->renameFile(jsonTmp, path);
+  } catch (...) {
+    removeQuietly(env, binRenamed ? binPath : binTmp);
+    removeQuietly(env, jsonTmp);
+    throw;
+  }
+  return g.info;
+}
+
+}  // namespace mt::interop

@@ -1,0 +1,453 @@
+// glTF in and out: the streaming reader (patchstore/io/gltf_reader.cpp) on hand-made files (several
+// meshes and node transforms at UTM-like coordinates, indexed and not, .gltf with an external
+// buffer, meshopt- and Draco-compressed), its errors on damaged files, and the round trip
+// glTF -> mtbuild -> mtextract --error 0 -> glTF, whose triangles must equal the input's as a
+// multiset of grid points (bit-exact on the MT grid), in every output variant. Also the MT file's
+// metadata block (the CRS).
+#include <draco/compression/encode.h>
+#include <draco/mesh/triangle_soup_mesh_builder.h>
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstring>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "interop/gltf_writer.h"
+#include "mtfile/mt_file.h"
+#include "patchstore/io/mesh_reader.h"
+#include "tests/test_support.h"
+
+namespace mt {
+namespace {
+
+using nlohmann::json;
+using test::runTool;
+using test::TempDir;
+
+// Everything a reader delivered.
+struct Soup : MeshSink {
+  MeshHeader header;
+  std::vector<InputVertex> v;
+  std::vector<uint32_t> t;
+  void begin(const MeshHeader& h) override { header = h; }
+  void vertices(const InputVertex* p, size_t n, uint64_t first) override {
+    EXPECT_EQ(first, v.size());
+    v.insert(v.end(), p, p + n);
+  }
+  void triangles(const uint32_t* idx, size_t n) override {
+    for (size_t i = 0; i < 3 * n; ++i) EXPECT_LT(idx[i], v.size());
+    t.insert(t.end(), idx, idx + 3 * n);
+  }
+};
+
+Soup readMesh(const std::string& path) {
+  Soup s;
+  openMesh(path)->read(s);
+  return s;
+}
+
+// Triangles as grid points, each rotated to start at its smallest corner (orientation kept), sorted.
+using GridTri = std::array<int64_t, 9>;
+std::vector<GridTri> onGrid(const Soup& s, const double origin[3], double step) {
+  std::vector<GridTri> out;
+  for (size_t i = 0; i < s.t.size(); i += 3) {
+    std::array<std::array<int64_t, 3>, 3> c;
+    for (int k = 0; k < 3; ++k)
+      for (int a = 0; a < 3; ++a) c[k][a] = int64_t(std::floor((s.v[s.t[i + k]].p[a] - origin[a]) / step + 0.5));
+    int m = 0;
+    for (int k = 1; k < 3; ++k)
+      if (c[k] < c[m]) m = k;
+    GridTri g;
+    for (int k = 0; k < 3; ++k)
+      for (int a = 0; a < 3; ++a) g[3 * k + a] = c[(m + k) % 3][a];
+    out.push_back(g);
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+// A wavy n x n grid at spacing 0.25, positions relative to its mesh node.
+struct Grid {
+  int n;
+  std::vector<float> p;
+  std::vector<uint32_t> t;
+  explicit Grid(int n_, float phase = 0) : n(n_) {
+    for (int j = 0; j < n; ++j)
+      for (int i = 0; i < n; ++i)
+        p.insert(p.end(), {0.25f * float(i), 0.25f * float(j), 0.125f * float(std::round(4 * std::sin(0.4 * i + phase) * std::cos(0.3 * j)))});
+    for (int j = 0; j + 1 < n; ++j)
+      for (int i = 0; i + 1 < n; ++i) {
+        uint32_t a = uint32_t(j * n + i), b = a + 1, c = a + uint32_t(n), d = c + 1;
+        t.insert(t.end(), {a, b, d, a, d, c});
+      }
+  }
+};
+
+// Builds a glTF document and its binary buffer by hand.
+struct Doc {
+  json j;
+  std::vector<uint8_t> bin;
+  Doc() {
+    j["asset"] = {{"version", "2.0"}};
+    j["buffers"] = json::array();
+    j["bufferViews"] = json::array();
+    j["accessors"] = json::array();
+    j["meshes"] = json::array();
+    j["nodes"] = json::array();
+  }
+  int view(const void* data, size_t size) {
+    while (bin.size() % 4) bin.push_back(0);
+    j["bufferViews"].push_back({{"buffer", 0}, {"byteOffset", bin.size()}, {"byteLength", size}});
+    bin.insert(bin.end(), static_cast<const uint8_t*>(data), static_cast<const uint8_t*>(data) + size);
+    return int(j["bufferViews"].size() - 1);
+  }
+  int accessor(int view, int componentType, size_t count, const char* type) {
+    j["accessors"].push_back({{"bufferView", view}, {"componentType", componentType}, {"count", count}, {"type", type}});
+    return int(j["accessors"].size() - 1);
+  }
+  int positions(const std::vector<float>& p) {
+    int a = accessor(view(p.data(), p.size() * 4), 5126, p.size() / 3, "VEC3");
+    float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (size_t i = 0; i < p.size(); ++i) lo[i % 3] = std::min(lo[i % 3], p[i]), hi[i % 3] = std::max(hi[i % 3], p[i]);
+    j["accessors"][a]["min"] = {lo[0], lo[1], lo[2]};
+    j["accessors"][a]["max"] = {hi[0], hi[1], hi[2]};
+    return a;
+  }
+  int mesh(json primitive) {
+    j["meshes"].push_back({{"primitives", json::array({primitive})}});
+    return int(j["meshes"].size() - 1);
+  }
+  void node(json n) { j["nodes"].push_back(n); }
+  void scene() {
+    json roots = json::array();
+    for (size_t i = 0; i < j["nodes"].size(); ++i) roots.push_back(i);
+    j["scenes"] = json::array({{{"nodes", roots}}});
+    j["scene"] = 0;
+  }
+  std::string glb() {
+    while (bin.size() % 4) bin.push_back(0);
+    j["buffers"] = json::array({{{"byteLength", bin.size()}}});
+    std::string text = j.dump();
+    while (text.size() % 4) text += ' ';
+    std::string out;
+    auto u32 = [&](uint32_t v) { out.append(reinterpret_cast<const char*>(&v), 4); };
+    u32(0x46546C67), u32(2), u32(uint32_t(12 + 8 + text.size() + 8 + bin.size()));
+    u32(uint32_t(text.size())), u32(0x4E4F534A);
+    out += text;
+    u32(uint32_t(bin.size())), u32(0x004E4942);
+    out.append(reinterpret_cast<const char*>(bin.data()), bin.size());
+    return out;
+  }
+  // .gltf + external .bin named `binName` beside it.
+  void writeGltf(const TempDir& dir, const std::string& name, const std::string& binName) {
+    j["buffers"] = json::array({{{"byteLength", bin.size()}, {"uri", binName}}});
+    test::writeFile(dir.file(name), j.dump(2));
+    test::writeFile(dir.file(binName), std::string(bin.begin(), bin.end()));
+  }
+};
+
+// The test scene: two meshes at UTM-like coordinates (one indexed with uint16, one with uint32
+// indices under a rotated and scaled child node), and a non-indexed third one.
+Doc sceneDoc() {
+  Doc d;
+  Grid a(40), b(30, 1.0f), c(12, 2.0f);
+  std::vector<uint16_t> ai(a.t.begin(), a.t.end());
+  int ma = d.mesh({{"attributes", {{"POSITION", d.positions(a.p)}}},
+                   {"indices", d.accessor(d.view(ai.data(), ai.size() * 2), 5123, ai.size(), "SCALAR")}});
+  int mb = d.mesh({{"attributes", {{"POSITION", d.positions(b.p)}}},
+                   {"indices", d.accessor(d.view(b.t.data(), b.t.size() * 4), 5125, b.t.size(), "SCALAR")}});
+  std::vector<float> soup;
+  for (uint32_t i : c.t) soup.insert(soup.end(), &c.p[3 * i], &c.p[3 * i] + 3);
+  int mc = d.mesh({{"attributes", {{"POSITION", d.positions(soup)}}}});
+  d.node({{"mesh", ma}, {"translation", {500000.0, 4000000.0, 100.0}}, {"children", json::array({1})}});
+  d.node({{"mesh", mb}, {"translation", {12.0, 0.0, 0.0}}, {"rotation", {0.0, 0.0, 0.38268343236508978, 0.92387953251128674}},
+          {"scale", {1.5, 1.5, 1.5}}});
+  d.node({{"mesh", mc}, {"translation", {500000.0, 4000020.0, 100.0}}});
+  d.j["scenes"] = json::array({{{"nodes", {0, 2}}}});
+  d.j["scene"] = 0;
+  return d;
+}
+
+TEST(GltfReader, ReadsMeshesPrimitivesAndNodeTransformsInDouble) {
+  TempDir dir;
+  Doc d = sceneDoc();
+  test::writeFile(dir.file("scene.glb"), d.glb());
+  Soup s = readMesh(dir.file("scene.glb"));
+  EXPECT_EQ(s.header.format, MeshFormat::Glb);
+  EXPECT_TRUE(s.header.doublePrecision);
+  EXPECT_EQ(s.t.size() / 3, size_t(2 * 39 * 39 + 2 * 29 * 29 + 2 * 11 * 11));
+  EXPECT_EQ(s.v.size(), size_t(40 * 40 + 30 * 30 + 2 * 11 * 11 * 3));
+  // Mesh A's corner (1,1) at exactly 500000.25, 4000000.25: the node translation in double.
+  EXPECT_EQ(s.v[41].p[0], 500000.25);
+  EXPECT_EQ(s.v[41].p[1], 4000000.25);
+  // Mesh B under A: rotated 45 degrees about z, scaled 1.5, moved by 12 in A's frame.
+  const double r = 0.25 * 1.5 * std::sqrt(0.5);
+  EXPECT_NEAR(s.v[1600 + 1].p[0], 500012.0 + r, 1e-9);
+  EXPECT_NEAR(s.v[1600 + 1].p[1], 4000000.0 + r, 1e-9);
+
+  // The same document as .gltf with an external buffer reads the same.
+  d.writeGltf(dir, "scene.gltf", "scene-data.bin");
+  Soup g = readMesh(dir.file("scene.gltf"));
+  EXPECT_EQ(g.header.format, MeshFormat::Gltf);
+  ASSERT_EQ(g.v.size(), s.v.size());
+  for (size_t i = 0; i < s.v.size(); ++i)
+    for (int a = 0; a < 3; ++a) ASSERT_EQ(g.v[i].p[a], s.v[i].p[a]);
+  EXPECT_EQ(g.t, s.t);
+}
+
+TEST(GltfReader, ReadsDracoAndMeshoptCompressedPrimitives) {
+  TempDir dir;
+  Grid a(25);
+  // Draco, lossless (no position quantization), in a GLB with KHR_draco_mesh_compression.
+  draco::TriangleSoupMeshBuilder builder;
+  builder.Start(int(a.t.size() / 3));
+  const int pos = builder.AddAttribute(draco::GeometryAttribute::POSITION, 3, draco::DT_FLOAT32);
+  for (size_t f = 0; f < a.t.size() / 3; ++f)
+    builder.SetAttributeValuesForFace(pos, draco::FaceIndex(uint32_t(f)), &a.p[3 * a.t[3 * f]], &a.p[3 * a.t[3 * f + 1]],
+                                      &a.p[3 * a.t[3 * f + 2]]);
+  std::unique_ptr<draco::Mesh> mesh = builder.Finalize();
+  ASSERT_TRUE(mesh);
+  draco::Encoder encoder;
+  encoder.SetSpeedOptions(5, 5);
+  draco::EncoderBuffer buffer;
+  ASSERT_TRUE(encoder.EncodeMeshToBuffer(*mesh, &buffer).ok());
+  const uint32_t uid = mesh->attribute(pos)->unique_id();
+  Doc d;
+  int bv = d.view(buffer.data(), buffer.size());
+  d.j["accessors"].push_back({{"componentType", 5126}, {"count", mesh->num_points()}, {"type", "VEC3"},
+                              {"min", {0, 0, -0.5}}, {"max", {6, 6, 0.5}}});
+  d.j["accessors"].push_back({{"componentType", 5125}, {"count", a.t.size()}, {"type", "SCALAR"}});
+  d.mesh({{"attributes", {{"POSITION", 0}}}, {"indices", 1},
+          {"extensions", {{"KHR_draco_mesh_compression", {{"bufferView", bv}, {"attributes", {{"POSITION", uid}}}}}}}});
+  d.node({{"mesh", 0}, {"translation", {500000.0, 4000000.0, 0.0}}});
+  d.scene();
+  d.j["extensionsUsed"] = json::array({"KHR_draco_mesh_compression"});
+  d.j["extensionsRequired"] = json::array({"KHR_draco_mesh_compression"});
+  test::writeFile(dir.file("draco.glb"), d.glb());
+  Soup draco = readMesh(dir.file("draco.glb"));
+
+  // The plain reference.
+  Doc plain;
+  plain.mesh({{"attributes", {{"POSITION", plain.positions(a.p)}}},
+              {"indices", plain.accessor(plain.view(a.t.data(), a.t.size() * 4), 5125, a.t.size(), "SCALAR")}});
+  plain.node({{"mesh", 0}, {"translation", {500000.0, 4000000.0, 0.0}}});
+  plain.scene();
+  test::writeFile(dir.file("plain.glb"), plain.glb());
+  Soup ref = readMesh(dir.file("plain.glb"));
+  const double origin[3] = {499990, 3999990, -10};
+  EXPECT_EQ(onGrid(draco, origin, 1.0 / 1024), onGrid(ref, origin, 1.0 / 1024));
+
+  // Meshopt: our writer's EXT_meshopt_compression output, with and without quantization.
+  std::vector<double> p(ref.v.size() * 3);
+  for (size_t i = 0; i < ref.v.size(); ++i)
+    for (int k = 0; k < 3; ++k) p[3 * i + k] = ref.v[i].p[k];
+  interop::GltfMeshView view;
+  view.vertexCount = ref.v.size();
+  view.triangleCount = ref.t.size() / 3;
+  view.positions = p.data();
+  view.triangles = ref.t.data();
+  interop::GltfOptions o;
+  o.meshopt = true;
+  interop::writeGltfFile(dir.file("meshopt.glb"), view, o);
+  EXPECT_EQ(onGrid(readMesh(dir.file("meshopt.glb")), origin, 1.0 / 1024), onGrid(ref, origin, 1.0 / 1024));
+  interop::writeGltfFile(dir.file("meshopt.gltf"), view, o);
+  EXPECT_EQ(onGrid(readMesh(dir.file("meshopt.gltf")), origin, 1.0 / 1024), onGrid(ref, origin, 1.0 / 1024));
+}
+
+// glTF in -> MT -> glTF cut at full resolution: the input's triangles, as a multiset, bit-exact on
+// the MT grid, for every output variant; the CRS given to mtbuild is in the file, in mtinfo and in
+// the glTF's asset.extras.
+TEST(GltfRoundTrip, FullResolutionCutEqualsTheInputOnTheGrid) {
+  TempDir dir;
+  test::writeFile(dir.file("scene.glb"), sceneDoc().glb());
+  auto built = runTool("mtbuild", dir.file("scene.glb") + " -o " + dir.file("scene.mt") + " --crs EPSG:32633 -q");
+  ASSERT_EQ(built.exitCode, 0) << built.output;
+  auto reader = MtFileReader::open(dir.file("scene.mt"));
+  EXPECT_EQ(reader->crs(), "EPSG:32633");
+  EXPECT_GT(reader->header().metadataSize, 0u);
+  const double* origin = reader->header().gridOrigin;
+  const double step = reader->header().gridStep;
+  EXPECT_EQ(reader->header().weldedTriangles, 0u);
+  const auto input = onGrid(readMesh(dir.file("scene.glb")), origin, step);
+  auto info = runTool("mtinfo", dir.file("scene.mt"));
+  EXPECT_NE(info.output.find("EPSG:32633"), std::string::npos) << info.output;
+
+  for (const std::string variant : {"cut.glb", "cut.gltf", "cut-meshopt.glb --meshopt", "cut-q.glb --quantize",
+                                    "cut-qm.gltf --quantize --meshopt"}) {
+    SCOPED_TRACE(variant);
+    auto ex = runTool("mtextract", dir.file("scene.mt") + " --error 0 -o " + dir.path() + "/" + variant);
+    ASSERT_EQ(ex.exitCode, 0) << ex.output;
+    EXPECT_EQ(ex.output.find("warning"), std::string::npos) << ex.output;
+    const std::string out = dir.file(variant.substr(0, variant.find(' ')));
+    EXPECT_EQ(onGrid(readMesh(out), origin, step), input);
+    // The CRS travels with the cut.
+    std::string bytes = test::readFile(out);
+    EXPECT_NE(bytes.find("\"crs\":\"EPSG:32633\""), std::string::npos);
+  }
+  // The glTF options are refused for PLY, and unknown extensions still are.
+  auto ply = runTool("mtextract", dir.file("scene.mt") + " --error 0 --meshopt -o " + dir.file("cut.ply"));
+  EXPECT_EQ(ply.exitCode, 1);
+  EXPECT_NE(ply.output.find("--meshopt and --quantize are for glTF output"), std::string::npos) << ply.output;
+  auto xyz = runTool("mtextract", dir.file("scene.mt") + " --error 0 -o " + dir.file("cut.xyz"));
+  EXPECT_EQ(xyz.exitCode, 1);
+  EXPECT_NE(xyz.output.find("supported: .ply, .glb, .gltf"), std::string::npos) << xyz.output;
+  EXPECT_FALSE(test::fileExists(dir.file("cut.ply")));
+  // A coarser cut is smaller and still reads.
+  auto coarse = runTool("mtextract", dir.file("scene.mt") + " --triangles 2000 -o " + dir.file("coarse.glb"));
+  ASSERT_EQ(coarse.exitCode, 0) << coarse.output;
+  EXPECT_LT(readMesh(dir.file("coarse.glb")).t.size(), input.size() * 3);
+}
+
+TEST(MtMetadata, NoCrsMeansNoBlockAndADamagedBlockIsRefused) {
+  TempDir dir;
+  test::writeFile(dir.file("scene.glb"), sceneDoc().glb());
+  ASSERT_EQ(runTool("mtbuild", dir.file("scene.glb") + " -o " + dir.file("plain.mt") + " -q").exitCode, 0);
+  ASSERT_EQ(runTool("mtbuild", dir.file("scene.glb") + " -o " + dir.file("crs.mt") + " --crs EPSG:32633 -q").exitCode, 0);
+  auto plain = MtFileReader::open(dir.file("plain.mt"));
+  EXPECT_EQ(plain->header().metadataSize, 0u);
+  EXPECT_EQ(plain->header().metadataOffset, 0u);
+  EXPECT_EQ(plain->crs(), "");
+  EXPECT_TRUE(plain->metadata().empty());
+  auto crs = MtFileReader::open(dir.file("crs.mt"));
+  // The block sits between the patch index and the footer: the files differ by it (and the header).
+  EXPECT_EQ(crs->fileSize(), plain->fileSize() + crs->header().metadataSize);
+  EXPECT_EQ(crs->header().metadataOffset, crs->header().patchesOffset + crs->header().patchCount * sizeof(format::PatchRecord));
+  // A flipped byte inside the block: the footer checksum covers it.
+  std::string bytes = test::readFile(dir.file("crs.mt"));
+  bytes[size_t(crs->header().metadataOffset) + 9] ^= 0x20;
+  test::writeFile(dir.file("bad.mt"), bytes);
+  try {
+    MtFileReader::open(dir.file("bad.mt"));
+    FAIL() << "a damaged metadata block was accepted";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.kind(), ErrorKind::Corruption);
+    EXPECT_NE(std::string(e.what()).find("checksum"), std::string::npos) << e.what();
+  }
+  auto help = runTool("mtbuild", "--help");
+  EXPECT_NE(help.output.find("--crs"), std::string::npos);
+  // mtgen --offset: positions moved in double; only binary PLY can hold them.
+  ASSERT_EQ(runTool("mtgen", "-o " + dir.file("a.ply") + " --triangles 2k").exitCode, 0);
+  ASSERT_EQ(runTool("mtgen", "-o " + dir.file("b.ply") + " --triangles 2k --offset 500000,4000000,100.5").exitCode, 0);
+  Soup a = readMesh(dir.file("a.ply")), b = readMesh(dir.file("b.ply"));
+  ASSERT_EQ(a.v.size(), b.v.size());
+  EXPECT_TRUE(b.header.doublePrecision);
+  for (size_t i = 0; i < a.v.size(); i += 97) {
+    EXPECT_NEAR(b.v[i].p[0] - 500000.0, a.v[i].p[0], 1e-6);
+    EXPECT_NEAR(b.v[i].p[1] - 4000000.0, a.v[i].p[1], 1e-6);
+    EXPECT_NEAR(b.v[i].p[2] - 100.5, a.v[i].p[2], 1e-6);
+  }
+  auto obj = runTool("mtgen", "-o " + dir.file("c.obj") + " --triangles 2k --offset 1,2,3");
+  EXPECT_EQ(obj.exitCode, 1);
+  EXPECT_NE(obj.output.find("--offset needs --format ply"), std::string::npos) << obj.output;
+  auto bad = runTool("mtgen", "-o " + dir.file("d.ply") + " --triangles 2k --offset 1,2");
+  EXPECT_EQ(bad.exitCode, 1);
+  EXPECT_NE(bad.output.find("--offset wants X,Y,Z"), std::string::npos) << bad.output;
+}
+
+// Damaged and wrong files: one clear error naming the file and where.
+TEST(GltfReader, BadFilesGiveOneClearErrorNamingTheFileAndWhere) {
+  TempDir dir;
+  Grid a(5);
+  auto good = [&] {
+    Doc d;
+    d.mesh({{"attributes", {{"POSITION", d.positions(a.p)}}},
+            {"indices", d.accessor(d.view(a.t.data(), a.t.size() * 4), 5125, a.t.size(), "SCALAR")}});
+    d.node({{"mesh", 0}});
+    d.scene();
+    return d;
+  };
+  struct Case {
+    std::string name, bytes, expect;
+  };
+  std::vector<Case> cases;
+  {
+    std::string g = good().glb();
+    cases.push_back({"truncated.glb", g.substr(0, g.size() - 10), "differs from the file's"});
+    std::string v = g;
+    v[4] = 3;
+    cases.push_back({"version.glb", v, "GLB version 3 at byte offset 4"});
+  }
+  {
+    Doc d = good();
+    std::string g = d.glb();
+    const size_t brace = g.find("{");
+    g[brace + 1] = '!';  // JSON syntax error right after the opening brace
+    cases.push_back({"json.glb", g, "bad JSON at byte offset 21"});
+  }
+  {
+    Doc d = good();
+    d.j["accessors"][1]["count"] = 1000;  // runs past its view
+    cases.push_back({"range.glb", d.glb(), "accessor 1 (indices of mesh 0 primitive 0): 1000 elements"});
+  }
+  {
+    Doc d = good();
+    std::vector<uint32_t> t = a.t;
+    t[7] = 99;
+    d.bin.clear();
+    d.j["bufferViews"] = json::array();
+    d.view(a.p.data(), a.p.size() * 4);
+    d.view(t.data(), t.size() * 4);
+    cases.push_back({"index.glb", d.glb(), "element 7: index 99 >= the primitive's 25 vertices, at byte offset"});
+  }
+  {
+    Doc d = good();
+    std::vector<float> p = a.p;
+    p[3 * 6 + 1] = NAN;
+    d.bin.clear();
+    d.j["bufferViews"] = json::array();
+    d.view(p.data(), p.size() * 4);
+    d.view(a.t.data(), a.t.size() * 4);
+    cases.push_back({"nan.glb", d.glb(), "accessor 0 (POSITION of mesh 0 primitive 0) element 6: non-finite position at byte offset"});
+  }
+  {
+    Doc d = good();
+    d.j["accessors"][0]["sparse"] = {{"count", 1}};
+    cases.push_back({"sparse.glb", d.glb(), "sparse accessors are not read"});
+  }
+  {
+    Doc d = good();
+    d.j["meshes"][0]["primitives"][0]["indices"] = 7;
+    cases.push_back({"missing.glb", d.glb(), "refers to accessors 7, which does not exist"});
+  }
+  {
+    Doc d = good();
+    d.j["extensionsRequired"] = json::array({"KHR_gaussian_splatting"});
+    cases.push_back({"ext.glb", d.glb(), "requires the extension KHR_gaussian_splatting"});
+  }
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    const std::string path = dir.file(c.name);
+    test::writeFile(path, c.bytes);
+    try {
+      Soup s;
+      openMesh(path)->read(s);
+      ADD_FAILURE() << "no error";
+    } catch (const Error& e) {
+      const std::string m = e.what();
+      EXPECT_EQ(m.rfind(path + ": ", 0), 0u) << m;
+      EXPECT_NE(m.find(c.expect), std::string::npos) << m;
+      EXPECT_EQ(m.find('\n'), std::string::npos) << m;
+    }
+  }
+  // A .gltf whose buffer file is missing names that file.
+  good().writeGltf(dir, "nobin.gltf", "nobin.bin");
+  std::remove(dir.file("nobin.bin").c_str());
+  try {
+    readMesh(dir.file("nobin.gltf"));
+    ADD_FAILURE() << "no error";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("nobin.bin"), std::string::npos) << e.what();
+  }
+  // mtbuild says the same and leaves nothing.
+  auto r = runTool("mtbuild", dir.file("index.glb") + " -o " + dir.file("x.mt") + " -q");
+  EXPECT_EQ(r.exitCode, 1);
+  EXPECT_NE(r.output.find("index 99"), std::string::npos) << r.output;
+  EXPECT_FALSE(test::fileExists(dir.file("x.mt")));
+}
+
+}  // namespace
+}  // namespace mt
