@@ -178,6 +178,7 @@ PatchView PatchCache::view(uint32_t id) const {
   v.vertexCount = s.vertexCount;
   v.indices = reinterpret_cast<const uint32_t*>(base + uint64_t(s.vertexCount) * sizeof(RenderVertex));
   v.indexCount = s.indexCount;
+  v.bound = s.bound;
   return v;
 }
 
@@ -258,9 +259,10 @@ int PatchCache::reserve(uint32_t id, Urgency urgency, uint64_t frame) {
   return chosen;
 }
 
-void PatchCache::commit(int slot, uint32_t vertexCount, uint32_t indexCount) {
+void PatchCache::commit(int slot, uint32_t vertexCount, uint32_t indexCount, const PatchBound& bound) {
   std::lock_guard<std::mutex> lock(mu_);
   Slot& s = slots_[slot];
+  s.bound = bound;
   s.vertexCount = vertexCount;
   s.indexCount = indexCount;
   s.state = State::Ready;

@@ -47,8 +47,21 @@ inline uint64_t renderPatchBytes(uint64_t vertices, uint64_t triangles) {
   return vertices * sizeof(RenderVertex) + triangles * 3 * sizeof(uint32_t);
 }
 
-// A patch in the cache: vertices then 32-bit triangle indices, in one place holder.
+// A patch's own bounds, measured when it is decoded (relative to Scene::patchOrigin): its
+// bounding sphere and its normal cone (axis, cos of the half angle; cutoff <= -1: no cone). The
+// finest patches (on arcs leaving a source node) have no DAG node of their own to carry a cone;
+// these give them back-face culling too.
+struct PatchBound {
+  float center[3] = {0, 0, 0};
+  float radius = 0;
+  float coneAxis[3] = {0, 0, 1};
+  float coneCutoff = -2;
+};
+
+// A patch in the cache: vertices (positions relative to Scene::patchOrigin) then 32-bit triangle
+// indices, in one place holder.
 struct PatchView {
+  PatchBound bound;
   const RenderVertex* vertices = nullptr;
   uint32_t vertexCount = 0;
   const uint32_t* indices = nullptr;
@@ -108,7 +121,7 @@ class PatchCache {
   int reserve(uint32_t id, Urgency urgency, uint64_t frame);
   uint8_t* slotData(int slot) { return arena_.get() + slots_[slot].offset; }
   uint64_t slotBytes(int slot) const { return classBytes_[slots_[slot].cls]; }
-  void commit(int slot, uint32_t vertexCount, uint32_t indexCount);
+  void commit(int slot, uint32_t vertexCount, uint32_t indexCount, const PatchBound& bound = {});
   // Loading failed: frees the place holder; bad = never try this patch again.
   void abort(int slot, bool bad);
 
@@ -119,6 +132,7 @@ class PatchCache {
     uint32_t usage = 0;
     uint64_t touched = 0;      // last frame referenced (+1; 0 = never)
     uint32_t vertexCount = 0, indexCount = 0;
+    PatchBound bound;
     bool onFree = false;
     uint8_t cls = 0;           // size class
     uint64_t offset = 0;       // in the arena

@@ -33,7 +33,7 @@ Scene::Scene(const std::vector<std::string>& paths) {
     for (size_t i = 0; i < rn.size(); ++i) {
       const auto& n = rn[i];
       SceneNode s{};
-      for (int a = 0; a < 3; ++a) s.center[a] = float(n.center[a]), s.coneAxis[a] = n.coneAxis[a];
+      for (int a = 0; a < 3; ++a) s.center[a] = n.center[a], s.coneAxis[a] = n.coneAxis[a];
       s.radius = n.radius;
       s.error = n.error;
       s.coneCutoff = n.coneCutoff;
