@@ -179,9 +179,29 @@ void Engine::markOccluded() {
       occludedList_.push_back(n);
     }
   };
-  for (uint32_t n : extract_->refineCandidates()) mark(n);
   for (uint32_t n : extract_->coarsenCandidates()) mark(n);
   for (uint32_t a : extract_->cutArcs()) mark(scene_->arcs()[a].cullNode);
+  // The refinements, and two levels of what follows them (what prefetching and the requests
+  // ahead of a still image look at): spheres nest, so what an occluded node replaces is hidden
+  // too and needs no test.
+  const auto& arcs = scene_->arcs();
+  const auto& inArcs = scene_->inArcs();
+  for (uint32_t n : extract_->refineCandidates()) {
+    mark(n);
+    if (occluded_[n]) continue;
+    const SceneNode& s = nodes[n];
+    for (uint32_t k = 0; k < s.inArcCount; ++k) {
+      const uint32_t m = arcs[inArcs[s.firstInArc + k]].from;
+      if (nodes[m].source) continue;
+      mark(m);
+      if (occluded_[m]) continue;
+      const SceneNode& sm = nodes[m];
+      for (uint32_t j = 0; j < sm.inArcCount; ++j) {
+        const uint32_t g = arcs[inArcs[sm.firstInArc + j]].from;
+        if (!nodes[g].source) mark(g);
+      }
+    }
+  }
 }
 
 void Engine::drawWithOcclusion(const View& view, GlRenderer& gl, FrameRecord& rec) {

@@ -183,8 +183,17 @@ double ExtractRender::screenError(uint32_t node, const View& view) const {
   if (s.sink) return std::numeric_limits<double>::infinity();
   ++keyed_;
   const glm::dvec3 c(s.center[0], s.center[1], s.center[2]);
-  // Occlusion (Derzapf et al. 4.2): hidden behind nearer geometry in the last frame's depth.
-  if (options_.cull && options_.occlusion && occluded_ && (*occluded_)[node]) return 0;
+  // Occlusion (Derzapf et al. 4.2): hidden behind nearer geometry in the last frame's depth; or
+  // everything the node replaces (its in-arcs, each bounded by its cull node's sphere) is hidden:
+  // then refining it adds nothing visible and coarsening it removes nothing visible, even when the
+  // node's own sphere (which also bounds its coarser fragment) pokes out.
+  if (options_.cull && options_.occlusion && occluded_) {
+    if ((*occluded_)[node]) return 0;
+    bool hidden = s.inArcCount > 0;
+    for (uint32_t k = 0; k < s.inArcCount && hidden; ++k)
+      hidden = (*occluded_)[scene_.arcs()[scene_.inArcs()[s.firstInArc + k]].cullNode] != 0;
+    if (hidden) return 0;
+  }
   if (options_.cull) {
     // Frustum: a node entirely outside needs no detail (BMT 5.1 projects through the sphere).
     for (const auto& p : view.planes)

@@ -126,7 +126,6 @@ GlRenderer::GlRenderer(uint64_t gpuCapBytes) : cap_(gpuCapBytes) {
 
 GlRenderer::~GlRenderer() {
   for (auto& [id, b] : buffers_) glDeleteBuffers(1, &b.buffer);
-  if (stream_) glDeleteBuffers(1, &stream_);
   deleteTarget(accumulation_);
   deleteTarget(presented_);
   if (fbo_) {
@@ -261,9 +260,13 @@ void GlRenderer::warmUp(const DrawSettings& settings) {
 
 void GlRenderer::evictFor(uint64_t bytes) {
   if (gpuBytes_ + bytes <= cap_) return;
+  // Least recently drawn first. In the hard cap that may include buffers drawn earlier in this
+  // frame: their draws are already submitted, and GL keeps a deleted buffer alive until the draws
+  // that use it are done, so the image is unaffected (a cut larger than the GPU cache is simply
+  // re-uploaded every frame). The soft cap (test switch) keeps this frame's buffers.
   std::vector<std::pair<uint64_t, uint32_t>> old;
   for (const auto& [id, b] : buffers_)
-    if (b.lastFrame < frame_) old.push_back({b.lastFrame, id});
+    if (hardCap_ || b.lastFrame < frame_) old.push_back({b.lastUse, id});
   std::sort(old.begin(), old.end());
   for (const auto& [f, id] : old) {
     if (gpuBytes_ + bytes <= cap_) break;
@@ -276,11 +279,7 @@ void GlRenderer::evictFor(uint64_t bytes) {
 
 uint32_t GlRenderer::drawPatch(uint32_t id, uint32_t level, const double origin[3], const std::function<PatchView()>& fetch) {
   auto it = buffers_.find(id);
-  Buffer streamed;
-  Buffer* bp = nullptr;
-  if (it != buffers_.end()) {
-    bp = &it->second;
-  } else {
+  if (it == buffers_.end()) {
     PatchView v = fetch();
     if (v.vertexCount == 0 || v.indexCount == 0) return 0;
     Buffer b;
@@ -288,40 +287,22 @@ uint32_t GlRenderer::drawPatch(uint32_t id, uint32_t level, const double origin[
     b.indexOffset = vbytes;
     b.indexCount = v.indexCount;
     b.bytes = vbytes + uint64_t(v.indexCount) * 4;
-    if (hardCap_) evictFor(b.bytes);
-    if (!hardCap_ || gpuBytes_ + b.bytes <= cap_) {
-      glCreateBuffers(1, &b.buffer);
-      glNamedBufferStorage(b.buffer, GLsizeiptr(b.bytes), nullptr, GL_DYNAMIC_STORAGE_BIT);
-      glNamedBufferSubData(b.buffer, 0, GLsizeiptr(vbytes), v.vertices);
-      glNamedBufferSubData(b.buffer, GLintptr(vbytes), GLsizeiptr(uint64_t(v.indexCount) * 4), v.indices);
-      gpuBytes_ += b.bytes;
-      ++uploads_;
-      bp = &buffers_.emplace(id, b).first->second;
-    } else {
-      // Everything held was drawn this frame: stream this patch through one reused buffer (it
-      // grows to the largest patch streamed, within the cap, once nothing else is held).
-      if (streamBytes_ < b.bytes) {
-        if (stream_) glDeleteBuffers(1, &stream_);
-        gpuBytes_ -= streamBytes_;
-        streamBytes_ = 0;
-        stream_ = 0;
-        if (gpuBytes_ + b.bytes > cap_) return 0;  // not even one patch fits beside what this frame drew
-        glCreateBuffers(1, &stream_);
-        glNamedBufferStorage(stream_, GLsizeiptr(b.bytes), nullptr, GL_DYNAMIC_STORAGE_BIT);
-        streamBytes_ = b.bytes;
-        gpuBytes_ += b.bytes;
-      }
-      glNamedBufferSubData(stream_, 0, GLsizeiptr(vbytes), v.vertices);
-      glNamedBufferSubData(stream_, GLintptr(vbytes), GLsizeiptr(uint64_t(v.indexCount) * 4), v.indices);
-      ++uploads_;
-      streamed = b;
-      streamed.buffer = stream_;
-      bp = &streamed;
+    if (hardCap_) {
+      evictFor(b.bytes);
+      if (gpuBytes_ + b.bytes > cap_) return 0;  // one patch larger than the whole cap
     }
+    glCreateBuffers(1, &b.buffer);
+    glNamedBufferStorage(b.buffer, GLsizeiptr(b.bytes), nullptr, GL_DYNAMIC_STORAGE_BIT);
+    glNamedBufferSubData(b.buffer, 0, GLsizeiptr(vbytes), v.vertices);
+    glNamedBufferSubData(b.buffer, GLintptr(vbytes), GLsizeiptr(uint64_t(v.indexCount) * 4), v.indices);
+    gpuBytes_ += b.bytes;
     gpuPeak_ = std::max(gpuPeak_, gpuBytes_);
+    ++uploads_;
+    it = buffers_.emplace(id, b).first;
   }
-  Buffer& b = *bp;
+  Buffer& b = it->second;
   b.lastFrame = frame_;
+  b.lastUse = ++uses_;
   if (mode_ == ColorMode::Patch) {
     glm::vec3 c = hashColor(id);
     glUniform3f(locTint_, c.r, c.g, c.b);

@@ -66,10 +66,9 @@ class GlRenderer {
   // model-view matrix is the view matrix times translate(origin), composed in double, so only
   // small numbers reach the GPU (camera-relative drawing). Uploads the patch first when it is not
   // on the GPU, taking its data from fetch() (a PatchView with vertexCount 0 = unavailable:
-  // nothing drawn). The GPU cap is hard: before an upload, buffers not drawn this frame are
-  // evicted (least recently drawn first) until it fits; when even that is not enough, the patch
-  // is drawn from one reused streaming buffer (counted in the cap) and not kept. Returns
-  // triangles drawn.
+  // nothing drawn). The GPU cap is hard: before an upload, the least recently drawn buffers are
+  // deleted until it fits (this frame's too, once their draws are submitted: GL keeps them alive
+  // until done), so the bytes held never pass the cap. Returns triangles drawn.
   uint32_t drawPatch(uint32_t id, uint32_t level, const double origin[3], const std::function<PatchView()>& fetch);
   void endFrame();
   // Test switch: false = the old soft cap (buffers trimmed after the frame), to show the hard cap matters.
@@ -91,6 +90,7 @@ class GlRenderer {
     uint64_t indexOffset = 0;
     uint32_t indexCount = 0;
     uint64_t lastFrame = 0;
+    uint64_t lastUse = 0;
   };
   // A colour + depth render target.
   struct Target {
@@ -104,8 +104,7 @@ class GlRenderer {
   uint64_t cap_;
   bool hardCap_ = true;
   uint64_t gpuPeak_ = 0;
-  uint32_t stream_ = 0;           // the streaming buffer
-  uint64_t streamBytes_ = 0;
+  uint64_t uses_ = 0;             // draw counter (least recently drawn order)
   glm::dmat4 viewD_{1}, projD_{1};
   uint32_t program_ = 0, vao_ = 0, fbo_ = 0, colorRb_ = 0, depthRb_ = 0;
   Target accumulation_, presented_;
