@@ -92,6 +92,12 @@ class PatchCache {
   // patchBytes[id]: an upper bound of patch id's decoded size (renderPatchBytes). Throws
   // mt::Error when the cap cannot give every size class a few place holders.
   PatchCache(uint64_t capBytes, const std::vector<uint64_t>& patchBytes);
+  // The same, knowing which patches one cut move needs resident together (`moves`: for each DAG
+  // node, its in- and out-patches; Scene::moveGroups): each size class gets at least the place
+  // holders the largest move needs in it, plus 3. Without that floor a class sized by its share
+  // of the bytes alone could be smaller than one refinement of the coarse levels (whose patches
+  // are the largest), and the cut stayed at the coarsest for ever.
+  PatchCache(uint64_t capBytes, const std::vector<uint64_t>& patchBytes, const std::vector<std::vector<uint32_t>>& moves);
   ~PatchCache();
 
   // ---- render thread ----
