@@ -72,6 +72,7 @@ struct ExtractOptions {
   bool starvationOrder = true;   // loads: patches requested in the most consecutive frames first
   bool lodScalePolicy = true;    // the global LOD scale grows while the cache is full
   bool occlusion = true;         // nodes the last frame's depth hides get screen error 0 (setOccluded)
+  bool patchCones = true;        // the finest patches are culled by their own normal cones (engine.cpp)
 };
 
 // One wanted, non-resident patch, as the load order sees it.
