@@ -113,6 +113,8 @@ class Engine {
   void markOccluded();
   bool occlusionOn() const { return options_.extract.cull && options_.extract.occlusion; }
   DepthPyramid pyramid_;
+  uint64_t nextOcclusionFrame_ = 0;
+  double occlusionMs_ = 0;  // the drawing with occlusion (read-back and tests included), averaged
   std::vector<float> depth_;
   std::vector<uint8_t> occluded_;       // per node, for ExtractRender::setOccluded
   std::vector<uint32_t> occludedList_;  // the nodes set in occluded_
