@@ -11,6 +11,12 @@
 #      of cut, no RAM cache, no PatchServer, no prefetch; its GPU buffer cache has the same cap),
 #      each with its peak RSS (GNU time) since no cgroup memory limit is available here.
 #
+#   4. the run-time policies on the same path: misses with and without prefetch (--no-prefetch),
+#      the cut update's whole cost against its deadline (heaps, prefetch and requests included:
+#      extract_within_deadline_pct, extract_ms_max), and occlusion culling on the default view
+#      (the front of the model hides its back): drawn and loaded triangles with and without it
+#      (--no-occlusion), and the GPU cache's peak against its cap.
+#
 # Environment: FRAMES (600), WIDTH (1280), HEIGHT (720), BUDGET_MS (50), CAMERA (flythrough),
 # CACHES ("32M 64M 128M 256M"), OUT (a fresh directory under /tmp), BIN (build/bin),
 # THROUGHPUT (1: also section 3, raw draw throughput for RAW_TRIANGLES="60000 100000 200000 400000").
@@ -57,17 +63,20 @@ printf "frame ms median / p99 / max %s / %s / %s\n" "$(val main frame_ms_median)
 printf "max cache bytes vs cap    %s / %s (%s)\n" "$(val main cache_max_bytes)" "$(val main cache_cap_bytes)" \
   "$(awk '{ if ($1 == "cache_max_bytes") m = $2; if ($1 == "cache_cap_bytes") c = $2 } END { print (m <= c ? "within the cap" : "ABOVE THE CAP") }' "$OUT/main.out")"
 printf "extract median            %s ms\n" "$(val main extract_ms_median)"
+printf "extract within deadline   %s %%, max %s ms\n" "$(val main extract_within_deadline_pct)" "$(val main extract_ms_max)"
 printf "first frame (cold start)  %s ms from process start\n" "$(val main first_frame_ms)"
 printf "<= 1 px after the stop    %s (ms; camera stops at frame %s)\n" "$(rest main settle_ms)" "$(val main stop_frame)"
 printf "peak RSS                  %s KiB\n" "$(val main peak_rss_kib)"
 echo "charts: $OUT/plots/*.png"
 
+[[ ${POLICIES_ONLY:-0} == 1 ]] && CACHES=256M
 for c in $CACHES; do
   [[ $c == 256M ]] && { cp "$OUT/main.csv" "$OUT/cache-$c.csv"; cp "$OUT/main.out" "$OUT/cache-$c.out"; continue; }
   run "cache-$c" "$@" --cache "$c"
 done
-run baseline "$@" --cache 256M --baseline-mmap
+[[ ${POLICIES_ONLY:-0} == 1 ]] || run baseline "$@" --cache 256M --baseline-mmap
 
+if [[ ${POLICIES_ONLY:-0} != 1 ]]; then
 echo
 echo "== miss rate and frame time by cache size (same path; cf. El-Sana & Chiang Table 2)"
 printf "%-16s %10s %8s %12s %10s %10s %10s %14s %12s\n" mode miss_rate misses frame_med_ms frame_p99 within_% extract_ms cache_max_MiB peak_rss_MiB
@@ -82,6 +91,32 @@ printf "%-16s %10s %8s %12s %10s %10s %10s %14s %12s\n" "baseline mmap" "$(val $
   "$(val $n frame_ms_median)" "$(p99 $n)" "$(val $n within_budget_pct)" "$(val $n extract_ms_median)" "-" \
   "$(mib "$(( $(val $n peak_rss_kib) * 1024 ))")"
 echo "(baseline: misses = patches decoded synchronously inside frames; its GPU buffer cache is capped at 256 MiB)"
+fi
+
+# 4. The run-time policies.
+run noprefetch "$@" --cache 256M --cold --no-prefetch
+echo
+echo "== prefetch (same path, cold start, 256 MiB)"
+printf "%-14s %10s %10s %10s %12s\n" mode misses miss_rate within_% extract_max
+for n in main noprefetch; do
+  printf "%-14s %10s %10s %10s %12s\n" "$n" "$(val $n misses_total)" "$(val $n miss_rate)" "$(val $n within_budget_pct)" "$(val $n extract_ms_max)"
+done
+awk -v a="$(val main misses_total)" -v b="$(val noprefetch misses_total)" 'BEGIN { if (a > 0) printf "misses without / with prefetch: %.2fx\n", b / a }'
+echo "cut update within its deadline (heaps, prefetch, requests included): $(rest main extract_within_deadline_pct)"
+printf "GPU peak vs cap            %s / %s\n" "$(val main gpu_peak_bytes)" "$(val main gpu_cap_bytes)"
+OCC_FRAMES=${OCC_FRAMES:-120}
+for o in on off; do
+  extra=""; [[ $o == off ]] && extra="--no-occlusion"
+  "$BIN/mtrender" "$@" --headless --quiet --camera-path fixed --frames "$OCC_FRAMES" --width "$WIDTH" --height "$HEIGHT" \
+    --budget-ms "$BUDGET_MS" --cache 256M --still-frames 1 --stats "$OUT/occ-$o.csv" $extra > "$OUT/occ-$o.out"
+done
+echo
+echo "== occlusion culling (default view: the model's front hides its back; $OCC_FRAMES frames, one frame's budget each)"
+printf "%-14s %16s %16s %20s %10s\n" occlusion drawn_last_frame cut_last_frame loaded_triangles within_%
+for o in on off; do
+  printf "%-14s %16s %16s %20s %10s\n" "$o" "$(tail -1 "$OUT/occ-$o.csv" | cut -d, -f10)" "$(tail -1 "$OUT/occ-$o.csv" | cut -d, -f4)" \
+    "$(val occ-$o loaded_triangles_total)" "$(val occ-$o within_budget_pct)"
+done
 
 # 3. Raw llvmpipe throughput on this machine: the path's final (held) view, a fixed cut of N
 #    triangles (--fixed-triangles, the time model off), 60 frames each; ms per frame and the

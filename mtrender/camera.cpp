@@ -32,6 +32,8 @@ View makeView(const CameraPose& pose, int width, int height, const glm::dvec3& c
   glm::dmat4 proj = glm::perspective(fovy, double(width) / double(height), v.nearPlane, v.farPlane);
   v.viewMatrix = glm::mat4(view);
   v.projMatrix = glm::mat4(proj);
+  v.viewD = view;
+  v.projD = proj;
   // Gribb-Hartmann plane extraction from the combined matrix.
   glm::dmat4 m = glm::transpose(proj * view);
   glm::dvec4 rows[4] = {m[0], m[1], m[2], m[3]};

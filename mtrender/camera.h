@@ -26,6 +26,9 @@ struct CameraPose {
 
 struct View {
   glm::mat4 viewMatrix{1}, projMatrix{1};
+  // The same in double: the GL backend composes each patch's model-view matrix from these and the
+  // patch's double origin (camera-relative drawing), so nothing large ever reaches a float.
+  glm::dmat4 viewD{1}, projD{1};
   glm::dvec3 eye{0};
   glm::dvec3 forward{0, 0, -1};
   glm::dvec4 planes[6];   // inside: dot(plane.xyz, p) + plane.w >= 0 (normalized)

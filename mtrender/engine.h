@@ -27,6 +27,7 @@
 #include "mtrender/camera.h"
 #include "mtrender/extract.h"
 #include "mtrender/gl_renderer.h"
+#include "mtrender/occlusion.h"
 #include "mtrender/patch_cache.h"
 #include "mtrender/patch_server.h"
 #include "mtrender/scene.h"
@@ -48,7 +49,10 @@ struct EngineOptions {
 
 struct FrameRecord : FrameStats {
   double frameMs = 0;
+  uint32_t occludedArcs = 0;  // cut arcs in the frustum not drawn: hidden in this frame's depth
+  uint32_t conedPatches = 0;  // finest patches not drawn: back-facing by their own normal cones
   uint32_t loads = 0;        // patches loaded (server) or decoded in the frame (baseline)
+  uint64_t loadedTriangles = 0;  // their triangles (server loads only)
   uint64_t cacheBytes = 0;   // RAM cache in use (place holders holding a patch)
   uint64_t gpuBytes = 0;
   bool moving = false;
@@ -93,13 +97,28 @@ class Engine {
   std::unique_ptr<ExtractRender> extract_;
   glm::dvec3 center_{0};
   double radius_ = 1;
-  uint64_t frame_ = 0, lastLoads_ = 0;
+  uint64_t frame_ = 0, lastLoads_ = 0, lastLoadedTriangles_ = 0;
   std::vector<uint64_t> drawnPerFile_;
   std::vector<std::pair<double, uint32_t>> drawOrder_;  // (distance, cut arc), reused every frame
   // Sorts the cut arcs visible in `view` front to back into drawOrder_.
   void orderVisibleArcs(const View& view);
-  // Draws drawOrder_[from, to) and adds to rec's drawn counts.
-  void drawArcs(size_t from, size_t to, GlRenderer& gl, FrameRecord& rec);
+  // Draws drawOrder_[from, to) and adds to rec's drawn counts (the patches of arcs leaving a
+  // source are culled by their own normal cones against `view`).
+  void drawArcs(size_t from, size_t to, GlRenderer& gl, FrameRecord& rec, const View& view);
+  // Occlusion culling (Derzapf et al. 4.2, with a depth pyramid): draws the arcs whose node was
+  // not hidden last frame, reads the depth back, draws those of the rest that this frame's depth
+  // does not hide, and marks the front nodes the depth hides for the next cut update.
+  void drawWithOcclusion(const View& view, GlRenderer& gl, FrameRecord& rec);
+  // Marks the front of the cut (and the cut arcs' nodes) hidden in pyramid_.
+  void markOccluded();
+  bool occlusionOn() const { return options_.extract.cull && options_.extract.occlusion; }
+  DepthPyramid pyramid_;
+  uint64_t nextOcclusionFrame_ = 0;
+  double occlusionMs_ = 0;  // the drawing with occlusion (read-back and tests included), averaged
+  std::vector<float> depth_;
+  std::vector<uint8_t> occluded_;       // per node, for ExtractRender::setOccluded
+  std::vector<uint32_t> occludedList_;  // the nodes set in occluded_
+  std::vector<std::pair<double, uint32_t>> deferred_;
   // Progressive refinement of a still view.
   struct Still {
     bool active = false;       // the camera has stopped; the screen shows `presented`

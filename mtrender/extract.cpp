@@ -68,6 +68,32 @@ bool ExtractRender::isCoarsenCandidate(uint32_t n) const {
   return !inS_[n] && !s.sink && predOut_[n] == 0;
 }
 
+void ExtractRender::syncCandidate(uint32_t n) {
+  auto sync = [](std::vector<uint32_t>& set, std::vector<uint32_t>& pos, uint32_t n, bool member) {
+    if (member == (pos[n] != UINT32_MAX)) return;
+    if (member) {
+      pos[n] = uint32_t(set.size());
+      set.push_back(n);
+    } else {
+      const uint32_t last = set.back();
+      set[pos[n]] = last;
+      pos[last] = pos[n];
+      set.pop_back();
+      pos[n] = UINT32_MAX;
+    }
+  };
+  sync(refineSet_, refinePos_, n, isRefineCandidate(n));
+  sync(coarsenSet_, coarsenPos_, n, isCoarsenCandidate(n));
+}
+
+double ExtractRender::pinLimit() const {
+  if (!cache_) return 1e18;
+  const double slots = cache_->stats().slots;
+  // A cache that holds every patch of the scene needs no room kept for prefetching.
+  if (slots >= double(scene_.patches().size())) return slots;
+  return options_.memoryFraction * slots;
+}
+
 void ExtractRender::addCutArc(uint32_t a) {
   cutPos_[a] = uint32_t(cutArcs_.size());
   cutArcs_.push_back(a);
@@ -100,6 +126,12 @@ void ExtractRender::start(double timeoutMs) {
   cutArcs_.clear();
   triangles_ = 0;
   cutPatchCount_ = 0;
+  refineSet_.clear();
+  coarsenSet_.clear();
+  refinePos_.assign(n, UINT32_MAX);
+  coarsenPos_.assign(n, UINT32_MAX);
+  stamp_.assign(n, 0);
+  stampNow_ = 0;
   // The coarsest cut: every node but the sinks.
   for (size_t i = 0; i < n; ++i) inS_[i] = !nodes[i].sink;
   for (uint32_t a = 0; a < scene_.arcs().size(); ++a) {
@@ -112,6 +144,7 @@ void ExtractRender::start(double timeoutMs) {
       cutPatchCount_ += arc.patchCount;
     }
   }
+  for (uint32_t i = 0; i < n; ++i) syncCandidate(i);
   if (!cache_) return;
   std::vector<LoadRequest> req;
   for (uint32_t a : cutArcs_) {
@@ -148,7 +181,19 @@ bool ExtractRender::arcVisible(uint32_t arc, const View& view) const {
 double ExtractRender::screenError(uint32_t node, const View& view) const {
   const SceneNode& s = scene_.nodes()[node];
   if (s.sink) return std::numeric_limits<double>::infinity();
+  ++keyed_;
   const glm::dvec3 c(s.center[0], s.center[1], s.center[2]);
+  // Occlusion (Derzapf et al. 4.2): hidden behind nearer geometry in the last frame's depth; or
+  // everything the node replaces (its in-arcs, each bounded by its cull node's sphere) is hidden:
+  // then refining it adds nothing visible and coarsening it removes nothing visible, even when the
+  // node's own sphere (which also bounds its coarser fragment) pokes out.
+  if (options_.cull && options_.occlusion && occluded_) {
+    if ((*occluded_)[node]) return 0;
+    bool hidden = s.inArcCount > 0;
+    for (uint32_t k = 0; k < s.inArcCount && hidden; ++k)
+      hidden = (*occluded_)[scene_.arcs()[scene_.inArcs()[s.firstInArc + k]].cullNode] != 0;
+    if (hidden) return 0;
+  }
   if (options_.cull) {
     // Frustum: a node entirely outside needs no detail (BMT 5.1 projects through the sphere).
     for (const auto& p : view.planes)
@@ -171,6 +216,12 @@ double ExtractRender::screenError(uint32_t node, const View& view) const {
   return double(s.error) * view.pixelsPerUnit / d;
 }
 
+double ExtractRender::screenErrorAhead(uint32_t node, const std::vector<View>& views) const {
+  double e = 0;
+  for (const View& v : views) e = std::max(e, screenError(node, v));
+  return e;
+}
+
 bool ExtractRender::tryRefine(uint32_t n) {
   const SceneNode& s = scene_.nodes()[n];
   collectIn(n, scratch_);
@@ -190,7 +241,17 @@ bool ExtractRender::tryRefine(uint32_t n) {
   }
   triangles_ = triangles_ + s.inTriangles - s.outTriangles;
   cutPatchCount_ = cutPatchCount_ + uint32_t(scratch_.size()) - uint32_t(scratch2_.size());
+  syncAround(n);
   return true;
+}
+
+// A move on n changes n's membership of S, the successor counts of its in-arcs' `from` nodes and
+// the predecessor counts of its out-arcs' `to` nodes: only those can change candidacy.
+void ExtractRender::syncAround(uint32_t n) {
+  const SceneNode& s = scene_.nodes()[n];
+  syncCandidate(n);
+  for (uint32_t k = 0; k < s.inArcCount; ++k) syncCandidate(scene_.arcs()[scene_.inArcs()[s.firstInArc + k]].from);
+  for (uint32_t k = 0; k < s.arcCount; ++k) syncCandidate(scene_.arcs()[s.firstArc + k].to);
 }
 
 bool ExtractRender::tryCoarsen(uint32_t n) {
@@ -212,6 +273,7 @@ bool ExtractRender::tryCoarsen(uint32_t n) {
   }
   triangles_ = triangles_ + s.outTriangles - s.inTriangles;
   cutPatchCount_ = cutPatchCount_ + uint32_t(scratch_.size()) - uint32_t(scratch2_.size());
+  syncAround(n);
   return true;
 }
 
@@ -231,8 +293,8 @@ int64_t ExtractRender::visibleDelta(uint32_t n, bool refine, const View& view) c
 
 void ExtractRender::want(const std::vector<uint32_t>& ids, Urgency u) {
   for (uint32_t id : ids) {
-    auto [it, fresh] = wanted_.emplace(id, u);
-    if (!fresh && uint8_t(u) > uint8_t(it->second)) it->second = u;
+    auto [it, fresh] = wanted_.emplace(id, Want{u, uint32_t(wanted_.size())});
+    if (!fresh && uint8_t(u) > uint8_t(it->second.urgency)) it->second.urgency = u;
   }
 }
 
@@ -280,56 +342,52 @@ double ExtractRender::nextBudget(double extractMs) {
   return budget * budgetScale_;
 }
 
+std::vector<LoadRequest> orderRequests(std::vector<RequestCandidate> c, uint32_t budget, bool byConsecutive) {
+  std::sort(c.begin(), c.end(), [byConsecutive](const RequestCandidate& a, const RequestCandidate& b) {
+    if (a.urgency != b.urgency) return uint8_t(a.urgency) > uint8_t(b.urgency);
+    if (byConsecutive && a.consecutive != b.consecutive) return a.consecutive > b.consecutive;
+    return a.rank < b.rank;
+  });
+  std::vector<LoadRequest> out;
+  for (size_t i = 0; i < c.size() && out.size() < budget; ++i) out.push_back({c[i].id, c[i].urgency});
+  return out;
+}
+
 void ExtractRender::submitRequests(uint64_t frame, FrameStats& st) {
   // Requests for the PatchServer: urgent first, then the patches wanted in the most consecutive
   // frames (Derzapf 4.1: no region starves), within the load budget.
   if (!cache_) return;
-  {
-    struct Req {
-      uint32_t id;
-      Urgency u;
-      uint32_t consecutive;
-    };
-    std::vector<Req> reqs;
-    std::unordered_map<uint32_t, uint32_t> nextConsecutive;
-    touched_.clear();
-    for (const auto& [id, u] : wanted_) {
-      PatchCache::State s = cache_->state(id);
-      if (s == PatchCache::State::Ready) {
-        touched_.push_back(id);
-        continue;
-      }
-      if (s == PatchCache::State::Bad) continue;
-      if (u != Urgency::Prefetch) ++st.misses;
-      if (s == PatchCache::State::Loading) continue;
-      auto it = consecutive_.find(id);
-      uint32_t c = (it == consecutive_.end() ? 0 : it->second) + 1;
-      nextConsecutive[id] = c;
-      reqs.push_back({id, u, c});
+  std::vector<RequestCandidate> reqs;
+  std::unordered_map<uint32_t, uint32_t> nextConsecutive;
+  touched_.clear();
+  for (const auto& [id, w] : wanted_) {
+    PatchCache::State s = cache_->state(id);
+    if (s == PatchCache::State::Ready) {
+      touched_.push_back(id);
+      continue;
     }
-    consecutive_.swap(nextConsecutive);
-    cache_->touch(touched_.data(), touched_.size(), frame);
-    std::sort(reqs.begin(), reqs.end(), [](const Req& a, const Req& b) {
-      if (a.u != b.u) return uint8_t(a.u) > uint8_t(b.u);
-      if (a.consecutive != b.consecutive) return a.consecutive > b.consecutive;
-      return a.id < b.id;
-    });
-    uint32_t loadBudget = options_.loadBudget;
-    if (!loadBudget) {
-      double ms = server_->meanLoadMs();
-      loadBudget = uint32_t(std::clamp(ms > 0 ? options_.budgetMs / ms : 64.0, 8.0, 512.0));
-    }
-    std::vector<LoadRequest> out;
-    for (const Req& r : reqs) {
-      if (out.size() >= loadBudget) break;
-      out.push_back({r.id, r.u});
-      if (r.u == Urgency::Prefetch) ++st.prefetches;
-      else ++st.requests;
-    }
-    server_->submit(std::move(out), frame);
-    cache_->endFrame(frame);
+    if (s == PatchCache::State::Bad) continue;
+    if (w.urgency != Urgency::Prefetch) ++st.misses;
+    auto it = consecutive_.find(id);
+    const uint32_t c = (it == consecutive_.end() ? 0 : it->second) + 1;
+    nextConsecutive[id] = c;
+    if (s == PatchCache::State::Loading) continue;
+    reqs.push_back({id, w.urgency, c, w.rank});
   }
-
+  consecutive_.swap(nextConsecutive);
+  cache_->touch(touched_.data(), touched_.size(), frame);
+  uint32_t loadBudget = options_.loadBudget;
+  if (!loadBudget) {
+    double ms = server_->meanLoadMs();
+    loadBudget = uint32_t(std::clamp(ms > 0 ? options_.budgetMs / ms : 64.0, 8.0, 512.0));
+  }
+  std::vector<LoadRequest> out = orderRequests(std::move(reqs), loadBudget, options_.starvationOrder);
+  for (const LoadRequest& r : out) {
+    if (r.urgency == Urgency::Prefetch) ++st.prefetches;
+    else ++st.requests;
+  }
+  server_->submit(std::move(out), frame);
+  cache_->endFrame(frame);
 }
 
 FrameStats ExtractRender::requestAhead(uint64_t frame, const View& view) {
@@ -349,15 +407,16 @@ FrameStats ExtractRender::requestAhead(uint64_t frame, const View& view) {
     bool operator<(const Entry& o) const { return err < o.err; }
   };
   std::priority_queue<Entry> heap;
-  for (uint32_t n = 0; n < nodes.size(); ++n)
-    if (isRefineCandidate(n) && !badNode_[n]) heap.push({screenError(n, view), n, 0});
+  keyed_ = 0;
+  for (uint32_t n : refineSet_)
+    if (!badNode_[n]) heap.push({screenError(n, view), n, 0});
   double triangles = double(visibleTriangles_);
-  std::vector<uint8_t> seen(nodes.size(), 0);
+  const uint32_t visit = ++stampNow_;
   while (!heap.empty()) {
     Entry e = heap.top();
     heap.pop();
-    if (e.err <= tau || seen[e.node]) continue;
-    seen[e.node] = 1;
+    if (e.err <= tau || stamp_[e.node] == visit) continue;
+    stamp_[e.node] = visit;
     triangles += double(visibleDelta(e.node, true, view));
     // Beyond the budget the next update trades coarsenings for the best refinements: ask for
     // those too, at prefetch priority, up to twice the budget.
@@ -378,6 +437,7 @@ FrameStats ExtractRender::requestAhead(uint64_t frame, const View& view) {
   st.lodScale = lodScale_;
   st.modelA = time_.a();
   st.modelB = time_.b() * 1e6;
+  st.nodesKeyed = keyed_;
   st.extractMs = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
   return st;
 }
@@ -409,28 +469,32 @@ struct ExtractRender::Pass {
   double maxErr = 0;         // the largest screen error left on the visible cut
   uint32_t ops = 0;
   uint32_t urgentLeft = 4;   // the first misses at the top of the heap are urgent (3.3.2)
+  double blockedErr = 0;     // the refinement memory stopped: what the LOD scale must reach at most
   bool memoryFull = false;   // the cut would crowd the cache: the global LOD scale grows
 
   Pass(const View& v, FrameStats& s) : view(v), st(s) {}
   // The deadline, looked at every 8th move; once passed, the update stops where it is.
+  bool useDeadline = true;
   bool timeUp() {
-    if ((++ops & 7) != 0) return false;
+    if ((++ops & 7) != 0 || !useDeadline) return false;
     if (Clock::now() < deadline) return false;
     st.interrupted = true;
     return true;
   }
 };
 
+// Re-keys the heaps for the new view from the candidate sets (kept by every move): the work is
+// the front of the cut, not the DAG.
 void ExtractRender::fillHeaps(Pass& p) const {
-  const auto& nodes = scene_.nodes();
-  for (uint32_t n = 0; n < nodes.size(); ++n) {
-    if (isRefineCandidate(n))
-      p.refine.push({screenError(n, p.view), n});
-    else if (isCoarsenCandidate(n))
-      p.coarse.push({screenError(n, p.view), n});
-    else if (nodes[n].source && succIn_[n] == 0)
-      p.maxErr = std::max(p.maxErr, screenError(n, p.view));
-  }
+  std::vector<Pass::Entry> r, c;
+  r.reserve(refineSet_.size());
+  c.reserve(coarsenSet_.size());
+  for (uint32_t n : refineSet_) r.push_back({screenError(n, p.view), n});
+  for (uint32_t n : coarsenSet_) c.push_back({screenError(n, p.view), n});
+  p.refine = decltype(p.refine)(Pass::LargestFirst(), std::move(r));
+  p.coarse = decltype(p.coarse)(Pass::SmallestFirst(), std::move(c));
+  for (uint32_t n : scene_.sources())
+    if (succIn_[n] == 0) p.maxErr = std::max(p.maxErr, screenError(n, p.view));
 }
 
 // After a move on n, n and its neighbours may have become feasible moves (BMT 5, figure 8).
@@ -518,6 +582,7 @@ void ExtractRender::refineWithinBudget(Pass& p) {
     collectIn(e.node, scratch_);
     if (double(cutPatchCount_) + double(scratch_.size()) > p.pinLimit) {
       p.memoryFull = true;
+      p.blockedErr = e.err;
       break;
     }
     p.refine.pop();
@@ -553,10 +618,12 @@ void ExtractRender::coarsenFarBelow(Pass& p) {
   }
 }
 
-// Step 4. Prefetch (BMT 5: "the operations in the heaps"; Derzapf 4.3: children and the view
-// extrapolated 10 frames ahead), at low priority so it only uses spare load capacity.
-void ExtractRender::prefetch(Pass& p, const View& predicted) {
+// Step 4. Prefetch (BMT 5: "the operations in the heaps"; Derzapf 4.3: the children, and the
+// frustum enlarged to contain the frusta of the next frames), at low priority so it only uses
+// spare load capacity, and only in the time left before the deadline.
+void ExtractRender::prefetch(Pass& p, const std::vector<View>& ahead) {
   const auto& nodes = scene_.nodes();
+  auto timeLeft = [&] { return p.useDeadline ? Clock::now() < p.deadline : true; };
   for (int k = 0; !p.refine.empty() && k < 24;) {
     const Pass::Entry e = p.refine.top();
     p.refine.pop();
@@ -582,24 +649,55 @@ void ExtractRender::prefetch(Pass& p, const View& predicted) {
     want(scratch_, Urgency::Prefetch);
     ++k;
   }
-  // The extrapolated view: refinements it will want that the current view does not.
-  std::vector<Pass::Entry> ahead;
-  for (uint32_t n = 0; n < nodes.size(); ++n)
-    if (isRefineCandidate(n) && !badNode_[n]) {
-      double e = screenError(n, predicted);
-      if (e > p.tau) ahead.push_back({e, n});
+  if (ahead.empty() || !timeLeft()) return;
+  // The enlarged frustum: the refinements the next frames' views will want, the largest error
+  // first, two levels deep (as if applied), within twice the render budget's worth of triangles.
+  struct Entry {
+    double err;
+    uint32_t node, depth;
+    bool operator<(const Entry& o) const { return err < o.err; }
+  };
+  std::vector<Entry> start;
+  start.reserve(refineSet_.size());
+  for (uint32_t n : refineSet_)
+    if (!badNode_[n]) {
+      const double e = screenErrorAhead(n, ahead);
+      if (e > p.tau) start.push_back({e, n, 0});
     }
-  std::sort(ahead.begin(), ahead.end(), [](const Pass::Entry& a, const Pass::Entry& b) { return a.err > b.err; });
-  for (size_t i = 0; i < ahead.size() && i < 32; ++i) {
-    collectIn(ahead[i].node, scratch_);
+  std::priority_queue<Entry> heap(std::less<Entry>(), std::move(start));
+  const uint32_t visit = ++stampNow_;
+  double triangles = 0;
+  for (uint32_t ops = 0; !heap.empty(); ++ops) {
+    if ((ops & 15) == 15 && !timeLeft()) break;
+    const Entry e = heap.top();
+    heap.pop();
+    if (stamp_[e.node] == visit) continue;
+    stamp_[e.node] = visit;
+    triangles += double(nodes[e.node].inTriangles);
+    if (triangles > 2 * p.budget) break;
+    collectIn(e.node, scratch_);
     want(scratch_, Urgency::Prefetch);
+    if (e.depth >= 1) continue;
+    const SceneNode& s = nodes[e.node];
+    for (uint32_t k = 0; k < s.inArcCount; ++k) {
+      const uint32_t m = scene_.arcs()[scene_.inArcs()[s.firstInArc + k]].from;
+      if (nodes[m].source || badNode_[m]) continue;
+      const double em = screenErrorAhead(m, ahead);
+      if (em > p.tau) heap.push({em, m, e.depth + 1});
+    }
   }
 }
 
 FrameStats ExtractRender::update(uint64_t frame, const View& view, const View& predicted) {
+  return update(frame, view, std::vector<View>{predicted});
+}
+
+FrameStats ExtractRender::update(uint64_t frame, const View& view, const std::vector<View>& ahead) {
   FrameStats st;
   Pass p(view, st);
   p.t0 = Clock::now();
+  p.useDeadline = options_.deadline;
+  keyed_ = 0;
   frame_ = frame;
   wanted_.clear();
   const double extractMs = options_.extractMs > 0 ? options_.extractMs : std::min(2.0, options_.budgetMs / 20);
@@ -612,9 +710,10 @@ FrameStats ExtractRender::update(uint64_t frame, const View& view, const View& p
   visibleTriangles_ = 0;
   for (uint32_t a : cutArcs_)
     if (arcVisible(a, view)) visibleTriangles_ += scene_.arcs()[a].triangles;
-  const uint32_t slots = cache_ ? cache_->stats().slots : UINT32_MAX;
-  p.pinLimit = cache_ ? options_.memoryFraction * slots : 1e18;
+  p.pinLimit = pinLimit();
   fillHeaps(p);
+  if (occluded_ && options_.occlusion)
+    for (uint32_t n : refineSet_) st.occludedNodes += (*occluded_)[n];
 
   if (!frozen_) {
     coarsenOverBudget(p);
@@ -625,17 +724,28 @@ FrameStats ExtractRender::update(uint64_t frame, const View& view, const View& p
   while (!p.refine.empty() && !isRefineCandidate(p.refine.top().node)) p.refine.pop();
   if (!p.refine.empty()) p.maxErr = std::max(p.maxErr, p.refine.top().err);
   st.maxScreenError = p.maxErr;
-  if (cache_ && options_.prefetch && !frozen_ && Clock::now() < p.deadline + (p.deadline - p.t0)) prefetch(p, predicted);
+  if (cache_ && options_.prefetch && !frozen_ && (!p.useDeadline || Clock::now() < p.deadline)) prefetch(p, ahead);
 
   submitRequests(frame, st);
 
-  // Global LOD scale (Derzapf 4.1): coarsen everything while memory is full, relax gradually.
-  if (p.memoryFull) lodScale_ = std::min(lodScale_ * 1.1, 64.0);
-  else if (lodScale_ > 1 && double(cutPatchCount_) < 0.8 * p.pinLimit) lodScale_ = std::max(1.0, lodScale_ * 0.97);
+  // Global LOD scale (Derzapf 4.1): while the cut cannot refine for lack of place holders, the
+  // tolerance of every model grows (x1.1 a frame), but never past the error of the refinement
+  // memory stopped (beyond that it buys nothing: a scale that ran away during close views left a
+  // later far view at the coarsest cut). It relaxes once the cut is back under 80% of the limit:
+  // quickly (x0.85) under half of it, gradually (x0.97) above; between 80% and 100% it holds, so
+  // raising and relaxing cannot alternate.
+  const double cut = double(cutPatchCount_);
+  if (p.memoryFull && options_.lodScalePolicy) {
+    const double cap = std::max(lodScale_, p.blockedErr / options_.pixelTolerance);
+    lodScale_ = std::min({lodScale_ * 1.1, cap, 64.0});
+  } else if (lodScale_ > 1 && cut < 0.8 * p.pinLimit) {
+    lodScale_ = std::max(1.0, lodScale_ * (cut < 0.5 * p.pinLimit ? 0.85 : 0.97));
+  }
   st.memoryFull = p.memoryFull;
   st.lodScale = lodScale_;
   st.triangles = triangles_;
   st.patches = cutPatchCount_;
+  st.nodesKeyed = keyed_;
   st.extractMs = std::chrono::duration<double, std::milli>(Clock::now() - p.t0).count();
   return st;
 }

@@ -7,15 +7,18 @@
 //   RefinementHeap: nodes of S with no successor in S (their whole fragment is on screen), the
 //                   largest error first;
 //   CoarseningHeap: nodes outside S whose predecessors are all in S, the smallest error first.
-// Each frame: rebuild the heaps for the new view (the DAG has thousands of nodes, so this is cheap),
-// then Extract + Apply (interleaved, so the deadline can stop it anywhere and the cut stays
+// The feasible moves are kept as two indexed candidate sets, updated by every move (the paper's
+// heaps persist across frames; only their keys depend on the view). Each frame the heaps are
+// re-keyed from those sets for the new view: O(front of the cut), never a walk of the whole DAG,
+// and inside the update's deadline. Then Extract + Apply (interleaved, so the deadline can stop it anywhere and the cut stays
 // conforming): coarsen while over the render budget, refine the worst node while its error is
 // above the tolerance and CheckBudget allows (trading the cheapest coarsening for it when the
 // budget is spent), coarsen what is far below the tolerance. A move is applied only when all
 // its patches are resident (pinned atomically in the cache): a move waiting for the disk is a
 // miss, requested from the PatchServer, and the cut simply stays where it is.
-// Then Prefetch in the leftover time: patches of the moves at the top of both heaps, their
-// children, and the refinements the view extrapolated 10 frames ahead will want.
+// Then Prefetch in the leftover time before the deadline: patches of the moves at the top of both
+// heaps, their children, and the refinements wanted in the frustum enlarged to contain the frusta
+// of the next 10 frames (Derzapf et al. 4.3), two levels deep.
 // CheckBudget: render budget = triangles per frame from a time model fitted online to measured
 // frame times; load budget = patches per frame, from the PatchServer's measured load time.
 // A global LOD scale multiplies the tolerance while the cache cannot hold what the cut needs, and
@@ -63,7 +66,26 @@ struct ExtractOptions {
   bool prefetch = true;
   bool cull = true;              // frustum + normal-cone culling (per node for errors, per arc for drawing)
   double memoryFraction = 0.6;   // the cut may pin at most this share of the cache's place holders
+                                 // (all of them when the cache holds every patch of the scene)
+  // Internal switches, so a test can show each policy matters (all on in production):
+  bool deadline = true;          // the extract deadline stops the update (off: it runs to the end)
+  bool starvationOrder = true;   // loads: patches requested in the most consecutive frames first
+  bool lodScalePolicy = true;    // the global LOD scale grows while the cache is full
+  bool occlusion = true;         // nodes the last frame's depth hides get screen error 0 (setOccluded)
+  bool patchCones = true;        // the finest patches are culled by their own normal cones (engine.cpp)
 };
+
+// One wanted, non-resident patch, as the load order sees it.
+struct RequestCandidate {
+  uint32_t id;
+  Urgency urgency;
+  uint32_t consecutive;  // frames in a row it has been requested, this one included
+  uint32_t rank;         // order of discovery this frame (the heaps' order: largest error first)
+};
+// The load order (Derzapf et al. 4.1): urgent first; then, with byConsecutive, the patches
+// requested in the most consecutive frames (so a region the heaps keep ranking low is served
+// after a few frames: no LOD starvation); then the heaps' order. At most `budget` requests.
+std::vector<LoadRequest> orderRequests(std::vector<RequestCandidate> candidates, uint32_t budget, bool byConsecutive);
 
 struct FrameStats {
   double extractMs = 0;
@@ -79,6 +101,8 @@ struct FrameStats {
   double lodScale = 1;
   bool memoryFull = false;
   bool interrupted = false;      // the deadline stopped the update
+  uint32_t nodesKeyed = 0;       // screen errors computed (heaps re-keyed, prefetch): O(front), not O(DAG)
+  uint32_t occludedNodes = 0;    // front nodes hidden by the last frame's depth (error 0)
   double modelA = 0, modelB = 0; // time model: ms fixed, ms per million triangles
 };
 
@@ -92,6 +116,19 @@ class ExtractRender {
 
   // One frame's cut update for `view`; `predicted` is the view extrapolated 10 frames ahead.
   FrameStats update(uint64_t frame, const View& view, const View& predicted);
+  // The same, prefetching for the frustum enlarged to contain all of `ahead` (the views of the
+  // next frames, extrapolated; Derzapf et al. 4.3).
+  FrameStats update(uint64_t frame, const View& view, const std::vector<View>& ahead);
+  // Per node: 1 = hidden behind nearer geometry in the last frame's depth (occlusion culling,
+  // Derzapf et al. 4.2: a node occluded gets no detail and its patches are not loaded). Null: none.
+  // The vector must outlive the updates that use it.
+  void setOccluded(const std::vector<uint8_t>* occluded) { occluded_ = occluded; }
+  // The feasible moves of the cut (kept up to date by every move): refinements, coarsenings.
+  const std::vector<uint32_t>& refineCandidates() const { return refineSet_; }
+  const std::vector<uint32_t>& coarsenCandidates() const { return coarsenSet_; }
+  double lodScale() const { return lodScale_; }
+  // Place holders the cut may pin (memoryFraction of the cache's, or all when every patch fits).
+  double pinLimit() const;
   // For a frame that leaves the cut as it is (it draws part of a still image, engine.h): advances
   // the render budget and asks the PatchServer for what the refinements of the cut beyond it
   // would need, as if they were applied (the best first, two levels deep, within the scaled
@@ -116,6 +153,8 @@ class ExtractRender {
   bool arcVisible(uint32_t arc, const View& view) const;
   const std::vector<uint8_t>& inSet() const { return inS_; }
   double screenError(uint32_t node, const View& view) const;
+  // Largest screen error of the node over several views (the enlarged frustum of prefetching).
+  double screenErrorAhead(uint32_t node, const std::vector<View>& views) const;
   uint64_t cutTriangles() const { return triangles_; }
   // Triangles of the cut that pass culling for the last update's view: what the render budget
   // constrains (the time model is fitted to drawn triangles; culled ones cost nothing).
@@ -148,7 +187,9 @@ class ExtractRender {
   void refineWithinBudget(Pass& p);
   void refineOrRequest(Pass& p, uint32_t node, double err, int64_t dv);
   void coarsenFarBelow(Pass& p);
-  void prefetch(Pass& p, const View& predicted);
+  void prefetch(Pass& p, const std::vector<View>& ahead);
+  void syncCandidate(uint32_t n);  // n's membership of the candidate sets after a move
+  void syncAround(uint32_t n);     // n and the nodes a move on n may have made (in)feasible
 
   const Scene& scene_;
   PatchCache* cache_;
@@ -168,8 +209,16 @@ class ExtractRender {
   bool lastMemoryFull_ = false;
   uint64_t frame_ = 0;
   std::vector<uint32_t> scratch_, scratch2_;
-  struct Want { Urgency urgency; };
-  std::unordered_map<uint32_t, Urgency> wanted_;        // this frame
+  struct Want {
+    Urgency urgency;
+    uint32_t rank;
+  };
+  std::unordered_map<uint32_t, Want> wanted_;           // this frame
+  std::vector<uint32_t> refineSet_, coarsenSet_, refinePos_, coarsenPos_;  // indexed candidate sets
+  std::vector<uint32_t> stamp_;                          // per node: last requestAhead/prefetch visit
+  uint32_t stampNow_ = 0;
+  mutable uint32_t keyed_ = 0;  // screen errors computed since the update began
+  const std::vector<uint8_t>* occluded_ = nullptr;
   std::unordered_map<uint32_t, uint32_t> consecutive_;  // frames in a row a patch was requested
   std::vector<uint32_t> touched_;
   double smoothBudget_ = 0;

@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cstring>
+#include <glm/gtc/matrix_transform.hpp>
 #include <glm/gtc/type_ptr.hpp>
 #include <string>
 
@@ -218,6 +219,8 @@ void GlRenderer::setFrameState(const View& view, const DrawSettings& s) {
   glDisable(GL_CULL_FACE);
   glPolygonMode(GL_FRONT_AND_BACK, s.wireframe ? GL_LINE : GL_FILL);
   glUseProgram(program_);
+  viewD_ = view.viewD;
+  projD_ = view.projD;
   glm::mat4 mvp = view.projMatrix * view.viewMatrix;
   glUniformMatrix4fv(locMvp_, 1, GL_FALSE, glm::value_ptr(mvp));
   glUniformMatrix4fv(locMv_, 1, GL_FALSE, glm::value_ptr(view.viewMatrix));
@@ -255,7 +258,26 @@ void GlRenderer::warmUp(const DrawSettings& settings) {
   --frame_;  // not a frame of the cut
 }
 
-uint32_t GlRenderer::drawPatch(uint32_t id, uint32_t level, const std::function<PatchView()>& fetch) {
+void GlRenderer::evictFor(uint64_t bytes) {
+  if (gpuBytes_ + bytes <= cap_) return;
+  // Least recently drawn first. In the hard cap that may include buffers drawn earlier in this
+  // frame: their draws are already submitted, and GL keeps a deleted buffer alive until the draws
+  // that use it are done, so the image is unaffected (a cut larger than the GPU cache is simply
+  // re-uploaded every frame). The soft cap (test switch) keeps this frame's buffers.
+  std::vector<std::pair<uint64_t, uint32_t>> old;
+  for (const auto& [id, b] : buffers_)
+    if (hardCap_ || b.lastFrame < frame_) old.push_back({b.lastUse, id});
+  std::sort(old.begin(), old.end());
+  for (const auto& [f, id] : old) {
+    if (gpuBytes_ + bytes <= cap_) break;
+    auto it = buffers_.find(id);
+    gpuBytes_ -= it->second.bytes;
+    glDeleteBuffers(1, &it->second.buffer);
+    buffers_.erase(it);
+  }
+}
+
+uint32_t GlRenderer::drawPatch(uint32_t id, uint32_t level, const double origin[3], const std::function<PatchView()>& fetch) {
   auto it = buffers_.find(id);
   if (it == buffers_.end()) {
     PatchView v = fetch();
@@ -265,16 +287,22 @@ uint32_t GlRenderer::drawPatch(uint32_t id, uint32_t level, const std::function<
     b.indexOffset = vbytes;
     b.indexCount = v.indexCount;
     b.bytes = vbytes + uint64_t(v.indexCount) * 4;
+    if (hardCap_) {
+      evictFor(b.bytes);
+      if (gpuBytes_ + b.bytes > cap_) return 0;  // one patch larger than the whole cap
+    }
     glCreateBuffers(1, &b.buffer);
     glNamedBufferStorage(b.buffer, GLsizeiptr(b.bytes), nullptr, GL_DYNAMIC_STORAGE_BIT);
     glNamedBufferSubData(b.buffer, 0, GLsizeiptr(vbytes), v.vertices);
     glNamedBufferSubData(b.buffer, GLintptr(vbytes), GLsizeiptr(uint64_t(v.indexCount) * 4), v.indices);
     gpuBytes_ += b.bytes;
+    gpuPeak_ = std::max(gpuPeak_, gpuBytes_);
     ++uploads_;
     it = buffers_.emplace(id, b).first;
   }
   Buffer& b = it->second;
   b.lastFrame = frame_;
+  b.lastUse = ++uses_;
   if (mode_ == ColorMode::Patch) {
     glm::vec3 c = hashColor(id);
     glUniform3f(locTint_, c.r, c.g, c.b);
@@ -282,6 +310,12 @@ uint32_t GlRenderer::drawPatch(uint32_t id, uint32_t level, const std::function<
     glm::vec3 c = levelColor(level);
     glUniform3f(locTint_, c.r, c.g, c.b);
   }
+  // Camera-relative: the translation to the patch's origin is composed with the view in double;
+  // the float matrix holds only the small offset from the eye.
+  const glm::dmat4 mvD = glm::translate(viewD_, glm::dvec3(origin[0], origin[1], origin[2]));
+  const glm::mat4 mv(mvD), mvp(projD_ * mvD);
+  glUniformMatrix4fv(locMvp_, 1, GL_FALSE, glm::value_ptr(mvp));
+  glUniformMatrix4fv(locMv_, 1, GL_FALSE, glm::value_ptr(mv));
   glVertexArrayVertexBuffer(vao_, 0, b.buffer, 0, sizeof(RenderVertex));
   glVertexArrayElementBuffer(vao_, b.buffer);
   glDrawElements(GL_TRIANGLES, GLsizei(b.indexCount), GL_UNSIGNED_INT, reinterpret_cast<const void*>(b.indexOffset));
@@ -290,18 +324,17 @@ uint32_t GlRenderer::drawPatch(uint32_t id, uint32_t level, const std::function<
 
 void GlRenderer::endFrame() {
   glPolygonMode(GL_FRONT_AND_BACK, GL_FILL);
-  if (gpuBytes_ <= cap_) return;
-  std::vector<std::pair<uint64_t, uint32_t>> old;
-  for (const auto& [id, b] : buffers_)
-    if (b.lastFrame < frame_) old.push_back({b.lastFrame, id});
-  std::sort(old.begin(), old.end());
-  for (const auto& [f, id] : old) {
-    if (gpuBytes_ <= cap_) break;
-    auto it = buffers_.find(id);
-    gpuBytes_ -= it->second.bytes;
-    glDeleteBuffers(1, &it->second.buffer);
-    buffers_.erase(it);
-  }
+  // The soft cap of the test switch: trimmed after the frame.
+  if (!hardCap_) evictFor(0);
+}
+
+void GlRenderer::readDepth(std::vector<float>& out, bool presented) const {
+  const Target* t = presented ? &presented_ : nullptr;
+  const int w = t ? t->width : width_, h = t ? t->height : height_;
+  out.resize(size_t(w) * h);
+  glBindFramebuffer(GL_READ_FRAMEBUFFER, t ? t->fbo : fbo_);
+  glPixelStorei(GL_PACK_ALIGNMENT, 4);
+  glReadPixels(0, 0, w, h, GL_DEPTH_COMPONENT, GL_FLOAT, out.data());
 }
 
 void GlRenderer::finish() { glFinish(); }

@@ -62,11 +62,22 @@ class GlRenderer {
   // variants (LLVM JIT) at the first draw, so doing it while the files open takes it off the
   // first frame.
   void warmUp(const DrawSettings& settings);
-  // Draws patch `id`; uploads it first when it is not on the GPU, taking its data from fetch()
-  // (a PatchView with vertexCount 0 = unavailable: nothing drawn). Returns triangles drawn.
-  uint32_t drawPatch(uint32_t id, uint32_t level, const std::function<PatchView()>& fetch);
-  // Evicts least recently drawn buffers beyond the GPU cap (never one drawn this frame).
+  // Draws patch `id`, whose vertices are relative to `origin` (Scene::patchOrigin): its
+  // model-view matrix is the view matrix times translate(origin), composed in double, so only
+  // small numbers reach the GPU (camera-relative drawing). Uploads the patch first when it is not
+  // on the GPU, taking its data from fetch() (a PatchView with vertexCount 0 = unavailable:
+  // nothing drawn). The GPU cap is hard: before an upload, the least recently drawn buffers are
+  // deleted until it fits (this frame's too, once their draws are submitted: GL keeps them alive
+  // until done), so the bytes held never pass the cap. Returns triangles drawn.
+  uint32_t drawPatch(uint32_t id, uint32_t level, const double origin[3], const std::function<PatchView()>& fetch);
   void endFrame();
+  // Test switch: false = the old soft cap (buffers trimmed after the frame), to show the hard cap matters.
+  void setHardCap(bool hard) { hardCap_ = hard; }
+  // The largest GPU bytes held at any moment (after every upload), since the start.
+  uint64_t gpuPeakBytes() const { return gpuPeak_; }
+  // The depth of the output (or of the presented image when `presented`) as window-space depths
+  // in [0, 1], rows bottom to top (occlusion culling reads it back; engine.h).
+  void readDepth(std::vector<float>& out, bool presented = false) const;
   void finish();
   Image readPixels() const;
   uint64_t gpuBytes() const { return gpuBytes_; }
@@ -79,6 +90,7 @@ class GlRenderer {
     uint64_t indexOffset = 0;
     uint32_t indexCount = 0;
     uint64_t lastFrame = 0;
+    uint64_t lastUse = 0;
   };
   // A colour + depth render target.
   struct Target {
@@ -88,7 +100,12 @@ class GlRenderer {
   void makeTarget(Target& t, int width, int height);
   void deleteTarget(Target& t);
   void setFrameState(const View& view, const DrawSettings& settings);
+  void evictFor(uint64_t bytes);  // evicts buffers not drawn this frame until `bytes` more fit
   uint64_t cap_;
+  bool hardCap_ = true;
+  uint64_t gpuPeak_ = 0;
+  uint64_t uses_ = 0;             // draw counter (least recently drawn order)
+  glm::dmat4 viewD_{1}, projD_{1};
   uint32_t program_ = 0, vao_ = 0, fbo_ = 0, colorRb_ = 0, depthRb_ = 0;
   Target accumulation_, presented_;
   int width_ = 0, height_ = 0;

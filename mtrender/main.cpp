@@ -49,16 +49,18 @@ void writeCsv(const std::string& path, const std::vector<FrameRecord>& frames) {
     if (!out) mt::fail(path, "cannot write the stats CSV");
     out << "frame,frame_ms,extract_ms,triangles,patches,loads,misses,cache_bytes,max_screen_error,"
            "drawn_triangles,drawn_patches,budget_triangles,gpu_bytes,lod_scale,moving,requests,prefetches,"
-           "refinements,coarsenings,model_fixed_ms,model_ms_per_mtri,accumulating,image_frames\n";
+           "refinements,coarsenings,model_fixed_ms,model_ms_per_mtri,accumulating,image_frames,"
+           "occluded_arcs,occluded_nodes,coned_patches,nodes_keyed,interrupted,loaded_triangles\n";
     char buf[512];
     for (size_t i = 0; i < frames.size(); ++i) {
       const FrameRecord& f = frames[i];
-      std::snprintf(buf, sizeof buf, "%zu,%.3f,%.4f,%llu,%u,%u,%u,%llu,%.4f,%llu,%u,%llu,%llu,%.3f,%d,%u,%u,%u,%u,%.3f,%.1f,%d,%u\n", i,
+      std::snprintf(buf, sizeof buf, "%zu,%.3f,%.4f,%llu,%u,%u,%u,%llu,%.4f,%llu,%u,%llu,%llu,%.3f,%d,%u,%u,%u,%u,%.3f,%.1f,%d,%u,%u,%u,%u,%u,%d,%llu\n", i,
                     f.frameMs, f.extractMs, (unsigned long long)f.triangles, f.patches, f.loads, f.misses,
                     (unsigned long long)f.cacheBytes, f.maxScreenError, (unsigned long long)f.drawnTriangles,
                     f.drawnPatches, (unsigned long long)f.budgetTriangles, (unsigned long long)f.gpuBytes, f.lodScale,
                     f.moving ? 1 : 0, f.requests, f.prefetches, f.refinements, f.coarsenings, f.modelA, f.modelB,
-                    f.accumulating ? 1 : 0, f.imageFrames);
+                    f.accumulating ? 1 : 0, f.imageFrames, f.occludedArcs, f.occludedNodes, f.conedPatches, f.nodesKeyed,
+                    f.interrupted ? 1 : 0, (unsigned long long)f.loadedTriangles);
       out << buf;
     }
     if (!out) mt::fail(path, "write failed");
@@ -139,6 +141,7 @@ double median(std::vector<double> v) {
 struct CliOptions {
   std::vector<std::string> files;
   bool headless = false, baseline = false, noPrefetch = false, noCull = false, quiet = false, wireframe = false;
+  bool noOcclusion = false;
   bool cold = false;
   std::string cameraPath, statsPath, screenshotDir, plotDir, cacheText = "256M", gpuCacheText, colorMode = "shaded";
   std::string screenshotPath, recordPath = "mtrender-path.txt";
@@ -199,7 +202,10 @@ void addRenderOptions(CLI::App& app, CliOptions& o) {
       ->check(mt::cli::countIn(1, 64))
       ->capture_default_str();
   app.add_flag("--no-prefetch", o.noPrefetch, "no prefetching");
-  app.add_flag("--no-cull", o.noCull, "no frustum / normal-cone culling");
+  app.add_flag("--no-cull", o.noCull, "no frustum / normal-cone / occlusion culling");
+  app.add_flag("--no-occlusion", o.noOcclusion,
+               "no occlusion culling (by default patches hidden behind nearer geometry in the frame's depth are "
+               "neither refined, loaded nor drawn)");
 }
 
 // Drawing, pacing, test hooks and the viewer's options.
@@ -268,6 +274,7 @@ EngineOptions engineOptions(const CliOptions& o) {
   eo.extract.loadBudget = o.loadBudget;
   eo.extract.prefetch = !o.noPrefetch && !o.baseline;
   eo.extract.cull = !o.noCull;
+  eo.extract.occlusion = !o.noOcclusion;
   return eo;
 }
 
@@ -362,11 +369,16 @@ void printSummary(const CliOptions& o, const EngineOptions& eo, const std::vecto
                   double firstFrameMs) {
   const int frames = int(recs.size());
   size_t within = 0;
-  uint64_t maxCache = 0, maxGpu = 0;
+  uint64_t maxCache = 0, maxGpu = 0, drawnSum = 0, loadedSum = 0;
   double wantedSum = 0, missSum = 0;
+  size_t extractWithin = 0;
+  const double deadline = eo.extract.extractMs > 0 ? eo.extract.extractMs : std::min(2.0, o.budgetMs / 20);
   std::vector<double> extract, frameMs;
   for (const auto& r : recs) {
     within += r.frameMs <= o.budgetMs;
+    extractWithin += r.extractMs <= deadline;
+    drawnSum += r.drawnTriangles;
+    loadedSum += r.loadedTriangles;
     maxCache = std::max(maxCache, r.cacheBytes);
     maxGpu = std::max(maxGpu, r.gpuBytes);
     extract.push_back(r.extractMs);
@@ -394,6 +406,11 @@ void printSummary(const CliOptions& o, const EngineOptions& eo, const std::vecto
   std::printf("frame_ms_median %.3f\n", median(frameMs));
   std::printf("frame_ms_max %.3f\n", frameMs.empty() ? 0 : *std::max_element(frameMs.begin(), frameMs.end()));
   std::printf("extract_ms_median %.4f\n", median(extract));
+  std::printf("extract_ms_max %.4f\n", extract.empty() ? 0 : *std::max_element(extract.begin(), extract.end()));
+  std::printf("extract_within_deadline_pct %.2f (deadline %.3f ms, heaps and prefetch included)\n",
+              100.0 * double(extractWithin) / double(std::max(1, frames)), deadline);
+  std::printf("drawn_triangles_total %llu\n", (unsigned long long)drawnSum);
+  std::printf("loaded_triangles_total %llu\n", (unsigned long long)loadedSum);
   std::printf("first_frame_ms %.1f\n", firstFrameMs);
   std::printf("startup_ms gl %.1f open %.1f coarsest_cut %.1f first_frame %.1f\n", h.eglMs, h.openMs, h.startMs,
               recs.empty() ? 0.0 : recs[0].frameMs);
@@ -402,6 +419,8 @@ void printSummary(const CliOptions& o, const EngineOptions& eo, const std::vecto
   std::printf("cache_slots %u classes %u largest_slot_bytes %llu arena_bytes %llu\n", cs.slots, cs.classes,
               (unsigned long long)cs.slotBytes, (unsigned long long)cs.arenaBytes);
   std::printf("gpu_max_bytes %llu\n", (unsigned long long)maxGpu);
+  std::printf("gpu_peak_bytes %llu\n", (unsigned long long)h.gl->gpuPeakBytes());
+  std::printf("gpu_cap_bytes %llu\n", (unsigned long long)(eo.gpuCacheBytes ? eo.gpuCacheBytes : eo.cacheBytes));
   std::printf("miss_rate %.4f\n", missRate);
   std::printf("misses_total %.0f\n", missSum);
   std::printf("second_chance %llu evictions %llu urgent_evictions %llu given_up %llu\n",

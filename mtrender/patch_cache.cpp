@@ -15,7 +15,12 @@ uint32_t packNormal(const float n[3]) {
   return q(n[0]) | (q(n[1]) << 10) | (q(n[2]) << 20);
 }
 
-PatchCache::PatchCache(uint64_t capBytes, const std::vector<uint64_t>& patchBytes) : capBytes_(capBytes) {
+PatchCache::PatchCache(uint64_t capBytes, const std::vector<uint64_t>& patchBytes)
+    : PatchCache(capBytes, patchBytes, std::vector<std::vector<uint32_t>>()) {}
+
+PatchCache::PatchCache(uint64_t capBytes, const std::vector<uint64_t>& patchBytes,
+                       const std::vector<std::vector<uint32_t>>& moves)
+    : capBytes_(capBytes) {
   uint64_t largest = 64;
   for (uint64_t b : patchBytes) largest = std::max(largest, b);
   // Size classes: largest / 2^k (rounded up to 64 bytes), down to ~4 KiB, at most 6.
@@ -44,10 +49,38 @@ PatchCache::PatchCache(uint64_t capBytes, const std::vector<uint64_t>& patchByte
                                : uint64_t(double(capBytes_) * double(count[k] * classBytes_[k]) / double(demand)) / classBytes_[k];
     n[k] = std::max<uint64_t>(n[k], std::min<uint64_t>(count[k], 3));
   }
+  // The floor: the largest move's patches of each class, plus 3 (see the header).
+  std::vector<uint64_t> floor(nc, 0), inMove(nc, 0);
+  for (const auto& move : moves) {
+    std::fill(inMove.begin(), inMove.end(), 0);
+    for (uint32_t id : move)
+      if (id < patchClass_.size()) ++inMove[patchClass_[id]];
+    for (size_t k = 0; k < nc; ++k) floor[k] = std::max(floor[k], inMove[k]);
+  }
+  std::vector<uint64_t> least(nc);
+  for (size_t k = 0; k < nc; ++k) {
+    least[k] = std::min<uint64_t>(count[k], std::max<uint64_t>(3, floor[k] ? floor[k] + 3 : 0));
+    n[k] = std::max(n[k], least[k]);
+  }
+  // Over the cap once the floors are in: take place holders back from the classes with the most
+  // bytes above their floor, one at a time (a few thousand steps at most).
+  auto arena = [&] {
+    uint64_t b = 0;
+    for (size_t k = 0; k < nc; ++k) b += n[k] * classBytes_[k];
+    return b;
+  };
+  for (uint64_t b = arena(); b > capBytes_;) {
+    size_t best = nc;
+    for (size_t k = 0; k < nc; ++k)
+      if (n[k] > least[k] && (best == nc || (n[k] - least[k]) * classBytes_[k] > (n[best] - least[best]) * classBytes_[best])) best = k;
+    if (best == nc) break;  // the floors alone pass the cap: refused below
+    --n[best];
+    b -= classBytes_[best];
+  }
   for (size_t k = 0; k < nc; ++k) arenaBytes_ += n[k] * classBytes_[k];
   if (arenaBytes_ > capBytes_ || arenaBytes_ == 0)
-    throw Error("mtrender: a cache of " + std::to_string(capBytes_) + " bytes cannot hold 3 place holders of every size (the largest patch decodes to " +
-                std::to_string(largest) + " bytes); give a larger --cache");
+    throw Error("mtrender: a cache of " + std::to_string(capBytes_) + " bytes cannot hold the place holders one cut move needs in every size class (" +
+                std::to_string(arenaBytes_) + " bytes; the largest patch decodes to " + std::to_string(largest) + " bytes); give a larger --cache");
   // Uninitialized on purpose: pages are committed only when a place holder is first written, so
   // the resident size grows with use and never passes the cap.
   arena_.reset(new uint8_t[arenaBytes_]);
@@ -178,6 +211,7 @@ PatchView PatchCache::view(uint32_t id) const {
   v.vertexCount = s.vertexCount;
   v.indices = reinterpret_cast<const uint32_t*>(base + uint64_t(s.vertexCount) * sizeof(RenderVertex));
   v.indexCount = s.indexCount;
+  v.bound = s.bound;
   return v;
 }
 
@@ -223,19 +257,26 @@ int PatchCache::reserve(uint32_t id, Urgency urgency, uint64_t frame) {
     // 3.3.2: flush the first found place holder that is only prefetched (not used by the cut).
     // A switch down may do so only while >= 3 of them remain, so memory never fills with
     // patches that are all in use.
+    // The paper's one pool needs 3 such place holders before a switch down may flush one; a size
+    // class has its own few place holders (3 in a small class), where that rule can never hold
+    // once one of them is in use: a refinement then waited for ever while prefetched patches,
+    // asked for again every frame, kept the others (the cut stuck at the coarsest, seen on a
+    // flythrough). So the threshold scales with the class: 3, or half the class when smaller,
+    // at least 1.
+    const uint32_t n = classCount_[k], base = classFirst_[k];
+    const uint32_t need = std::min<uint32_t>(3, std::max<uint32_t>(1, (n - 1) / 2));
     uint32_t prefetchedOnly = 0;
     int first = -1;
-    const uint32_t n = classCount_[k], base = classFirst_[k];
     for (uint32_t j = 0; j < n; ++j) {
       uint32_t i = base + (urgentScan_[k] + j) % n;
       const Slot& s = slots_[i];
       if (s.state == State::Ready && s.usage == 0) {
         ++prefetchedOnly;
         if (first < 0) first = int(i);
-        if (urgency == Urgency::UrgentUp || prefetchedOnly >= 3) break;
+        if (urgency == Urgency::UrgentUp || prefetchedOnly >= need) break;
       }
     }
-    if (first >= 0 && (urgency == Urgency::UrgentUp || prefetchedOnly >= 3)) {
+    if (first >= 0 && (urgency == Urgency::UrgentUp || prefetchedOnly >= need)) {
       chosen = first;
       urgentScan_[k] = (uint32_t(first) - base + 1) % n;
       evictContent(uint32_t(chosen));
@@ -258,9 +299,10 @@ int PatchCache::reserve(uint32_t id, Urgency urgency, uint64_t frame) {
   return chosen;
 }
 
-void PatchCache::commit(int slot, uint32_t vertexCount, uint32_t indexCount) {
+void PatchCache::commit(int slot, uint32_t vertexCount, uint32_t indexCount, const PatchBound& bound) {
   std::lock_guard<std::mutex> lock(mu_);
   Slot& s = slots_[slot];
+  s.bound = bound;
   s.vertexCount = vertexCount;
   s.indexCount = indexCount;
   s.state = State::Ready;

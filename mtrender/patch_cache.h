@@ -47,8 +47,21 @@ inline uint64_t renderPatchBytes(uint64_t vertices, uint64_t triangles) {
   return vertices * sizeof(RenderVertex) + triangles * 3 * sizeof(uint32_t);
 }
 
-// A patch in the cache: vertices then 32-bit triangle indices, in one place holder.
+// A patch's own bounds, measured when it is decoded (relative to Scene::patchOrigin): its
+// bounding sphere and its normal cone (axis, cos of the half angle; cutoff <= -1: no cone). The
+// finest patches (on arcs leaving a source node) have no DAG node of their own to carry a cone;
+// these give them back-face culling too.
+struct PatchBound {
+  float center[3] = {0, 0, 0};
+  float radius = 0;
+  float coneAxis[3] = {0, 0, 1};
+  float coneCutoff = -2;
+};
+
+// A patch in the cache: vertices (positions relative to Scene::patchOrigin) then 32-bit triangle
+// indices, in one place holder.
 struct PatchView {
+  PatchBound bound;
   const RenderVertex* vertices = nullptr;
   uint32_t vertexCount = 0;
   const uint32_t* indices = nullptr;
@@ -79,6 +92,12 @@ class PatchCache {
   // patchBytes[id]: an upper bound of patch id's decoded size (renderPatchBytes). Throws
   // mt::Error when the cap cannot give every size class a few place holders.
   PatchCache(uint64_t capBytes, const std::vector<uint64_t>& patchBytes);
+  // The same, knowing which patches one cut move needs resident together (`moves`: for each DAG
+  // node, its in- and out-patches; Scene::moveGroups): each size class gets at least the place
+  // holders the largest move needs in it, plus 3. Without that floor a class sized by its share
+  // of the bytes alone could be smaller than one refinement of the coarse levels (whose patches
+  // are the largest), and the cut stayed at the coarsest for ever.
+  PatchCache(uint64_t capBytes, const std::vector<uint64_t>& patchBytes, const std::vector<std::vector<uint32_t>>& moves);
   ~PatchCache();
 
   // ---- render thread ----
@@ -108,7 +127,7 @@ class PatchCache {
   int reserve(uint32_t id, Urgency urgency, uint64_t frame);
   uint8_t* slotData(int slot) { return arena_.get() + slots_[slot].offset; }
   uint64_t slotBytes(int slot) const { return classBytes_[slots_[slot].cls]; }
-  void commit(int slot, uint32_t vertexCount, uint32_t indexCount);
+  void commit(int slot, uint32_t vertexCount, uint32_t indexCount, const PatchBound& bound = {});
   // Loading failed: frees the place holder; bad = never try this patch again.
   void abort(int slot, bool bad);
 
@@ -119,6 +138,7 @@ class PatchCache {
     uint32_t usage = 0;
     uint64_t touched = 0;      // last frame referenced (+1; 0 = never)
     uint32_t vertexCount = 0, indexCount = 0;
+    PatchBound bound;
     bool onFree = false;
     uint8_t cls = 0;           // size class
     uint64_t offset = 0;       // in the arena

@@ -10,7 +10,7 @@
 namespace mt::render {
 
 std::pair<uint32_t, uint32_t> decodeInto(const Scene& scene, uint32_t id, const DecodedPatch& p, uint8_t* out,
-                                         uint64_t capacity) {
+                                         uint64_t capacity, PatchBound* bound) {
   const uint32_t nv = p.vertexCount(), nt = p.triangleCount();
   if (renderPatchBytes(nv, nt) > capacity)
     throw Error("patch " + std::to_string(scene.patches()[id].local) + ": decodes to " +
@@ -19,29 +19,73 @@ std::pair<uint32_t, uint32_t> decodeInto(const Scene& scene, uint32_t id, const 
   auto* v = reinterpret_cast<RenderVertex*>(out);
   auto* idx = reinterpret_cast<uint32_t*>(out + uint64_t(nv) * sizeof(RenderVertex));
   std::memcpy(idx, p.triangles.data(), p.triangles.size() * sizeof(uint32_t));
+  // Positions relative to the patch's origin, in double from the exact grid coordinates: the
+  // file's floats (origin + step * q rounded to float) lose centimetres millions of units out.
+  const QuantizationGrid& grid = scene.reader(scene.patches()[id].file).grid();
+  const double* origin = scene.patchOrigin(id);
+  for (uint32_t i = 0; i < nv; ++i)
+    for (int a = 0; a < 3; ++a) v[i].position[a] = float(grid.dequantize(a, p.q[3 * i + a]) - origin[a]);
   std::vector<float> normals;
   const float* nsrc = p.normals.empty() ? nullptr : p.normals.data();
-  if (!nsrc) {
+  double axis[3] = {0, 0, 0};
+  if (!nsrc || bound) {
     // The files usually store no normals (patch_codec.h): area-weighted vertex normals of the
     // patch. Positions are bit-identical across patch borders, so silhouettes never crack; only
     // the shading may show a faint seam.
-    normals.assign(size_t(nv) * 3, 0.0f);
+    if (!nsrc) normals.assign(size_t(nv) * 3, 0.0f);
     for (uint32_t t = 0; t < nt; ++t) {
       const uint32_t a = p.triangles[3 * t], b = p.triangles[3 * t + 1], c = p.triangles[3 * t + 2];
-      const float* pa = &p.positions[3 * a];
-      const float* pb = &p.positions[3 * b];
-      const float* pc = &p.positions[3 * c];
+      const float* pa = v[a].position;
+      const float* pb = v[b].position;
+      const float* pc = v[c].position;
       float e1[3] = {pb[0] - pa[0], pb[1] - pa[1], pb[2] - pa[2]};
       float e2[3] = {pc[0] - pa[0], pc[1] - pa[1], pc[2] - pa[2]};
       float n[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]};
-      for (uint32_t k : {a, b, c})
-        for (int i = 0; i < 3; ++i) normals[3 * k + i] += n[i];
+      for (int i = 0; i < 3; ++i) axis[i] += n[i];
+      if (!nsrc)
+        for (uint32_t k : {a, b, c})
+          for (int i = 0; i < 3; ++i) normals[3 * k + i] += n[i];
     }
-    nsrc = normals.data();
+    if (!nsrc) nsrc = normals.data();
+  }
+  if (bound) {
+    // The normal cone of the patch's triangles (the builder's rule for nodes: the mean normal and
+    // the widest angle from it), and its bounding sphere (box centre, farthest vertex).
+    *bound = PatchBound();
+    const double len = std::sqrt(axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2]);
+    if (len > 0 && nt > 0) {
+      double cutoff = 1;
+      for (uint32_t t = 0; t < nt && cutoff > -1; ++t) {
+        const float* pa = v[p.triangles[3 * t]].position;
+        const float* pb = v[p.triangles[3 * t + 1]].position;
+        const float* pc = v[p.triangles[3 * t + 2]].position;
+        double e1[3] = {pb[0] - pa[0], pb[1] - pa[1], pb[2] - pa[2]};
+        double e2[3] = {pc[0] - pa[0], pc[1] - pa[1], pc[2] - pa[2]};
+        double n[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]};
+        const double nl = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+        if (nl > 0) cutoff = std::min(cutoff, (n[0] * axis[0] + n[1] * axis[1] + n[2] * axis[2]) / (nl * len));
+      }
+      for (int i = 0; i < 3; ++i) bound->coneAxis[i] = float(axis[i] / len);
+      // A little slack for the float rounding of the axis and of the test.
+      bound->coneCutoff = cutoff > 0.01 ? float(cutoff - 0.005) : -2.0f;
+    }
+    float lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0};
+    for (uint32_t i = 0; i < nv; ++i)
+      for (int a = 0; a < 3; ++a) {
+        lo[a] = i ? std::min(lo[a], v[i].position[a]) : v[i].position[a];
+        hi[a] = i ? std::max(hi[a], v[i].position[a]) : v[i].position[a];
+      }
+    double r2 = 0;
+    for (int a = 0; a < 3; ++a) bound->center[a] = 0.5f * (lo[a] + hi[a]);
+    for (uint32_t i = 0; i < nv; ++i) {
+      double d2 = 0;
+      for (int a = 0; a < 3; ++a) d2 += std::pow(double(v[i].position[a]) - bound->center[a], 2);
+      r2 = std::max(r2, d2);
+    }
+    bound->radius = float(std::sqrt(r2) * 1.0001 + 1e-6);
   }
   for (uint32_t i = 0; i < nv; ++i) {
     RenderVertex& r = v[i];
-    for (int a = 0; a < 3; ++a) r.position[a] = p.positions[3 * i + a];
     float n[3] = {nsrc[3 * i], nsrc[3 * i + 1], nsrc[3 * i + 2]};
     float len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
     if (len > 0)
@@ -118,13 +162,15 @@ void PatchServer::run() {
         std::this_thread::sleep_for(std::chrono::duration<double, std::milli>(options_.readDelayMs));
       DecodedPatch decoded = reader.readPatch(sp.local);
       std::pair<uint32_t, uint32_t> counts;
+      PatchBound bound;
       try {
-        counts = decodeInto(scene_, req.id, decoded, cache_.slotData(slot), cache_.slotBytes(slot));
+        counts = decodeInto(scene_, req.id, decoded, cache_.slotData(slot), cache_.slotBytes(slot), &bound);
       } catch (const Error& e) {
         throw Error(reader.path() + ": " + e.what());
       }
-      cache_.commit(slot, counts.first, counts.second);
+      cache_.commit(slot, counts.first, counts.second, bound);
       bytesRead_ += sp.fileBytes;
+      trianglesLoaded_ += sp.triangles;
       const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
       {
         std::lock_guard<std::mutex> lock(mu_);

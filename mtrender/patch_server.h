@@ -28,11 +28,13 @@ struct LoadRequest {
   Urgency urgency = Urgency::Prefetch;
 };
 
-// Decodes patch `id` of the scene into `out` (RenderPatch layout: vertices, then indices);
-// computes area-weighted normals when the file stores none. Returns {vertexCount, indexCount}.
-// Throws mt::Error (damaged payload, or larger than `capacity`).
+// Decodes patch `id` of the scene into `out` (RenderPatch layout: vertices, then indices), the
+// positions relative to Scene::patchOrigin(id), computed in double from the exact grid
+// coordinates (camera-relative drawing: a georeferenced model keeps its centimetres); computes
+// area-weighted normals when the file stores none, and the patch's bound when `bound` is given.
+// Returns {vertexCount, indexCount}. Throws mt::Error (damaged payload, or larger than `capacity`).
 std::pair<uint32_t, uint32_t> decodeInto(const Scene& scene, uint32_t id, const DecodedPatch& patch, uint8_t* out,
-                                         uint64_t capacity);
+                                         uint64_t capacity, PatchBound* bound = nullptr);
 
 class PatchServer {
  public:
@@ -50,6 +52,7 @@ class PatchServer {
 
   uint64_t loads() const { return loads_.load(); }
   uint64_t bytesRead() const { return bytesRead_.load(); }
+  uint64_t trianglesLoaded() const { return trianglesLoaded_.load(); }
   uint64_t badPatches() const { return bad_.load(); }
   double meanLoadMs() const;  // measured read + decode time per patch (0 before the first)
   std::vector<std::string> warnings() const;
@@ -64,7 +67,7 @@ class PatchServer {
   std::deque<LoadRequest> queue_;
   uint64_t frame_ = 0;
   bool busy_ = false, stop_ = false;
-  std::atomic<uint64_t> loads_{0}, bytesRead_{0}, bad_{0};
+  std::atomic<uint64_t> loads_{0}, bytesRead_{0}, bad_{0}, trianglesLoaded_{0};
   double loadMsSum_ = 0;
   std::vector<std::string> warnings_;
   std::thread thread_;

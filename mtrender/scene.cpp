@@ -33,7 +33,7 @@ Scene::Scene(const std::vector<std::string>& paths) {
     for (size_t i = 0; i < rn.size(); ++i) {
       const auto& n = rn[i];
       SceneNode s{};
-      for (int a = 0; a < 3; ++a) s.center[a] = float(n.center[a]), s.coneAxis[a] = n.coneAxis[a];
+      for (int a = 0; a < 3; ++a) s.center[a] = n.center[a], s.coneAxis[a] = n.coneAxis[a];
       s.radius = n.radius;
       s.error = n.error;
       s.coneCutoff = n.coneCutoff;
@@ -90,6 +90,21 @@ void Scene::boundingSphere(double c[3], double& r) const {
 }  // namespace mt::render
 
 namespace mt::render {
+
+std::vector<std::vector<uint32_t>> Scene::moveGroups() const {
+  // The sink is never moved either, but its in-patches are the coarsest cut: resident together.
+  std::vector<std::vector<uint32_t>> groups(nodes_.size());
+  for (size_t i = 0; i < nodes_.size(); ++i) {
+    const SceneNode& n = nodes_[i];
+    if (n.source) continue;  // never moved (its out-arcs are every finest patch)
+    auto add = [&](const SceneArc& a) {
+      for (uint32_t p = 0; p < a.patchCount; ++p) groups[i].push_back(arcPatches_[a.firstPatch + p]);
+    };
+    for (uint32_t k = 0; k < n.arcCount; ++k) add(arcs_[n.firstArc + k]);
+    for (uint32_t k = 0; k < n.inArcCount; ++k) add(arcs_[inArcs_[n.firstInArc + k]]);
+  }
+  return groups;
+}
 
 uint64_t Scene::decodedBytesBound(uint32_t patch) const {
   const ScenePatch& p = patches_[patch];

@@ -18,7 +18,7 @@
 namespace mt::render {
 
 struct SceneNode {
-  float center[3];
+  double center[3];   // double: georeferenced models sit millions of units from the origin
   float radius;
   float error;        // object-space error (BMT 5.1); +inf for a sink
   float coneAxis[3];
@@ -70,6 +70,14 @@ class Scene {
   // Decoded size of a patch in the renderer's layout (RenderPatch in patch_cache.h), an upper
   // bound the cache sizes its place holders with.
   uint64_t decodedBytesBound(uint32_t patch) const;
+  // The double-precision origin a patch's vertices are stored relative to (camera-relative
+  // drawing: floats hold small offsets from it, so a model millions of units from the origin keeps
+  // its centimetres; the GL backend composes the model-view matrix in double). It is the centre
+  // of the sphere that bounds the patch (the arc's cull node).
+  const double* patchOrigin(uint32_t patch) const { return nodes_[arcs_[patches_[patch].arc].cullNode].center; }
+  // For each node but the sources, the patches one move on it needs resident together (its in- and
+  // out-patches; for a sink, the coarsest cut), for PatchCache's per-class floor.
+  std::vector<std::vector<uint32_t>> moveGroups() const;
   // A patch's id within the scene from (file, local patch id).
   uint32_t globalPatch(uint32_t file, uint32_t local) const { return patchBase_[file] + local; }
   // The file a scene patch comes from.

@@ -1,0 +1,614 @@
+// mtrender's run-time policies, each shown to matter: the interruptible cut update (a tiny deadline
+// leaves a conforming cut and the next frame resumes), the load order (no region starves), prefetch
+// over the enlarged frustum (fewer misses), the global LOD scale (raised while the cache is full,
+// relaxed when it frees, no oscillation), the hard GPU cap, normal-cone culling (node cones, and the
+// finest patches' own cones), occlusion culling (a wall hides most of a model: fewer triangles
+// drawn and loaded, the same image), two different files sharing one cache and one budget,
+// --plot, and camera-relative drawing of a georeferenced model.
+//
+// Each policy has an internal switch (ExtractOptions::deadline, starvationOrder, lodScalePolicy,
+// occlusion, prefetch, cull; GlRenderer::setHardCap; --no-occlusion, --no-cull): the tests use
+// the defaults, and each was checked to fail with its switch's default turned off
+// (docs/mtrender.md, "Policies and their tests").
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <sstream>
+
+#include "mtfile/mt_cut.h"
+#include "mtfile/mt_file.h"
+#include "mtrender/engine.h"
+#include "mtrender/extract.h"
+#include "mtrender/gl_renderer.h"
+#include "mtrender/image.h"
+#include "mtrender/patch_cache.h"
+#include "mtrender/patch_server.h"
+#include "mtrender/scene.h"
+#include "testing/test_meshes.h"
+#include "tests/test_support.h"
+
+using namespace mt::render;
+using mt::test::runTool;
+using mt::test::TempDir;
+
+namespace {
+
+// A binary little-endian PLY with double coordinates (read exactly).
+void writePly(const std::string& path, const mt::test::TestMesh& m) {
+  std::ofstream out(path, std::ios::binary);
+  out << "ply\nformat binary_little_endian 1.0\nelement vertex " << m.vertexCount()
+      << "\nproperty double x\nproperty double y\nproperty double z\nelement face " << m.triangleCount()
+      << "\nproperty list uchar int vertex_indices\nend_header\n";
+  out.write(reinterpret_cast<const char*>(m.positions.data()), std::streamsize(m.positions.size() * sizeof(double)));
+  for (size_t t = 0; t < m.triangleCount(); ++t) {
+    const uint8_t three = 3;
+    out.write(reinterpret_cast<const char*>(&three), 1);
+    const int32_t idx[3] = {int32_t(m.triangles[3 * t]), int32_t(m.triangles[3 * t + 1]), int32_t(m.triangles[3 * t + 2])};
+    out.write(reinterpret_cast<const char*>(idx), sizeof idx);
+  }
+}
+
+struct Csv {
+  std::vector<std::string> header;
+  std::vector<std::vector<double>> rows;
+  size_t col(const std::string& name) const {
+    auto it = std::find(header.begin(), header.end(), name);
+    if (it == header.end()) throw std::runtime_error("no column " + name);
+    return size_t(it - header.begin());
+  }
+  double at(size_t row, const std::string& name) const { return rows[row][col(name)]; }
+  double sum(const std::string& name) const {
+    double s = 0;
+    for (const auto& r : rows) s += r[col(name)];
+    return s;
+  }
+};
+
+Csv readCsv(const std::string& path) {
+  Csv csv;
+  std::ifstream in(path);
+  std::string line;
+  bool first = true;
+  while (std::getline(in, line)) {
+    std::vector<std::string> cells;
+    std::stringstream ss(line);
+    std::string cell;
+    while (std::getline(ss, cell, ',')) cells.push_back(cell);
+    if (first) csv.header = cells, first = false;
+    else {
+      std::vector<double> r;
+      for (const auto& c : cells) r.push_back(std::stod(c));
+      csv.rows.push_back(r);
+    }
+  }
+  return csv;
+}
+
+std::map<std::string, std::string> summary(const std::string& out) {
+  std::map<std::string, std::string> m;
+  std::stringstream ss(out);
+  std::string line;
+  while (std::getline(ss, line)) {
+    auto sp = line.find(' ');
+    if (sp != std::string::npos) m[line.substr(0, sp)] = line.substr(sp + 1);
+  }
+  return m;
+}
+
+// Pixels differing by more than 40/255 in some channel, and the mean difference.
+std::pair<size_t, double> imageDiff(const Image& a, const Image& b) {
+  size_t differ = 0;
+  double sum = 0;
+  for (int y = 0; y < a.height; ++y)
+    for (int x = 0; x < a.width; ++x) {
+      int d = 0;
+      for (int k = 0; k < 3; ++k) d = std::max(d, std::abs(int(a.pixel(x, y)[k]) - int(b.pixel(x, y)[k])));
+      differ += d > 40;
+      sum += d;
+    }
+  return {differ, sum / (double(a.width) * a.height)};
+}
+
+// The suite's models: a scan-like torus (mtgen), a flat wall in front of it (a second, different
+// MT file), and a small bumpy tile with centimetre features built at the origin and at a UTM-like
+// offset.
+class RenderPolicies : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    dir_ = new TempDir();
+    auto g = runTool("mtgen", "-o " + dir_->file("s.ply") + " --triangles 40k --holes 4 --seed 7");
+    ASSERT_EQ(g.exitCode, 0) << g.output;
+    auto b = runTool("mtbuild", dir_->file("s.ply") + " -o " + model() + " --patch-triangles 300 --threads 2 -q");
+    ASSERT_EQ(b.exitCode, 0) << b.output;
+    // A finer DAG for occlusion: nodes small enough to lie wholly behind the wall.
+    g = runTool("mtgen", "-o " + dir_->file("big.ply") + " --triangles 150k --holes 4 --seed 7");
+    ASSERT_EQ(g.exitCode, 0) << g.output;
+    b = runTool("mtbuild", dir_->file("big.ply") + " -o " + dir_->file("big.mt") + " --patch-triangles 300 --threads 2 -q");
+    ASSERT_EQ(b.exitCode, 0) << b.output;
+    auto reader = mt::MtFileReader::open(model());
+    for (int a = 0; a < 3; ++a) lo_[a] = reader->header().boundsMin[a], hi_[a] = reader->header().boundsMax[a];
+    // The wall: a plane y = const in front of the model (seen from -y), higher than the model,
+    // hiding its left 70% (the rest stays in view), gently rippled so it has detail to cut.
+    const double sx = hi_[0] - lo_[0], sz = hi_[2] - lo_[2], sy = hi_[1] - lo_[1];
+    const double y = lo_[1] - 0.55 * sy;
+    auto wall = mt::test::gridSurface(120, 60, false, false, [&](double u, double v, double* p) {
+      p[0] = lo_[0] - 1.0 * sx + u * 1.6 * sx;
+      p[2] = lo_[2] - 1.5 * sz + v * 4.0 * sz;
+      p[1] = y + 0.002 * sx * std::sin(40 * u) * std::sin(30 * v);
+    });
+    writePly(dir_->file("wall.ply"), wall);
+    b = runTool("mtbuild", dir_->file("wall.ply") + " -o " + wallMt() + " --patch-triangles 300 --threads 2 -q");
+    ASSERT_EQ(b.exitCode, 0) << b.output;
+    // The georeferenced tile: 1 m x 1 m at 1 cm spacing, 1-3 cm bumps.
+    for (int utm = 0; utm < 2; ++utm) {
+      const double ox = utm ? 500000.0 : 0.0, oy = utm ? 4000000.0 : 0.0, oz = utm ? 100.0 : 0.0;
+      auto tile = mt::test::gridSurface(100, 100, false, false, [&](double u, double v, double* p) {
+        p[0] = ox + u;
+        p[1] = oy + v;
+        p[2] = oz + 0.02 * std::sin(31 * u) * std::cos(23 * v) + 0.01 * std::sin(97 * u + 41 * v);
+      });
+      const std::string name = utm ? "utm" : "origin";
+      writePly(dir_->file(name + ".ply"), tile);
+      b = runTool("mtbuild", dir_->file(name + ".ply") + " -o " + dir_->file(name + ".mt") + " --patch-triangles 300 --threads 2 -q");
+      ASSERT_EQ(b.exitCode, 0) << b.output;
+    }
+  }
+  static void TearDownTestSuite() {
+    if (std::getenv("MT_KEEP_RENDER_TEST")) std::filesystem::rename(dir_->path(), std::getenv("MT_KEEP_RENDER_TEST"));
+    delete dir_;
+    dir_ = nullptr;
+  }
+  static std::string model() { return dir_->file("s.mt"); }
+  static std::string wallMt() { return dir_->file("wall.mt"); }
+  static glm::dvec3 lo() { return {lo_[0], lo_[1], lo_[2]}; }
+  static glm::dvec3 hi() { return {hi_[0], hi_[1], hi_[2]}; }
+  static TempDir* dir_;
+  static double lo_[3], hi_[3];
+};
+TempDir* RenderPolicies::dir_ = nullptr;
+double RenderPolicies::lo_[3], RenderPolicies::hi_[3];
+
+// The scene's pieces for in-process tests of ExtractRender.
+struct Rig {
+  Scene scene;
+  std::unique_ptr<PatchCache> cache;
+  std::unique_ptr<PatchServer> server;
+  glm::dvec3 center;
+  double radius;
+  explicit Rig(const std::vector<std::string>& files, uint64_t cacheBytes = 16ull << 20) : scene(files) {
+    std::vector<uint64_t> bounds(scene.patches().size());
+    for (uint32_t p = 0; p < bounds.size(); ++p) bounds[p] = scene.decodedBytesBound(p);
+    cache = std::make_unique<PatchCache>(cacheBytes, bounds, scene.moveGroups());
+    server = std::make_unique<PatchServer>(scene, *cache, PatchServer::Options{});
+    double c[3];
+    scene.boundingSphere(c, radius);
+    center = {c[0], c[1], c[2]};
+  }
+  View view(const CameraPose& p) const { return makeView(p, 256, 256, center, radius); }
+};
+
+// ---- the interruptible update -----------------------------------------------------------------
+
+TEST_F(RenderPolicies, ATinyDeadlineLeavesAConformingCutAndTheNextFrameResumes) {
+  Rig rig({model()});
+  auto reader = mt::MtFileReader::open(model());
+  ExtractOptions eo;
+  eo.fixedTriangles = 1'000'000;
+  eo.pixelTolerance = 0.2;
+  eo.prefetch = false;
+  eo.extractMs = 1e-6;  // a nanosecond: every update stops after its first few moves
+  ExtractRender ex(rig.scene, rig.cache.get(), rig.server.get(), eo);
+  ex.start(10000);
+  CameraPose pose = defaultPose(rig.center, rig.radius);
+  pose.eye = rig.center + (pose.eye - rig.center) * 0.6;
+  const View v = rig.view(pose);
+  uint32_t interrupted = 0, frames = 0, maxMoves = 0;
+  double lastTriangles = 0;
+  for (uint64_t f = 1; f <= 400; ++f) {
+    FrameStats st = ex.update(f, v, v);
+    ++frames;
+    interrupted += st.interrupted;
+    maxMoves = std::max(maxMoves, st.refinements + st.coarsenings);
+    std::string why;
+    ASSERT_TRUE(mt::isValidCut(*reader, ex.inSet(), &why)) << "frame " << f << ": " << why;
+    // The heaps are re-keyed from the front of the cut, not from every node of the DAG.
+    EXPECT_LE(st.nodesKeyed, ex.refineCandidates().size() + ex.coarsenCandidates().size() + rig.scene.sources().size() +
+                                 64 * (st.refinements + st.coarsenings + 1))
+        << "frame " << f;
+    rig.server->waitIdle(2000);
+    lastTriangles = double(st.triangles);
+    if (!st.interrupted && st.maxScreenError <= eo.pixelTolerance) break;
+  }
+  // The deadline stopped the update (a handful of moves a frame), and the frames that followed
+  // carried on from where it stopped until the cut met the tolerance.
+  std::printf("%u frames, %u interrupted, at most %u moves a frame\n", frames, interrupted, maxMoves);
+  EXPECT_GT(interrupted, 5u);
+  EXPECT_LE(maxMoves, 8u) << "the deadline did not stop the update";
+  ExtractOptions full = eo;
+  full.extractMs = 60000;
+  ExtractRender ref(rig.scene, rig.cache.get(), rig.server.get(), full);
+  ref.start(10000);
+  FrameStats rs;
+  for (uint64_t f = 1; f <= 60; ++f) {
+    rs = ref.update(f, v, v);
+    rig.server->waitIdle(2000);
+  }
+  EXPECT_LT(frames, 400u) << "never converged";
+  EXPECT_EQ(lastTriangles, double(rs.triangles)) << "the interrupted updates did not reach the same cut";
+}
+
+// ---- load order -------------------------------------------------------------------------------
+
+TEST_F(RenderPolicies, ARegionStarvedOfLoadsIsServedFirstAfterAFewFrames) {
+  // Each frame the heaps rank 3 new patches first (new detail keeps appearing where the camera
+  // looks) and patch 1000, of a region ranked low, last; the load budget is 3 a frame. Ordered by
+  // rank alone, patch 1000 would never load; by consecutive frames it is served the next frame.
+  const ExtractOptions defaults;
+  uint32_t servedAt = 0;
+  for (uint32_t frame = 1; frame <= 20 && !servedAt; ++frame) {
+    std::vector<RequestCandidate> c;
+    for (uint32_t k = 0; k < 3; ++k) c.push_back({frame * 10 + k, Urgency::Needed, 1, k});
+    c.push_back({1000, Urgency::Needed, frame, 50});
+    for (const LoadRequest& r : orderRequests(c, 3, defaults.starvationOrder))
+      if (r.id == 1000) servedAt = frame;
+  }
+  EXPECT_EQ(servedAt, 2u) << "the starved patch was not served after 2 consecutive frames (0 = never)";
+  // Urgency still comes first: an urgent request is never pushed out by a long-waiting one.
+  std::vector<RequestCandidate> c{{1, Urgency::UrgentDown, 1, 0}, {2, Urgency::Needed, 30, 1}};
+  EXPECT_EQ(orderRequests(c, 1, defaults.starvationOrder)[0].id, 1u);
+}
+
+// ---- prefetch ---------------------------------------------------------------------------------
+
+TEST_F(RenderPolicies, PrefetchOverTheEnlargedFrustumLowersMisses) {
+  // A recorded path sweeping close along the model; the disk keeps up with 3 patches a frame.
+  // Prefetching the patches the next 10 frames' frusta want (Derzapf et al. 4.3) with the spare
+  // loads must lower the misses against no prefetching.
+  std::vector<CameraPose> path;
+  {
+    Rig probe({model()});
+    const double r = probe.radius;
+    for (int f = 0; f < 90; ++f) {
+      const double a = -1.2 + 2.4 * f / 89.0;
+      CameraPose p;
+      p.eye = probe.center + r * glm::dvec3(1.1 * std::sin(a), -1.1 * std::cos(a), 0.45);
+      p.target = probe.center + r * glm::dvec3(0.5 * std::sin(a + 0.3), -0.5 * std::cos(a + 0.3), 0.0);
+      path.push_back(p);
+    }
+  }
+  auto run = [&](bool prefetch) {
+    Rig rig({model()});
+    ExtractOptions eo;
+    eo.fixedTriangles = 30000;
+    eo.pixelTolerance = 0.5;
+    eo.loadBudget = 16;
+    eo.extractMs = 50;
+    eo.prefetch = prefetch;
+    ExtractRender ex(rig.scene, rig.cache.get(), rig.server.get(), eo);
+    ex.start(10000);
+    uint64_t misses = 0, prefetched = 0, requested = 0;
+    for (size_t f = 0; f < path.size(); ++f) {
+      const CameraPose& prev = path[f ? f - 1 : 0];
+      std::vector<View> ahead;
+      for (int k = 2; k <= 10; k += 2) ahead.push_back(rig.view(extrapolate(prev, path[f], k)));
+      FrameStats st = ex.update(f + 1, rig.view(path[f]), ahead);
+      misses += st.misses;
+      prefetched += st.prefetches;
+      requested += st.requests;
+      rig.server->waitIdle(5000);
+    }
+    std::printf("prefetch %d: %llu misses, %llu requests, %llu prefetches\n", int(prefetch), (unsigned long long)misses,
+                (unsigned long long)requested, (unsigned long long)prefetched);
+    return misses;
+  };
+  const uint64_t with = run(ExtractOptions().prefetch), without = run(false);
+  std::printf("misses: %llu with prefetch, %llu without\n", (unsigned long long)with, (unsigned long long)without);
+  EXPECT_GT(without, 20u) << "the path does not stress the loads";
+  // In this rig every load arrives before the next frame, so a miss costs one frame and prefetch
+  // can only spare those first frames: measured 824 vs 854 (the flythrough figures, with a real
+  // disk and paced frames, are in docs/mtrender.md).
+  EXPECT_LT(with, without) << "prefetch did not lower the misses";
+}
+
+// ---- the global LOD scale -----------------------------------------------------------------------
+
+TEST_F(RenderPolicies, AFullCacheRaisesTheLodScaleAndRelaxesItWithoutOscillation) {
+  // A cache that cannot hold the model, of which the cut may pin 30%: a close view at 0.3 px
+  // wants far more than that. The LOD scale must rise until the cut fits, settle (no up and
+  // down), and relax back to 1 once a far view frees the memory.
+  Rig rig({model()}, 1'500'000);
+  ExtractOptions eo;
+  eo.fixedTriangles = 1'000'000;
+  eo.pixelTolerance = 0.3;
+  eo.extractMs = 50;
+  eo.memoryFraction = 0.3;  // the cut may pin 30% of the place holders
+  ExtractRender ex(rig.scene, rig.cache.get(), rig.server.get(), eo);
+  ex.start(10000);
+  ASSERT_LT(double(rig.cache->stats().slots), double(rig.scene.patches().size()));
+  CameraPose close;
+  close.target = rig.center;
+  close.eye = rig.center + rig.radius * glm::dvec3(0, -0.9, 0.5);
+  const View near = rig.view(close);
+  std::vector<double> scale;
+  for (uint64_t f = 1; f <= 120; ++f) {
+    FrameStats st = ex.update(f, near, near);
+    scale.push_back(st.lodScale);
+    EXPECT_LE(double(ex.cutPatchCount()), ex.pinLimit() + 1e-9) << "frame " << f;
+    rig.server->waitIdle(2000);
+  }
+  EXPECT_GT(scale.back(), 1.2) << "the LOD scale did not rise with the cache full";
+  // Settled: over the last 60 frames it only ever moved one way (at most one change of direction).
+  int turns = 0, lastSign = 0;
+  for (size_t i = 61; i < scale.size(); ++i) {
+    const double d = scale[i] - scale[i - 1];
+    const int sign = d > 1e-12 ? 1 : d < -1e-12 ? -1 : 0;
+    if (sign && lastSign && sign != lastSign) ++turns;
+    if (sign) lastSign = sign;
+  }
+  EXPECT_LE(turns, 1) << "the LOD scale oscillates";
+  // A far view needs little: the memory frees and the scale relaxes to 1, never rising meanwhile.
+  CameraPose far = defaultPose(rig.center, rig.radius);
+  far.eye = rig.center + (far.eye - rig.center) * 3.0;
+  const View fv = rig.view(far);
+  double prev = scale.back();
+  bool relaxed = false;
+  for (uint64_t f = 121; f <= 240 && !relaxed; ++f) {
+    FrameStats st = ex.update(f, fv, fv);
+    EXPECT_LE(st.lodScale, prev + 1e-12) << "frame " << f;
+    prev = st.lodScale;
+    relaxed = st.lodScale == 1.0;
+    rig.server->waitIdle(2000);
+  }
+  EXPECT_TRUE(relaxed) << "the LOD scale stayed at " << prev;
+}
+
+// ---- a small cache never strands the cut at the coarsest ---------------------------------------
+
+TEST_F(RenderPolicies, ASmallCacheNeverStrandsTheCutAtTheCoarsest) {
+  // The flythrough that ended at the coarsest cut (1 patch, 21 px, camera still): place holders
+  // come in size classes sized by their share of the bytes, and the coarse levels' patches are
+  // the largest; the root's refinement needs 5 patches of the largest class at once, which a
+  // 600 kB cache gave fewer place holders than that: the refinement could never load, the cut
+  // stayed at 1 patch (547 px here) for ever. The classes now get at least what the largest move
+  // needs (Scene::moveGroups), and the cut leaves the coarsest.
+  Rig rig({model()}, 600'000);
+  ExtractOptions eo;
+  eo.fixedTriangles = 1'000'000;
+  eo.pixelTolerance = 0.3;
+  eo.extractMs = 50;
+  ExtractRender ex(rig.scene, rig.cache.get(), rig.server.get(), eo);
+  ex.start(10000);
+  CameraPose close;
+  close.target = rig.center;
+  close.eye = rig.center + rig.radius * glm::dvec3(0, -0.9, 0.5);
+  const View v = rig.view(close);
+  FrameStats first, last;
+  for (uint64_t f = 1; f <= 40; ++f) {
+    last = ex.update(f, v, v);
+    if (f == 1) first = last;
+    rig.server->waitIdle(2000);
+  }
+  EXPECT_EQ(first.patches, 1u);
+  EXPECT_GT(last.patches, 4u) << "the cut is stranded at the coarsest";
+  EXPECT_LT(last.maxScreenError, 0.5 * first.maxScreenError);
+}
+
+// ---- GPU cache ----------------------------------------------------------------------------------
+
+TEST(RenderGpuCache, NeverExceedsItsCapAtAnyMoment) {
+  // 40 patches of ~24 KB under a 100 KB cap, two frames: every upload must fit the cap (evicting
+  // what this frame has not drawn, else streaming), and every patch must still be drawn.
+  EglContext egl;
+  const uint64_t cap = 100'000;
+  GlRenderer gl(cap);
+  gl.useOffscreen(64, 64);
+  std::vector<RenderVertex> verts(600);
+  std::vector<uint32_t> idx(3 * 1000);
+  for (size_t i = 0; i < verts.size(); ++i) verts[i].position[0] = float(i) * 1e-3f;
+  for (size_t i = 0; i < idx.size(); ++i) idx[i] = uint32_t(i % verts.size());
+  PatchView pv;
+  pv.vertices = verts.data();
+  pv.vertexCount = uint32_t(verts.size());
+  pv.indices = idx.data();
+  pv.indexCount = uint32_t(idx.size());
+  const double origin[3] = {0, 0, 0};
+  View v;
+  v.width = v.height = 64;
+  for (int frame = 0; frame < 2; ++frame) {
+    gl.beginFrame(v, DrawSettings());
+    for (uint32_t id = 0; id < 40; ++id) {
+      EXPECT_EQ(gl.drawPatch(id + 100 * frame, 0, origin, [&] { return pv; }), 1000u);
+      EXPECT_LE(gl.gpuBytes(), cap) << "frame " << frame << " patch " << id;
+    }
+    gl.endFrame();
+    gl.finish();
+  }
+  EXPECT_LE(gl.gpuPeakBytes(), cap);
+  EXPECT_GT(gl.uploads(), 40u);
+}
+
+// ---- culling by normal cones --------------------------------------------------------------------
+
+TEST_F(RenderPolicies, ABackFacingPatchSetIsCulledByItsCones) {
+  // The wall is a plane facing one way: from its back nothing is drawn, from its front all of it.
+  // The camera first looks at one side at 0.3 px (the finest patches, on arcs leaving the source,
+  // are in the cut), then jumps to the other side; the cut update has a tiny deadline, so the
+  // frame after the jump still holds the finest patches: their own cones must cull them there.
+  Rig probe({wallMt()});
+  const double r = probe.radius;
+  auto runSide = [&](double side, const std::string& extra) {
+    const std::string path = dir_->file("side.path"), csv = dir_->file("side.csv");
+    {
+      std::ofstream out(path);
+      out << "space object\n";
+      auto pose = [&](double s) {
+        const glm::dvec3 e = probe.center + glm::dvec3(0, s * 1.2 * r, 0.05 * r);
+        out << e.x << ' ' << e.y << ' ' << e.z << ' ' << probe.center.x << ' ' << probe.center.y << ' ' << probe.center.z << '\n';
+      };
+      for (int i = 0; i < 40; ++i) pose(-side);
+      pose(side);
+    }
+    auto res = runTool("mtrender", wallMt() + " --headless --quiet --width 256 --height 256 --camera-path " + path +
+                                       " --frames 41 --frame-interval-ms 5 --tolerance 0.3 --fixed-triangles 1000000 "
+                                       "--still-frames 1 --stats " + csv + " " + extra);
+    EXPECT_EQ(res.exitCode, 0) << res.output;
+    Csv c = readCsv(csv);
+    return std::make_tuple(c.at(39, "drawn_triangles"), c.at(40, "drawn_triangles"), c.at(40, "coned_patches"));
+  };
+  // Which side is the front depends on the winding: find it, then check both.
+  for (double side : {1.0, -1.0}) {
+    auto [beforeCull, afterCull, coned] = runSide(side, "");
+    auto [beforeAll, afterAll, conedAll] = runSide(side, "--no-cull --extract-ms 0.000001");
+    (void)beforeAll;
+    (void)conedAll;
+    if (afterAll == 0) continue;
+    auto [b2, afterTiny, conedTiny] = runSide(side, "--extract-ms 0.000001");
+    (void)b2;
+    if (beforeCull > 0 && afterCull == 0) {
+      // This jump goes from the front to the back.
+      EXPECT_GT(conedTiny, 0) << "the finest patches were not culled by their own cones";
+      EXPECT_LT(afterTiny, 0.05 * afterAll) << "from the back, " << afterTiny << " triangles were drawn";
+      return;
+    }
+    (void)coned;
+  }
+  FAIL() << "no side of the wall was culled from behind";
+}
+
+// ---- occlusion culling --------------------------------------------------------------------------
+
+TEST_F(RenderPolicies, AModelBehindAWallIsNeitherDrawnNorLoadedAndLooksTheSame) {
+  // The wall hides the model's left 70% as seen from -y. With occlusion culling the hidden part
+  // is not refined, not loaded and not drawn; the image is the same as with it off.
+  const glm::dvec3 c = 0.5 * (lo() + hi());
+  const double size = hi().x - lo().x;
+  const std::string path = dir_->file("wall.path");
+  {
+    std::ofstream out(path);
+    out << "space object\n";
+    const glm::dvec3 e(c.x, lo().y - 1.1 * size, c.z);
+    out << e.x << ' ' << e.y << ' ' << e.z << ' ' << c.x << ' ' << c.y << ' ' << c.z << '\n';
+  }
+  auto render = [&](const std::string& extra, const std::string& name) {
+    const std::string dir = dir_->file("occ-" + name), csv = dir + ".csv";
+    std::filesystem::remove_all(dir);
+    auto r = runTool("mtrender", dir_->file("big.mt") + " " + wallMt() +
+                                     " --headless --quiet --width 640 --height 640 --camera-path " + path +
+                                     " --frames 60 --frame-interval-ms 5 --tolerance 0.5 --fixed-triangles 1000000 "
+                                     "--cache 32M --still-frames 1 --screenshots " + dir + " --screenshot-every 1000 --stats " +
+                                     csv + " " + extra);
+    EXPECT_EQ(r.exitCode, 0) << r.output;
+    return std::make_tuple(readCsv(csv), readPng(dir + "/frame_00059.png"), summary(r.output));
+  };
+  auto [on, onImg, onSum] = render("", "on");
+  ASSERT_EQ(onImg.width, 640);
+  auto [off, offImg, offSum] = render("--no-occlusion", "off");
+  const double drawnOn = on.rows.back()[on.col("drawn_triangles")], drawnOff = off.rows.back()[off.col("drawn_triangles")];
+  const double loadedOn = std::stod(onSum["loaded_triangles_total"]), loadedOff = std::stod(offSum["loaded_triangles_total"]);
+  std::printf("drawn %.0f vs %.0f, loaded %.0f vs %.0f triangles (occlusion on vs off)\n", drawnOn, drawnOff, loadedOn, loadedOff);
+  // Measured: 1.54x fewer drawn (the wall's 14.4 k included; the model's own 1.7x) and 1.41x fewer
+  // loaded; the DAG of this small model is shallow (the nodes above the finest are large spheres
+  // that straddle the wall's edge), so the factors are modest here; docs/mtrender.md has the
+  // 13 M build's figures.
+  EXPECT_LT(drawnOn * 1.3, drawnOff) << "occlusion culling did not cut the drawn triangles";
+  EXPECT_LT(loadedOn * 1.2, loadedOff) << "occlusion culling did not cut the loaded triangles";
+  EXPECT_GT(on.rows.back()[on.col("occluded_nodes")] + on.rows.back()[on.col("occluded_arcs")], 0);
+  auto [differ, mean] = imageDiff(onImg, offImg);
+  EXPECT_LT(double(differ), 0.002 * onImg.width * onImg.height) << "pixels differ with occlusion culling";
+  EXPECT_LT(mean, 1.0);
+}
+
+// ---- two different files ------------------------------------------------------------------------
+
+TEST_F(RenderPolicies, TwoDifferentFilesShareOneCacheAndOneBudget) {
+  Rig rig({model(), wallMt()}, 6ull << 20);
+  auto readerA = mt::MtFileReader::open(model()), readerB = mt::MtFileReader::open(wallMt());
+  const size_t na = readerA->nodes().size();
+  ASSERT_EQ(rig.scene.nodes().size(), na + readerB->nodes().size());
+  ExtractOptions eo;
+  eo.fixedTriangles = 25000;
+  eo.extractMs = 50;
+  ExtractRender ex(rig.scene, rig.cache.get(), rig.server.get(), eo);
+  ex.start(10000);
+  // From above and behind the wall's top: both in view.
+  CameraPose pose;
+  pose.target = rig.center;
+  pose.eye = rig.center + rig.radius * glm::dvec3(0.3, -1.6, 1.4);
+  const View v = rig.view(pose);
+  for (uint64_t f = 1; f <= 40; ++f) {
+    ex.update(f, v, v);
+    rig.server->waitIdle(2000);
+    std::string why;
+    std::vector<uint8_t> a(ex.inSet().begin(), ex.inSet().begin() + na), b(ex.inSet().begin() + na, ex.inSet().end());
+    ASSERT_TRUE(mt::isValidCut(*readerA, a, &why)) << "model: " << why;
+    ASSERT_TRUE(mt::isValidCut(*readerB, b, &why)) << "wall: " << why;
+    ASSERT_LE(rig.cache->stats().usedBytes, 6ull << 20);
+  }
+  EXPECT_LE(ex.visibleTriangles(), eo.fixedTriangles) << "one budget for both files";
+  uint64_t perFile[2] = {0, 0}, coarsest[2] = {0, 0};
+  for (uint32_t a : ex.cutArcs()) perFile[rig.scene.nodes()[rig.scene.arcs()[a].from].file] += rig.scene.arcs()[a].triangles;
+  for (uint32_t f = 0; f < 2; ++f) {
+    const uint32_t sink = rig.scene.sinks()[f];
+    const SceneNode& s = rig.scene.nodes()[sink];
+    for (uint32_t k = 0; k < s.inArcCount; ++k) coarsest[f] += rig.scene.arcs()[rig.scene.inArcs()[s.firstInArc + k]].triangles;
+  }
+  EXPECT_GT(perFile[0], 2 * coarsest[0]) << "the model was not refined";
+  EXPECT_GT(perFile[1], 2 * coarsest[1]) << "the wall was not refined";
+}
+
+// ---- --plot -------------------------------------------------------------------------------------
+
+TEST_F(RenderPolicies, PlotWritesOnePngPerSeries) {
+  const std::string dir = dir_->file("plots");
+  std::filesystem::remove_all(dir);
+  auto r = runTool("mtrender", model() + " --headless --quiet --width 128 --height 128 --camera-path orbit --frames 20 --plot " + dir);
+  ASSERT_EQ(r.exitCode, 0) << r.output;
+  for (const char* series : {"frame_ms", "triangles", "loads_misses", "cache_bytes", "screen_error"}) {
+    const std::string png = dir + "/" + series + ".png";
+    ASSERT_TRUE(std::filesystem::exists(png)) << png;
+    EXPECT_GT(std::filesystem::file_size(png), 2000u) << png;
+    const std::string head = mt::test::readFile(png).substr(0, 8);
+    EXPECT_EQ(head, std::string("\x89PNG\r\n\x1a\n", 8)) << png;
+    Image img = readPng(png);
+    EXPECT_EQ(img.width, 900) << png;
+  }
+}
+
+// ---- camera-relative drawing --------------------------------------------------------------------
+
+TEST_F(RenderPolicies, AGeoreferencedModelRendersLikeTheSameModelAtTheOrigin) {
+  // The same 1 m tile with centimetre bumps, at the origin and at (500000, 4000000, 100) m: the
+  // same view relative to each (a unit-space path) must give the same image. Floats at 4e6 m
+  // have a 0.5 m step: without camera-relative drawing the far tile is a jumble.
+  const std::string path = dir_->file("tile.path");
+  std::ofstream(path) << "# oblique, close\n0.3 -1.1 0.7  0 0 0\n";
+  auto render = [&](const std::string& name) {
+    const std::string dir = dir_->file("geo-" + name);
+    std::filesystem::remove_all(dir);
+    auto r = runTool("mtrender", dir_->file(name + ".mt") + " --headless --quiet --width 256 --height 256 --camera-path " +
+                                     path + " --frames 30 --frame-interval-ms 5 --tolerance 0.3 --fixed-triangles 1000000 "
+                                     "--screenshots " + dir + " --screenshot-every 1000");
+    EXPECT_EQ(r.exitCode, 0) << r.output;
+    return readPng(dir + "/frame_00029.png");
+  };
+  const Image a = render("origin"), b = render("utm");
+  size_t covered = 0;
+  for (int y = 0; y < a.height; ++y)
+    for (int x = 0; x < a.width; ++x) covered += !(a.pixel(x, y)[0] == 20 && a.pixel(x, y)[1] == 23 && a.pixel(x, y)[2] == 28);
+  EXPECT_GT(covered, size_t(0.2 * a.width * a.height)) << "the tile is not in view";
+  auto [differ, mean] = imageDiff(a, b);
+  EXPECT_LT(double(differ), 0.01 * a.width * a.height) << "pixels differ between the origin and the UTM tile";
+  // The two builds partition the tile differently, and normals are computed per patch, so the
+  // shading differs a little along patch borders (mean ~2.8/255 measured); a tile drawn from
+  // float positions at 4e6 m is a jumble of slabs (mean far above this).
+  EXPECT_LT(mean, 4.0);
+}
+
+}  // namespace
