@@ -6,7 +6,6 @@
 #include <cfloat>
 #include <cmath>
 #include <cstring>
-#include <unordered_map>
 #include <vector>
 
 namespace mt {
@@ -83,12 +82,57 @@ struct Cell {
   int64_t c[3];
   bool operator==(const Cell& o) const { return c[0] == o.c[0] && c[1] == o.c[1] && c[2] == o.c[2]; }
 };
-struct CellHash {
-  size_t operator()(const Cell& k) const {
-    uint64_t h = uint64_t(k.c[0]) * 0x9E3779B97F4A7C15ull ^ uint64_t(k.c[1]) * 0xC2B2AE3D27D4EB4Full ^
-                 uint64_t(k.c[2]) * 0x165667B19E3779F9ull;
-    return size_t(h ^ (h >> 29));
+
+// Grid cell -> number of live vertices in it: open addressing with linear probing, 16-byte slots
+// (a node-based hash map was 5% of the build). Cells are kept relative to the cell of the region
+// box's low corner, so each component fits 32 bits (the grid has at most 31 bits per axis). A
+// count that drops to 0 keeps its slot; at most one new cell per collapse is added, so 2 x the
+// vertex count bounds the keys and the table never grows past half full.
+class CellCounts {
+ public:
+  void init(const int64_t lo[3], size_t vertexCount) {
+    for (int a = 0; a < 3; ++a) lo_[a] = lo[a];
+    size_t n = 16;
+    while (n < 4 * vertexCount) n *= 2;
+    slots_.assign(n, Slot{{0, 0, 0}, kEmpty});
+    mask_ = n - 1;
   }
+  // The count of cell c (at or above the low corner), added with 0 when missing.
+  uint32_t& operator[](const Cell& c) {
+    Slot& s = find(c);
+    if (s.count == kEmpty) s.count = 0;
+    return s.count;
+  }
+  // The count of cell c, without adding it.
+  uint32_t count(const Cell& c) {
+    const Slot& s = find(c);
+    return s.count == kEmpty ? 0 : s.count;
+  }
+
+ private:
+  static constexpr uint32_t kEmpty = ~0u;
+  struct Slot {
+    uint32_t k[3];
+    uint32_t count;
+  };
+  // The slot of c: its own, or the empty slot where it would go (key filled in).
+  Slot& find(const Cell& c) {
+    uint32_t k[3];
+    for (int a = 0; a < 3; ++a) k[a] = uint32_t(c.c[a] - lo_[a]);
+    const uint64_t h = (uint64_t(k[0]) * 0x9E3779B97F4A7C15ull) ^ (uint64_t(k[1]) * 0xC2B2AE3D27D4EB4Full) ^
+                       (uint64_t(k[2]) * 0x165667B19E3779F9ull);
+    for (size_t i = size_t(h ^ (h >> 29)) & mask_;; i = (i + 1) & mask_) {
+      Slot& s = slots_[i];
+      if (s.count == kEmpty) {
+        s.k[0] = k[0], s.k[1] = k[1], s.k[2] = k[2];
+        return s;
+      }
+      if (s.k[0] == k[0] && s.k[1] == k[1] && s.k[2] == k[2]) return s;
+    }
+  }
+  int64_t lo_[3] = {0, 0, 0};
+  size_t mask_ = 0;
+  std::vector<Slot> slots_;
 };
 
 // A collapse of edge (s, r): r disappears, s survives at p (local coordinates).
@@ -150,7 +194,7 @@ class Simplifier {
   void collapse(const Candidate& c);
   Cell cellOf(const double* global) const;
   Cell cellOfVertex(uint32_t v) const { return cellOf(out_ + size_t(v) * 3); }
-  void snap(double* global) const;
+  void bestCorner(const Quadric& q, double* global, double* local) const;
   void appendTriangle(uint32_t v, uint32_t t);
   void neighbours(uint32_t v, std::vector<uint32_t>& n) const;
 
@@ -158,6 +202,7 @@ class Simplifier {
   size_t nv_;
   double center_[3] = {0, 0, 0};
   double lo_[3] = {0, 0, 0}, hi_[3] = {0, 0, 0};  // the input's bounding box, local
+  int64_t cellLo_[3] = {0, 0, 0}, cellHi_[3] = {0, 0, 0};  // the grid cells of the box's corners
   std::vector<double> pos_;  // local (centred) positions: the quadrics stay precise far from the origin
   double* out_;              // global positions (the caller's destinationPositions)
   uint8_t* moved_;
@@ -175,7 +220,7 @@ class Simplifier {
     return count_[e.r] && (version_[e.s] & 0x7fff) == (e.versionS & 0x7fffu) && (version_[e.r] & 0x7fff) == (e.versionR & 0x7fffu);
   }
   void dropStale();
-  std::unordered_map<Cell, uint32_t, CellHash> cells_;  // grid cell -> number of live vertices in it
+  CellCounts cells_;  // grid cell -> number of live vertices in it
   size_t liveTriangles_ = 0;
   // Scratch of check(), kept for collapse().
   std::vector<uint32_t> ts_, tr_, edge_, ns_, nr_, nb_;
@@ -207,9 +252,13 @@ Simplifier::Simplifier(const uint32_t* indices, size_t indexCount, const double*
   version_.assign(nv_, 0);
   buildLists();
   buildQuadrics();
-  if (options_.gridStep > 0)
+  if (options_.gridStep > 0 && nv_) {
+    const Cell l = cellOf(lo), h = cellOf(hi);
+    for (int a = 0; a < 3; ++a) cellLo_[a] = l.c[a], cellHi_[a] = h.c[a];
+    cells_.init(cellLo_, nv_);
     for (uint32_t v = 0; v < nv_; ++v)
       if (live_[v]) ++cells_[cellOfVertex(v)];
+  }
 }
 
 // Vertex -> triangle lists in one pool (counting sort). A list that outgrows its room moves to the
@@ -295,9 +344,26 @@ Cell Simplifier::cellOf(const double* g) const {
   return c;
 }
 
-void Simplifier::snap(double* g) const {
-  const Cell c = cellOf(g);
-  for (int a = 0; a < 3; ++a) g[a] = options_.gridOrigin[a] + options_.gridStep * double(c.c[a]);
+// Puts the new point on the grid point of least quadric error among the 8 corners of the grid cube
+// around it (global g, local p; both updated). Rounding to the nearest grid point instead moves the
+// point off the local planes by a quarter step on average, as much as the simplification itself
+// costs at a few levels (the step is 1/8 of the mean input edge); the best corner lies on or next
+// to them. Corners are kept within the grid cells of the input's box, which the grid covers.
+void Simplifier::bestCorner(const Quadric& q, double* g, double* p) const {
+  int64_t base[3];
+  for (int a = 0; a < 3; ++a) base[a] = int64_t(std::floor((g[a] - options_.gridOrigin[a]) / options_.gridStep));
+  double best = DBL_MAX, bestG[3] = {g[0], g[1], g[2]};
+  for (int corner = 0; corner < 8; ++corner) {
+    double cg[3], cp[3];
+    for (int a = 0; a < 3; ++a) {
+      const int64_t i = std::min(std::max(base[a] + ((corner >> a) & 1), cellLo_[a]), cellHi_[a]);
+      cg[a] = options_.gridOrigin[a] + options_.gridStep * double(i);
+      cp[a] = cg[a] - center_[a];
+    }
+    const double e = q.at(cp);
+    if (e < best) best = e, std::memcpy(bestG, cg, sizeof bestG);
+  }
+  for (int a = 0; a < 3; ++a) g[a] = bestG[a], p[a] = bestG[a] - center_[a];
 }
 
 // The collapse of edge (a, b) and its cost (G&H 4): toward a frozen end without moving it; else to
@@ -325,10 +391,7 @@ bool Simplifier::candidate(uint32_t a, uint32_t b, bool allowMove, Candidate& c)
     for (int k = 0; k < 3; ++k) p[k] = std::min(std::max(p[k], lo_[k]), hi_[k]);
     double g[3];
     for (int k = 0; k < 3; ++k) g[k] = p[k] + center_[k];
-    if (ok && options_.gridStep > 0) {
-      snap(g);
-      for (int k = 0; k < 3; ++k) p[k] = g[k] - center_[k];
-    }
+    if (ok && options_.gridStep > 0) bestCorner(q, g, p);
     const double ea = q.at(pa), eb = q.at(pb), ep = ok ? q.at(p) : DBL_MAX;
     if (ep < std::min(ea, eb)) {
       std::memcpy(c.p, p, sizeof c.p);
@@ -444,8 +507,7 @@ Verdict Simplifier::check(const Candidate& c) {
     }
   if (c.moves && options_.gridStep > 0) {
     const Cell k = cellOf(c.g);
-    auto it = cells_.find(k);
-    uint32_t n = it == cells_.end() ? 0 : it->second;
+    uint32_t n = cells_.count(k);
     n -= cellOfVertex(s) == k;
     n -= cellOfVertex(r) == k;
     if (n > 0) return Verdict::GridTaken;
@@ -487,9 +549,9 @@ void Simplifier::collapse(const Candidate& c) {
   count_[r] = 0;
   if (options_.gridStep > 0) {
     for (uint32_t v : {s, r}) {
-      auto it = cells_.find(cellOfVertex(v));
-      assert(it != cells_.end());
-      if (--it->second == 0) cells_.erase(it);
+      uint32_t& n = cells_[cellOfVertex(v)];
+      assert(n > 0);
+      --n;
     }
   }
   std::memcpy(&pos_[s * 3], c.p, sizeof c.p);
