@@ -6,6 +6,7 @@
 #include <cfloat>
 #include <cmath>
 #include <cstring>
+#include <cstdlib>
 #include <vector>
 
 namespace mt {
@@ -169,13 +170,61 @@ Entry entryOf(const Candidate& c, bool allowMove) {
   return {float(c.cost), c.s, c.r, uint16_t(c.versionS & 0x7fff), uint16_t((c.versionR & 0x7fff) | (allowMove ? 0x8000 : 0))};
 }
 
+// A 4-ary min-heap on Later (half the depth of a binary heap, and a node's children share a
+// cache line: the pops of stale entries were 10% of the simplifier with std::pop_heap).
+void siftUp(std::vector<Entry>& h, size_t i) {
+  const Entry e = h[i];
+  while (i > 0) {
+    const size_t parent = (i - 1) / 4;
+    if (!Later()(h[parent], e)) break;
+    h[i] = h[parent];
+    i = parent;
+  }
+  h[i] = e;
+}
+void siftDown(std::vector<Entry>& h, size_t i) {
+  const size_t n = h.size();
+  const Entry e = h[i];
+  for (;;) {
+    const size_t first = 4 * i + 1;
+    if (first >= n) break;
+    size_t best = first;
+    const size_t last = std::min(first + 4, n);
+    for (size_t c = first + 1; c < last; ++c)
+      if (Later()(h[best], h[c])) best = c;
+    if (!Later()(e, h[best])) break;
+    h[i] = h[best];
+    i = best;
+  }
+  h[i] = e;
+}
+void heapPush(std::vector<Entry>& h, const Entry& e) {
+  h.push_back(e);
+  siftUp(h, h.size() - 1);
+}
+Entry heapPop(std::vector<Entry>& h) {
+  const Entry top = h[0];
+  h[0] = h.back();
+  h.pop_back();
+  if (!h.empty()) siftDown(h, 0);
+  return top;
+}
+void heapMake(std::vector<Entry>& h) {
+  for (size_t i = h.size() / 4 + 1; i-- > 0;)
+    if (i < h.size()) siftDown(h, i);
+}
+
 enum class Verdict { Ok, Refused, GridTaken };
 
 constexpr double kMinQuality = 0.05;  // a face below this is a sliver; none is made from a better one
 // A collapse that makes a face of quality q below kFairQuality costs cost * kFairQuality / q (the
 // shape penalty of vcg's TriEdgeCollapseQuadric, which Nexus uses, with its threshold 0.3): at a
 // given triangle count, well-shaped triangles follow the surface more closely on average.
-constexpr double kFairQuality = 0.3;
+static double envOr(const char* n, double d) { const char* v = getenv(n); return v ? atof(v) : d; }
+static const double kFairQuality = envOr("QS_FAIR", 0.3);
+static const double kCosThr = envOr("QS_COS", -1);
+static const double kRadius = envOr("QS_RADIUS", 1);
+static const double kAreaExp = envOr("QS_AREA", 1);
 
 class Simplifier {
  public:
@@ -213,8 +262,7 @@ class Simplifier {
   std::vector<Quadric> quadric_;
   std::vector<Entry> heap_, retry_;
   void push(const Candidate& c, bool allowMove) {
-    heap_.push_back(entryOf(c, allowMove));
-    std::push_heap(heap_.begin(), heap_.end(), Later());
+    heapPush(heap_, entryOf(c, allowMove));
   }
   bool current(const Entry& e) const {
     return count_[e.r] && (version_[e.s] & 0x7fff) == (e.versionS & 0x7fffu) && (version_[e.r] & 0x7fff) == (e.versionR & 0x7fffu);
@@ -224,7 +272,15 @@ class Simplifier {
   size_t liveTriangles_ = 0;
   // Scratch of check(), kept for collapse().
   std::vector<uint32_t> ts_, tr_, edge_, ns_, nr_, nb_;
-  double minQuality_ = 1;  // the worst quality of a face the checked collapse changes
+  double minQuality_ = 1;
+  double minCos_ = 1;
+ public:
+  double penalty() const {
+    double f = 1;
+    if (minQuality_ < kFairQuality) f *= kFairQuality / std::max(minQuality_, 1e-6);
+    if (minCos_ < kCosThr) f *= (1 + kCosThr) / std::max(1 + minCos_, 1e-6);
+    return f;
+  }  // the worst quality of a face the checked collapse changes
 };
 
 Simplifier::Simplifier(const uint32_t* indices, size_t indexCount, const double* positions, size_t vertexCount,
@@ -299,7 +355,7 @@ void Simplifier::buildQuadrics() {
     if (!(len > 0)) continue;
     for (double& x : n) x /= len;
     const double d = -dot(n, &pos_[f[0] * 3]);
-    for (int k = 0; k < 3; ++k) quadric_[f[k]].addPlane(n, d, 0.5 * len);
+    for (int k = 0; k < 3; ++k) quadric_[f[k]].addPlane(n, d, kAreaExp == 1 ? 0.5 * len : std::pow(0.5 * len, kAreaExp));
   }
   std::vector<uint32_t> nb;
   for (uint32_t a = 0; a < nv_; ++a) {
@@ -350,20 +406,36 @@ Cell Simplifier::cellOf(const double* g) const {
 // costs at a few levels (the step is 1/8 of the mean input edge); the best corner lies on or next
 // to them. Corners are kept within the grid cells of the input's box, which the grid covers.
 void Simplifier::bestCorner(const Quadric& q, double* g, double* p) const {
-  int64_t base[3];
-  for (int a = 0; a < 3; ++a) base[a] = int64_t(std::floor((g[a] - options_.gridOrigin[a]) / options_.gridStep));
-  double best = DBL_MAX, bestG[3] = {g[0], g[1], g[2]};
-  for (int corner = 0; corner < 8; ++corner) {
-    double cg[3], cp[3];
-    for (int a = 0; a < 3; ++a) {
-      const int64_t i = std::min(std::max(base[a] + ((corner >> a) & 1), cellLo_[a]), cellHi_[a]);
-      cg[a] = options_.gridOrigin[a] + options_.gridStep * double(i);
-      cp[a] = cg[a] - center_[a];
-    }
-    const double e = q.at(cp);
-    if (e < best) best = e, std::memcpy(bestG, cg, sizeof bestG);
+  // The corners are base + d with d in {0, step}^3 per axis (0 on an axis where the box's cells
+  // leave one choice). With x = base (local), q(x + d) = q(x) + 2 (A x + b).d + d^T A d: one full
+  // evaluation, then a few additions per corner.
+  double x[3], d[3];
+  int64_t index[3];
+  for (int a = 0; a < 3; ++a) {
+    const int64_t i = int64_t(std::floor((g[a] - options_.gridOrigin[a]) / options_.gridStep));
+    const int64_t i0 = std::min(std::max(i, cellLo_[a]), cellHi_[a]), i1 = std::min(std::max(i + 1, cellLo_[a]), cellHi_[a]);
+    index[a] = i0;
+    x[a] = options_.gridOrigin[a] + options_.gridStep * double(i0) - center_[a];
+    d[a] = options_.gridStep * double(i1 - i0);
   }
-  for (int a = 0; a < 3; ++a) g[a] = bestG[a], p[a] = bestG[a] - center_[a];
+  const double e0 = q.at(x);
+  const double gx = 2 * (q.a00 * x[0] + q.a01 * x[1] + q.a02 * x[2] + q.b0) * d[0];
+  const double gy = 2 * (q.a01 * x[0] + q.a11 * x[1] + q.a12 * x[2] + q.b1) * d[1];
+  const double gz = 2 * (q.a02 * x[0] + q.a12 * x[1] + q.a22 * x[2] + q.b2) * d[2];
+  const double xx = q.a00 * d[0] * d[0], yy = q.a11 * d[1] * d[1], zz = q.a22 * d[2] * d[2];
+  const double xy = 2 * q.a01 * d[0] * d[1], xz = 2 * q.a02 * d[0] * d[2], yz = 2 * q.a12 * d[1] * d[2];
+  double best = DBL_MAX;
+  int bestCorner = 0;
+  for (int corner = 0; corner < 8; ++corner) {
+    const double i = corner & 1, j = (corner >> 1) & 1, k = (corner >> 2) & 1;
+    const double e = e0 + i * (gx + xx) + j * (gy + yy) + k * (gz + zz) + i * j * xy + i * k * xz + j * k * yz;
+    if (e < best) best = e, bestCorner = corner;
+  }
+  for (int a = 0; a < 3; ++a) {
+    const int64_t i = index[a] + (d[a] > 0 ? (bestCorner >> a) & 1 : 0);
+    g[a] = options_.gridOrigin[a] + options_.gridStep * double(i);
+    p[a] = g[a] - center_[a];
+  }
 }
 
 // The collapse of edge (a, b) and its cost (G&H 4): toward a frozen end without moving it; else to
@@ -385,7 +457,7 @@ bool Simplifier::candidate(uint32_t a, uint32_t b, bool allowMove, Candidate& c)
     double mid[3], p[3];
     for (int k = 0; k < 3; ++k) mid[k] = 0.5 * (pa[k] + pb[k]);
     const double l2 = dist2(pa, pb);
-    bool ok = allowMove && q.minimum(mid, p) && dist2(p, mid) <= l2;
+    bool ok = allowMove && q.minimum(mid, p) && dist2(p, mid) <= kRadius * kRadius * l2;
     if (allowMove && !ok) std::memcpy(p, mid, sizeof p), ok = true;  // compared with the ends below
     // Never outside the input's box: the quantization grid covers the input's box only.
     for (int k = 0; k < 3; ++k) p[k] = std::min(std::max(p[k], lo_[k]), hi_[k]);
@@ -438,7 +510,7 @@ void Simplifier::pushEdgesOf(uint32_t v) {
 // face rules (no flip, no new sliver) and the grid rule (a moved vertex takes a free cell).
 Verdict Simplifier::check(const Candidate& c) {
   const uint32_t s = c.s, r = c.r;
-  minQuality_ = 1;
+  minQuality_ = 1, minCos_ = 1;
   auto liveOf = [&](uint32_t v, std::vector<uint32_t>& out) {
     out.clear();
     for (uint32_t i = start_[v]; i < start_[v] + count_[v]; ++i)
@@ -504,6 +576,7 @@ Verdict Simplifier::check(const Candidate& c) {
       const double qa = quality(n[0], n[1], n[2], after);
       if (qa < kMinQuality && qa < quality(q[0], q[1], q[2], before)) return Verdict::Refused;
       minQuality_ = std::min(minQuality_, qa);
+      minCos_ = std::min(minCos_, dot(before, after) / std::sqrt(dot(before, before) * dot(after, after)));
     }
   if (c.moves && options_.gridStep > 0) {
     const Cell k = cellOf(c.g);
@@ -578,7 +651,7 @@ void Simplifier::run(size_t targetTriangles) {
       if (w > v && candidate(v, w, true, c)) heap_.push_back(entryOf(c, true));
     }
   }
-  std::make_heap(heap_.begin(), heap_.end(), Later());
+  heapMake(heap_);
   size_t liveEntries = heap_.size();  // entries pushed since the last clean-up, stale or not
   for (int round = 0; liveTriangles_ > targetTriangles;) {
     if (heap_.empty()) {
@@ -587,12 +660,10 @@ void Simplifier::run(size_t targetTriangles) {
       for (const Entry& e : retry_)
         if (current(e)) heap_.push_back(e);
       retry_.clear();
-      std::make_heap(heap_.begin(), heap_.end(), Later());
+      heapMake(heap_);
       continue;
     }
-    std::pop_heap(heap_.begin(), heap_.end(), Later());
-    const Entry e = heap_.back();
-    heap_.pop_back();
+    const Entry e = heapPop(heap_);
     if (!current(e)) continue;
     Candidate c;
     candidate(e.s, e.r, e.allowMove(), c);
@@ -600,13 +671,12 @@ void Simplifier::run(size_t targetTriangles) {
     const Verdict verdict = check(c);
     // The shape penalty needs the neighbourhood, so it is applied when popped (the raw cost is a
     // lower bound): a penalized collapse that is no longer the cheapest goes back in.
-    if (verdict == Verdict::Ok && !e.penalized() && minQuality_ < kFairQuality) {
+    if (verdict == Verdict::Ok && !e.penalized() && penalty() > 1) {
       Entry p = e;
-      p.cost = float(c.cost * (kFairQuality / std::max(minQuality_, 1e-6)));
+      p.cost = float(c.cost * penalty());
       p.versionS |= 0x8000;
       if (!heap_.empty() && !Later()(heap_.front(), p)) {
-        heap_.push_back(p);
-        std::push_heap(heap_.begin(), heap_.end(), Later());
+        heapPush(heap_, p);
         continue;
       }
     }
@@ -630,7 +700,7 @@ void Simplifier::run(size_t targetTriangles) {
 
 void Simplifier::dropStale() {
   heap_.erase(std::remove_if(heap_.begin(), heap_.end(), [&](const Entry& e) { return !current(e); }), heap_.end());
-  std::make_heap(heap_.begin(), heap_.end(), Later());
+  heapMake(heap_);
 }
 
 size_t Simplifier::write(uint32_t* destination) const {
