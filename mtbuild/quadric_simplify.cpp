@@ -6,7 +6,6 @@
 #include <cfloat>
 #include <cmath>
 #include <cstring>
-#include <cstdlib>
 #include <vector>
 
 namespace mt {
@@ -220,11 +219,7 @@ constexpr double kMinQuality = 0.05;  // a face below this is a sliver; none is 
 // A collapse that makes a face of quality q below kFairQuality costs cost * kFairQuality / q (the
 // shape penalty of vcg's TriEdgeCollapseQuadric, which Nexus uses, with its threshold 0.3): at a
 // given triangle count, well-shaped triangles follow the surface more closely on average.
-static double envOr(const char* n, double d) { const char* v = getenv(n); return v ? atof(v) : d; }
-static const double kFairQuality = envOr("QS_FAIR", 0.3);
-static const double kCosThr = envOr("QS_COS", -1);
-static const double kRadius = envOr("QS_RADIUS", 1);
-static const double kAreaExp = envOr("QS_AREA", 1);
+constexpr double kFairQuality = 0.3;
 
 class Simplifier {
  public:
@@ -273,14 +268,7 @@ class Simplifier {
   // Scratch of check(), kept for collapse().
   std::vector<uint32_t> ts_, tr_, edge_, ns_, nr_, nb_;
   double minQuality_ = 1;
-  double minCos_ = 1;
- public:
-  double penalty() const {
-    double f = 1;
-    if (minQuality_ < kFairQuality) f *= kFairQuality / std::max(minQuality_, 1e-6);
-    if (minCos_ < kCosThr) f *= (1 + kCosThr) / std::max(1 + minCos_, 1e-6);
-    return f;
-  }  // the worst quality of a face the checked collapse changes
+  // the worst quality of a face the checked collapse changes
 };
 
 Simplifier::Simplifier(const uint32_t* indices, size_t indexCount, const double* positions, size_t vertexCount,
@@ -355,7 +343,7 @@ void Simplifier::buildQuadrics() {
     if (!(len > 0)) continue;
     for (double& x : n) x /= len;
     const double d = -dot(n, &pos_[f[0] * 3]);
-    for (int k = 0; k < 3; ++k) quadric_[f[k]].addPlane(n, d, kAreaExp == 1 ? 0.5 * len : std::pow(0.5 * len, kAreaExp));
+    for (int k = 0; k < 3; ++k) quadric_[f[k]].addPlane(n, d, 0.5 * len);
   }
   std::vector<uint32_t> nb;
   for (uint32_t a = 0; a < nv_; ++a) {
@@ -457,7 +445,7 @@ bool Simplifier::candidate(uint32_t a, uint32_t b, bool allowMove, Candidate& c)
     double mid[3], p[3];
     for (int k = 0; k < 3; ++k) mid[k] = 0.5 * (pa[k] + pb[k]);
     const double l2 = dist2(pa, pb);
-    bool ok = allowMove && q.minimum(mid, p) && dist2(p, mid) <= kRadius * kRadius * l2;
+    bool ok = allowMove && q.minimum(mid, p) && dist2(p, mid) <= l2;
     if (allowMove && !ok) std::memcpy(p, mid, sizeof p), ok = true;  // compared with the ends below
     // Never outside the input's box: the quantization grid covers the input's box only.
     for (int k = 0; k < 3; ++k) p[k] = std::min(std::max(p[k], lo_[k]), hi_[k]);
@@ -510,7 +498,7 @@ void Simplifier::pushEdgesOf(uint32_t v) {
 // face rules (no flip, no new sliver) and the grid rule (a moved vertex takes a free cell).
 Verdict Simplifier::check(const Candidate& c) {
   const uint32_t s = c.s, r = c.r;
-  minQuality_ = 1, minCos_ = 1;
+  minQuality_ = 1;
   auto liveOf = [&](uint32_t v, std::vector<uint32_t>& out) {
     out.clear();
     for (uint32_t i = start_[v]; i < start_[v] + count_[v]; ++i)
@@ -576,7 +564,6 @@ Verdict Simplifier::check(const Candidate& c) {
       const double qa = quality(n[0], n[1], n[2], after);
       if (qa < kMinQuality && qa < quality(q[0], q[1], q[2], before)) return Verdict::Refused;
       minQuality_ = std::min(minQuality_, qa);
-      minCos_ = std::min(minCos_, dot(before, after) / std::sqrt(dot(before, before) * dot(after, after)));
     }
   if (c.moves && options_.gridStep > 0) {
     const Cell k = cellOf(c.g);
@@ -671,9 +658,9 @@ void Simplifier::run(size_t targetTriangles) {
     const Verdict verdict = check(c);
     // The shape penalty needs the neighbourhood, so it is applied when popped (the raw cost is a
     // lower bound): a penalized collapse that is no longer the cheapest goes back in.
-    if (verdict == Verdict::Ok && !e.penalized() && penalty() > 1) {
+    if (verdict == Verdict::Ok && !e.penalized() && minQuality_ < kFairQuality) {
       Entry p = e;
-      p.cost = float(c.cost * penalty());
+      p.cost = float(c.cost * (kFairQuality / std::max(minQuality_, 1e-6)));
       p.versionS |= 0x8000;
       if (!heap_.empty() && !Later()(heap_.front(), p)) {
         heapPush(heap_, p);
