@@ -6,17 +6,18 @@
 # merged vertices, and the `mtverify --cuts 32` verdict; then the mean per mesh and the CPU ratio.
 #
 #   bench/scans.sh [SIZE] [--rounds N] [--memory 512M] [--threads 2] [--codec meshopt|draco]
-#                  [--partition irregular|regular] [--work DIR] [--keep]
+#                  [--partition irregular|regular] [--simplifier quadric|meshopt] [--work DIR] [--keep]
 #
 # SIZE (default 13M; e.g. 3M, 53M) picks the base model and scangen LEVELS whose size (base
 # triangles x 4^LEVELS) is nearest; the mtgen mesh then gets exactly the scan's triangle count.
 # --rounds N runs the two builds interleaved, A B A B ..., N times each (same session, so the
 # machine's load affects both alike). Inputs are kept in WORK (default out/bench-scans) for the
-# next run; --keep keeps the .mt files too. BIN=dir/bin picks another build dir.
+# next run; --keep keeps the .mt files too. BIN=dir/bin picks another build dir. --simplifier is
+# passed to mtbuild (default: mtbuild's own default).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-size=13M rounds=1 memory=512M threads=2 codec=meshopt partition=irregular work=out/bench-scans keep=0
+size=13M rounds=1 memory=512M threads=2 codec=meshopt partition=irregular work=out/bench-scans keep=0 simplifier=""
 while [[ $# -gt 0 ]]; do
   case "$1" in
     --rounds) rounds=$2; shift 2 ;;
@@ -24,9 +25,10 @@ while [[ $# -gt 0 ]]; do
     --threads) threads=$2; shift 2 ;;
     --codec) codec=$2; shift 2 ;;
     --partition) partition=$2; shift 2 ;;
+    --simplifier) simplifier=$2; shift 2 ;;
     --work) work=$2; shift 2 ;;
     --keep) keep=1; shift ;;
-    -h|--help) sed -n '2,17p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    -h|--help) sed -n '2,16p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
     -*) echo "bench/scans.sh: unknown option $1 (see --help)" >&2; exit 1 ;;
     *) size=$1; shift ;;
   esac
@@ -88,7 +90,7 @@ if [[ ! -s "$gen" ]]; then
   "$bin/mtgen" -o "$gen" --triangles "$scanTriangles" --holes "$holes" --seed 7 2>"$work/mtgen.log"
 fi
 
-echo "bench/scans.sh: $(nproc) cores, load $(cut -d' ' -f1-3 /proc/loadavg); --threads $threads --memory $memory --codec $codec --partition $partition; $rounds round(s), interleaved"
+echo "bench/scans.sh: $(nproc) cores, load $(cut -d' ' -f1-3 /proc/loadavg); --threads $threads --memory $memory --codec $codec --partition $partition${simplifier:+ --simplifier $simplifier}; $rounds round(s), interleaved"
 echo "  scan:  $scan (scangen $base.off $levels: $scanTriangles triangles)"
 echo "  mtgen: $gen (--triangles $scanTriangles --holes $holes --seed 7)"
 results="$work/results.txt"
@@ -100,7 +102,8 @@ for ((round = 1; round <= rounds; ++round)); do
     out="$work/$which.mt"
     rm -rf "$out" "$out.work"
     if ! /usr/bin/time -v -o "$work/time.txt" "$bin/mtbuild" "$input" -o "$out" --memory "$memory" \
-         --threads "$threads" --codec "$codec" --partition "$partition" >"$work/build.log" 2>&1; then
+         --threads "$threads" --codec "$codec" --partition "$partition" ${simplifier:+--simplifier "$simplifier"} \
+         >"$work/build.log" 2>&1; then
       echo "bench/scans.sh: mtbuild failed on $input:" >&2
       tail -5 "$work/build.log" >&2
       exit 1

@@ -14,9 +14,11 @@
 //   * topology safety: the link condition (Dey et al.; no non-manifold edge or vertex results),
 //     no face flips, no sliver faces made from good ones, no vertex left without triangles;
 //   * open borders (scan holes) kept in shape by G&H section 6.2's perpendicular boundary planes;
-//   * optionally, moved vertices snapped to the MT's quantization grid and kept out of any grid
-//     cell another vertex of the mesh already occupies (cuts are welded by grid position);
-//   * deterministic: one binary heap ordered by (cost, lower id, higher id).
+//   * optionally, moved vertices put on the MT's quantization grid (the corner of least quadric
+//     error of the grid cube around the optimum, not the nearest grid point, which is a quarter
+//     step off the surface on average) and kept out of any grid cell another vertex of the mesh
+//     already occupies (cuts are welded by grid position);
+//   * deterministic: one heap (4-ary) ordered by (cost, lower id, higher id).
 #pragma once
 
 #include <cstddef>

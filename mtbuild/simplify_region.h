@@ -13,11 +13,13 @@
 //     can accumulate a real, monotone error bound level by level (BMT 4.1).
 //
 // Two simplifiers (SimplifyRegionOptions::simplifier):
-//   * Quadric (default): mtbuild/quadric_simplify.h, G&H 1997 edge collapse with optimal placement,
+//   * Quadric: mtbuild/quadric_simplify.h, G&H 1997 edge collapse with optimal placement,
 //     locks and the rules below built in. Moved vertices are put on the MT's quantization grid
-//     (gridStep/gridOrigin) in a cell no other vertex of the region occupies, so the quantized
-//     patches keep every vertex distinct, as the grid weld left them.
-//   * Meshopt: meshoptimizer 0.18's half-edge collapse (every output vertex is an input vertex).
+//     (gridStep/gridOrigin), on the corner of least quadric error around the optimum, in a cell no
+//     other vertex of the region occupies, so the quantized patches keep every vertex distinct, as
+//     the grid weld left them.
+//   * Meshopt (default): meshoptimizer 0.18's half-edge collapse (every output vertex is an input
+//     vertex).
 //     It has no per-vertex lock argument, and meshopt_SimplifyLockBorder would freeze scan holes
 //     too; but it classifies a vertex that shares its position with another vertex and has no
 //     matching seam as "locked": so every locked vertex gets one unreferenced duplicate appended

@@ -557,3 +557,57 @@ TEST(QuadricSimplify, CloserOnAverageThanHalfEdgeCollapse) {
 }
 }  // namespace
 }  // namespace mt
+
+namespace mt {
+namespace {
+// A moved vertex goes to the grid corner of least quadric error around its optimum, not to the
+// nearest grid point, and lies on a grid point. On a sampled sphere, at a step of 0.3 sample
+// spacings, the input's mean distance to the quarter-size result is 0.0189 (0.0220 with the
+// nearest grid point, the rule before).
+TEST(QuadricSimplify, MovedVerticesTakeTheBestGridCorner) {
+  const uint32_t n = 41;
+  const double R = 30, c[3] = {20, 20, -20};
+  std::vector<double> pos;
+  std::vector<uint32_t> tris;
+  for (uint32_t j = 0; j < n; ++j)
+    for (uint32_t i = 0; i < n; ++i) {
+      const double x = i + 0.3 * std::sin(1.7 * j), y = j + 0.3 * std::cos(2.3 * i);
+      pos.insert(pos.end(), {x, y, c[2] + std::sqrt(R * R - (x - c[0]) * (x - c[0]) - (y - c[1]) * (y - c[1]))});
+    }
+  for (uint32_t j = 0; j + 1 < n; ++j)
+    for (uint32_t i = 0; i + 1 < n; ++i) {
+      const uint32_t a = j * n + i, b = a + 1, cc = a + n, d = cc + 1;
+      tris.insert(tris.end(), {a, b, d, a, d, cc});
+    }
+  QuadricSimplifyOptions o;
+  o.gridStep = 0.3;
+  o.gridOrigin[0] = -0.71, o.gridOrigin[1] = -0.93, o.gridOrigin[2] = -0.47;
+  std::vector<uint32_t> out(tris.size());
+  std::vector<double> outPos(pos.size());
+  std::vector<uint8_t> moved(n * n);
+  const size_t count = quadricSimplify(out.data(), outPos.data(), moved.data(), tris.data(), tris.size(), pos.data(),
+                                       n * n, 3 * sizeof(double), nullptr, tris.size() / 4, o);
+  out.resize(count);
+  std::set<uint32_t> kept(out.begin(), out.end());
+  double sum = 0;
+  size_t movedCount = 0;
+  for (uint32_t v : kept) {
+    if (!moved[v]) continue;
+    const double* p = &outPos[v * 3];
+    for (int a = 0; a < 3; ++a) {
+      const double k = (p[a] - o.gridOrigin[a]) / o.gridStep;
+      EXPECT_NEAR(k, std::round(k), 1e-9) << "vertex " << v << " is not on a grid point";
+    }
+    const double d[3] = {p[0] - c[0], p[1] - c[1], p[2] - c[2]};
+    sum += std::fabs(std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) - R);
+    ++movedCount;
+  }
+  ASSERT_GT(movedCount, kept.size() / 4);
+  EXPECT_LT(sum / double(movedCount), 0.1 * o.gridStep) << movedCount << " moved";
+  TriangleGrid result(outPos.data(), n * n, out.data(), out.size() / 3);
+  double inputToResult = 0;
+  for (uint32_t v = 0; v < n * n; ++v) inputToResult += result.distance(&pos[v * 3]);
+  EXPECT_LT(inputToResult / (n * n), 0.0200);
+}
+}  // namespace
+}  // namespace mt
