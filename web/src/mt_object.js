@@ -63,7 +63,7 @@ export class MTObject extends THREE.Group {
     });
     this.extract = new ExtractRender(scene, this.cache, this.server, {
       pixelTolerance: options.pixelTolerance ?? 1,
-      budgetMs: options.budgetMs ?? 33,
+      budgetMs: options.budgetMs ?? 50,  // mtrender's default: 20 fps, which a software renderer can hold
       fixedTriangles: options.fixedTriangles || 0,
     });
     this.meshes = new Map();  // patch id -> Mesh (patches of the cut)
