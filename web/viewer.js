@@ -54,7 +54,7 @@ async function main() {
   try {
     mt = await MTObject.open(file, {
       pixelTolerance: Number(q.get('tol') || 1),
-      budgetMs: Number(q.get('budget') || 33),
+      budgetMs: Number(q.get('budget') || 50),
       fixedTriangles: Number(q.get('fixed') || 0),
       cacheBytes: Number(q.get('cache') || 256) * 2 ** 20,
       onWarning: (m) => {
