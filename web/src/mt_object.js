@@ -132,7 +132,10 @@ export class MTObject extends THREE.Group {
    */
   update(camera, width, height) {
     const t = performance.now();
-    if (this.lastTime && this.frame > 1) this.extract.frameDone(this.drawnTriangles, t - this.lastTime);
+    // The time model learns from frames that drew. A still frame that drew nothing touched no
+    // pixel (the browser kept the image): its time says nothing about the cost of drawing.
+    if (this.lastTime && this.frame > 1 && (this.drawnTriangles > 0 || !this.progressiveNow))
+      this.extract.frameDone(this.drawnTriangles, t - this.lastTime);
     this.lastTime = t;
     ++this.frame;
     const pose = this._pose(camera);
