@@ -4,7 +4,7 @@
 # time to the first image after page load, the share of frames within the page's budget, the cache
 # against its cap, the bytes fetched per frame and in total against the file size, and the time the
 # screen error takes to reach the tolerance after the camera stops.
-#   bench/web.sh [FILE.mt] [--budget MS=33] [--tol PX=1] [--cache MIB=256] [--frames N=600] [--shots DIR]
+#   bench/web.sh [FILE.mt] [--budget MS=50] [--tol PX=1] [--cache MIB=256] [--frames N=600] [--shots DIR]
 # FILE.mt defaults to a 53M-triangle mtgen build (WORKDIR=out/bench-web, made once:
 # mtgen --triangles 53M, mtbuild --threads 2 --memory 512M). BIN=dir/bin picks the build dir.
 # Needs /usr/bin/chromium and web/node_modules (scripts/setup.sh, then `npm ci` in web/).

@@ -1,4 +1,4 @@
-// The standalone viewer page: viewer.html?file=URL[&tol=1][&budget=33][&cache=256][&bg=20242a]
+// The standalone viewer page: viewer.html?file=URL[&tol=1][&budget=50][&cache=256][&bg=20242a]
 // [&path=orbit|fixed&frames=600][&view=EX,EY,EZ,TX,TY,TZ (unit space)]. Orbit/pan/zoom with the
 // mouse (three's OrbitControls); the HUD shows fps, triangles, cache, loads and the screen error.
 // `plain` draws with renderer.render (no progressive still image). `capture` keeps the drawing buffer for reading the image back (the tests). `path` plays a recorded camera path frame by frame (the browser tests and bench/web.sh); the
@@ -54,7 +54,7 @@ async function main() {
   try {
     mt = await MTObject.open(file, {
       pixelTolerance: Number(q.get('tol') || 1),
-      budgetMs: Number(q.get('budget') || 33),
+      budgetMs: Number(q.get('budget') || 50),
       fixedTriangles: Number(q.get('fixed') || 0),
       cacheBytes: Number(q.get('cache') || 256) * 2 ** 20,
       onWarning: (m) => {

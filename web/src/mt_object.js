@@ -63,7 +63,7 @@ export class MTObject extends THREE.Group {
     });
     this.extract = new ExtractRender(scene, this.cache, this.server, {
       pixelTolerance: options.pixelTolerance ?? 1,
-      budgetMs: options.budgetMs ?? 33,
+      budgetMs: options.budgetMs ?? 50,  // mtrender's default: 20 fps, which a software renderer can hold
       fixedTriangles: options.fixedTriangles || 0,
     });
     this.meshes = new Map();  // patch id -> Mesh (patches of the cut)
@@ -132,7 +132,10 @@ export class MTObject extends THREE.Group {
    */
   update(camera, width, height) {
     const t = performance.now();
-    if (this.lastTime && this.frame > 1) this.extract.frameDone(this.drawnTriangles, t - this.lastTime);
+    // The time model learns from frames that drew. A still frame that drew nothing touched no
+    // pixel (the browser kept the image): its time says nothing about the cost of drawing.
+    if (this.lastTime && this.frame > 1 && (this.drawnTriangles > 0 || !this.progressiveNow))
+      this.extract.frameDone(this.drawnTriangles, t - this.lastTime);
     this.lastTime = t;
     ++this.frame;
     const pose = this._pose(camera);

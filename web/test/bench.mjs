@@ -18,7 +18,7 @@ const opt = (name, def) => {
   return i >= 0 ? args[i + 1] : def;
 };
 const [binDir, file] = args;
-const frames = Number(opt('--frames', 600)), budget = Number(opt('--budget', 33)), tol = Number(opt('--tol', 1));
+const frames = Number(opt('--frames', 600)), budget = Number(opt('--budget', 50)), tol = Number(opt('--tol', 1));
 const cacheMiB = Number(opt('--cache', 256)), shots = opt('--shots', '');
 const root = fs.mkdtempSync(path.join(os.tmpdir(), 'mtbench-'));
 fs.symlinkSync(path.resolve(here, '..'), path.join(root, 'web'));
