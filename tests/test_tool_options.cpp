@@ -241,7 +241,7 @@ TEST(ToolHelp, EveryOptionStatesItsRange) {
   } helps[] = {
       {"mtextract",
        {"a finite number >= 0", "an integer in [1, 1000000000000]", "(0, 180) degrees", "[1, 1000000] pixels",
-        "(0, 1000000] pixels", "must end in .ply"}},
+        "(0, 1000000] pixels", ".ply (binary little-endian, welded), .glb or .gltf"}},
       {"mtverify", {"an integer in [0, 1000000]", "from 64K to 1024T", "=8", "=1G"}},
       {"mtrender",
        {"(0, 60000] ms", "an integer in [1, 10000000]", "an integer in [16, 16384]", "(0, 10000] pixels",
