@@ -400,6 +400,22 @@ TEST_F(RenderPolicies, ASmallCacheNeverStrandsTheCutAtTheCoarsest) {
   EXPECT_LT(last.maxScreenError, 0.5 * first.maxScreenError);
 }
 
+// ---- a still view gets its detail even when frames are back to back --------------------------
+
+TEST_F(RenderPolicies, AStillHeadlessViewIsNotLeftAtTheCoarsestCut) {
+  // The reported flythrough ended at the coarsest cut with the camera still: frames that redraw
+  // nothing take ~0.2 ms, so back-to-back headless frames passed before one load finished. Still
+  // frames now spend their unused budget waiting for the loads their next refinement needs.
+  const std::string csv = dir_->file("still.csv");
+  auto r = runTool("mtrender", model() + " --headless --quiet --width 256 --height 256 --camera-path fixed --frames 40 "
+                                         "--test-read-delay-ms 5 --fixed-triangles 200000 --still-frames 1 --stats " + csv);
+  ASSERT_EQ(r.exitCode, 0) << r.output;
+  Csv c = readCsv(csv);
+  EXPECT_EQ(c.at(0, "patches"), 1.0);
+  EXPECT_GT(c.rows.back()[c.col("patches")], 10.0) << "the still view stayed at the coarsest cut";
+  EXPECT_LE(c.rows.back()[c.col("max_screen_error")], 1.0);
+}
+
 // ---- GPU cache ----------------------------------------------------------------------------------
 
 TEST(RenderGpuCache, NeverExceedsItsCapAtAnyMoment) {
