@@ -334,6 +334,15 @@ FrameRecord Engine::frame(const CameraPose& pose, const CameraPose& prev, GlRend
   }
   gl.endFrame();
   gl.finish();
+  // A still view whose next detail is waiting for the disk: the frame spends what is left of its
+  // budget (up to 80%) waiting for those loads, as a display-bound renderer would wait for the
+  // next refresh anyway. Without this, frames that redraw nothing (the image on screen is already
+  // of the cut) take ~0.2 ms, and a headless run's whole still stretch passed before one load
+  // finished: the run ended at the coarsest cut (1 patch, 21 px) with the camera still.
+  if (server_ && !rec.moving && (rec.requests > 0 || rec.misses > 0)) {
+    const double left = 0.8 * options_.extract.budgetMs - std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+    if (left > 1) server_->waitIdle(left);
+  }
   rec.frameMs = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
   // The first frame pays for shader compilation: not a sample of the draw cost.
   if (frame_ > 1) extract_->frameDone(rec.drawnTriangles, rec.frameMs);

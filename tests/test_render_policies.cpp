@@ -400,6 +400,22 @@ TEST_F(RenderPolicies, ASmallCacheNeverStrandsTheCutAtTheCoarsest) {
   EXPECT_LT(last.maxScreenError, 0.5 * first.maxScreenError);
 }
 
+// ---- a still view gets its detail even when frames are back to back --------------------------
+
+TEST_F(RenderPolicies, AStillHeadlessViewIsNotLeftAtTheCoarsestCut) {
+  // The reported flythrough ended at the coarsest cut with the camera still: frames that redraw
+  // nothing take ~0.2 ms, so back-to-back headless frames passed before one load finished. Still
+  // frames now spend their unused budget waiting for the loads their next refinement needs.
+  const std::string csv = dir_->file("still.csv");
+  auto r = runTool("mtrender", model() + " --headless --quiet --width 256 --height 256 --camera-path fixed --frames 40 "
+                                         "--test-read-delay-ms 5 --fixed-triangles 200000 --still-frames 1 --stats " + csv);
+  ASSERT_EQ(r.exitCode, 0) << r.output;
+  Csv c = readCsv(csv);
+  EXPECT_EQ(c.at(0, "patches"), 1.0);
+  EXPECT_GT(c.rows.back()[c.col("patches")], 10.0) << "the still view stayed at the coarsest cut";
+  EXPECT_LE(c.rows.back()[c.col("max_screen_error")], 1.0);
+}
+
 // ---- GPU cache ----------------------------------------------------------------------------------
 
 TEST(RenderGpuCache, NeverExceedsItsCapAtAnyMoment) {
@@ -462,22 +478,19 @@ TEST_F(RenderPolicies, ABackFacingPatchSetIsCulledByItsCones) {
     Csv c = readCsv(csv);
     return std::make_tuple(c.at(39, "drawn_triangles"), c.at(40, "drawn_triangles"), c.at(40, "coned_patches"));
   };
-  // Which side is the front depends on the winding: find it, then check both.
+  // Which side is the front depends on the winding: the jump that goes from the front to the back
+  // is the one where the culled run drew something before the jump and nothing after it.
   for (double side : {1.0, -1.0}) {
-    auto [beforeCull, afterCull, coned] = runSide(side, "");
-    auto [beforeAll, afterAll, conedAll] = runSide(side, "--no-cull --extract-ms 0.000001");
-    (void)beforeAll;
-    (void)conedAll;
-    if (afterAll == 0) continue;
-    auto [b2, afterTiny, conedTiny] = runSide(side, "--extract-ms 0.000001");
-    (void)b2;
-    if (beforeCull > 0 && afterCull == 0) {
-      // This jump goes from the front to the back.
-      EXPECT_GT(conedTiny, 0) << "the finest patches were not culled by their own cones";
-      EXPECT_LT(afterTiny, 0.05 * afterAll) << "from the back, " << afterTiny << " triangles were drawn";
-      return;
-    }
-    (void)coned;
+    const auto [beforeCull, afterCull, conedCull] = runSide(side, "");
+    if (!(beforeCull > 0 && afterCull == 0)) continue;
+    // The same jump with a tiny deadline, so the finest patches are still in the cut after it.
+    const auto [beforeAll, afterAll, conedAll] = runSide(side, "--no-cull --extract-ms 0.000001");
+    const auto [beforeTiny, afterTiny, conedTiny] = runSide(side, "--extract-ms 0.000001");
+    ASSERT_GT(afterAll, 0) << "without culling the back of the wall is drawn";
+    EXPECT_GT(conedTiny, 0) << "the finest patches were not culled by their own cones";
+    EXPECT_LT(afterTiny, 0.05 * afterAll) << "from the back, " << afterTiny << " triangles were drawn";
+    (void)conedCull, (void)beforeAll, (void)conedAll, (void)beforeTiny;
+    return;
   }
   FAIL() << "no side of the wall was culled from behind";
 }
