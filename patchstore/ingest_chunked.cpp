@@ -347,21 +347,26 @@ ChunkedScratch& chunkedScratch() {
 }
 inline unsigned bitWidth(uint64_t x) { return x == 0 ? 1 : unsigned(64 - __builtin_clzll(x)); }
 
-// The distinct values of `values`, ascending, into `out` (a radix sort on the bits that differ:
-// a patch's corners span a narrow range of input indices in a scan).
+// The distinct values of `values`, ascending, into `out`. A patch's corners span a narrow range
+// of input indices in a scan: a bit set over the range, marked and read back in order, costs no
+// sort of the three corners per triangle; a wide range (a shuffled input) is sorted.
 void distinctSorted(const std::vector<uint32_t>& values, std::vector<uint32_t>& out) {
   out.clear();
   if (values.empty()) return;
   auto [lo, hi] = std::minmax_element(values.begin(), values.end());
   const uint32_t base = *lo;
-  const unsigned bits = bitWidth(*hi - base);
-  ChunkedScratch& s = chunkedScratch();
-  s.keys.resize(values.size());
-  s.tmp.resize(values.size());
-  for (size_t i = 0; i < values.size(); ++i) s.keys[i] = values[i] - base;
-  const uint64_t* sorted = lsdRadixSort(s.keys.data(), s.tmp.data(), values.size(), [](uint64_t x) { return x; }, bits);
-  for (size_t i = 0; i < values.size(); ++i)
-    if (i == 0 || sorted[i] != sorted[i - 1]) out.push_back(uint32_t(sorted[i]) + base);
+  const uint64_t range = uint64_t(*hi) - base + 1;
+  if (range > 16 * uint64_t(values.size())) {
+    out = values;
+    std::sort(out.begin(), out.end());
+    out.erase(std::unique(out.begin(), out.end()), out.end());
+    return;
+  }
+  std::vector<uint64_t>& bits = chunkedScratch().keys;
+  bits.assign(size_t((range + 63) / 64), 0);
+  for (uint32_t v : values) bits[(v - base) >> 6] |= uint64_t(1) << ((v - base) & 63);
+  for (size_t w = 0; w < bits.size(); ++w)
+    for (uint64_t x = bits[w]; x; x &= x - 1) out.push_back(base + uint32_t(w * 64 + unsigned(__builtin_ctzll(x))));
 }
 
 using PairSorter = ExternalSorter<uint64_t, U64Less>;
