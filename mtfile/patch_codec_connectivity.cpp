@@ -167,6 +167,7 @@ void encodeConnectivity(RangeEncoder& rc, const uint32_t* indices, size_t indexC
     }
     uint32_t a = tri[rot], b = tri[(rot + 1) % 3], c = tri[(rot + 2) % 3], sym = kExplicit;
     if (slot != kNoEdge) {
+      assert(c <= next);  // a and b are known: c is known or the next new vertex
       sym = c == next ? kNew : c == open.firstOut(a) ? kOpenOut : c == open.firstIn(b) ? kOpenIn : kExplicit;
       rc.tree(m->third[bucket(slot) * 4 + (ctx & 3)], sym, 2);
       if (sym == kNew) ++next;
