@@ -28,45 +28,69 @@ namespace {
 constexpr uint32_t kNil = ~0u;
 
 // The open half-edges of the decoded region, per vertex: out[u] lists v for every open u->v, in[v]
-// lists u, most recent first (singly linked lists in one pool; a vertex has one or two open
-// half-edges on a manifold front, so the lists stay short).
+// lists u, most recent first (one pool of nodes, each in two doubly linked lists). A hash map
+// from the directed edge to its most recent open node (and each node to the previous open copy
+// of the same edge, for non-manifold input) closes a twin in constant time, so no input, however
+// damaged, makes the decoder slower than linear.
 class OpenEdges {
  public:
   OpenEdges(size_t vertexCount, size_t triangleCount) : outHead_(vertexCount, kNil), inHead_(vertexCount, kNil) {
-    pool_.reserve(triangleCount * 6);
+    pool_.reserve(triangleCount * 3);
+    size_t n = 16;
+    while (n < triangleCount * 4) n *= 2;  // at most 3 open keys per triangle: load <= 3/4
+    keys_.assign(n, ~0ull);
+    vals_.resize(n);
+    mask_ = n - 1;
   }
   // Adds the directed edge u->v of a new triangle: closes its twin v->u if that is open, else
   // opens u->v.
   void add(uint32_t u, uint32_t v) {
-    if (remove(outHead_[v], u)) {
-      [[maybe_unused]] bool had = remove(inHead_[u], v);
-      assert(had);
+    uint32_t* twin = slot(key(v, u), false);
+    if (twin && *twin != kNil) {
+      Node& t = pool_[*twin];
+      unlink(outHead_[v], t.outPrev, t.outNext, &Node::outPrev, &Node::outNext);
+      unlink(inHead_[u], t.inPrev, t.inNext, &Node::inPrev, &Node::inNext);
+      *twin = t.same;
       return;
     }
-    push(outHead_[u], v);
-    push(inHead_[v], u);
+    uint32_t id = uint32_t(pool_.size());
+    uint32_t* same = slot(key(u, v), true);
+    pool_.push_back({u, v, kNil, outHead_[u], kNil, inHead_[v], *same});
+    if (outHead_[u] != kNil) pool_[outHead_[u]].outPrev = id;
+    if (inHead_[v] != kNil) pool_[inHead_[v]].inPrev = id;
+    outHead_[u] = inHead_[v] = *same = id;
   }
   uint32_t firstOut(uint32_t u) const { return outHead_[u] == kNil ? kNil : pool_[outHead_[u]].v; }
-  uint32_t firstIn(uint32_t v) const { return inHead_[v] == kNil ? kNil : pool_[inHead_[v]].v; }
+  uint32_t firstIn(uint32_t v) const { return inHead_[v] == kNil ? kNil : pool_[inHead_[v]].u; }
 
  private:
   struct Node {
-    uint32_t v, next;
+    uint32_t u, v;
+    uint32_t outPrev, outNext, inPrev, inNext;
+    uint32_t same;  // the previous open node of the same directed edge
   };
-  void push(uint32_t& head, uint32_t v) {
-    pool_.push_back({v, head});
-    head = uint32_t(pool_.size() - 1);
-  }
-  bool remove(uint32_t& head, uint32_t v) {
-    for (uint32_t* link = &head; *link != kNil; link = &pool_[*link].next)
-      if (pool_[*link].v == v) {
-        *link = pool_[*link].next;
-        return true;
+  static uint64_t key(uint32_t a, uint32_t b) { return (uint64_t(a) << 32) | b; }
+  // The map's value for key k (kNil: none open); with insert, a new key starts at kNil.
+  uint32_t* slot(uint64_t k, bool insert) {
+    for (uint64_t i = ((k * 0x9E3779B97F4A7C15ull) >> 20) & mask_;; i = (i + 1) & mask_) {
+      if (keys_[i] == k) return &vals_[i];
+      if (keys_[i] == ~0ull) {
+        if (!insert) return nullptr;
+        keys_[i] = k, vals_[i] = kNil;
+        return &vals_[i];
       }
-    return false;
+    }
+  }
+  void unlink(uint32_t& head, uint32_t prev, uint32_t next, uint32_t Node::*prevField, uint32_t Node::*nextField) {
+    if (prev == kNil) head = next;
+    else pool_[prev].*nextField = next;
+    if (next != kNil) pool_[next].*prevField = prev;
   }
   std::vector<uint32_t> outHead_, inHead_;
   std::vector<Node> pool_;
+  std::vector<uint64_t> keys_;
+  std::vector<uint32_t> vals_;
+  uint64_t mask_;
 };
 
 // The 16 most recent candidate edges: the twins of the edges of recent triangles, each stored
@@ -143,6 +167,7 @@ void encodeConnectivity(RangeEncoder& rc, const uint32_t* indices, size_t indexC
     }
     uint32_t a = tri[rot], b = tri[(rot + 1) % 3], c = tri[(rot + 2) % 3], sym = kExplicit;
     if (slot != kNoEdge) {
+      assert(c <= next);  // a and b are known: c is known or the next new vertex
       sym = c == next ? kNew : c == open.firstOut(a) ? kOpenOut : c == open.firstIn(b) ? kOpenIn : kExplicit;
       rc.tree(m->third[bucket(slot) * 4 + (ctx & 3)], sym, 2);
       if (sym == kNew) ++next;

@@ -401,6 +401,21 @@ TEST(Codec, ConnectivityCodeTakesAnyTriangleList) {
     ASSERT_EQ(decoded, coded) << "round " << round;
     EXPECT_EQ(rd.overrun(), 0u);
   }
+  // 20000 triangles that share only vertex 0 (a non-manifold star): vertex 0 collects 20000 open
+  // half-edges each way, which the decoder must still handle in linear time.
+  std::vector<uint32_t> star;
+  for (uint32_t t = 0; t < 20000; ++t) star.insert(star.end(), {0, 1 + 2 * t, 2 + 2 * t});
+  std::vector<uint8_t> bytes;
+  std::vector<uint32_t> coded, decoded;
+  {
+    codec_detail::RangeEncoder rc(bytes);
+    codec_detail::encodeConnectivity(rc, star.data(), star.size(), 40001, coded);
+    rc.finish();
+  }
+  codec_detail::RangeDecoder rd(bytes.data(), bytes.data() + bytes.size());
+  codec_detail::decodeConnectivity(rd, 20000, 40001, decoded);
+  EXPECT_EQ(decoded, coded);
+  EXPECT_EQ(rd.overrun(), 0u);
 }
 
 // A connectivity-coded payload, truncated or with any byte changed, throws mt::Error or decodes to
