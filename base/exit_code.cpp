@@ -52,8 +52,9 @@ int reportError(const char* tool, const std::exception& e) {
   const std::string prefix = std::string(tool) + ": ";
   // Some layers already name the tool: do not say it twice.
   if (message.rfind(prefix, 0) == 0) message.erase(0, prefix.size());
+  // The kind goes last, so the line still starts "TOOL: FILE: " as every message does.
   const char* label = errorKindLabel(errorKindOf(e));
-  std::fprintf(stderr, "%s%s%s%s\n", prefix.c_str(), label, *label ? ": " : "", message.c_str());
+  std::fprintf(stderr, "%s%s%s%s%s\n", prefix.c_str(), message.c_str(), *label ? " [" : "", label, *label ? "]" : "");
   return exitCodeFor(e);
 }
 

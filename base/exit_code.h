@@ -30,8 +30,8 @@ int exitCodeFor(ErrorKind kind, int signal = 0);
 ErrorKind errorKindOf(const std::exception& e);
 // The exit code of any exception (mt::Interrupted gives 128 + its signal).
 int exitCodeFor(const std::exception& e);
-// Prints one line "TOOL: [KIND: ]MESSAGE" to stderr (KIND for every kind but invalid input, e.g.
-// "mtinfo: corrupt file: x.mt: patch 3: checksum mismatch") and returns exitCodeFor(e): a tool's
+// Prints one line "TOOL: MESSAGE[ [KIND]]" to stderr (KIND for every kind but invalid input, e.g.
+// "mtinfo: x.mt: patch 3: checksum mismatch [corrupt file]") and returns exitCodeFor(e): a tool's
 // catch-all ends with `return mt::reportError("tool", e);`.
 int reportError(const char* tool, const std::exception& e);
 // The word printed before the message for a kind ("corrupt file", "I/O error", "resource limit"),

@@ -67,6 +67,11 @@ void LevelBuilder::State::startFresh(bool storeInput) {
     info = store->info();
     liveTriangles = info.triangles;
   }
+  // Every triangle degenerate (a repeated vertex, or all within one grid cell once welded): the
+  // file would have no patch, which no reader accepts.
+  if (store->info().triangles == 0)
+    fail(input, "every triangle is degenerate (zero area at the grid step " + std::to_string(grid.step) +
+                    "); nothing to build");
   startFile(info, grid);
   // 3. The DAG. Node 0 is the source: the full-resolution fragment (BMT 3.1).
   nodes.assign(1, format::NodeRecord{});

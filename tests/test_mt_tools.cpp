@@ -601,17 +601,17 @@ TEST(MtInfo, DamagedFiles) {
   flipPayloadByte(mt, 5);
   EXPECT_EQ(runTool("mtinfo", mt).exitCode, 0) << "metadata is fine";
   auto res = runTool("mtinfo", mt + " --check");
-  EXPECT_EQ(res.exitCode, 1);
+  EXPECT_EQ(res.exitCode, 3);
   EXPECT_NE(res.output.find(mt + ": patch 5 is damaged"), std::string::npos) << res.output;
   EXPECT_NE(res.output.find("[node 0, level 0]"), std::string::npos) << res.output;
   EXPECT_NE(res.output.find("1 damaged"), std::string::npos) << res.output;
 
-  // Damaged metadata (a byte of the DAG section): one line naming the file, exit 1.
+  // Damaged metadata (a byte of the DAG section): one line naming the file, exit 3.
   std::string bytes = test::readFile(mt);
   bytes[bytes.size() - kFooterSize - 40] ^= 0x01;
   test::writeFile(mt, bytes);
   res = runTool("mtinfo", mt);
-  EXPECT_EQ(res.exitCode, 1);
+  EXPECT_EQ(res.exitCode, 3);
   EXPECT_NE(res.output.find("mtinfo: " + mt + ": checksum mismatch"), std::string::npos) << res.output;
   EXPECT_EQ(std::count(res.output.begin(), res.output.end(), '\n'), 1) << res.output;
 
@@ -641,7 +641,7 @@ TEST(MtVerify, FlippedPayloadByte) {
   flipPayloadByte(mt, 5);
   flipPayloadByte(mt, 17);
   auto res = runTool("mtverify", mt);
-  EXPECT_EQ(res.exitCode, 1) << res.output;
+  EXPECT_EQ(res.exitCode, 3) << res.output;
   EXPECT_NE(res.output.find(mt + ": patch 5 is damaged"), std::string::npos) << res.output;
   EXPECT_NE(res.output.find(mt + ": patch 17 is damaged"), std::string::npos) << "keeps going: " << res.output;
   EXPECT_NE(res.output.find("2 damaged"), std::string::npos) << res.output;
@@ -653,7 +653,7 @@ TEST(MtVerify, NonMonotoneError) {
   const std::string mt = dir.file("a.mt");
   TestMt t = writeTestMt(mt, {0, false, true});
   auto res = runTool("mtverify", mt);
-  EXPECT_EQ(res.exitCode, 1) << res.output;
+  EXPECT_EQ(res.exitCode, 3) << res.output;
   EXPECT_NE(res.output.find("error not monotone: node 5 (level 2)"), std::string::npos) << res.output;
   EXPECT_NE(res.output.find("monotone errors  PROBLEMS"), std::string::npos) << res.output;
   EXPECT_NE(res.output.find("crack-free cuts  10 of 10"), std::string::npos) << "only the errors are wrong: " << res.output;
@@ -676,7 +676,7 @@ TEST(MtVerify, MovedBorderVertexIsACrack) {
   const std::string mt = dir.file("a.mt");
   writeTestMt(mt, {0, false, false, true});
   auto res = runTool("mtverify", mt + " --cuts 40 --seed 3");
-  EXPECT_EQ(res.exitCode, 1) << res.output;
+  EXPECT_EQ(res.exitCode, 3) << res.output;
   EXPECT_NE(res.output.find("crack in random cut"), std::string::npos) << res.output;
   EXPECT_NE(res.output.find("is not on the input's boundary"), std::string::npos) << res.output;
   EXPECT_NE(res.output.find("monotone errors  ok"), std::string::npos) << res.output;
@@ -693,7 +693,7 @@ TEST(MtVerify, MemoryBudgetDoesNotChangeTheOutput) {
   for (const std::string& mt : {good, moved}) {
     auto big = runTool("mtverify", mt + " --cuts 40 --seed 3");
     auto small = runTool("mtverify", mt + " --cuts 40 --seed 3 --memory 256K");
-    EXPECT_EQ(big.exitCode, mt == good ? 0 : 1) << big.output;
+    EXPECT_EQ(big.exitCode, mt == good ? 0 : 3) << big.output;
     EXPECT_EQ(small.exitCode, big.exitCode) << small.output;
     EXPECT_EQ(small.output, big.output);
   }
@@ -804,10 +804,10 @@ TEST(MtExtract, BadArgumentsLeaveNoOutput) {
   }
   EXPECT_EQ(runTool("mtextract", mt + " --error 1").exitCode, 1) << "-o is required";
 
-  // A damaged payload inside the cut: exit 1 naming the patch, nothing written.
+  // A damaged payload inside the cut: exit 3 naming the patch, nothing written.
   flipPayloadByte(mt, 3);
   auto res = runTool("mtextract", mt + " --error 0 -o " + out);
-  EXPECT_EQ(res.exitCode, 1);
+  EXPECT_EQ(res.exitCode, 3);
   EXPECT_NE(res.output.find("patch 3 is damaged"), std::string::npos) << res.output;
   EXPECT_FALSE(outputLeftBehind(dir, "cut.ply"));
   // Damaged metadata.
@@ -815,7 +815,7 @@ TEST(MtExtract, BadArgumentsLeaveNoOutput) {
   bytes[bytes.size() - kFooterSize - 8] ^= 0x01;
   test::writeFile(mt, bytes);
   res = runTool("mtextract", mt + " --error 1 -o " + out);
-  EXPECT_EQ(res.exitCode, 1);
+  EXPECT_EQ(res.exitCode, 3);
   EXPECT_NE(res.output.find(mt + ": checksum mismatch"), std::string::npos) << res.output;
   EXPECT_FALSE(outputLeftBehind(dir, "cut.ply"));
 

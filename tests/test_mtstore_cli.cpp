@@ -116,10 +116,10 @@ TEST(MtstoreCli, CheckFindsACorruptedStoreAndExportLeavesNoPartialFile) {
       writeFile(e.path(), b);
     }
   CommandResult check = runTool("mtstore", "check " + tmp.file("s"));
-  EXPECT_EQ(check.exitCode, 1) << check.output;
+  EXPECT_EQ(check.exitCode, 3) << check.output;
   EXPECT_NE(check.output.find("checksum mismatch"), std::string::npos) << check.output;
   CommandResult exp = runTool("mtstore", "export " + tmp.file("s") + " -o " + tmp.file("out.ply"));
-  EXPECT_EQ(exp.exitCode, 1) << exp.output;
+  EXPECT_EQ(exp.exitCode, 3) << exp.output;
   EXPECT_FALSE(fs::exists(tmp.file("out.ply")));
   for (auto& e : fs::directory_iterator(tmp.path())) EXPECT_EQ(e.path().filename().string().find(".tmp"), std::string::npos) << e.path();
 }

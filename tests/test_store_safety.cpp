@@ -293,6 +293,6 @@ TEST(StoreSafety, ExportChecksItsOutputAndNeverTruncatesAnExistingFile) {
       test::writeFile(e.path().string(), bytes);
     }
   CommandResult bad = runTool("mtstore", "export " + store + " -o " + tmp.file("keep.ply") + " -q");
-  EXPECT_EQ(bad.exitCode, 1) << bad.output;
+  EXPECT_EQ(bad.exitCode, 3) << bad.output;
   EXPECT_EQ(test::readFile(tmp.file("keep.ply")), "precious");
 }

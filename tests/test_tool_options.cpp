@@ -206,7 +206,7 @@ TEST_F(ToolOptions, MtextractWritesPlyOnlyAndOnlyWhenComplete) {
   }
   writeFile(broken, bytes);
   r = runLimited("mtextract", broken + " --error 0 -o " + dir.file("cut.ply"));
-  EXPECT_EQ(r.exitCode, 1) << r.output;
+  EXPECT_EQ(r.exitCode, 3) << r.output;
   EXPECT_NE(r.output.find("patch 0 is damaged"), std::string::npos) << r.output;
   EXPECT_EQ(readFile(dir.file("cut.ply")), old);
   EXPECT_EQ(entries(dir.path()), (std::vector<std::string>{"CUT.PLY", "broken.mt", "cut.ply"}));

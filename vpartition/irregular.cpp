@@ -674,9 +674,12 @@ PartitionSequence buildIrregularFromSample(const vp::CentroidSample& sample, con
     return seq;
   }
   if (!(area > 0)) {
-    // Degenerate input (all triangles zero-area): use the bounding box faces as the area.
-    double e[3];
-    for (int a = 0; a < 3; ++a) e[a] = std::max(1e-30, plan.box.hi[a] - plan.box.lo[a]);
+    // Degenerate input (all triangles zero-area): use the bounding box faces as the area. An
+    // extent is at least 1/1000 of the largest: on a box with two zero extents (a line), 1e-30
+    // made the seed radius ~1e-15 of the box and the seed index enumerate ~1e15 cells.
+    double e[3], largest = 1e-30;
+    for (int a = 0; a < 3; ++a) largest = std::max(largest, plan.box.hi[a] - plan.box.lo[a]);
+    for (int a = 0; a < 3; ++a) e[a] = std::max(1e-3 * largest, plan.box.hi[a] - plan.box.lo[a]);
     area = 2 * (e[0] * e[1] + e[1] * e[2] + e[0] * e[2]) * double(plan.N) / double(Ntotal);
   }
   // Input triangles per sampled one: the sample's area stands for weight times as much surface.

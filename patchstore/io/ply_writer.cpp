@@ -31,7 +31,14 @@ PlyWriter::PlyWriter(const std::string& path, const PlyWriteOptions& options, co
     : path_(path), tmpPath_(temporaryPath.empty() ? uniqueTempName(path) : temporaryPath), options_(options) {
   file_ = Env::Default()->newWritableFile(tmpPath_);  // throws naming the file (Io)
   buffer_.reserve(kBufferBytes);
-  writeHeader();
+  try {
+    writeHeader();
+  } catch (...) {
+    // The destructor does not run for a constructor that throws: remove the temporary here.
+    file_.reset();
+    std::remove(tmpPath_.c_str());
+    throw;
+  }
 }
 
 PlyWriter::~PlyWriter() {
