@@ -250,7 +250,11 @@ class Simplifier {
   std::vector<double> pos_;  // local (centred) positions: the quadrics stay precise far from the origin
   double* out_;              // global positions (the caller's destinationPositions)
   uint8_t* moved_;
-  std::vector<uint8_t> frozen_, locked_;  // frozen: never removed nor moved (locks and non-manifold spots)
+  std::vector<uint8_t> frozen_, locked_;
+  // On an open border (a scan hole) at the start: such a vertex never moves. It may go along the
+  // border onto a neighbour on it, or stay (mtfile/mt_cut.h: a cut's boundary edges must join
+  // boundary vertices of the finest cut, compared by grid position).
+  std::vector<uint8_t> border_;  // frozen: never removed nor moved (locks and non-manifold spots)
   std::vector<uint32_t> tri_;
   std::vector<uint8_t> dead_;
   std::vector<uint32_t> start_, count_, cap_, pool_, live_, version_;
@@ -334,6 +338,7 @@ void Simplifier::buildLists() {
 // them can keep the surface a manifold that the link condition describes.
 void Simplifier::buildQuadrics() {
   quadric_.assign(nv_, Quadric());
+  border_.assign(nv_, 0);
   const size_t nt = tri_.size() / 3;
   for (size_t t = 0; t < nt; ++t) {
     const uint32_t* f = &tri_[t * 3];
@@ -379,6 +384,7 @@ void Simplifier::buildQuadrics() {
       }
     }
     if (borderEdges > 2) frozen_[a] = 1;
+    if (borderEdges > 0) border_[a] = 1;
   }
 }
 
@@ -439,6 +445,16 @@ bool Simplifier::candidate(uint32_t a, uint32_t b, bool allowMove, Candidate& c)
   c.moves = false;
   if (frozen_[a] || frozen_[b]) {
     c.s = frozen_[a] ? a : b;
+    std::memcpy(c.p, &pos_[c.s * 3], sizeof c.p);
+    std::memcpy(c.g, out_ + size_t(c.s) * 3, sizeof c.g);
+  } else if (border_[a] || border_[b]) {
+    // Toward the border end without moving it; both on the border: the end of least error.
+    if (border_[a] && border_[b]) {
+      const double ea = q.at(pa), eb = q.at(pb);
+      c.s = ea < eb || (ea == eb && a < b) ? a : b;
+    } else {
+      c.s = border_[a] ? a : b;
+    }
     std::memcpy(c.p, &pos_[c.s * 3], sizeof c.p);
     std::memcpy(c.g, out_ + size_t(c.s) * 3, sizeof c.g);
   } else {

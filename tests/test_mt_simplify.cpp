@@ -611,3 +611,40 @@ TEST(QuadricSimplify, MovedVerticesTakeTheBestGridCorner) {
 }
 }  // namespace
 }  // namespace mt
+
+namespace mt {
+namespace {
+// Scan holes simplify along their rims, but a vertex on a hole's rim never moves and every
+// boundary edge of the result joins two input rim vertices: mtverify's crack-free rule
+// (mtfile/mt_cut.h) compares a cut's boundary with the finest cut's by grid position.
+TEST(QuadricSimplify, HoleRimsStayOnInputRimVertices) {
+  Region r = makeRegion(3);
+  QuadricSimplifyOptions o;
+  o.gridStep = 0.1;
+  o.gridOrigin[0] = -1.01, o.gridOrigin[1] = -1.02, o.gridOrigin[2] = -30.03;
+  auto borderVertices = [](const std::vector<uint32_t>& tris) {
+    std::map<std::pair<uint32_t, uint32_t>, int> count;
+    for (size_t t = 0; t < tris.size(); t += 3)
+      for (int k = 0; k < 3; ++k) {
+        uint32_t a = tris[t + k], b = tris[t + (k + 1) % 3];
+        count[{std::min(a, b), std::max(a, b)}]++;
+      }
+    std::set<uint32_t> v;
+    size_t edges = 0;
+    for (const auto& [e, n] : count)
+      if (n == 1) v.insert(e.first), v.insert(e.second), ++edges;
+    return std::make_pair(v, edges);
+  };
+  const auto [inputRim, inputEdges] = borderVertices(r.g.triangles);
+  QuadricRun q = runQuadric(r, r.g.triangleCount() / 8, o);
+  const auto [rim, edges] = borderVertices(q.indices);
+  ASSERT_GT(edges, 0u);
+  EXPECT_LT(edges, inputEdges);  // the rims simplified
+  for (uint32_t v : rim) {
+    EXPECT_TRUE(inputRim.count(v)) << "vertex " << v << " is on a result boundary edge, not on the input's";
+    EXPECT_FALSE(q.moved[v]) << "rim vertex " << v << " moved";
+    for (int a = 0; a < 3; ++a) EXPECT_EQ(q.positions[v * 3 + a], r.g.positions[v * 3 + a]);
+  }
+}
+}  // namespace
+}  // namespace mt

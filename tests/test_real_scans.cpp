@@ -102,13 +102,16 @@ struct Mesh {
 struct Job {
   const Mesh* mesh = nullptr;
   std::string codec, partition;
+  std::string extra;  // more mtbuild options, e.g. "--simplifier quadric"
   // results
   bool built = false, verified = false, extracted = false;
   std::string log;  // the tools' outputs, for the failure message
   std::string weld;  // mtbuild's grid-weld line, if any
   double middleError = 0, seconds = 0;
   CutTopology finest, middle;
-  std::string label() const { return mesh->name + " --codec " + codec + " --partition " + partition; }
+  std::string label() const {
+    return mesh->name + " --codec " + codec + " --partition " + partition + (extra.empty() ? "" : " " + extra);
+  }
 };
 
 // "errorMax": values of mtinfo --json, coarsest level last.
@@ -131,7 +134,7 @@ void runJob(Job& job, const std::string& dir, size_t index) {
   auto start = std::chrono::steady_clock::now();
   const std::string mt = dir + "/build" + std::to_string(index) + ".mt";
   auto build = runTool("mtbuild", job.mesh->path + " -o " + mt + " --codec " + job.codec + " --partition " +
-                                      job.partition + " --threads 1 --memory 256M");
+                                      job.partition + " --threads 1 --memory 256M" + (job.extra.empty() ? "" : " " + job.extra));
   job.log += "$ mtbuild ...\n" + build.output;
   job.built = build.exitCode == 0;
   std::smatch weld;
@@ -167,11 +170,11 @@ void runJob(Job& job, const std::string& dir, size_t index) {
 }
 
 // Every mesh with both codecs and both partitions, a few builds at a time; then the checks.
-void buildAndCheck(const std::vector<Mesh>& meshes, const TempDir& dir) {
+void buildAndCheck(const std::vector<Mesh>& meshes, const TempDir& dir, const std::string& extra = "") {
   std::vector<Job> jobs;
   for (const Mesh& mesh : meshes)
     for (const char* codec : {"meshopt", "draco"})
-      for (const char* partition : {"irregular", "regular"}) jobs.push_back(Job{&mesh, codec, partition});
+      for (const char* partition : {"irregular", "regular"}) jobs.push_back(Job{&mesh, codec, partition, extra});
   const size_t workers = std::clamp<size_t>(std::thread::hardware_concurrency(), 2, 4);
   std::atomic<size_t> next{0};
   std::vector<std::thread> pool;
@@ -193,7 +196,7 @@ void buildAndCheck(const std::vector<Mesh>& meshes, const TempDir& dir) {
     // A cut may simplify the input's open borders and non-manifold edges, never add any.
     EXPECT_LE(job.middle.boundaryEdges, job.finest.boundaryEdges) << job.log;
     EXPECT_LE(job.middle.nonManifoldEdges, job.finest.nonManifoldEdges) << job.log;
-    std::printf("%-58s %5.1f s  middle cut %8llu triangles at %-10.4g %s\n", job.label().c_str(), job.seconds,
+    std::printf("%-80s %5.1f s  middle cut %8llu triangles at %-10.4g %s\n", job.label().c_str(), job.seconds,
                 (unsigned long long)job.middle.triangles, job.middleError, job.weld.c_str());
   }
 }
@@ -212,6 +215,29 @@ TEST(RealScans, EveryMtgenPathologyKeepsThePromises) {
     meshes.push_back(m);
   }
   buildAndCheck(meshes, dir);
+}
+
+// The quadric simplifier moves vertices (onto the grid): the same promises, on a scan-derived mesh
+// with holes and on every mtgen pathology at once. A moved hole-rim vertex broke mtverify's rule
+// (a cut's boundary must run through the input's rim vertices); rim vertices no longer move, but
+// on `mtgen --pathology all --holes 6` mtverify still finds 23 of 34 cuts conforming (2 of 34
+// before that rule), so this test is disabled until that is found: it is why meshopt stays the
+// default (docs/mtbuild.md). Run it with --gtest_also_run_disabled_tests.
+TEST(RealScans, DISABLED_QuadricSimplifierKeepsThePromises) {
+  TempDir dir;
+  std::vector<Mesh> meshes;
+  Mesh all{"mtgen --pathology all", dir.file("all.ply")};
+  auto r = runTool("mtgen", "-o " + all.path + " --triangles 100k --holes 6 --seed 11 --pathology all");
+  ASSERT_EQ(r.exitCode, 0) << r.output;
+  meshes.push_back(all);
+  const std::string bases = kBuildDir + "/scan-bases";
+  if (fileExists(mt::test::binDir() + "/scangen") && runShell(kSourceDir + "/scripts/scan_bases.sh " + bases).exitCode == 0) {
+    Mesh dragon{"scangen ChineseDragon-10kv 2 --holes 0.3", dir.file("dragon.ply")};
+    auto made = runTool("scangen", bases + "/ChineseDragon-10kv.off 2 " + dragon.path + " --holes 0.3");
+    ASSERT_EQ(made.exitCode, 0) << made.output;
+    meshes.push_back(dragon);
+  }
+  buildAndCheck(meshes, dir, "--simplifier quadric");
 }
 
 TEST(RealScans, ScanDerivedMeshesKeepThePromises) {
