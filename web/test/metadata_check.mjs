@@ -1,16 +1,27 @@
-// node metadata_check.mjs WITH_CRS.mt CRS WITHOUT.mt: the metadata block (mt_format.h "The
+// node metadata_check.mjs WITH_CRS.mt CRS WITHOUT.mt [--dump DIR]: the metadata block (mt_format.h "The
 // metadata block") as the web module reads it (format.js readMetadata, indexRange; mtfile.js).
 //  - WITH_CRS.mt (built by mtbuild --crs CRS) opens with scene.crs === CRS; WITHOUT.mt with ''.
 //  - Variants of WITH_CRS.mt made here, each with a valid footer checksum so that the reader's
 //    checks (not the checksum) must find the damage: every rule of the block broken once is refused
 //    with an MtError naming it; unknown keys are ignored; a block changed without fixing the
 //    checksum is refused by the checksum (the block is covered by it).
+//  - With --dump DIR each variant is also written to DIR/NN.mt, and DIR/expect lists "NN.mt opens
+//    CRS" or "NN.mt refused" (the caller checks that the C++ reader agrees).
 import fs from 'node:fs';
 import { FileSource } from '../src/source.js';
 import { openMtFile, hasher } from '../src/mtfile.js';
 import { MtError, kHeaderSize, kFooterSize } from '../src/format.js';
 
 const [withCrs, crs, without] = process.argv.slice(2);
+const dumpAt = process.argv.indexOf('--dump');
+const dump = dumpAt > 0 ? process.argv[dumpAt + 1] : null;
+const expect = [];
+const save = (bytes, what) => {
+  if (!dump) return;
+  const name = `${String(expect.length).padStart(2, '0')}.mt`;
+  fs.writeFileSync(`${dump}/${name}`, bytes);
+  expect.push(`${name} ${what}`);
+};
 if (!without) {
   console.error('usage: node metadata_check.mjs WITH_CRS.mt CRS WITHOUT.mt');
   process.exit(2);
@@ -66,6 +77,7 @@ function variant(block, { size = block.length, offset = h.metadataOffset, edit =
 }
 
 async function expectOpens(name, bytes, wantCrs) {
+  save(bytes, `opens ${wantCrs}`);
   try {
     const s = await openMtFile(new MemorySource(name, bytes));
     if (s.crs !== wantCrs) fail(`${name}: crs '${s.crs}', expected '${wantCrs}'`);
@@ -75,6 +87,7 @@ async function expectOpens(name, bytes, wantCrs) {
   }
 }
 async function expectRefused(name, bytes, words) {
+  save(bytes, 'refused');
   try {
     await openMtFile(new MemorySource(name, bytes));
     fail(`${name}: opened, expected a refusal naming '${words}'`);
@@ -103,4 +116,5 @@ await expectRefused('a block changed without its checksum',
   variant(cat(crsEntry), { keepChecksum: true, edit: (o) => { o[o.length - kFooterSize - 1] ^= 1; } }), 'checksum mismatch');
 await expectRefused('footer reserved bytes not zero', variant(cat(crsEntry), { edit: (o) => { o[o.length - kFooterSize + 20] = 1; } }),
   'footer reserved bytes');
+if (dump) fs.writeFileSync(`${dump}/expect`, expect.join('\n') + '\n');
 process.exit(failures ? 1 : 0);
