@@ -20,18 +20,20 @@
 
 // web_cut_nodes --decode FILE.mt: every patch decoded by the C++ decoder, printed as
 // web/test/decode_check.mjs prints the web decoder's (patches, triangles, vertices, the sum of
-// every decoded grid coordinate).
+// every decoded grid coordinate, and a weighted sum of every patch's index list in decoded order:
+// sum over i of (i % 1021 + 1) * triangles[i], modulo 2^64, which a changed order or index changes).
 static int decodeAll(const char* path) {
   auto r = mt::MtFileReader::open(path);
-  uint64_t tris = 0, verts = 0, qsum = 0;
+  uint64_t tris = 0, verts = 0, qsum = 0, tsum = 0;
   for (uint32_t i = 0; i < r->patches().size(); ++i) {
     mt::DecodedPatch d = r->readPatch(i);
     tris += d.triangleCount();
     verts += d.q.size() / 3;
     for (uint32_t v : d.q) qsum += v;
+    for (size_t k = 0; k < d.triangles.size(); ++k) tsum += uint64_t(k % 1021 + 1) * d.triangles[k];
   }
-  std::printf("patches %zu triangles %llu vertices %llu qsum %llu\n", r->patches().size(), (unsigned long long)tris,
-              (unsigned long long)verts, (unsigned long long)qsum);
+  std::printf("patches %zu triangles %llu vertices %llu qsum %llu tsum %llu\n", r->patches().size(),
+              (unsigned long long)tris, (unsigned long long)verts, (unsigned long long)qsum, (unsigned long long)tsum);
   return 0;
 }
 

@@ -1,6 +1,7 @@
 // The standalone viewer page: viewer.html?file=URL[&tol=1][&budget=50][&cache=256][&bg=20242a]
 // [&path=orbit|fixed&frames=600][&view=EX,EY,EZ,TX,TY,TZ (unit space)]. Orbit/pan/zoom with the
-// mouse (three's OrbitControls); the HUD shows fps, triangles, cache, loads and the screen error.
+// mouse (three's OrbitControls); the HUD shows fps, triangles, cache, loads and the screen error,
+// and the file's coordinate reference system when its metadata block names one.
 // `plain` draws with renderer.render (no progressive still image). `capture` keeps the drawing buffer for reading the image back (the tests). `path` plays a recorded camera path frame by frame (the browser tests and bench/web.sh); the
 // per-frame figures are in window.mtViewer.frames.
 import * as THREE from 'three';
@@ -86,6 +87,7 @@ async function main() {
   state.canvas = renderer.domElement;
   state.ready = true;
   state.fileSize = mt.mt.fileSize;
+  state.crs = mt.mt.crs;  // the file's coordinate reference system ('' when it names none)
   state.openBytes = mt.mt.source.bytesFetched;
   state.budgetMs = mt.extract.options.budgetMs;
   state.tolerance = mt.extract.options.pixelTolerance;
@@ -122,7 +124,8 @@ async function main() {
       `triangles ${(st.triangles / 1e6).toFixed(2)} M in the cut, ${(st.drawnTriangles / 1e6).toFixed(2)} M drawn this frame, ${st.drawnPatches} patches\n` +
       `cache ${(st.cacheBytes / 2 ** 20).toFixed(1)} / ${(st.cacheCap / 2 ** 20).toFixed(0)} MiB\n` +
       `loads ${st.loads}, pending ${st.loadsPending}, fetched ${(st.bytesRead / 2 ** 20).toFixed(1)} MiB of ${(mt.mt.fileSize / 2 ** 20).toFixed(1)}\n` +
-      `screen error ${st.maxScreenError.toFixed(2)} px (tolerance ${state.tolerance})`;
+      `screen error ${st.maxScreenError.toFixed(2)} px (tolerance ${state.tolerance})` +
+      (state.crs ? `\ncrs ${state.crs.length > 60 ? state.crs.slice(0, 57) + '...' : state.crs}` : '');
     ++i;
     if (path && i >= frames) state.done = true;
     requestAnimationFrame(loop);

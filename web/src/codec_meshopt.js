@@ -1,13 +1,15 @@
 // Codec::Meshopt, the decoder half of mtfile/patch_codec_meshopt.cpp, ported function by function
 // (readMeshoptFrame, decodeMeshoptTriangles, decodeMeshoptAttributes, decodeIndexCode,
 // decodeResidual, ResidualModel, parallelogramWalk, decodeContextPositions, decodeLegacyPositions,
-// decodeMeshopt) so that a change of the C++ decoder ports line by line. Byte layouts: mt_format.h.
+// decodeMeshopt), and of the decoder half of mtfile/patch_codec_connectivity.cpp (OpenEdges,
+// EdgeFifo, ConnectivityModel, decodeExplicit, decodeConnectivity: the version-4 connectivity
+// code), so that a change of the C++ decoder ports line by line. Byte layouts: mt_format.h.
 // `libs` brings the npm decoders: libs.zstd(bytes, rawSize) -> Uint8Array (fzstd) and libs.meshopt
 // (meshoptimizer's MeshoptDecoder, ready).
 
 import {
   kPayloadHeaderSize, kPayloadNormals, kPayloadColors, kPayloadWide, kPayloadStrip, kPayloadRangePositions,
-  kPayloadRangeIndices, kPayloadPositionContexts, attributeStride,
+  kPayloadRangeIndices, kPayloadPositionContexts, kPayloadConnectivity, attributeStride,
 } from './format.js';
 import { RangeDecoder, countedBits } from './range_coder.js';
 
@@ -168,6 +170,166 @@ function decodeIndexCode(rc, code, triangles) {
   }
 }
 
+// ---- The connectivity code (version 4): patch_codec_connectivity.cpp's decoder half ----
+
+const kNil = 0xffffffff;
+
+/**
+ * OpenEdges: the open half-edges of the decoded region, per vertex: out[u] lists v for every
+ * open u->v, in[v] lists u, most recent first (singly linked lists in one pool of `val`/`nxt`).
+ * Every add pushes at most two nodes, so 6 per triangle bound the pool.
+ */
+class OpenEdges {
+  constructor(vertexCount, triangleCount) {
+    this.outHead = new Uint32Array(vertexCount).fill(kNil);
+    this.inHead = new Uint32Array(vertexCount).fill(kNil);
+    this.val = new Uint32Array(triangleCount * 6);
+    this.nxt = new Uint32Array(triangleCount * 6);
+    this.size = 0;
+  }
+  /** OpenEdges::add: closes the twin v->u if it is open, else opens u->v. */
+  add(u, v) {
+    if (this.remove(this.outHead, v, u)) {
+      this.remove(this.inHead, u, v);
+      return;
+    }
+    this.push(this.outHead, u, v);
+    this.push(this.inHead, v, u);
+  }
+  firstOut(u) { const h = this.outHead[u]; return h === kNil ? kNil : this.val[h]; }
+  firstIn(v) { const h = this.inHead[v]; return h === kNil ? kNil : this.val[h]; }
+  /** push(head[w], v) */
+  push(heads, w, v) {
+    const i = this.size++;
+    this.val[i] = v;
+    this.nxt[i] = heads[w];
+    heads[w] = i;
+  }
+  /** remove(head[w], v): unlinks the first entry equal to v; false when there is none. */
+  remove(heads, w, v) {
+    let prev = kNil;
+    for (let i = heads[w]; i !== kNil; prev = i, i = this.nxt[i]) {
+      if (this.val[i] === v) {
+        if (prev === kNil) heads[w] = this.nxt[i];
+        else this.nxt[prev] = this.nxt[i];
+        return true;
+      }
+    }
+    return false;
+  }
+}
+
+/** EdgeFifo: the 16 most recent candidate edges; slot(i) is the push i pushes ago (0: the last). */
+class EdgeFifo {
+  constructor() {
+    this.e = new Uint32Array(32).fill(kNil);
+    this.offset = 0;
+  }
+  push(a, b) {
+    this.e[this.offset * 2] = a;
+    this.e[this.offset * 2 + 1] = b;
+    this.offset = (this.offset + 1) & 15;
+  }
+  /** The index into e of slot i's edge (e0 at it, e1 after it). */
+  slot(i) { return ((this.offset - 1 - i) & 15) * 2; }
+}
+
+// Third-vertex symbols of an attached triangle.
+const kNew = 0, kOpenOut = 1, kOpenIn = 2, kExplicit = 3;
+const kNoEdge = 16;  // the triangle is not attached to a FIFO edge
+
+/** ConnectivityModel: slot0[16], slot1[16], slotRest[16][16], third[12][4], fresh[3], length[64], mantissa[33][32]. */
+function connectivityModel() {
+  return {
+    slot0: countedBits(16), slot1: countedBits(16), slotRest: countedBits(16 * 16),
+    third: countedBits(12 * 4), fresh: countedBits(3),
+    length: countedBits(64), mantissa: countedBits(33 * 32),
+  };
+}
+
+function bucket(slot) { return slot < 2 ? slot : 2; }
+
+/** decodeExplicit: the vertex next - 1 - d, or -1 when the code names no vertex decoded so far. */
+function decodeExplicit(rc, m, next) {
+  const k = rc.tree(m.length, 0, 6);
+  if (k > 32) return -1;
+  let d = k;
+  if (k >= 2) {
+    d = 1;
+    for (let i = k - 1; i-- > 0;) d = d * 2 + rc.bit(m.mantissa, k * 32 + i);
+  }
+  if (d >= next) return -1;
+  return next - 1 - d;
+}
+
+/**
+ * decodeConnectivity: `triangleCount` triangles over `vertexCount` vertices out of the range-coded
+ * stream (mt_format.h, kPayloadConnectivity). Throws BadPayload on every damage the C++ throws on.
+ * @returns {Uint32Array} the triangle list
+ */
+export function decodeConnectivity(rc, triangleCount, vertexCount) {
+  const m = connectivityModel();
+  const open = new OpenEdges(vertexCount, triangleCount);
+  const fifo = new EdgeFifo();
+  const fe = fifo.e;
+  const triangles = new Uint32Array(triangleCount * 3);
+  let next = 0, ctx = 3 * 4 + kExplicit;
+  let v0 = 0, v1 = 0, v2 = 0;
+  for (let t = 0; t < triangles.length; t += 3) {
+    let slot = 0;
+    if (rc.bit(m.slot0, ctx)) {
+      slot = 1;
+      if (rc.bit(m.slot1, ctx)) slot = 2 + rc.tree(m.slotRest, ctx * 16, 4);
+    }
+    if (slot > kNoEdge) bad(`connectivity code names edge slot ${slot}`);
+    let sym = kExplicit;
+    if (slot !== kNoEdge) {
+      const e = fifo.slot(slot);
+      if (fe[e] === kNil) bad('connectivity code names an empty edge slot');
+      v0 = fe[e];
+      v1 = fe[e + 1];
+      sym = rc.tree(m.third, (bucket(slot) * 4 + (ctx & 3)) * 4, 2);
+      if (sym === kNew) {
+        v2 = next++;
+      } else if (sym === kOpenOut) {
+        v2 = open.firstOut(v0);
+      } else if (sym === kOpenIn) {
+        v2 = open.firstIn(v1);
+      } else {
+        v2 = decodeExplicit(rc, m, next);
+        if (v2 < 0) bad('connectivity code names a vertex not decoded yet');
+      }
+      if (v2 === kNil) bad('connectivity code names an open edge that does not exist');
+    } else {
+      for (let k = 0; k < 3; ++k) {
+        let v;
+        if (!rc.bit(m.fresh, k)) v = next++;
+        else if ((v = decodeExplicit(rc, m, next)) < 0) bad('connectivity code names a vertex not decoded yet');
+        if (k === 0) v0 = v;
+        else if (k === 1) v1 = v;
+        else v2 = v;
+      }
+    }
+    if (next > vertexCount) bad('connectivity code has more vertices than the header');
+    // Not in the C++ loop (it checks once, after it): a stream that ran out cannot decode, so stop
+    // here rather than decode up to the header's triangle count out of zeros.
+    if (rc.overrun > 0) bad('connectivity stream truncated');
+    triangles[t] = v0;
+    triangles[t + 1] = v1;
+    triangles[t + 2] = v2;
+    open.add(v0, v1);
+    open.add(v1, v2);
+    open.add(v2, v0);
+    if (slot === kNoEdge) fifo.push(v1, v0);
+    fifo.push(v2, v1);
+    fifo.push(v0, v2);
+    ctx = (slot === kNoEdge ? 3 : bucket(slot)) * 4 + sym;
+  }
+  if (rc.overrun > 0) bad('connectivity stream truncated');
+  if (next !== vertexCount) bad('vertices not referenced by any triangle');
+  return triangles;
+}
+
 /** readMeshoptFrame: the zstd frame (or stored bytes) after the payload header. */
 function readMeshoptFrame(data, h, libs) {
   const size = data.length;
@@ -179,9 +341,14 @@ function readMeshoptFrame(data, h, libs) {
   const ranged = (h.flags & kPayloadRangePositions) !== 0;
   const rangeIndices = (h.flags & kPayloadRangeIndices) !== 0;
   const contextual = (h.flags & kPayloadPositionContexts) !== 0;
+  const connectivity = (h.flags & kPayloadConnectivity) !== 0;
   if ((rangeIndices || contextual) && !ranged) bad('version-3 flags without range-coded positions');
   if (rangeIndices && (h.flags & kPayloadStrip)) bad('range-coded indices cannot be a strip');
-  const stored = rangeIndices && zSize === 0;
+  if (connectivity && (!contextual || rangeIndices || (h.flags & kPayloadStrip)))
+    bad(`connectivity code with flags ${h.flags}`);
+  // Version 3 with range-coded indices, and version 4 with the connectivity code, may store the
+  // raw bytes as they are (zSize 0).
+  const stored = (rangeIndices || connectivity) && zSize === 0;
   const frameBytes = stored ? rawSize : zSize;
   if (ranged ? frameBytes > size - pos : size - pos !== zSize) bad(`zstd frame size ${zSize} does not match payload`);
   const n = h.vertexCount, tri3 = h.triangleCount * 3;
@@ -365,6 +532,13 @@ export function decodeMeshopt(data, h, libs, out) {
   const rc = new RangeDecoder(data, f.rangeBegin, data.length);
   let ib = f.raw.subarray(12);
   let abOffset = 12 + sizes[0];
+  if (h.flags & kPayloadConnectivity) {
+    if (sizes[2] + 12 !== f.raw.length || sizes[0] !== 0 || sizes[1] !== h.triangleCount * 3)
+      bad('stream sizes do not add up');
+    out.triangles = decodeConnectivity(rc, h.triangleCount, n);
+    decodeMeshoptAttributes(h, f.raw.subarray(12), sizes[2], libs, out);
+    return decodeContextPositions(rc, out.triangles, n);
+  }
   if (rangeIndices) {
     if (sizes[2] + 12 !== f.raw.length) bad('stream sizes do not add up');
     if (sizes[0] < 1 + h.triangleCount + 16 || sizes[0] > encodeIndexBufferBound(h.triangleCount * 3, n))

@@ -7,7 +7,7 @@ export const kMagic = 'BMT-MT\r\n';
 export const kFooterMagic = 'BMT-END\n';
 // Readers accept kMinReadableVersion..kVersion (mt_format.h); a later file version is refused with
 // a message naming it, never guessed at.
-export const kVersion = 3;
+export const kVersion = 4;
 export const kMinReadableVersion = 1;
 export const kHeaderSize = 256;
 export const kFooterSize = 32;
@@ -30,8 +30,15 @@ export const kPayloadStrip = 1 << 3;
 export const kPayloadRangePositions = 1 << 4;
 export const kPayloadRangeIndices = 1 << 5;
 export const kPayloadPositionContexts = 1 << 6;
+export const kPayloadConnectivity = 1 << 7;  // version 4: triangles by the connectivity code
 // Every flag this reader knows; a payload with another bit set is refused.
-export const kPayloadKnownFlags = 0x7f;
+export const kPayloadKnownFlags = 0xff;
+
+// The metadata block (optional, mt_format.h "The metadata block").
+export const kMaxMetadataSize = 1 << 20;
+export const kMaxMetadataKey = 255;
+export const kMetadataCrs = 'crs';
+export const kMetadataSizeOffset = 180;  // offsetof(FileHeader, metadataSize)
 
 /** attributeStride(payloadFlags) of mt_format.h. */
 export function attributeStride(flags) {
@@ -91,6 +98,7 @@ export function parseHeader(buf) {
     gridStep: dv.getFloat64(160, true),
     quantizationError: dv.getFloat64(168, true),
     gridBits: dv.getUint32(176, true),
+    metadataSize: dv.getUint32(180, true),
     metaOffset: u64(dv, 184),
     nodesOffset: u64(dv, 192),
     arcsOffset: u64(dv, 200),
@@ -99,6 +107,7 @@ export function parseHeader(buf) {
     patchesOffset: u64(dv, 224),
     weldedVertices: u64(dv, 232),
     weldedTriangles: u64(dv, 240),
+    metadataOffset: u64(dv, 248),
   };
 }
 
@@ -110,6 +119,7 @@ export function parseFooter(buf) {
     checksumLo: dv.getUint32(8, true),
     checksumHi: dv.getUint32(12, true),
     version: dv.getUint32(16, true),
+    reserved: dv.getUint32(20, true),
     magic: str(new Uint8Array(buf), 24, 8),
   };
 }
@@ -134,6 +144,7 @@ export function readHeaderAndFooter(path, size, headerBuf, footerBuf) {
   if (f.magic !== kFooterMagic)
     throw new MtError(path, `bad footer magic at byte offset ${footerAt + 24} (truncated or damaged file)`);
   if (f.version !== h.version) throw new MtError(path, `footer version mismatch at byte offset ${footerAt + 16}`);
+  if (f.reserved !== 0) throw new MtError(path, `footer reserved bytes at byte offset ${footerAt + 20} are not zero`);
   if (f.metaOffset !== h.metaOffset || h.metaOffset < kHeaderSize || h.metaOffset > footerAt)
     throw new MtError(path, `footer index offset ${f.metaOffset} out of range (file ${size} bytes) at byte offset ${footerAt}`);
   return { header: h, footer: f };
@@ -141,7 +152,8 @@ export function readHeaderAndFooter(path, size, headerBuf, footerBuf) {
 
 /**
  * The byte range of the index section ([metaOffset, size - kFooterSize)), after the section
- * offsets were checked to tile it (MtFileReader::readIndex, first half).
+ * offsets (the optional metadata block last) were checked to tile it (MtFileReader::readIndex,
+ * first part).
  */
 export function indexRange(path, size, h) {
   const footerAt = size - kFooterSize;
@@ -159,6 +171,9 @@ export function indexRange(path, size, h) {
   section(h.backArcsOffset, h.arcCount * 4, 'backward-star array');
   section(h.patchRefsOffset, h.patchRefCount * 4, 'patch reference array');
   section(h.patchesOffset, h.patchCount * kPatchRecordSize, 'patch index');
+  if (h.metadataSize > kMaxMetadataSize || (h.metadataSize === 0 && h.metadataOffset !== 0))
+    throw new MtError(path, `bad metadata block size ${h.metadataSize} in header (byte offset ${kMetadataSizeOffset})`);
+  if (h.metadataSize) section(h.metadataOffset, h.metadataSize, 'metadata block');
   if (expect !== footerAt)
     throw new MtError(path, `index section is ${metaSize} bytes, header describes ${expect - h.metaOffset} (truncated or damaged)`);
   return { begin: h.metaOffset, end: footerAt };
@@ -242,6 +257,44 @@ export function readIndex(h, meta) {
     patches.checksumHi[i] = dv.getUint32(o + 28, true);
   }
   return { nodes, arcs, backArcs, patchRefs, patches };
+}
+
+/**
+ * MtFileReader::readIndex, last part: the metadata block's entries (uint32 length + key, uint32
+ * length + value, filling the block exactly; keys unique) as a Map key -> value (UTF-8 text).
+ * Empty when the file has no block. Called after the footer checksum was checked.
+ * @param {ArrayBuffer} meta bytes [metaOffset, footer)
+ */
+export function readMetadata(path, h, meta) {
+  const out = new Map();
+  if (!h.metadataSize) return out;
+  const begin = h.metadataOffset - h.metaOffset, end = begin + h.metadataSize;
+  const dv = new DataView(meta);
+  const bytes = new Uint8Array(meta);
+  const utf8 = new TextDecoder('utf-8');
+  let p = begin;
+  const seen = new Set();
+  const text = (maxLength, what) => {
+    const at = h.metadataOffset + (p - begin);
+    if (end - p < 4) throw new MtError(path, `metadata block: truncated ${what} length at byte offset ${at}`);
+    const n = dv.getUint32(p, true);
+    p += 4;
+    if (n > end - p || n > maxLength || (n === 0 && maxLength === kMaxMetadataKey))
+      throw new MtError(path, `metadata block: bad ${what} length ${n} at byte offset ${at}`);
+    const s = bytes.subarray(p, p + n);
+    p += n;
+    return s;
+  };
+  while (p < end) {
+    const key = text(kMaxMetadataKey, 'key');
+    const value = text(kMaxMetadataSize, 'value');
+    // Keys compared as bytes, as the C++ reader does (not after UTF-8 decoding).
+    const raw = String.fromCharCode(...key);
+    if (seen.has(raw)) throw new MtError(path, 'metadata block: a key appears twice');
+    seen.add(raw);
+    out.set(utf8.decode(key), utf8.decode(value));
+  }
+  return out;
 }
 
 /** MtFileReader::checkIndex: cross-checks of the records (the writer was right, not only honest). */

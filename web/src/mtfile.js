@@ -1,9 +1,12 @@
 // Opening an MT file from a byte source (source.js): footer, header, then the DAG and the index in
-// one range read, the footer checksum checked (XXH64 over header + index), the records
-// cross-checked (format.js), the scene built (scene.js). Payloads are read later, on demand.
+// one range read, the footer checksum checked (XXH64 over header + index + metadata block), the
+// records cross-checked and the metadata block read (format.js), the scene built (scene.js).
+// Payloads are read later, on demand.
 
 import xxhash from 'xxhash-wasm';
-import { kHeaderSize, kFooterSize, readHeaderAndFooter, indexRange, readIndex, checkIndex, MtError } from './format.js';
+import {
+  kHeaderSize, kFooterSize, kMetadataCrs, readHeaderAndFooter, indexRange, readIndex, readMetadata, checkIndex, MtError,
+} from './format.js';
 import { buildScene } from './scene.js';
 
 let hasherPromise = null;
@@ -36,8 +39,12 @@ export async function openMtFile(source) {
   if (sum !== want)
     throw new MtError(source.path, `checksum mismatch over header + DAG + index (bytes 0-${kHeaderSize} and ${range.begin}-${range.end})`);
   const idx = readIndex(header, meta);
+  const metadata = readMetadata(source.path, header, meta);
   checkIndex(source.path, header, idx);
   const scene = buildScene(header, idx);
+  // The metadata block (MtFileReader::crs()): '' when the file names no coordinate system.
+  scene.metadata = metadata;
+  scene.crs = metadata.get(kMetadataCrs) || '';
   scene.source = source;
   scene.path = source.path;
   scene.fileSize = size;
