@@ -16,6 +16,10 @@ ALL=(reader_ply reader_obj reader_off reader_stl mt_file patch_meshopt patch_dra
 
 configure_and_build() {
   [[ ${MT_FUZZ_NO_BUILD:-0} == 1 ]] && return 0
+  # clang-14 and its libFuzzer runtime (Debian's); only the fuzzers need them, so not setup.sh.
+  if ! command -v clang++-14 >/dev/null || ! dpkg-query -W libclang-rt-14-dev >/dev/null 2>&1; then
+    apt-get install -y -qq --no-install-recommends clang-14 libclang-rt-14-dev >/dev/null
+  fi
   if [[ ! -f $BUILD/build.ninja ]]; then
     local launcher=()
     command -v ccache >/dev/null && launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache)
