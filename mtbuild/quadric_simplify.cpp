@@ -439,6 +439,9 @@ void Simplifier::bestCorner(const Quadric& q, double* g, double* p) const {
 // was taken).
 bool Simplifier::candidate(uint32_t a, uint32_t b, bool allowMove, Candidate& c) const {
   if (frozen_[a] && frozen_[b]) return false;
+  // A free rim vertex goes only onto a vertex on a border: a frozen interior vertex (a
+  // non-manifold spot) would carry the rim off the input's rim vertices.
+  if ((frozen_[a] && !border_[a] && border_[b]) || (frozen_[b] && !border_[b] && border_[a])) return false;
   Quadric q = quadric_[a];
   q.add(quadric_[b]);
   const double *pa = &pos_[a * 3], *pb = &pos_[b * 3];

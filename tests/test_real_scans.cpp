@@ -218,12 +218,10 @@ TEST(RealScans, EveryMtgenPathologyKeepsThePromises) {
 }
 
 // The quadric simplifier moves vertices (onto the grid): the same promises, on a scan-derived mesh
-// with holes and on every mtgen pathology at once. A moved hole-rim vertex broke mtverify's rule
-// (a cut's boundary must run through the input's rim vertices); rim vertices no longer move, but
-// on `mtgen --pathology all --holes 6` mtverify still finds 23 of 34 cuts conforming (2 of 34
-// before that rule), so this test is disabled until that is found: it is why meshopt stays the
-// default (docs/mtbuild.md). Run it with --gtest_also_run_disabled_tests.
-TEST(RealScans, DISABLED_QuadricSimplifierKeepsThePromises) {
+// with holes and on every mtgen pathology at once. Moved hole-rim vertices, and rims carried onto
+// frozen non-manifold spots, broke mtverify's rule (a cut's boundary must run through the input's
+// rim vertices): 2 of 34 cuts conformed on `mtgen --pathology all --holes 6`.
+TEST(RealScans, QuadricSimplifierKeepsThePromises) {
   TempDir dir;
   std::vector<Mesh> meshes;
   Mesh all{"mtgen --pathology all", dir.file("all.ply")};
