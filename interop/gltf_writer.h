@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "base/env.h"
+#include "mtfile/mt_cut.h"
 
 namespace mt::interop {
 
@@ -37,6 +38,21 @@ struct GltfMeshView {
   double gridOrigin[3] = {0, 0, 0};
   double gridStep = 0;
 };
+
+// The view of a welded cut of an MT file (assembleCut) on its grid (header gridOrigin, gridStep).
+inline GltfMeshView gltfMeshViewOf(const WeldedMesh& mesh, const double gridOrigin[3], double gridStep) {
+  GltfMeshView view;
+  view.vertexCount = mesh.vertexCount();
+  view.triangleCount = mesh.triangleCount();
+  view.positions = mesh.positions.data();
+  view.triangles = mesh.triangles.data();
+  view.normals = mesh.normals.empty() ? nullptr : mesh.normals.data();
+  view.colors = mesh.colors.empty() ? nullptr : mesh.colors.data();
+  view.q = mesh.q.data();
+  for (int a = 0; a < 3; ++a) view.gridOrigin[a] = gridOrigin[a];
+  view.gridStep = gridStep;
+  return view;
+}
 
 struct GltfOptions {
   bool meshopt = false;   // EXT_meshopt_compression on every buffer view

@@ -122,16 +122,7 @@ TilesReport exportTiles(const MtFileReader& r, const std::string& dir, const Til
         c.empty = true;
         return;
       }
-      GltfMeshView view;
-      view.vertexCount = mesh.vertexCount();
-      view.triangleCount = mesh.triangleCount();
-      view.positions = mesh.positions.data();
-      view.triangles = mesh.triangles.data();
-      view.normals = mesh.normals.empty() ? nullptr : mesh.normals.data();
-      view.colors = mesh.colors.empty() ? nullptr : mesh.colors.data();
-      view.q = mesh.q.data();
-      for (int a = 0; a < 3; ++a) view.gridOrigin[a] = origin[a];
-      view.gridStep = h.gridStep;
+      const GltfMeshView view = gltfMeshViewOf(mesh, origin, h.gridStep);
       GltfOptions go;
       go.meshopt = options.meshopt;
       go.quantize = options.quantize;

@@ -205,16 +205,7 @@ int run(const Options& o) {
 
   if (gltf) {
     // The whole cut as one glTF mesh; positions relative to a grid point (gltf_writer.h).
-    mt::interop::GltfMeshView meshView;
-    meshView.vertexCount = mesh.vertexCount();
-    meshView.triangleCount = mesh.triangleCount();
-    meshView.positions = mesh.positions.data();
-    meshView.triangles = mesh.triangles.data();
-    meshView.normals = mesh.normals.empty() ? nullptr : mesh.normals.data();
-    meshView.colors = mesh.colors.empty() ? nullptr : mesh.colors.data();
-    meshView.q = mesh.q.data();
-    for (int a = 0; a < 3; ++a) meshView.gridOrigin[a] = r.header().gridOrigin[a];
-    meshView.gridStep = r.header().gridStep;
+    const mt::interop::GltfMeshView meshView = mt::interop::gltfMeshViewOf(mesh, r.header().gridOrigin, r.header().gridStep);
     mt::interop::GltfOptions go;
     go.meshopt = o.meshopt;
     go.quantize = o.quantize;
