@@ -22,7 +22,10 @@
 // the order above. Footer.checksum = XXH64(header bytes, then bytes [metaOffset, footer), seed 0):
 // it covers everything a reader trusts before touching a payload. Each payload has its own
 // XXH64 (seed 0) in its PatchRecord, checked when the patch is read, so a damaged payload is
-// reported as "patch N" without spoiling the rest of the file.
+// reported as "patch N" without spoiling the rest of the file. The padding between a payload and
+// the next one (or the index after the last) is zero bytes, which no checksum covers: readers
+// check the gaps of up to 4 KiB a writer makes, so a flipped byte there is found too. A range-coded
+// stream (below) that a decoder reads past the payload's end is damaged, not zero-extended.
 //
 // DAG orientation (BMT 3.1): node 0 is the source, whose fragment is the full-resolution mesh
 // (level 0); the last node is the sink (level = levelCount, error = +inf, no patches). An arc
@@ -154,7 +157,7 @@ struct Footer {
   uint64_t metaOffset;   // == header.metaOffset (lets a reader find the index from the end)
   uint64_t checksum;     // XXH64(header || bytes[metaOffset, fileSize - kFooterSize))
   uint32_t version;      // kVersion
-  uint32_t reserved;
+  uint32_t reserved;     // zero (readers refuse another value: no checksum covers it)
   char magic[8];         // kFooterMagic
 };
 static_assert(sizeof(Footer) == kFooterSize, "Footer is the last 32 bytes of the file");

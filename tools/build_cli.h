@@ -97,7 +97,7 @@ struct BuildCli {
                    "fans) or strip (tri-strips, BMT 6; larger files, see docs/mt-format.md)");
     app.add_option("--simplifier", simplifier,
                    "Region simplifier: meshopt (default: half-edge collapse, every vertex an input vertex) or quadric\n"
-                   "(edge collapse with optimal placement: closer to the input at equal size, ~1.9x the build CPU;\n"
+                   "(edge collapse with optimal placement: closer to the input at equal size, ~1.7x the build CPU;\n"
                    "see docs/mtbuild.md)");
     app.add_flag("--normals", normals, "Store per-vertex normals (2x8 bit) instead of letting the renderer compute them");
     app.add_flag("--no-normals", noNormals, "Store no normals (the default; kept for scripts that say so explicitly)");
