@@ -90,7 +90,8 @@ std::vector<BoundaryEntry> decodeBoundary(const std::string& payload, const std:
   ByteReader r(payload, source);
   uint32_t n = r.get<uint32_t>();
   std::vector<BoundaryEntry> entries(n);
-  std::memcpy(entries.data(), r.getRaw(size_t(n) * sizeof(BoundaryEntry)), size_t(n) * sizeof(BoundaryEntry));
+  const void* raw = r.getRaw(size_t(n) * sizeof(BoundaryEntry));
+  if (n) std::memcpy(entries.data(), raw, size_t(n) * sizeof(BoundaryEntry));  // memcpy(null, ..., 0) is UB
   if (!r.atEnd()) fail(source, "boundary block has trailing bytes");
   return entries;
 }

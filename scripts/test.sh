@@ -29,5 +29,11 @@ built=$(date +%s)
 export ASAN_OPTIONS="detect_leaks=1:abort_on_error=0:strict_string_checks=1:detect_stack_use_after_return=0"
 export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"
 export LSAN_OPTIONS="suppressions=$PWD/scripts/lsan.supp:print_suppressions=0"
-(cd build-asan && ctest --output-on-failure --timeout 900 -j "$(nproc)" -E "$SANITIZER_EXCLUDE")
+# Open MPI's plugins and Mesa's driver are unloaded before exit, so LeakSanitizer reports what they
+# keep with stacks it cannot name (no suppression can match them): the tests that start MPI ranks
+# or a GL context run with leak detection off, and with ASan and UBSan on as everywhere else.
+NO_LEAK_CHECK='^(Mtcluster\.|BuildSafety\.Mtcluster|MtRenderViewer\.|RenderGpuCache\.)'
+(cd build-asan && ctest --output-on-failure --timeout 900 -j "$(nproc)" -E "$SANITIZER_EXCLUDE|$NO_LEAK_CHECK")
+(cd build-asan && ASAN_OPTIONS="${ASAN_OPTIONS/detect_leaks=1/detect_leaks=0}" \
+  ctest --output-on-failure --timeout 900 -j "$(nproc)" -R "$NO_LEAK_CHECK")
 echo "test.sh: sanitizer stage: build $((built - stage_start)) s, suite $(($(date +%s) - built)) s"

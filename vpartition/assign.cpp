@@ -226,7 +226,7 @@ PartitionSequence PartitionSequence::deserialize(const std::string& bytes) {
       throw Error("V-partition blob: level " + std::to_string(l) + ": bad header");
     r.need(size_t(count) * 12);
     L->seeds.resize(size_t(count) * 3);
-    std::memcpy(L->seeds.data(), body.data() + r.pos, size_t(count) * 12);
+    if (count) std::memcpy(L->seeds.data(), body.data() + r.pos, size_t(count) * 12);  // no null memcpy
     r.pos += size_t(count) * 12;
     seq.addLevel(std::move(L));
   }
