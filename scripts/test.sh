@@ -18,9 +18,11 @@ scripts/setup.sh
 # The sanitizer stage: gcc, -O1 (ASan's own advice: fast enough, and keeps the stack traces),
 # without bench/. Any report fails the test (-fno-sanitize-recover=all; ASan's exit code).
 # Left out here, and why (each still runs in the Release suite above):
-SANITIZER_EXCLUDE='^(RealScans\.)'
+SANITIZER_EXCLUDE='^(RealScans\.|StreamedWeld\.MtextractWritesTheSameBytesWithinASmallMemory$)'
 #   RealScans.*  builds from CGAL's demo models and scangen meshes of up to ~1M triangles: minutes
 #                under ASan; the same code paths run on small inputs in test_mtbuild and test_faults.
+#   StreamedWeld.MtextractWritesTheSameBytesWithinASmallMemory  compares two runs' peak RSS, which
+#                ASan's shadow memory and quarantine make meaningless (its byte checks run elsewhere).
 stage_start=$(date +%s)
 cmake -S . -B build-asan -G Ninja -DCMAKE_BUILD_TYPE=Release \
   -DMT_SANITIZE=address,undefined -DMT_BENCH=OFF >/dev/null
@@ -32,7 +34,7 @@ export LSAN_OPTIONS="suppressions=$PWD/scripts/lsan.supp:print_suppressions=0"
 # Open MPI's plugins and Mesa's driver are unloaded before exit, so LeakSanitizer reports what they
 # keep with stacks it cannot name (no suppression can match them): the tests that start MPI ranks
 # or a GL context run with leak detection off, and with ASan and UBSan on as everywhere else.
-NO_LEAK_CHECK='^(Mtcluster\.|BuildSafety\.Mtcluster|MtRenderViewer\.|RenderGpuCache\.)'
+NO_LEAK_CHECK='^(Mtcluster\.|BuildSafety\.Mtcluster|MtRenderViewer\.|RenderGpuCache\.|MtRender\.|RenderPolicies\.)'
 (cd build-asan && ctest --output-on-failure --timeout 900 -j "$(nproc)" -E "$SANITIZER_EXCLUDE|$NO_LEAK_CHECK")
 (cd build-asan && ASAN_OPTIONS="${ASAN_OPTIONS/detect_leaks=1/detect_leaks=0}" \
   ctest --output-on-failure --timeout 900 -j "$(nproc)" -R "$NO_LEAK_CHECK")
