@@ -87,17 +87,23 @@ bool checkOutputFormat(const std::string& output) {
   mt::fail(output, "cannot write the format " + name.substr(dot) + " (supported: .ply, .glb, .gltf)");
 }
 
-// The PLY writer as the streamed weld's sink: the header's choices made as assembleCut's path
-// makes them, from the cut's extent.
+// The PLY header's choices for a welded cut, on both paths (in RAM and streamed): float coordinates
+// unless the grid is finer than float spacing at this distance from the origin (distinct grid
+// points must stay distinct in the PLY: it is "welded").
+mt::PlyWriteOptions plyOptionsFor(double maxAbsCoordinate, double gridStep, bool normals, bool colors) {
+  mt::PlyWriteOptions options;
+  options.doublePrecision = maxAbsCoordinate * 0x1.0p-23 > gridStep * 0.5;
+  options.normals = normals;
+  options.colors = colors;
+  return options;
+}
+
+// The PLY writer as the streamed weld's sink.
 class PlySink : public mt::WeldedCutSink {
  public:
   PlySink(const std::string& output, double gridStep) : output_(output), gridStep_(gridStep) {}
   void begin(const mt::WeldedCutInfo& info) override {
-    mt::PlyWriteOptions options;
-    options.doublePrecision = info.maxAbsCoordinate * 0x1.0p-23 > gridStep_ * 0.5;
-    options.normals = info.normals;
-    options.colors = info.colors;
-    ply_ = std::make_unique<mt::PlyWriter>(output_, options);
+    ply_ = std::make_unique<mt::PlyWriter>(output_, plyOptionsFor(info.maxAbsCoordinate, gridStep_, info.normals, info.colors));
   }
   void vertex(const double p[3], const float* n, const uint8_t* c) override { ply_->addVertex(p, n, c); }
   void triangle(uint32_t a, uint32_t b, uint32_t c) override { ply_->addTriangle(a, b, c); }
@@ -216,14 +222,10 @@ int run(const Options& o) {
       std::fprintf(stderr, "mtextract: warning: %s: float positions, not KHR_mesh_quantization: %s\n", o.output.c_str(),
                    info.fallbackReason.c_str());
   } else {
-  // Float coordinates unless the grid is finer than float spacing at this distance from the
-  // origin (distinct grid points must stay distinct in the PLY: it is "welded").
   double maxAbs = 0;
   for (double p : mesh.positions) maxAbs = std::max(maxAbs, std::abs(p));
-  mt::PlyWriteOptions plyOptions;
-  plyOptions.doublePrecision = maxAbs * 0x1.0p-23 > r.header().gridStep * 0.5;
-  plyOptions.normals = !mesh.normals.empty();
-  plyOptions.colors = !mesh.colors.empty();
+  const mt::PlyWriteOptions plyOptions =
+      plyOptionsFor(maxAbs, r.header().gridStep, !mesh.normals.empty(), !mesh.colors.empty());
   // PlyWriter writes under uniqueTempName(output) and renames when finished; an error or a
   // signal (polled here) unwinds through its destructor, which removes the temporary file.
   mt::PlyWriter ply(o.output, plyOptions);
