@@ -12,7 +12,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$PWD
 BUILD=$ROOT/build-fuzz
-ALL=(reader_ply reader_obj reader_off reader_stl mt_file patch_meshopt patch_draco store_manifest store_segment camera_path)
+ALL=(reader_ply reader_obj reader_off reader_stl reader_gltf mt_file patch_meshopt patch_draco store_manifest store_segment camera_path)
 
 configure_and_build() {
   [[ ${MT_FUZZ_NO_BUILD:-0} == 1 ]] && return 0
@@ -41,8 +41,14 @@ if [[ ${1:-} == --seeds ]]; then
   "$B/mtbuild" "$T/small.ply" -o "$T/small_draco_n.mt" --codec draco --normals --patch-triangles 200 --threads 1 -q
   "$B/mtbuild" "$T/mid.ply" -o "$T/mid_meshopt.mt" --patch-triangles 100 --threads 1 -q
   "$B/mtbuild" "$T/mid.ply" -o "$T/mid_draco.mt" --codec draco --patch-triangles 100 --threads 1 -q
+  "$B/mtbuild" "$T/tiny.ply" -o "$T/tiny.mt" --normals --patch-triangles 100 --threads 1 -q
   rm -rf fuzz/corpus/mt_file fuzz/corpus/patch_meshopt fuzz/corpus/patch_draco fuzz/corpus/store_* fuzz/store
   mkdir -p fuzz/corpus/mt_file fuzz/corpus/patch_meshopt fuzz/corpus/patch_draco fuzz/corpus/store_manifest fuzz/corpus/store_segment
+  # glTF: our writer's meshopt and quantized outputs (a cut of the tiny MT), Draco primitives.
+  mkdir -p fuzz/corpus/reader_gltf
+  "$B/mtextract" "$T/tiny.mt" -o fuzz/corpus/reader_gltf/extract_meshopt.glb --meshopt --triangles 120 >/dev/null
+  "$B/mtextract" "$T/tiny.mt" -o fuzz/corpus/reader_gltf/extract_quantized.glb --quantize --triangles 120 >/dev/null
+  "$BUILD/bin/fuzz_seed_gltf" fuzz/corpus/reader_gltf
   cp "$T/small_strip.mt" "$T/small_draco_n.mt" "$T/mid_meshopt.mt" fuzz/corpus/mt_file/
   for f in small_strip mid_meshopt; do "$BUILD/bin/fuzz_seed_payloads" "$T/$f.mt" fuzz/corpus/patch_meshopt 12; done
   for f in small_draco_n mid_draco; do "$BUILD/bin/fuzz_seed_payloads" "$T/$f.mt" fuzz/corpus/patch_draco 12; done

@@ -1,9 +1,13 @@
 // What the fuzzers of fuzz/ found, each kept as a regression test of the normal suite (the
 // sanitizer stage of scripts/test.sh runs these under ASan+UBSan, where the undefined behaviour
-// itself is caught, not only a wrong answer). docs/hardening.md lists the findings.
+// itself is caught, not only a wrong answer), and the bounds the readers put on damaged counts.
+// docs/hardening.md lists the findings.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstdint>
+#include <cstring>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -56,4 +60,95 @@ TEST(FuzzRegressions, CameraPathWithNonFiniteOrTrailingWordsIsRefused) {
   // The seed paths still load.
   writeFile(tmp.file("good"), "space unit\nfov 30\n0 -3 1 0 0 0\n1 -2 1 0 0 0 0 0 1\n");
   EXPECT_EQ(mt::render::loadCameraPath(tmp.file("good"), centre, 4.0).poses.size(), 2u);
+}
+
+// The patch decoders' bound on a payload's counts. It was 64 triangles per payload byte, which a
+// large, perfectly flat, regular patch exceeds (Draco codes a 128 x 128 grid at 135 triangles per
+// byte): such a patch of a valid file was refused as damaged. The bound is now the count the
+// file's index states (PatchRecord::triangles, which the header must equal) and the format's
+// limit (kMaxPayloadTriangles, 3 vertices per triangle), checked before anything is allocated.
+TEST(PayloadBounds, ALargeFlatRegularPatchDecodesAndDamagedCountsAreRefused) {
+  const int n = 128;
+  std::vector<double> p;
+  std::vector<uint32_t> t;
+  for (int j = 0; j < n; ++j)
+    for (int i = 0; i < n; ++i) p.insert(p.end(), {double(i), double(j), 0.0});
+  for (int j = 0; j + 1 < n; ++j)
+    for (int i = 0; i + 1 < n; ++i) {
+      const uint32_t a = uint32_t(j * n + i), b = a + 1, c = a + uint32_t(n), d = c + 1;
+      t.insert(t.end(), {a, b, d, a, d, c});
+    }
+  const double lo[3] = {0, 0, 0}, hi[3] = {n, n, 1};
+  const mt::QuantizationGrid grid = mt::QuantizationGrid::fromBounds(lo, hi, 1.0);
+  mt::PatchInput in;
+  in.positions = p.data();
+  in.vertexCount = p.size() / 3;
+  in.triangles = t.data();
+  in.triangleCount = t.size() / 3;
+  auto corners = [](const mt::DecodedPatch& d) {
+    std::multiset<std::vector<uint32_t>> out;
+    for (size_t k = 0; k < d.triangles.size(); k += 3) {
+      std::vector<uint32_t> tri;
+      for (int c = 0; c < 3; ++c) tri.insert(tri.end(), &d.q[3 * d.triangles[k + c]], &d.q[3 * d.triangles[k + c]] + 3);
+      out.insert(tri);
+    }
+    return out;
+  };
+  std::multiset<std::vector<uint32_t>> expected;
+  for (size_t k = 0; k < t.size(); k += 3) {
+    std::vector<uint32_t> tri;
+    for (int c = 0; c < 3; ++c)
+      for (int a = 0; a < 3; ++a) tri.push_back(uint32_t(p[3 * t[k + c] + a]));
+    expected.insert(tri);
+  }
+  const uint32_t triangles = uint32_t(in.triangleCount);
+  for (auto codec : {mt::format::Codec::Meshopt, mt::format::Codec::Draco}) {
+    SCOPED_TRACE(codec == mt::format::Codec::Draco ? "draco" : "meshopt");
+    mt::PatchCodecOptions o;
+    o.codec = codec;
+    const std::vector<uint8_t> payload = mt::encodePatch(in, grid, o);
+    if (codec == mt::format::Codec::Draco) {
+      EXPECT_GT(double(triangles) / double(payload.size()), 64.0) << payload.size();
+    }
+    mt::DecodedPatch d = mt::decodePatch(payload.data(), payload.size(), codec, grid, triangles);
+    ASSERT_EQ(d.triangleCount(), triangles);
+    // Rotation of each triangle's corners may differ from the input's: compare as rotated sets.
+    auto canon = [](std::multiset<std::vector<uint32_t>> s) {
+      std::multiset<std::vector<uint32_t>> out;
+      for (auto tri : s) {
+        std::vector<uint32_t> best = tri;
+        for (int r = 1; r < 3; ++r) {
+          std::rotate(tri.begin(), tri.begin() + 3, tri.end());
+          best = std::min(best, tri);
+        }
+        out.insert(best);
+      }
+      return out;
+    };
+    EXPECT_EQ(canon(corners(d)), canon(expected));
+    EXPECT_EQ(mt::decodePatch(payload.data(), payload.size(), codec, grid).triangleCount(), triangles);
+
+    // The index says otherwise: refused before decoding, naming both counts.
+    try {
+      mt::decodePatch(payload.data(), payload.size(), codec, grid, triangles - 1);
+      ADD_FAILURE() << "a header that differs from the index was accepted";
+    } catch (const mt::Error& e) {
+      EXPECT_NE(std::string(e.what()).find("its header says " + std::to_string(triangles) + " triangles, the index " +
+                                           std::to_string(triangles - 1)),
+                std::string::npos)
+          << e.what();
+    }
+    // Counts beyond the format's limits: refused, whatever the index says.
+    std::vector<uint8_t> damaged = payload;
+    mt::format::PayloadHeader h;
+    std::memcpy(&h, damaged.data(), sizeof h);
+    h.triangleCount = mt::format::kMaxPayloadTriangles + 1;
+    std::memcpy(damaged.data(), &h, sizeof h);
+    EXPECT_THROW(mt::decodePatch(damaged.data(), damaged.size(), codec, grid, h.triangleCount), mt::Error);
+    EXPECT_THROW(mt::decodePatch(damaged.data(), damaged.size(), codec, grid), mt::Error);
+    h.triangleCount = triangles;
+    h.vertexCount = 3 * triangles + 1;
+    std::memcpy(damaged.data(), &h, sizeof h);
+    EXPECT_THROW(mt::decodePatch(damaged.data(), damaged.size(), codec, grid, triangles), mt::Error);
+  }
 }
