@@ -7,16 +7,26 @@
 #include <algorithm>
 #include <cstdint>
 #include <cstring>
+#include <filesystem>
 #include <set>
 #include <string>
 #include <vector>
 
+#include <xxhash.h>
+
+#include <fstream>
+
 #include "base/error.h"
+#include "base/exit_code.h"
+#include "mtfile/mt_file.h"
 #include "mtfile/patch_codec.h"
 #include "mtrender/camera.h"
 #include "test_support.h"
 
 using mt::test::TempDir;
+using mt::test::readFile;
+using mt::test::runShell;
+using mt::test::runTool;
 using mt::test::writeFile;
 
 // fuzz_patch_meshopt: a stored (not zstd-compressed) stream with raw size 0 reached memcpy with
@@ -151,4 +161,44 @@ TEST(PayloadBounds, ALargeFlatRegularPatchDecodesAndDamagedCountsAreRefused) {
     std::memcpy(damaged.data(), &h, sizeof h);
     EXPECT_THROW(mt::decodePatch(damaged.data(), damaged.size(), codec, grid, triangles), mt::Error);
   }
+}
+
+// A file whose index and payload disagree on a patch's triangle count, with every checksum right (a
+// writer's bug, not damage on disk): mtinfo --check, mtverify and mtextract each refuse it as a
+// corrupt file, naming the patch and both counts.
+TEST(PayloadBounds, AnIndexCountThePayloadDisagreesWithIsNamedByEveryTool) {
+  TempDir tmp;
+  ASSERT_EQ(runTool("mtgen", "-o " + tmp.file("in.ply") + " -t 2k -s 5").exitCode, 0);
+  ASSERT_EQ(runTool("mtbuild", tmp.file("in.ply") + " -o " + tmp.file("a.mt") + " --patch-triangles 100 --threads 1 -q").exitCode, 0);
+  std::string bytes = readFile(tmp.file("a.mt"));
+  uint32_t patch = 0, triangles = 0;
+  {
+    auto r = mt::MtFileReader::open(tmp.file("a.mt"));
+    patch = uint32_t(r->patches().size() - 1);  // on the top level's arc: in every cut
+    triangles = r->patches()[patch].triangles;
+    const uint64_t record = r->header().patchesOffset + uint64_t(patch) * sizeof(mt::format::PatchRecord);
+    const uint32_t claimed = triangles + 1;
+    std::memcpy(&bytes[record + offsetof(mt::format::PatchRecord, triangles)], &claimed, 4);
+    // The footer's checksum over the header and the index, made right again.
+    mt::format::FileHeader h;
+    std::memcpy(&h, bytes.data(), sizeof h);
+    const size_t footer = bytes.size() - mt::format::kFooterSize;
+    XXH64_state_t* st = XXH64_createState();
+    XXH64_reset(st, 0);
+    XXH64_update(st, &h, sizeof h);
+    XXH64_update(st, bytes.data() + h.metaOffset, footer - h.metaOffset);
+    const uint64_t sum = XXH64_digest(st);
+    XXH64_freeState(st);
+    std::memcpy(&bytes[footer + offsetof(mt::format::Footer, checksum)], &sum, 8);
+  }
+  mt::test::writeFile(tmp.file("b.mt"), bytes);
+  const std::string said = "its header says " + std::to_string(triangles) + " triangles, the index " + std::to_string(triangles + 1);
+  for (const std::string& command :
+       {std::string("mtinfo --check"), std::string("mtverify"), "mtextract --error 1e30 -o " + tmp.file("out.ply")}) {
+    auto r = runShell(mt::test::binDir() + "/" + command + " " + tmp.file("b.mt"));
+    EXPECT_EQ(r.exitCode, mt::kExitCorruption) << command << ": " << r.output;
+    EXPECT_NE(r.output.find("patch " + std::to_string(patch)), std::string::npos) << command << ": " << r.output;
+    EXPECT_NE(r.output.find(said), std::string::npos) << command << ": " << r.output;
+  }
+  EXPECT_FALSE(std::filesystem::exists(tmp.file("out.ply")));
 }
