@@ -21,6 +21,7 @@
 #include "mtfile/mt_file.h"
 #include "mtfile/patch_codec.h"
 #include "mtrender/camera.h"
+#include "patchstore/store_impl.h"
 #include "test_support.h"
 
 using mt::test::TempDir;
@@ -201,4 +202,33 @@ TEST(PayloadBounds, AnIndexCountThePayloadDisagreesWithIsNamedByEveryTool) {
     EXPECT_NE(r.output.find(said), std::string::npos) << command << ": " << r.output;
   }
   EXPECT_FALSE(std::filesystem::exists(tmp.file("out.ply")));
+}
+
+// fuzz_store_segment: a geometry block whose header claims 2^29 vertices (checksums are off in the
+// fuzzing build; a block made on purpose has a right one) had its arrays allocated from the counts
+// (6 GB) before the block was found to hold far fewer bytes. Now every array is found in the block
+// first; the same for a boundary block's count.
+TEST(FuzzRegressions, StoreBlockWithHugeCountsIsRefusedBeforeAllocating) {
+  for (const bool doublePrecision : {false, true}) {
+    mt::VertexLayout layout;
+    layout.doublePrecision = doublePrecision;
+    layout.colors = true;
+    for (const uint32_t vertices : {0x20000000u, 0xFFFFFFFFu}) {
+      const mt::store_format::GeometryHeader h{vertices, 1, mt::layoutFlags(layout), 0};
+      std::string block(reinterpret_cast<const char*>(&h), sizeof h);
+      block.append(64, '\0');
+      mt::Patch p;
+      try {
+        mt::decodeGeometry(block, layout, p, "SEG-000001.dat: patch 3");
+        ADD_FAILURE() << "accepted";
+      } catch (const mt::Error& e) {
+        EXPECT_NE(std::string(e.what()).find("SEG-000001.dat: patch 3: record truncated"), std::string::npos) << e.what();
+      }
+      EXPECT_EQ(p.positions.capacity(), 0u);
+    }
+  }
+  const uint32_t entries = 0xFFFFFFFFu;
+  std::string block(reinterpret_cast<const char*>(&entries), 4);
+  block.append(24, '\0');
+  EXPECT_THROW(mt::decodeBoundary(block, "SEG-000001.dat: patch 3"), mt::Error);
 }
