@@ -73,9 +73,12 @@ run_one() {
   [[ -f $root/fuzz/dict/$name.dict ]] && dict=(-dict="$root/fuzz/dict/$name.dict")
   mkdir -p "$build/corpus/$t"
   # -rss_limit_mb: a reader must stay within its memory bound on any input; -timeout: and finish.
+  local start=$(date +%s)
   nice -n 10 "$build/bin/fuzz_$t" "$build/corpus/$t" "$root/fuzz/corpus/$t" "${dict[@]}" \
     -max_total_time="$s" -rss_limit_mb=2048 -timeout=20 -print_final_stats=1 \
     -artifact_prefix="$build/findings/$t-" >"$build/logs/$t.log" 2>&1 || true
+  # How long it ran (less than SECONDS when it stopped at a finding).
+  echo "fuzz.sh: ran $(($(date +%s) - start)) s" >>"$build/logs/$t.log"
 }
 export -f run_one
 printf '%s\n' "${TARGETS[@]}" | xargs -P 2 -I{} bash -c 'run_one "$@"' _ {} "$SECONDS_EACH" "$ROOT" "$BUILD"
@@ -89,7 +92,7 @@ for t in "${TARGETS[@]}"; do
   ft=$(sed -nE 's/.* ft: ([0-9]+).*/\1/p' <<<"$last")
   corp=$(sed -nE 's/.* corp: ([0-9]+)\/.*/\1/p' <<<"$last")
   execs=$(sed -nE 's/^stat::average_exec_per_sec: *([0-9]+)/\1/p' "$log" | tail -1)
-  secs=$(sed -nE 's/^stat::.*run_time.*: *([0-9]+)/\1/p' "$log" | tail -1)
+  secs=$(sed -nE 's/^fuzz.sh: ran ([0-9]+) s$/\1/p' "$log" | tail -1)
   found=$(ls "$BUILD/findings" 2>/dev/null | grep -c "^$t-" || true)
   if grep -qE '^==[0-9]+==ERROR|^SUMMARY: |runtime error|deadly signal' "$log"; then found=$((found > 0 ? found : 1)); fi
   ((found)) && status=1
