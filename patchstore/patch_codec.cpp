@@ -48,37 +48,37 @@ void decodeGeometry(const std::string& payload, const VertexLayout& layout, Patc
   ByteReader r(payload, source);
   auto h = r.get<GeometryHeader>();
   if (h.flags != layoutFlags(layout)) fail(source, "geometry block has the wrong vertex layout");
-  const size_t nv = h.vertexCount, nt = h.triangleCount;
-  // Every array is found in the block before anything is allocated: a damaged count must not ask
-  // for gigabytes the block does not hold.
-  const size_t positionBytes = nv * 3 * (layout.doublePrecision ? sizeof(double) : sizeof(float));
-  const char* positions = r.getRaw(positionBytes);
-  const char* normals = layout.normals ? r.getRaw(nv * 3 * sizeof(float)) : nullptr;
-  const char* colors = layout.colors ? r.getRaw(nv * 4) : nullptr;
-  const char* triangles = r.getRaw(nt * 3 * sizeof(uint32_t));
-  if (!r.atEnd()) fail(source, "geometry block has trailing bytes");
+  size_t nv = h.vertexCount, nt = h.triangleCount;
+  // The arrays the counts ask for must be in the block before they are allocated: a damaged count
+  // must not ask for gigabytes the block does not hold.
+  const uint64_t perVertex = (layout.doublePrecision ? 24 : 12) + (layout.normals ? 12 : 0) + (layout.colors ? 4 : 0);
+  if (uint64_t(nv) * perVertex + uint64_t(nt) * 12 > payload.size() - sizeof h)
+    fail(source, "geometry block of " + std::to_string(payload.size()) + " bytes is too short for its " + std::to_string(nv) +
+                     " vertices and " + std::to_string(nt) + " triangles");
   out.positions.resize(nv * 3);
   if (layout.doublePrecision) {
-    if (nv) std::memcpy(out.positions.data(), positions, positionBytes);  // memcpy(null, ..., 0) is UB
+    std::memcpy(out.positions.data(), r.getRaw(nv * 3 * sizeof(double)), nv * 3 * sizeof(double));
   } else {
+    const char* raw = r.getRaw(nv * 3 * sizeof(float));
     for (size_t i = 0; i < nv * 3; ++i) {
       float f;
-      std::memcpy(&f, positions + i * sizeof(float), sizeof f);
+      std::memcpy(&f, raw + i * sizeof(float), sizeof f);
       out.positions[i] = f;
     }
   }
   out.normals.clear();
   out.colors.clear();
-  if (normals) {
+  if (layout.normals) {
     out.normals.resize(nv * 3);
-    if (nv) std::memcpy(out.normals.data(), normals, nv * 3 * sizeof(float));
+    std::memcpy(out.normals.data(), r.getRaw(nv * 3 * sizeof(float)), nv * 3 * sizeof(float));
   }
-  if (colors) {
+  if (layout.colors) {
     out.colors.resize(nv * 4);
-    if (nv) std::memcpy(out.colors.data(), colors, nv * 4);
+    std::memcpy(out.colors.data(), r.getRaw(nv * 4), nv * 4);
   }
   out.triangles.resize(nt * 3);
-  if (nt) std::memcpy(out.triangles.data(), triangles, nt * 3 * sizeof(uint32_t));
+  std::memcpy(out.triangles.data(), r.getRaw(nt * 3 * sizeof(uint32_t)), nt * 3 * sizeof(uint32_t));
+  if (!r.atEnd()) fail(source, "geometry block has trailing bytes");
   for (size_t i = 0; i < out.triangles.size(); ++i)
     if (out.triangles[i] >= nv)
       fail(source, "triangle " + std::to_string(i / 3) + " references vertex " +
