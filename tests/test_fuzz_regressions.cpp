@@ -21,6 +21,7 @@
 #include "mtfile/mt_file.h"
 #include "mtfile/patch_codec.h"
 #include "mtrender/camera.h"
+#include "patchstore/io/mesh_reader.h"
 #include "patchstore/store_impl.h"
 #include "test_support.h"
 
@@ -233,4 +234,70 @@ TEST(FuzzRegressions, StoreBlockWithHugeCountsIsRefusedBeforeAllocating) {
   std::string block(reinterpret_cast<const char*>(&entries), 4);
   block.append(24, '\0');
   EXPECT_THROW(mt::decodeBoundary(block, "SEG-000001.dat: patch 3"), mt::Error);
+}
+
+// The glTF reader (fuzz_reader_gltf and inputs made for it): a JSON member of the wrong type threw
+// nlohmann's exception, which named no file; byte counts that were believed before the bytes were
+// seen (a view of a meshopt fallback buffer, a meshopt view's byteLength or compressed length)
+// allocated terabytes; a byteStride above 2^32 was cut to 32 bits; an accessor without a bufferView
+// (all zeros) delivered 3e9 positions; a node scale of 1e308 gave infinite positions. Each is now
+// refused, naming the file and the element.
+TEST(FuzzRegressions, GltfWithWrongTypesOrUnbackedCountsIsRefusedNamingTheElement) {
+  TempDir tmp;
+  const std::string data = R"("data:application/octet-stream;base64,AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAA")";
+  const std::string buffer = R"({"byteLength":36,"uri":)" + data + "}";
+  const std::string fallback = R"({"byteLength":1000000000000000,"extensions":{"EXT_meshopt_compression":{"fallback":true}}})";
+  const std::string mesh = R"("meshes":[{"primitives":[{"attributes":{"POSITION":0}}]}])";
+  auto doc = [&](const std::string& buffers, const std::string& view, const std::string& accessor,
+                 const std::string& rest = R"("meshes":[{"primitives":[{"attributes":{"POSITION":0}}]}])") {
+    return R"({"asset":{"version":"2.0"},"buffers":[)" + buffers + R"(],"bufferViews":[)" + view + R"(],"accessors":[)" +
+           accessor + "]," + rest + "}";
+  };
+  const std::string view = R"({"buffer":0,"byteLength":36})";
+  const std::string vec3 = R"({"bufferView":0,"componentType":5126,"count":3,"type":"VEC3")";
+  auto meshopt = [&](const std::string& length, const std::string& ext) {
+    return R"({"buffer":1,"byteLength":)" + length + R"(,"extensions":{"EXT_meshopt_compression":{)" + ext + "}}}";
+  };
+  const std::vector<std::pair<std::string, std::string>> bad = {
+      {doc(buffer, view, R"({"bufferView":0,"componentType":5126,"count":3,"type":5})"), "accessor 0 (POSITION of mesh 0 primitive 0): type is not a string"},
+      {doc(buffer, view, vec3 + R"(,"normalized":"yes"})"), "normalized is not true or false"},
+      {doc(buffer + "," + fallback, meshopt("36", R"("buffer":0,"byteLength":36,"byteStride":12,"count":3,"mode":7)"), vec3 + "}"),
+       "buffer view 0 (EXT_meshopt_compression): mode is not a string"},
+      {doc(fallback, R"({"buffer":0,"byteLength":10000000000000})", R"({"componentType":5126,"count":3,"type":"VEC3"})",
+           R"("meshes":[{"primitives":[{"attributes":{"POSITION":0},"extensions":{"KHR_draco_mesh_compression":{"bufferView":0,"attributes":{"POSITION":0}}}}]}])"),
+       "buffer view 0 reads buffer 0, which has no data"},
+      {doc(buffer + "," + fallback, meshopt("100000000000000", R"("buffer":0,"byteLength":36,"byteStride":12,"count":3,"mode":"ATTRIBUTES")"), vec3 + "}"),
+       "does not fit the view's 100000000000000 bytes"},
+      {doc(buffer + "," + fallback, meshopt("36", R"("buffer":1,"byteLength":3000000000,"byteStride":12,"count":3,"mode":"ATTRIBUTES")"), vec3 + "}"),
+       "(EXT_meshopt_compression) reads buffer 1, which has no data"},
+      {doc(buffer + "," + fallback, meshopt("36000", R"("buffer":0,"byteLength":36,"byteStride":12,"count":3000,"mode":"ATTRIBUTES")"), vec3 + "}"),
+       "byteStride 12 x count 3000 is more than 36 compressed bytes can hold"},
+      {doc(buffer, R"({"buffer":0,"byteLength":36,"byteStride":4294967308})", vec3 + "}"), "buffer view 0: byteStride 4294967308 is larger than glTF's 252"},
+      {doc(buffer, view, R"({"componentType":5126,"count":3000000000,"type":"VEC3"})"), "accessor 0 (POSITION of mesh 0 primitive 0) has no bufferView"},
+      {doc(buffer, view, vec3 + "}", mesh + R"(,"nodes":[{"mesh":0,"scale":[1e308,1,1],"translation":[1e308,0,0]}],"scenes":[{"nodes":[0]}])"),
+       "element 1: the node transform makes its position non-finite"},
+  };
+  struct Count : mt::MeshSink {
+    uint64_t delivered = 0;
+    void begin(const mt::MeshHeader&) override {}
+    void vertices(const mt::InputVertex*, size_t n, uint64_t) override { delivered += n; }
+    void triangles(const uint32_t*, size_t) override {}
+  };
+  for (size_t i = 0; i < bad.size(); ++i) {
+    const std::string path = tmp.file("bad" + std::to_string(i) + ".gltf");
+    writeFile(path, bad[i].first);
+    try {
+      Count sink;
+      mt::openMesh(path)->read(sink);
+      ADD_FAILURE() << i << ": accepted, " << sink.delivered << " vertices";
+    } catch (const mt::Error& e) {
+      EXPECT_EQ(std::string(e.what()).rfind(path + ": ", 0), 0u) << i << ": " << e.what();
+      EXPECT_NE(std::string(e.what()).find(bad[i].second), std::string::npos) << i << ": " << e.what();
+    }
+  }
+  // The document they were made from reads.
+  writeFile(tmp.file("good.gltf"), doc(buffer, view, vec3 + "}"));
+  Count sink;
+  mt::openMesh(tmp.file("good.gltf"))->read(sink);
+  EXPECT_EQ(sink.delivered, 3u);
 }

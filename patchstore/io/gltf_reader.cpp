@@ -239,6 +239,19 @@ class GltfReader final : public MeshReader {
                       std::to_string(a.size()) + " " + name + ")");
     return a[size_t(index)];
   }
+  static std::string text(const json& o, const char* key, const std::string& fallback, const std::string& path,
+                          const std::string& what) {
+    auto it = o.find(key);
+    if (it == o.end()) return fallback;
+    if (!it->is_string()) fail(path, what + ": " + key + " is not a string");
+    return it->get<std::string>();
+  }
+  static bool flag(const json& o, const char* key, const std::string& path, const std::string& what) {
+    auto it = o.find(key);
+    if (it == o.end()) return false;
+    if (!it->is_boolean()) fail(path, what + ": " + key + " is not true or false");
+    return it->get<bool>();
+  }
   static int64_t integer(const json& o, const char* key, int64_t fallback, const std::string& path, const std::string& what) {
     auto it = o.find(key);
     if (it == o.end()) {
@@ -298,15 +311,21 @@ class GltfReader final : public MeshReader {
     }
   }
 
-  void readBuffer(size_t index, uint64_t offset, size_t size, uint8_t* out, const std::string& what) {
+  // Bytes [offset, offset + size) of buffer `index` exist and hold data.
+  void checkBufferRange(size_t index, uint64_t offset, uint64_t size, const std::string& what) const {
     if (index >= buffers_.size()) fail(path_, what + " refers to buffer " + std::to_string(index) + ", which does not exist");
-    Buffer& b = buffers_[index];
+    const Buffer& b = buffers_[index];
     if (offset > b.length || size > b.length - offset)
       fail(path_, what + ": bytes " + std::to_string(offset) + ".." + std::to_string(offset + size) + " are beyond " + b.name +
                       "'s " + std::to_string(b.length) + " bytes");
+    if (size && !b.file && b.memory.empty())
+      fail(path_, what + " reads " + b.name + ", which has no data (a meshopt fallback buffer)");
+  }
+  void readBuffer(size_t index, uint64_t offset, size_t size, uint8_t* out, const std::string& what) {
+    checkBufferRange(index, offset, size, what);
+    const Buffer& b = buffers_[index];
     if (b.file) b.file->read(b.base + offset, size, out);
-    else if (!b.memory.empty() || size == 0) std::memcpy(out, b.memory.data() + offset, size);
-    else fail(path_, what + " reads " + b.name + ", which has no data (a meshopt fallback buffer)");
+    else if (size) std::memcpy(out, b.memory.data() + offset, size);
   }
 
   // A buffer view's bytes [offset, offset + size): from its buffer, or from its meshopt decoding.
@@ -326,14 +345,13 @@ class GltfReader final : public MeshReader {
     r.buffer = size_t(integer(v, "buffer", INT64_MIN, path_, what));
     r.offset = uint64_t(integer(v, "byteOffset", 0, path_, what));
     r.length = uint64_t(integer(v, "byteLength", INT64_MIN, path_, what));
-    r.stride = uint32_t(integer(v, "byteStride", 0, path_, what));
+    const int64_t stride = integer(v, "byteStride", 0, path_, what);
+    if (stride > 252) fail(path_, what + ": byteStride " + std::to_string(stride) + " is larger than glTF's 252");
+    r.stride = uint32_t(stride);
     if (v.contains("extensions") && v["extensions"].contains("EXT_meshopt_compression")) {
       r.decoded = &meshoptView(index, v["extensions"]["EXT_meshopt_compression"], r.length);
     } else {
-      if (r.buffer >= buffers_.size()) fail(path_, what + " refers to buffer " + std::to_string(r.buffer) + ", which does not exist");
-      if (r.offset > buffers_[r.buffer].length || r.length > buffers_[r.buffer].length - r.offset)
-        fail(path_, what + ": bytes " + std::to_string(r.offset) + ".." + std::to_string(r.offset + r.length) + " are beyond " +
-                        buffers_[r.buffer].name + "'s " + std::to_string(buffers_[r.buffer].length) + " bytes");
+      checkBufferRange(r.buffer, r.offset, r.length, what);
     }
     return r;
   }
@@ -354,12 +372,18 @@ class GltfReader final : public MeshReader {
     const uint64_t clength = uint64_t(integer(ext, "byteLength", INT64_MIN, path_, what));
     const uint64_t stride = uint64_t(integer(ext, "byteStride", INT64_MIN, path_, what));
     const uint64_t count = uint64_t(integer(ext, "count", INT64_MIN, path_, what));
-    const std::string mode = ext.value("mode", std::string());
-    const std::string filter = ext.value("filter", std::string("NONE"));
-    if (stride == 0 || stride > 256 || count > (uint64_t(1) << 32) || stride * count > length + stride)
+    const std::string mode = text(ext, "mode", "", path_, what);
+    const std::string filter = text(ext, "filter", "NONE", path_, what);
+    if (stride == 0 || stride > 256 || count > (uint64_t(1) << 32) || stride * count > length + stride ||
+        length > stride * count + stride)
       fail(path_, what + ": byteStride " + std::to_string(stride) + " x count " + std::to_string(count) +
                       " does not fit the view's " + std::to_string(length) + " bytes");
-    if (clength > kMaxJson * 16) fail(path_, what + ": " + std::to_string(clength) + " compressed bytes is too large");
+    // meshopt's codecs spend at least one byte per 64 decoded (a 2-bit header per 16 bytes of a
+    // vertex stream; a byte per triangle or index): more is damage, and would allocate without limit.
+    if (stride * count > 64 * clength + 256)
+      fail(path_, what + ": byteStride " + std::to_string(stride) + " x count " + std::to_string(count) +
+                      " is more than " + std::to_string(clength) + " compressed bytes can hold");
+    checkBufferRange(buffer, offset, clength, what);  // before allocating what it claims
     std::vector<uint8_t> code(clength);
     readBuffer(buffer, offset, code.size(), code.data(), what);
     std::vector<uint8_t> out(std::max<uint64_t>(length, stride * count));
@@ -405,9 +429,9 @@ class GltfReader final : public MeshReader {
     const json& j = element("accessors", index, role);
     a.count = uint64_t(integer(j, "count", INT64_MIN, path_, a.what));
     a.type = int(integer(j, "componentType", INT64_MIN, path_, a.what));
-    a.components = componentCount(j.value("type", std::string()));
+    a.components = componentCount(text(j, "type", "", path_, a.what));
     a.size = componentSize(a.type);
-    a.normalized = j.value("normalized", false);
+    a.normalized = flag(j, "normalized", path_, a.what);
     if (!a.size || !a.components) fail(path_, a.what + ": bad componentType or type");
     if (j.contains("sparse")) fail(path_, a.what + ": sparse accessors are not read");
     a.offset = uint64_t(integer(j, "byteOffset", 0, path_, a.what));
@@ -549,6 +573,7 @@ class GltfReader final : public MeshReader {
       if (!attrs.contains("POSITION")) fail(path_, what + " has no POSITION");
       Accessor pos = accessor(integer(attrs, "POSITION", INT64_MIN, path_, what), "POSITION of " + what);
       if (pos.components != 3) fail(path_, pos.what + " is not VEC3");
+      if (!pos.view && pos.count) fail(path_, pos.what + " has no bufferView: every position would be zero (sparse is not read)");
       std::optional<Accessor> nor, col;
       if (attrs.contains("NORMAL")) {
         nor = accessor(integer(attrs, "NORMAL", INT64_MIN, path_, what), "NORMAL of " + what);
@@ -575,6 +600,8 @@ class GltfReader final : public MeshReader {
             fail(path_, pos.what + " element " + std::to_string(first + i) + ": non-finite position at byte offset " +
                             std::to_string(elementOffset(pos, first + i)));
           transform(M, C, &P[3 * i], nor ? &Nn[3 * i] : nullptr, v);
+          if (!(std::isfinite(v.p[0]) && std::isfinite(v.p[1]) && std::isfinite(v.p[2])))
+            fail(path_, pos.what + " element " + std::to_string(first + i) + ": the node transform makes its position non-finite");
           color(col ? &Cc[size_t(col->components) * i] : nullptr, col ? col->components : 0, v);
         }
       }
@@ -610,6 +637,7 @@ class GltfReader final : public MeshReader {
     Accessor idx = accessor(integer(prim, "indices", INT64_MIN, path_, what), "indices of " + what);
     if (idx.components != 1 || idx.normalized || (idx.type != 5121 && idx.type != 5123 && idx.type != 5125))
       fail(path_, idx.what + ": not SCALAR unsigned byte, short or int");
+    if (!idx.view && idx.count) fail(path_, idx.what + " has no bufferView: every index would be zero (sparse is not read)");
     if (mode == 4 && idx.count % 3) fail(path_, idx.what + ": " + std::to_string(idx.count) + " indices is not a multiple of 3");
     // Strips and fans refer back to their first corners: read them whole (a fan's first is kept).
     std::vector<double> I;
@@ -711,6 +739,8 @@ class GltfReader final : public MeshReader {
         fail(path_, dwhat + ": point " + std::to_string(i) + " has a non-finite position");
       InputVertex& out = batch.addVertex();
       transform(M, C, pd, nor ? nd : nullptr, out);
+      if (!(std::isfinite(out.p[0]) && std::isfinite(out.p[1]) && std::isfinite(out.p[2])))
+        fail(path_, dwhat + ": point " + std::to_string(i) + ": the node transform makes its position non-finite");
       color(col ? cd : nullptr, col ? 4 : 0, out);
     }
     indices.clear();
