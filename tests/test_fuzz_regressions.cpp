@@ -240,7 +240,8 @@ TEST(FuzzRegressions, StoreBlockWithHugeCountsIsRefusedBeforeAllocating) {
 // nlohmann's exception, which named no file; byte counts that were believed before the bytes were
 // seen (a view of a meshopt fallback buffer, a meshopt view's byteLength or compressed length)
 // allocated terabytes; a byteStride above 2^32 was cut to 32 bits; an accessor without a bufferView
-// (all zeros) delivered 3e9 positions; a node scale of 1e308 gave infinite positions. Each is now
+// (all zeros) delivered 3e9 positions; a node transform of 1e308 gave infinite positions; nodes
+// sharing children repeated their subtrees exponentially. Each is now
 // refused, naming the file and the element.
 TEST(FuzzRegressions, GltfWithWrongTypesOrUnbackedCountsIsRefusedNamingTheElement) {
   TempDir tmp;
@@ -258,7 +259,7 @@ TEST(FuzzRegressions, GltfWithWrongTypesOrUnbackedCountsIsRefusedNamingTheElemen
   auto meshopt = [&](const std::string& length, const std::string& ext) {
     return R"({"buffer":1,"byteLength":)" + length + R"(,"extensions":{"EXT_meshopt_compression":{)" + ext + "}}}";
   };
-  const std::vector<std::pair<std::string, std::string>> bad = {
+  std::vector<std::pair<std::string, std::string>> bad = {
       {doc(buffer, view, R"({"bufferView":0,"componentType":5126,"count":3,"type":5})"), "accessor 0 (POSITION of mesh 0 primitive 0): type is not a string"},
       {doc(buffer, view, vec3 + R"(,"normalized":"yes"})"), "normalized is not true or false"},
       {doc(buffer + "," + fallback, meshopt("36", R"("buffer":0,"byteLength":36,"byteStride":12,"count":3,"mode":7)"), vec3 + "}"),
@@ -277,6 +278,12 @@ TEST(FuzzRegressions, GltfWithWrongTypesOrUnbackedCountsIsRefusedNamingTheElemen
       {doc(buffer, view, vec3 + "}", mesh + R"(,"nodes":[{"mesh":0,"scale":[1e308,1,1],"translation":[1e308,0,0]}],"scenes":[{"nodes":[0]}])"),
        "element 1: the node transform makes its position non-finite"},
   };
+  // Nodes sharing their children: 2^40 instances of one mesh from 40 nodes (glTF's nodes are trees).
+  std::string nodes = R"("nodes":[)";
+  for (int i = 0; i < 40; ++i) nodes += "{\"children\":[" + std::to_string(i + 1) + "," + std::to_string(i + 1) + "]},";
+  nodes += R"({"mesh":0}],"scenes":[{"nodes":[0]}])";
+  bad.push_back({doc(buffer, view, vec3 + "}", R"("meshes":[{"primitives":[{"attributes":{"POSITION":0}}]}],)" + nodes),
+                 "node 40 is reached twice (a second parent or a cycle"});
   struct Count : mt::MeshSink {
     uint64_t delivered = 0;
     void begin(const mt::MeshHeader&) override {}

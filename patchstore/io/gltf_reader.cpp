@@ -503,6 +503,11 @@ class GltfReader final : public MeshReader {
     const std::string what = "node " + std::to_string(index);
     if (depth > 1000) fail(path_, what + ": the node hierarchy is deeper than 1000 (a cycle?)");
     const json& node = element("nodes", index, depth ? "a node's children" : "the scene");
+    // glTF's nodes form disjoint trees (each has at most one parent): a node reached twice would
+    // repeat its subtree, and a few shared children per level make that exponential.
+    visited_.resize(array("nodes").size());
+    if (visited_[size_t(index)]) fail(path_, what + " is reached twice (a second parent or a cycle; glTF nodes form trees)");
+    visited_[size_t(index)] = 1;
     const Mat4 world = multiply(parent, localMatrix(node, what));
     if (node.contains("mesh")) addMesh(integer(node, "mesh", INT64_MIN, path_, what), world, what);
     if (node.contains("children")) {
@@ -763,6 +768,7 @@ class GltfReader final : public MeshReader {
   MeshHeader header_;
   std::vector<Buffer> buffers_;
   std::vector<Instance> instances_;
+  std::vector<uint8_t> visited_;  // nodes of the scene seen so far
   std::map<int64_t, std::vector<uint8_t>> decoded_;  // meshopt views of the current primitive
   std::vector<uint8_t> raw_;
   uint64_t nextVertex_ = 0;
