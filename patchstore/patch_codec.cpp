@@ -57,7 +57,8 @@ void decodeGeometry(const std::string& payload, const VertexLayout& layout, Patc
                      " vertices and " + std::to_string(nt) + " triangles");
   out.positions.resize(nv * 3);
   if (layout.doublePrecision) {
-    std::memcpy(out.positions.data(), r.getRaw(nv * 3 * sizeof(double)), nv * 3 * sizeof(double));
+    const char* raw = r.getRaw(nv * 3 * sizeof(double));
+    if (nv) std::memcpy(out.positions.data(), raw, nv * 3 * sizeof(double));  // memcpy(null, ..., 0) is UB
   } else {
     const char* raw = r.getRaw(nv * 3 * sizeof(float));
     for (size_t i = 0; i < nv * 3; ++i) {
@@ -70,14 +71,17 @@ void decodeGeometry(const std::string& payload, const VertexLayout& layout, Patc
   out.colors.clear();
   if (layout.normals) {
     out.normals.resize(nv * 3);
-    std::memcpy(out.normals.data(), r.getRaw(nv * 3 * sizeof(float)), nv * 3 * sizeof(float));
+    const char* raw = r.getRaw(nv * 3 * sizeof(float));
+    if (nv) std::memcpy(out.normals.data(), raw, nv * 3 * sizeof(float));
   }
   if (layout.colors) {
     out.colors.resize(nv * 4);
-    std::memcpy(out.colors.data(), r.getRaw(nv * 4), nv * 4);
+    const char* raw = r.getRaw(nv * 4);
+    if (nv) std::memcpy(out.colors.data(), raw, nv * 4);
   }
   out.triangles.resize(nt * 3);
-  std::memcpy(out.triangles.data(), r.getRaw(nt * 3 * sizeof(uint32_t)), nt * 3 * sizeof(uint32_t));
+  const char* triangles = r.getRaw(nt * 3 * sizeof(uint32_t));
+  if (nt) std::memcpy(out.triangles.data(), triangles, nt * 3 * sizeof(uint32_t));
   if (!r.atEnd()) fail(source, "geometry block has trailing bytes");
   for (size_t i = 0; i < out.triangles.size(); ++i)
     if (out.triangles[i] >= nv)

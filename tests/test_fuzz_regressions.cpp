@@ -230,6 +230,18 @@ TEST(FuzzRegressions, StoreBlockWithHugeCountsIsRefusedBeforeAllocating) {
       EXPECT_EQ(p.positions.capacity(), 0u);
     }
   }
+  // fuzz_store_segment: a block of no vertices and no triangles reached memcpy with an empty
+  // vector's null pointer (UBSan: null passed as a nonnull argument; the sanitizer stage catches it).
+  for (const bool doublePrecision : {false, true}) {
+    mt::VertexLayout layout;
+    layout.doublePrecision = doublePrecision;
+    layout.normals = layout.colors = true;
+    const mt::store_format::GeometryHeader h{0, 0, mt::layoutFlags(layout), 0};
+    mt::Patch p;
+    mt::decodeGeometry(std::string(reinterpret_cast<const char*>(&h), sizeof h), layout, p, "SEG-000001.dat: patch 4");
+    EXPECT_EQ(p.vertexCount(), 0u);
+    EXPECT_EQ(p.triangleCount(), 0u);
+  }
   const uint32_t entries = 0xFFFFFFFFu;
   std::string block(reinterpret_cast<const char*>(&entries), 4);
   block.append(24, '\0');
@@ -241,7 +253,8 @@ TEST(FuzzRegressions, StoreBlockWithHugeCountsIsRefusedBeforeAllocating) {
 // seen (a view of a meshopt fallback buffer, a meshopt view's byteLength or compressed length)
 // allocated terabytes; a byteStride above 2^32 was cut to 32 bits; an accessor without a bufferView
 // (all zeros) delivered 3e9 positions; a node transform of 1e308 gave infinite positions; nodes
-// sharing children repeated their subtrees exponentially. Each is now
+// sharing children repeated their subtrees exponentially; a number too large for a double escaped
+// as nlohmann's out_of_range (terminate in the fuzzer). Each is now
 // refused, naming the file and the element.
 TEST(FuzzRegressions, GltfWithWrongTypesOrUnbackedCountsIsRefusedNamingTheElement) {
   TempDir tmp;
@@ -278,6 +291,8 @@ TEST(FuzzRegressions, GltfWithWrongTypesOrUnbackedCountsIsRefusedNamingTheElemen
       {doc(buffer, view, vec3 + "}", mesh + R"(,"nodes":[{"mesh":0,"scale":[1e308,1,1],"translation":[1e308,0,0]}],"scenes":[{"nodes":[0]}])"),
        "element 1: the node transform makes its position non-finite"},
   };
+  // A number beyond a double's range (nlohmann's out_of_range, not a parse_error).
+  bad.push_back({R"({"asset":{"version":"2.0"},"x":429496729599901e308000000})", "bad JSON (from byte offset 0): number overflow"});
   // Nodes sharing their children: 2^40 instances of one mesh from 40 nodes (glTF's nodes are trees).
   std::string nodes = R"("nodes":[)";
   for (int i = 0; i < 40; ++i) nodes += "{\"children\":[" + std::to_string(i + 1) + "," + std::to_string(i + 1) + "]},";

@@ -140,6 +140,9 @@ class GltfReader final : public MeshReader {
     } catch (const json::parse_error& e) {
       fail(path_, std::string("bad JSON at byte offset ") + std::to_string(jsonStart_ + e.byte - (e.byte ? 1 : 0)) + ": " +
                       std::string(e.what()).substr(std::string(e.what()).find(':') + 2));
+    } catch (const json::exception& e) {  // e.g. a number too large for a double (no byte offset known)
+      fail(path_, std::string("bad JSON (from byte offset ") + std::to_string(jsonStart_) + "): " +
+                      std::string(e.what()).substr(std::string(e.what()).find(']') + 2));
     }
     if (!doc_.is_object()) fail(path_, "the glTF JSON is not an object (byte offset " + std::to_string(jsonStart_) + ")");
     checkAsset();
