@@ -58,6 +58,7 @@ std::string encodeContext(const RegionContext& c, const std::string& sequenceByt
   w.put(c.partitionLevels);
   w.put(c.rootTriangles);
   w.put(c.simplifier);
+  w.put(c.colorWeight);
   w.putString(sequenceBytes);
   return seal(w);
 }
@@ -69,6 +70,7 @@ void decodeContext(const std::string& bytes, WorkerContext& out) {
   out.context.partitionLevels = r.get<uint32_t>();
   out.context.rootTriangles = r.get<uint64_t>();
   out.context.simplifier = r.get<RegionSimplifier>();
+  out.context.colorWeight = r.get<double>();
   out.sequence = PartitionSequence::deserialize(r.getString());
   out.context.sequence = &out.sequence;
 }
@@ -140,6 +142,7 @@ std::string encodeResult(uint64_t index, const RegionResult& res) {
   putVector(w, m.triangleCell);
   w.put(m.level);
   w.put(res.deviation);
+  w.put(res.colorDeviation);
   w.put(res.sphere);
   w.put(res.coneAxis);
   w.put(res.coneCutoff);
@@ -170,6 +173,7 @@ RegionResult decodeResult(const std::string& bytes, uint64_t& index) {
   getVector(r, m.triangleCell, n);
   m.level = r.get<uint32_t>();
   res.deviation = r.get<double>();
+  res.colorDeviation = r.get<double>();
   std::memcpy(res.sphere, r.getRaw(sizeof res.sphere), sizeof res.sphere);
   std::memcpy(res.coneAxis, r.getRaw(sizeof res.coneAxis), sizeof res.coneAxis);
   res.coneCutoff = r.get<float>();

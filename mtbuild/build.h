@@ -36,6 +36,8 @@ constexpr uint32_t kMinPatchTriangles = 100, kMaxPatchTriangles = 100000;
 // The least --memory the build honours: the ingest's and the V-partition's fixed buffers (a 200k
 // scan needs 6 MiB for the partition alone); below it a build either fails late or exceeds the cap.
 constexpr uint64_t kMinBuildMemory = 16ull << 20;
+// The default --color-weight (docs/appearance.md, "Per-vertex colour").
+constexpr double kDefaultColorWeight = 1.0;
 // The work directory marker: a directory holding it was made by mtbuild/mtcluster, and is the
 // only kind they ever empty or remove.
 constexpr char kWorkMarker[] = ".mtbuild-work";
@@ -54,6 +56,14 @@ struct BuildOptions {
   bool strips = false;                // meshopt patches as tri-strips (--index-order strip)
   bool normals = false;               // store normals (else the renderer computes them)
   RegionSimplifier simplifier = RegionSimplifier::Meshopt;  // --simplifier
+  // --simplifier auto (the tools' default): the quadric simplifier when the input has per-vertex
+  // colours (only it keeps colour edges: mtbuild/attribute_quadric.h), meshopt otherwise; decided
+  // once the level-0 store exists. `simplifier` is then ignored.
+  bool simplifierByInput = false;
+  // --color-weight: with colours and the quadric simplifier, a full-range colour difference costs
+  // as much as a distance of colorWeight x the region's mean edge length (0: colours are carried
+  // but do not steer the collapses). docs/appearance.md has the measurements behind the default.
+  double colorWeight = kDefaultColorWeight;
   // Continue a killed build from the checkpoint in its work directory (the last finished level).
   bool resume = false;
   bool progress = true;
@@ -146,6 +156,7 @@ struct RegionContext {
   uint32_t partitionLevels = 0;       // sequence->levels()
   uint64_t rootTriangles = 0;
   RegionSimplifier simplifier = RegionSimplifier::Meshopt;
+  double colorWeight = 0;             // SimplifyRegionOptions::colorWeight (0 without colours)
 };
 
 // One region of V(level): its floor (the V*(level-1) patches inside it) assembled into one mesh,
@@ -169,6 +180,7 @@ struct RegionResult {
   std::vector<EncodedPatch> encoded;  // the floor patches, in task.mesh.patches order
   ReplacementMesh replacement;        // the simplified region, split by V*(level)
   double deviation = 0;               // measured distance simplified <-> floor
+  double colorDeviation = 0;          // measured colour deviation simplified <-> floor (color_error.h)
   double sphere[4] = {0, 0, 0, 0};    // centre, radius of the simplified region
   float coneAxis[3] = {0, 0, 1};
   float coneCutoff = -1;

@@ -106,6 +106,7 @@ RegionResult processRegion(const RegionTask& task, const RegionContext& ctx) {
   // Simplify to about half with the region's border locked (BMT 4), split by V*(level).
   SimplifyRegionOptions so;
   so.simplifier = ctx.simplifier;
+  so.colorWeight = ctx.colorWeight;
   so.gridStep = ctx.grid.step;
   for (int a = 0; a < 3; ++a) so.gridOrigin[a] = ctx.grid.origin[a];
   // At least one triangle: a region that had some must keep some, or its node would carry no
@@ -114,14 +115,14 @@ RegionResult processRegion(const RegionTask& task, const RegionContext& ctx) {
       1, task.root ? std::min<size_t>(lm.triangleCount() / 2, ctx.rootTriangles / 2) : lm.triangleCount() / 2);
   SimplifiedRegion sr = simplifyRegion(lm, so);
   out.deviation = sr.error;
+  out.colorDeviation = sr.colorError;
   ReplacementMesh& rep = out.replacement;
   rep.level = task.level;
   rep.origin = sr.origin;
   rep.triangles = sr.triangles;
-  for (uint32_t o : sr.origin) {
+  for (uint32_t o : sr.origin)
     if (!lm.normals.empty()) rep.normals.insert(rep.normals.end(), &lm.normals[3 * o], &lm.normals[3 * o] + 3);
-    if (!lm.colors.empty()) rep.colors.insert(rep.colors.end(), &lm.colors[4 * o], &lm.colors[4 * o] + 4);
-  }
+  rep.colors = std::move(sr.colors);  // the input's, or the quadric's best colours (empty without colours)
   rep.triangleCell.resize(sr.triangleCount());
   for (uint32_t t = 0; t < sr.triangleCount(); ++t) {
     uint64_t low = 0;

@@ -57,7 +57,8 @@ void main() {
   vec3 n = normalize(mat3(mv) * normal.xyz);
   vec3 p = (mv * vec4(position, 1.0)).xyz;
   float d = abs(dot(n, normalize(-p)));
-  vec3 base = mode == 0 ? color.rgb * vec3(0.85, 0.82, 0.75) : tint;
+  // mode 0: shaded (stone, geometry only); 1: the tint (patch or LOD colours); 2: vertex colours
+  vec3 base = mode == 0 ? vec3(0.85, 0.82, 0.75) : mode == 2 ? color.rgb : tint;
   vColor = vec4(base * (0.2 + 0.8 * d), 1.0);
 }
 )";
@@ -224,7 +225,7 @@ void GlRenderer::setFrameState(const View& view, const DrawSettings& s) {
   glm::mat4 mvp = view.projMatrix * view.viewMatrix;
   glUniformMatrix4fv(locMvp_, 1, GL_FALSE, glm::value_ptr(mvp));
   glUniformMatrix4fv(locMv_, 1, GL_FALSE, glm::value_ptr(view.viewMatrix));
-  glUniform1i(locMode_, s.mode == ColorMode::Shaded ? 0 : 1);
+  glUniform1i(locMode_, s.mode == ColorMode::Shaded ? 0 : s.mode == ColorMode::Vertex || s.mode == ColorMode::Texture ? 2 : 1);
   glUniform3f(locTint_, 1, 1, 1);
   mode_ = s.mode;
   glBindVertexArray(vao_);

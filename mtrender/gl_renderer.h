@@ -29,7 +29,8 @@ class EglContext {
   void* context_ = nullptr;
 };
 
-enum class ColorMode { Shaded, Patch, Lod };
+// mtrender --color (mtrender/color_mode.h names, parses and chooses them).
+enum class ColorMode { Shaded, Patch, Lod, Vertex, Texture };
 
 struct DrawSettings {
   ColorMode mode = ColorMode::Shaded;

@@ -23,6 +23,7 @@
 #include "base/exit_code.h"
 #include "base/output_path.h"
 #include "base/size.h"
+#include "mtrender/color_mode.h"
 #include "mtrender/engine.h"
 #include "mtrender/viewer.h"
 #include "base/cli_checks.h"
@@ -143,7 +144,7 @@ struct CliOptions {
   bool headless = false, baseline = false, noPrefetch = false, noCull = false, quiet = false, wireframe = false;
   bool noOcclusion = false;
   bool cold = false;
-  std::string cameraPath, statsPath, screenshotDir, plotDir, cacheText = "256M", gpuCacheText, colorMode = "shaded";
+  std::string cameraPath, statsPath, screenshotDir, plotDir, cacheText = "256M", gpuCacheText, colorMode = "auto";
   std::string screenshotPath, recordPath = "mtrender-path.txt";
   bool recordGiven = false;
   int frames = 0, width = 1280, height = 720, screenshotEvery = 1, maxFrames = 0;
@@ -211,8 +212,11 @@ void addRenderOptions(CLI::App& app, CliOptions& o) {
 // Drawing, pacing, test hooks and the viewer's options.
 void addDisplayOptions(CLI::App& app, CliOptions& o, CLI::Option*& recordOption) {
   const mt::cli::Interval kDelayMs{0, 60000, false, false, "ms"};
-  app.add_option("--color", o.colorMode, "shaded, patch or lod colours")
-      ->check(CLI::IsMember({"shaded", "patch", "lod"}))
+  app.add_option("--color", o.colorMode,
+                 "auto (vertex when the files have per-vertex colours, else shaded), shaded (geometry only), vertex "
+                 "(the per-vertex colours, lit by the headlight), texture (node textures; a file without them falls "
+                 "back to vertex colours, saying so), patch or lod colours")
+      ->check(CLI::IsMember(mt::render::colorModeNames()))
       ->capture_default_str();
   app.add_flag("--wireframe", o.wireframe, "draw edges only");
   app.add_option("--background", o.background, "background colour R G B, each 0-255 (default 20 23 28)")
@@ -281,9 +285,9 @@ EngineOptions engineOptions(const CliOptions& o) {
 DrawSettings drawSettings(const CliOptions& o) {
   DrawSettings ds;
   ds.wireframe = o.wireframe;
-  if (o.colorMode == "shaded") ds.mode = ColorMode::Shaded;
-  else if (o.colorMode == "patch") ds.mode = ColorMode::Patch;
-  else ds.mode = ColorMode::Lod;  // CLI11 checked the name
+  std::string note;
+  ds.mode = resolveColorMode(o.colorMode, colorSupportOf(o.files), &note);
+  if (!note.empty() && !o.quiet) std::fprintf(stderr, "mtrender: %s\n", note.c_str());
   if (o.background.size() == 3)
     ds.background = glm::vec3(float(o.background[0]), float(o.background[1]), float(o.background[2])) / 255.0f;
   return ds;
@@ -300,6 +304,7 @@ int runViewerFor(const CliOptions& o, const EngineOptions& eo, const DrawSetting
   vo.recordPath = o.recordPath;
   vo.statsPath = o.statsPath;
   vo.draw = ds;
+  vo.colors = colorSupportOf(o.files);
   return runViewer(vo);
 }
 

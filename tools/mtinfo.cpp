@@ -26,6 +26,7 @@ using mt::format::NodeRecord;
 struct LevelInfo {
   uint64_t nodes = 0, patches = 0, triangles = 0;
   double errorMin = std::numeric_limits<double>::infinity(), errorMax = -std::numeric_limits<double>::infinity();
+  double colorErrorMax = 0;  // NodeRecord::colorError (file version 5 on; 8-bit RGBA levels)
 };
 
 struct StarInfo {
@@ -77,7 +78,11 @@ int run(const std::string& path, bool json, bool check) {
     for (uint32_t k = 0; k < n.arcCount; ++k) L.patches += reader->arcs()[n.firstArc + k].patchCount;
     L.errorMin = std::min(L.errorMin, double(n.error));
     L.errorMax = std::max(L.errorMax, double(n.error));
+    L.colorErrorMax = std::max(L.colorErrorMax, double(n.colorError));
   }
+  // The colour error column: files with colours; written by version 5 on (older files have none).
+  const bool colors = h.vertexFlags & mt::format::kHasColors;
+  const bool colorErrors = colors && h.version >= mt::format::kFirstColorErrorVersion;
 
   // DAG shape (BMT 3.2: paths logarithmic, small backward stars). Depth = arcs on the longest
   // source -> sink path. Stars are over the inner nodes: the source's forward star and the
@@ -135,9 +140,9 @@ int run(const std::string& path, bool json, bool check) {
     for (size_t l = 0; l < levels.size(); ++l) {
       const LevelInfo& L = levels[l];
       std::printf("%s\n    {\"level\": %zu, \"nodes\": %" PRIu64 ", \"patches\": %" PRIu64 ", \"triangles\": %" PRIu64
-                  ", \"errorMin\": %s, \"errorMax\": %s}",
+                  ", \"errorMin\": %s, \"errorMax\": %s, \"colorErrorMax\": %s}",
                   l ? "," : "", l, L.nodes, L.patches, L.triangles, num(L.nodes ? L.errorMin : NAN).c_str(),
-                  num(L.nodes ? L.errorMax : NAN).c_str());
+                  num(L.nodes ? L.errorMax : NAN).c_str(), num(colorErrors && L.nodes ? L.colorErrorMax : NAN).c_str());
     }
     std::printf("\n  ]\n}\n");
   } else {
@@ -157,11 +162,17 @@ int run(const std::string& path, bool json, bool check) {
                 reader->arcs().size(), longest[sink]);
     std::printf("stars (inner)     backward mean %.2f max %u, forward mean %.2f max %u\n", back.mean, back.max, forward.mean,
                 forward.max);
-    std::printf("level     nodes    patches      triangles    error min    error max\n");
+    if (colors && !colorErrors)
+      std::printf("colour error      not stored (file version %u; version %u on stores it)\n", h.version,
+                  mt::format::kFirstColorErrorVersion);
+    std::printf("level     nodes    patches      triangles    error min    error max%s\n",
+                colorErrors ? "  colour err max" : "");
     for (size_t l = 0; l < levels.size(); ++l) {
       const LevelInfo& L = levels[l];
-      std::printf("%5zu %9" PRIu64 " %10" PRIu64 " %14" PRIu64 " %12.6g %12.6g\n", l, L.nodes, L.patches, L.triangles,
+      std::printf("%5zu %9" PRIu64 " %10" PRIu64 " %14" PRIu64 " %12.6g %12.6g", l, L.nodes, L.patches, L.triangles,
                   L.nodes ? L.errorMin : 0.0, L.nodes ? L.errorMax : 0.0);
+      if (colorErrors) std::printf(" %15.6g", L.nodes ? L.colorErrorMax : 0.0);
+      std::printf("\n");
     }
   }
 
