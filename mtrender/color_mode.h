@@ -1,9 +1,10 @@
 // mtrender --color: the one place that names the colour modes, parses them and decides what a
 // file can show (the viewer's C key cycles through the same list).
 //   shaded   the surface in one stone colour, lit by the headlight (geometry only);
-//   vertex   the per-vertex colours (mt_format.h kHasColors), lit by the same headlight as shaded
-//            (lit, so the shape still reads; a scan's colours usually carry no shading of their own
-//            at the scale of its geometry), white where a file has none;
+//   vertex   the per-vertex colours (mt_format.h kHasColors) as they are, unlit: a scan's colours
+//            were captured under real light and carry its shading (lighting them again darkens
+//            every hollow twice; photogrammetry viewers show them unlit too), and the image then
+//            measures the colours alone (docs/appearance.md); white where a file has none;
 //   texture  the node textures (not stored by this version: falls back to vertex colours, saying so);
 //   patch    one colour per patch; lod: one colour per level;
 //   auto     (the default) vertex when every file has colours, else shaded.

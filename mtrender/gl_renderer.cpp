@@ -57,9 +57,11 @@ void main() {
   vec3 n = normalize(mat3(mv) * normal.xyz);
   vec3 p = (mv * vec4(position, 1.0)).xyz;
   float d = abs(dot(n, normalize(-p)));
-  // mode 0: shaded (stone, geometry only); 1: the tint (patch or LOD colours); 2: vertex colours
-  vec3 base = mode == 0 ? vec3(0.85, 0.82, 0.75) : mode == 2 ? color.rgb : tint;
-  vColor = vec4(base * (0.2 + 0.8 * d), 1.0);
+  // mode 0: shaded (stone, geometry only); 1: the tint (patch or LOD colours), both lit; 2: vertex
+  // colours as they are, unlit (a scan's colours were captured under real light and carry its
+  // shading already; lighting them again darkens every hollow twice: mtrender/color_mode.h)
+  vec3 base = mode == 0 ? vec3(0.85, 0.82, 0.75) : tint;
+  vColor = mode == 2 ? vec4(color.rgb, 1.0) : vec4(base * (0.2 + 0.8 * d), 1.0);
 }
 )";
 

@@ -214,7 +214,7 @@ void addDisplayOptions(CLI::App& app, CliOptions& o, CLI::Option*& recordOption)
   const mt::cli::Interval kDelayMs{0, 60000, false, false, "ms"};
   app.add_option("--color", o.colorMode,
                  "auto (vertex when the files have per-vertex colours, else shaded), shaded (geometry only), vertex "
-                 "(the per-vertex colours, lit by the headlight), texture (node textures; a file without them falls "
+                 "(the per-vertex colours as captured, unlit), texture (node textures; a file without them falls "
                  "back to vertex colours, saying so), patch or lod colours")
       ->check(CLI::IsMember(mt::render::colorModeNames()))
       ->capture_default_str();

@@ -68,7 +68,7 @@ void ColorField::colorAt(const double p[3], uint8_t out[4], double shade) const 
     const bool dark = s - std::floor(s) < 1.0 / 3;
     for (int a = 0; a < 3; ++a) rgb[a] = dark ? hue[a] * 0.35 : hue[a];
   }
-  const double f = 0.5 + 0.5 * std::clamp(shade, 0.0, 1.0);
+  const double f = 0.85 + 0.15 * std::clamp(shade, 0.0, 1.0);
   for (int a = 0; a < 3; ++a) out[a] = uint8_t(std::lround(std::clamp(rgb[a] * f, 0.0, 255.0)));
   out[3] = 255;
 }

@@ -21,7 +21,9 @@ class ColorField {
   // lo, hi: the box the features are laid out in (the mesh's bounding box); seed: the spots'
   // layout and colours.
   ColorField(const double lo[3], const double hi[3], uint64_t seed = 1);
-  // RGBA8 at p; shade in [0, 1] darkens (0: half as bright, 1: as is).
+  // RGBA8 at p; shade in [0, 1] darkens a little (0: 85% as bright, 1: as is). Only a little: the
+  // displacement it comes from varies down to two edges, far below a pixel on a large scan, and a
+  // strong speckle there would make every rendering of the full resolution a noisy reference.
   void colorAt(const double p[3], uint8_t out[4], double shade = 1.0) const;
 
  private:
