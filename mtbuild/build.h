@@ -142,7 +142,10 @@ BuildReport buildMt(const std::string& input, const std::string& output, const B
 struct RegionBytes {
   uint64_t working = 0, held = 0;
 };
-RegionBytes estimateRegionBytes(uint64_t triangles, uint64_t vertices);
+// With per-vertex colours (`colors`) a region holds more: the colours (4 bytes a vertex in each
+// copy) and, while simplified, the attribute quadrics (216 bytes a vertex, attribute_quadric.h)
+// and the colour error's face index (color_error.cpp).
+RegionBytes estimateRegionBytes(uint64_t triangles, uint64_t vertices, bool colors = false);
 
 // ---- The per-region work, as one pure function (BMT section 4, "the i-th simplification step") --
 // mtbuild runs it on threads, mtcluster on MPI ranks; both commit the results in region order with
@@ -220,6 +223,7 @@ class LevelBuilder {
   size_t regionCount() const;
   uint64_t regionTriangles(size_t i) const;  // floor triangles of region i (from the manifest)
   uint64_t regionVertices(size_t i) const;   // floor vertices of region i (shared ones once per patch)
+  bool hasColors() const;                    // the input has per-vertex colours
   // Reads region i's floor patches and assembles them. Thread-safe between commits.
   RegionTask loadRegion(size_t i) const;
   // Commits region i; must be called for i = 0, 1, ... in order. `moveBytes`: what a cluster

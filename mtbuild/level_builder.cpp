@@ -317,6 +317,7 @@ uint32_t LevelBuilder::level() const { return s_->builtLevels + 1; }
 size_t LevelBuilder::regionCount() const { return s_->regionIds.size(); }
 uint64_t LevelBuilder::regionTriangles(size_t i) const { return s_->floorTriangles.at(i); }
 uint64_t LevelBuilder::regionVertices(size_t i) const { return s_->floorVertices.at(i); }
+bool LevelBuilder::hasColors() const { return s_->header.vertexFlags & format::kHasColors; }
 
 bool LevelBuilder::beginLevel() {
   State& s = *s_;

@@ -73,10 +73,15 @@ std::vector<EncodedPatch> encodePatches(const std::vector<Patch>& patches, const
 // to 0.58 vertices per triangle, no normals or colours): working 210-286 bytes per floor triangle
 // (at most 543 per vertex), held 41-72 (at most 134 per vertex). The larger of the two terms,
 // each 3-12% above the largest measured, covers a region whose patches share fewer vertices.
-RegionBytes estimateRegionBytes(uint64_t triangles, uint64_t vertices) {
+RegionBytes estimateRegionBytes(uint64_t triangles, uint64_t vertices, bool colors) {
   RegionBytes b;
   b.working = std::max(300 * triangles, 560 * vertices);
   b.held = std::max(80 * triangles, 150 * vertices);
+  // Colours, counted from the structures rather than measured: the attribute quadric (27 doubles),
+  // the current and output colours and the lock copy (9), the colours in the floor, the assembly
+  // and the result (12), the colour error's sorted input faces (12 bytes a triangle, ~2 triangles a
+  // vertex): ~260 bytes a vertex while simplified, 12 held.
+  if (colors) b.working += 280 * vertices, b.held += 12 * vertices;
   return b;
 }
 

@@ -277,6 +277,35 @@ TEST_F(ColourBuild, ColourWeightLowersTheColourError) {
   for (size_t l = 2; l + 1 < aware.size(); ++l) EXPECT_LT(aware[l], blind[l]) << "level " << l;
 }
 
+namespace {
+
+// The file's bytes with the footer checksum recomputed (after an edit of the header or the index).
+void resealAndWrite(std::string bytes, const std::string& path) {
+  mt::format::FileHeader h;
+  std::memcpy(&h, bytes.data(), sizeof h);
+  mt::format::Footer f;
+  const size_t footerAt = bytes.size() - sizeof f;
+  std::memcpy(&f, bytes.data() + footerAt, sizeof f);
+  f.version = h.version;
+  XXH64_state_t* s = XXH64_createState();
+  XXH64_reset(s, 0);
+  XXH64_update(s, bytes.data(), sizeof h);
+  XXH64_update(s, bytes.data() + h.metaOffset, footerAt - h.metaOffset);
+  f.checksum = XXH64_digest(s);
+  XXH64_freeState(s);
+  std::memcpy(bytes.data() + footerAt, &f, sizeof f);
+  mt::test::writeFile(path, bytes);
+}
+
+float* colorErrorOf(std::string& bytes, uint64_t node) {
+  mt::format::FileHeader h;
+  std::memcpy(&h, bytes.data(), sizeof h);
+  return reinterpret_cast<float*>(bytes.data() + h.nodesOffset + node * sizeof(mt::format::NodeRecord) +
+                                  offsetof(mt::format::NodeRecord, colorError));
+}
+
+}  // namespace
+
 // A file of the previous version (its node word reserved, zero) still reads: colour error 0, said
 // by mtinfo as not stored, and mtverify passes.
 TEST_F(ColourBuild, Version4FilesStillRead) {
@@ -285,21 +314,9 @@ TEST_F(ColourBuild, Version4FilesStillRead) {
   std::memcpy(&h, bytes.data(), sizeof h);
   h.version = 4;
   std::memcpy(bytes.data(), &h, sizeof h);
-  for (uint64_t v = 0; v < h.nodeCount; ++v)
-    std::memset(bytes.data() + h.nodesOffset + v * sizeof(mt::format::NodeRecord) + offsetof(mt::format::NodeRecord, colorError), 0, 4);
-  mt::format::Footer f;
-  const size_t footerAt = bytes.size() - sizeof f;
-  std::memcpy(&f, bytes.data() + footerAt, sizeof f);
-  f.version = 4;
-  XXH64_state_t* s = XXH64_createState();
-  XXH64_reset(s, 0);
-  XXH64_update(s, bytes.data(), sizeof h);
-  XXH64_update(s, bytes.data() + h.metaOffset, footerAt - h.metaOffset);
-  f.checksum = XXH64_digest(s);
-  XXH64_freeState(s);
-  std::memcpy(bytes.data() + footerAt, &f, sizeof f);
+  for (uint64_t v = 0; v < h.nodeCount; ++v) *colorErrorOf(bytes, v) = 0;
   const std::string old = dir_->file("v4.mt");
-  mt::test::writeFile(old, bytes);
+  resealAndWrite(bytes, old);
   auto r = mt::MtFileReader::open(old);
   for (const auto& n : r->nodes()) EXPECT_EQ(n.colorError, 0.0f);
   auto info = runTool("mtinfo", old);
@@ -307,6 +324,28 @@ TEST_F(ColourBuild, Version4FilesStillRead) {
   EXPECT_THAT(info.output, HasSubstr("colour error      not stored (file version 4"));
   auto verify = runTool("mtverify", old + " --cuts 4");
   EXPECT_EQ(verify.exitCode, 0) << verify.output;
+}
+
+// mtverify finds a colour error that drops below a predecessor's, and a sink that is not +inf.
+TEST_F(ColourBuild, MtverifyFindsABrokenColourError) {
+  const std::string original = mt::test::readFile(mt());
+  auto r = mt::MtFileReader::open(mt());
+  uint32_t node = 0;
+  for (uint32_t v = 1; v + 1 < r->nodes().size() && !node; ++v)
+    if (r->nodes()[v].level >= 2) node = v;
+  ASSERT_NE(node, 0u);
+  std::string bytes = original;
+  *colorErrorOf(bytes, node) = 0;
+  resealAndWrite(bytes, dir_->file("drop.mt"));
+  auto a = runTool("mtverify", dir_->file("drop.mt") + " --cuts 0");
+  EXPECT_NE(a.exitCode, 0);
+  EXPECT_THAT(a.output, HasSubstr("colour error not monotone: node " + std::to_string(node)));
+  bytes = original;
+  *colorErrorOf(bytes, r->nodes().size() - 1) = 5;
+  resealAndWrite(bytes, dir_->file("sink.mt"));
+  auto b = runTool("mtverify", dir_->file("sink.mt") + " --cuts 0");
+  EXPECT_NE(b.exitCode, 0);
+  EXPECT_THAT(b.output, HasSubstr("the sink's colour error is 5"));
 }
 
 namespace {
