@@ -6,6 +6,7 @@
 // colour, default mtrender's 20,23,28): the second is the stricter figure, since matching
 // background pixels inflate the first. RGB, 8 bits, MSE over the three channels.
 // Prints "psnr_all DB psnr_covered DB covered_pixels N".
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -17,15 +18,17 @@
 
 int main(int argc, char** argv) {
   int bg[3] = {20, 23, 28}, k = 1;
+  std::string diffPath;
   bool ok = argc >= 3 && argc % 2 == 1;
   for (int i = 3; ok && i + 1 < argc; i += 2) {
     const std::string o = argv[i];
     if (o == "--background") ok = std::sscanf(argv[i + 1], "%d,%d,%d", &bg[0], &bg[1], &bg[2]) == 3;
     else if (o == "--downsample") ok = std::sscanf(argv[i + 1], "%d", &k) == 1 && k >= 1 && k <= 16;
+    else if (o == "--diff") diffPath = argv[i + 1];
     else ok = false;
   }
   if (!ok) {
-    std::fprintf(stderr, "usage: bench_psnr A.png REFERENCE.png [--downsample K (1-16)] [--background R,G,B]\n");
+    std::fprintf(stderr, "usage: bench_psnr A.png REFERENCE.png [--downsample K (1-16)] [--background R,G,B] [--diff OUT.png]\n");
     return 1;
   }
   // Box filter by k x k; a pixel is background when all its k x k samples are.
@@ -72,6 +75,12 @@ int main(int argc, char** argv) {
       const double mse = count ? sse / (3.0 * double(count)) : 0;
       return mse > 0 ? 10 * std::log10(255.0 * 255.0 / mse) : INFINITY;
     };
+    if (!diffPath.empty()) {  // |A - B| per channel, x4, to see where they differ
+      mt::render::Image d = a;
+      for (size_t i = 0; i < d.rgba.size(); ++i)
+        d.rgba[i] = i % 4 == 3 ? 255 : uint8_t(std::min(255, 4 * std::abs(int(a.rgba[i]) - int(b.rgba[i]))));
+      mt::render::writePng(diffPath, d);
+    }
     std::printf("psnr_all %.2f psnr_covered %.2f covered_pixels %zu\n", psnr(all, n), psnr(covered, m), m);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "bench_psnr: %s\n", e.what());
