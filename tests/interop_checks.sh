@@ -11,12 +11,43 @@
 #                                              longitude/latitude PROJ's cs2cs gives for the MT file's box
 #                                              (interop/checks/cesium_check.mjs); the screenshot is
 #                                              BIN_DIR/../interop-cesium.png
+#   tests/interop_checks.sh cesium-show BIN_DIR MT CRS TILESET_DIR SCREENSHOT   the same check of a given
+#                                              export (bench/tiles.sh)
 set -euo pipefail
 mode="$1" bin="$2"
 checks="$(cd "$(dirname "$0")/../interop/checks" && pwd)"
 [[ -d "$checks/node_modules/gltf-validator" ]] || { echo "interop_checks: run 'npm ci' in $checks (scripts/setup.sh does)" >&2; exit 1; }
 t=$(mktemp -d)
 trap 'rm -rf "$t"' EXIT
+# show_in_cesium MT CRS TILESET_DIR SCREENSHOT: where the model must be is the MT file's box (mtinfo),
+# its centre and 8 corners taken to WGS84 longitude, latitude, height by PROJ's cs2cs (not by our code,
+# not from the tileset); cesium_check.mjs flies the camera there and puts the 9 points through the
+# tileset's root transform as Cesium composes it.
+show_in_cesium() {
+  local mt="$1" crs="$2" tiles="$3" shot="$4"
+  command -v cs2cs >/dev/null || { echo "interop_checks: PROJ's cs2cs is missing (Debian proj-bin; scripts/setup.sh installs it)" >&2; exit 1; }
+  "$bin/mtinfo" "$mt" --json > "$t/info.json"
+  node -e '
+    const j = JSON.parse(require("fs").readFileSync(process.argv[1], "utf8"));
+    const c = j.boundsMin.map((v, i) => (v + j.boundsMax[i]) / 2);
+    const pts = [c];
+    for (let k = 0; k < 8; ++k) pts.push([0, 1, 2].map((a) => ((k >> a) & 1 ? j.boundsMax : j.boundsMin)[a]));
+    for (const p of pts) console.log(p.map((v) => v.toFixed(9)).join(" "));' "$t/info.json" > "$t/points.txt"
+  cs2cs -f %.12f "$crs" EPSG:4979 < "$t/points.txt" > "$t/geodetic.txt"
+  node -e '
+    const fs = require("fs");
+    const [info, pts, geo, dir, shot, out] = process.argv.slice(1);
+    const j = JSON.parse(fs.readFileSync(info, "utf8"));
+    const p = fs.readFileSync(pts, "utf8").trim().split("\n").map((l) => l.trim().split(/\s+/).map(Number));
+    // cs2cs prints EPSG:4979 in its axis order: latitude, longitude, height.
+    const g = fs.readFileSync(geo, "utf8").trim().split("\n").map((l) => { const [lat, lon, h] = l.trim().split(/\s+/).map(Number); return [lon, lat, h]; });
+    const radius = Math.hypot(...j.boundsMin.map((v, i) => j.boundsMax[i] - v)) / 2;
+    const spec = { tileset: dir, screenshot: shot, radius, geodetic: g[0], tolerance: 1e-3,
+      points: p.map((q, k) => ({ local: q.map((v, a) => v - j.gridOrigin[a]), geodetic: g[k] })) };
+    fs.writeFileSync(out, JSON.stringify(spec));' "$t/info.json" "$t/points.txt" "$t/geodetic.txt" "$tiles" "$shot" "$t/spec.json"
+  node "$checks/cesium_check.mjs" "$t/spec.json"
+}
+
 case "$mode" in
   validate)
     "$bin/mtgen" -o "$t/scan.ply" --triangles 20k --normals --colors >/dev/null 2>&1
@@ -52,32 +83,13 @@ case "$mode" in
     ;;
   cesium)
     # A scan at UTM zone 33N coordinates, built with its CRS: the tileset is placed on the globe.
-    command -v cs2cs >/dev/null || { echo "interop_checks: PROJ's cs2cs is missing (Debian proj-bin; scripts/setup.sh installs it)" >&2; exit 1; }
     "$bin/mtgen" -o "$t/geo.ply" --triangles 20k --offset 500000,4000000,100 >/dev/null 2>&1
     "$bin/mtbuild" "$t/geo.ply" -o "$t/geo.mt" -q --crs EPSG:32633 --patch-triangles 500
     "$bin/mtexport" tiles "$t/geo.mt" "$t/tiles" 2>/dev/null
-    # Where the model must be: the MT file's box (mtinfo), its centre and corners taken to WGS84
-    # longitude, latitude, height by PROJ's cs2cs (not by our code, not from the tileset).
-    "$bin/mtinfo" "$t/geo.mt" --json > "$t/info.json"
-    node -e '
-      const j = JSON.parse(require("fs").readFileSync(process.argv[1], "utf8"));
-      const c = j.boundsMin.map((v, i) => (v + j.boundsMax[i]) / 2);
-      const pts = [c];
-      for (let k = 0; k < 8; ++k) pts.push([0, 1, 2].map((a) => ((k >> a) & 1 ? j.boundsMax : j.boundsMin)[a]));
-      for (const p of pts) console.log(p.map((v) => v.toFixed(9)).join(" "));' "$t/info.json" > "$t/points.txt"
-    cs2cs -f %.12f EPSG:32633 EPSG:4979 < "$t/points.txt" > "$t/geodetic.txt"
-    node -e '
-      const fs = require("fs");
-      const [info, pts, geo, dir, shot, out] = process.argv.slice(1);
-      const j = JSON.parse(fs.readFileSync(info, "utf8"));
-      const p = fs.readFileSync(pts, "utf8").trim().split("\n").map((l) => l.trim().split(/\s+/).map(Number));
-      // cs2cs prints EPSG:4979 in its axis order: latitude, longitude, height.
-      const g = fs.readFileSync(geo, "utf8").trim().split("\n").map((l) => { const [lat, lon, h] = l.trim().split(/\s+/).map(Number); return [lon, lat, h]; });
-      const radius = Math.hypot(...j.boundsMin.map((v, i) => j.boundsMax[i] - v)) / 2;
-      const spec = { tileset: dir, screenshot: shot, radius, geodetic: g[0], tolerance: 1e-3,
-        points: p.map((q, k) => ({ local: q.map((v, a) => v - j.gridOrigin[a]), geodetic: g[k] })) };
-      fs.writeFileSync(out, JSON.stringify(spec));' "$t/info.json" "$t/points.txt" "$t/geodetic.txt" "$t/tiles" "$bin/../interop-cesium.png" "$t/spec.json"
-    node "$checks/cesium_check.mjs" "$t/spec.json"
+    show_in_cesium "$t/geo.mt" EPSG:32633 "$t/tiles" "$bin/../interop-cesium.png"
     ;;
-  *) echo "usage: $0 validate|cesium BIN_DIR" >&2; exit 2 ;;
+  cesium-show)
+    show_in_cesium "$3" "$4" "$5" "$6"
+    ;;
+  *) echo "usage: $0 validate|cesium BIN_DIR | cesium-show BIN_DIR MT CRS TILESET_DIR SCREENSHOT" >&2; exit 2 ;;
 esac

@@ -7,6 +7,8 @@
 #include <gtest/gtest.h>
 #include <proj.h>
 
+#include <nlohmann/json.hpp>
+
 #include <cmath>
 #include <cstdio>
 #include <fstream>
@@ -137,6 +139,34 @@ TEST(Georeferenced, FloatPlyAtUtmCoordinatesKeepsWhatFloatCanHold) {
   const Grid g{150, 500000.0, 4000000.0, 80.0, 0.5};
   writeBinary(g, tmp.file("utm-float.ply"), false);
   expectFinestCutKeepsEverything(g, tmp.file("utm-float.ply"), true);
+}
+
+TEST(Georeferenced, MtinfoPrintsTheHeaderDoublesExactly) {
+  // At 4e6 m, 9 significant digits are centimetres: the origin, step and box must read back to
+  // the header's doubles bit for bit, in the text and in --json.
+  TempDir tmp;
+  const Grid g{40, 500000.123456, 4000000.987654, 100.001, 0.003};
+  writeBinary(g, tmp.file("utm.ply"), true);
+  ASSERT_EQ(runTool("mtbuild", tmp.file("utm.ply") + " -o " + tmp.file("utm.mt") + " -q").exitCode, 0);
+  const auto reader = MtFileReader::open(tmp.file("utm.mt"));
+  const auto& h = reader->header();
+  const auto info = runTool("mtinfo", tmp.file("utm.mt") + " --json");
+  ASSERT_EQ(info.exitCode, 0) << info.output;
+  const nlohmann::json j = nlohmann::json::parse(info.output);
+  for (int a = 0; a < 3; ++a) {
+    EXPECT_EQ(j["boundsMin"][a].get<double>(), h.boundsMin[a]) << a;
+    EXPECT_EQ(j["boundsMax"][a].get<double>(), h.boundsMax[a]) << a;
+    EXPECT_EQ(j["gridOrigin"][a].get<double>(), h.gridOrigin[a]) << a;
+  }
+  EXPECT_EQ(j["gridStep"].get<double>(), h.gridStep);
+  const auto text = runTool("mtinfo", tmp.file("utm.mt"));
+  const std::string line = text.output.substr(text.output.find("bounding box"));
+  double b[6];
+  ASSERT_EQ(std::sscanf(line.c_str(), "bounding box (%lf, %lf, %lf) - (%lf, %lf, %lf)", b, b + 1, b + 2, b + 3, b + 4, b + 5), 6) << line;
+  for (int a = 0; a < 3; ++a) {
+    EXPECT_EQ(b[a], h.boundsMin[a]);
+    EXPECT_EQ(b[3 + a], h.boundsMax[a]);
+  }
 }
 
 // ---- placement on the globe ----------------------------------------------------------------------
