@@ -95,11 +95,58 @@ void put(std::vector<uint8_t>& out, T v) {
   std::memcpy(out.data() + at, &v, sizeof v);
 }
 
+// The mesh's own arrays in the order meshopt's codecs compress best: triangles reordered for the
+// vertex cache (meshopt_optimizeVertexCache), then vertices in first-use order
+// (meshopt_optimizeVertexFetchRemap). The index codec codes a triangle that reuses the last
+// triangles' edges and recently used vertices in a few bits; the MT's cut comes patch by patch in
+// decoding order. Measured on a 10M-triangle build's tiles (docs/interop.md): indices 1.48 -> 1.19
+// bytes per triangle, positions 1.22 -> 1.40 (the vertex codec's deltas prefer the grid order the
+// cut had), 3.6% smaller in all for 1.8x the CPU time. The same triangles (orientation kept) and
+// vertices: only their order changes (and unreferenced vertices are dropped).
+struct Reordered {
+  std::vector<double> positions;
+  std::vector<uint32_t> triangles, q;
+  std::vector<float> normals;
+  std::vector<uint8_t> colors;
+  GltfMeshView view;
+};
+
+void reorderForCompression(const GltfMeshView& m, Reordered& r) {
+  const size_t indexCount = 3 * m.triangleCount, n = m.vertexCount;
+  r.triangles.resize(indexCount);
+  meshopt_optimizeVertexCache(r.triangles.data(), m.triangles, indexCount, n);
+  std::vector<uint32_t> remap(n);
+  const size_t used = meshopt_optimizeVertexFetchRemap(remap.data(), r.triangles.data(), indexCount, n);
+  for (uint32_t& i : r.triangles) i = remap[i];
+  r.positions.resize(3 * used);
+  if (m.q) r.q.resize(3 * used);
+  if (m.normals) r.normals.resize(3 * used);
+  if (m.colors) r.colors.resize(4 * used);
+  for (size_t v = 0; v < n; ++v) {
+    const uint32_t to = remap[v];
+    if (to == ~0u) continue;  // no triangle uses it
+    std::copy(m.positions + 3 * v, m.positions + 3 * v + 3, &r.positions[3 * to]);
+    if (m.q) std::copy(m.q + 3 * v, m.q + 3 * v + 3, &r.q[3 * to]);
+    if (m.normals) std::copy(m.normals + 3 * v, m.normals + 3 * v + 3, &r.normals[3 * to]);
+    if (m.colors) std::copy(m.colors + 4 * v, m.colors + 4 * v + 4, &r.colors[4 * to]);
+  }
+  r.view = m;
+  r.view.vertexCount = used;
+  r.view.positions = r.positions.data();
+  r.view.triangles = r.triangles.data();
+  r.view.q = m.q ? r.q.data() : nullptr;
+  r.view.normals = m.normals ? r.normals.data() : nullptr;
+  r.view.colors = m.colors ? r.colors.data() : nullptr;
+}
+
 }  // namespace
 
-GltfBytes buildGltf(const GltfMeshView& m, const GltfOptions& o, const std::string& binUri) {
-  if (m.vertexCount == 0 || m.triangleCount == 0) throw Error("glTF writer: the mesh has no triangles");
-  if (m.vertexCount > 0xFFFFFFFEu) throw Error("glTF writer: more vertices than 32-bit indices address");
+GltfBytes buildGltf(const GltfMeshView& input, const GltfOptions& o, const std::string& binUri) {
+  if (input.vertexCount == 0 || input.triangleCount == 0) throw Error("glTF writer: the mesh has no triangles");
+  if (input.vertexCount > 0xFFFFFFFEu) throw Error("glTF writer: more vertices than 32-bit indices address");
+  Reordered reordered;
+  if (o.meshopt) reorderForCompression(input, reordered);
+  const GltfMeshView& m = reordered.view.positions ? reordered.view : input;
   GltfBytes out;
   GltfInfo& info = out.info;
   const size_t n = m.vertexCount;

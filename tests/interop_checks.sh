@@ -61,8 +61,8 @@ case "$mode" in
       "$bin/mtextract" "$t/$mt.mt" --error 0 --quantize -o "$t/$mt-quantized.glb" 2>/dev/null
       "$bin/mtextract" "$t/$mt.mt" --error 0 --meshopt -o "$t/$mt-meshopt.glb" 2>/dev/null
       "$bin/mtextract" "$t/$mt.mt" --triangles 5000 --quantize --meshopt -o "$t/$mt-qm.gltf" 2>/dev/null
-      "$bin/mtexport" tiles "$t/$mt.mt" "$t/$mt-tiles" 2>/dev/null
-      "$bin/mtexport" tiles "$t/$mt.mt" "$t/$mt-tiles-meshopt" --meshopt 2>/dev/null
+      "$bin/mtexport" tiles "$t/$mt.mt" "$t/$mt-tiles" --no-meshopt 2>/dev/null
+      "$bin/mtexport" tiles "$t/$mt.mt" "$t/$mt-tiles-meshopt" 2>/dev/null
       files+=("$t/$mt-full.glb" "$t/$mt-coarse.gltf" "$t/$mt-quantized.glb" "$t/$mt-meshopt.glb" "$t/$mt-qm.gltf"
               "$t/$mt-tiles" "$t/$mt-tiles-meshopt")
     done
