@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # bench/tiles.sh [MT_FILE]: the 3D Tiles export's figures (mtexport tiles, docs/interop.md).
 #
-# For the MT file (default: a 53M mtgen scan built here first, which takes a while), once with plain
-# GLB contents (--no-meshopt: KHR_mesh_quantization only) and once with the default (meshopt too): wall time, CPU time
+# For the MT file (default: a 53M mtgen scan built here first, which takes a while), once per codec of
+# the GLB contents (--codec none: KHR_mesh_quantization only; meshopt; draco, the default): wall time, CPU time
 # (user+sys) and peak RSS (GNU time), tiles, leaf copies, GLB contents, tree depth, triangles, and
 # the tileset's size against the MT file's. With GEO=1 the default MT is a scan at UTM-like
 # coordinates (mtgen --offset 500000,4000000,100, mtbuild --crs EPSG:32633), exported placed on the
@@ -29,11 +29,11 @@ fi
 mtBytes=$(stat -c %s "$mt")
 echo "MT file: $mt, $mtBytes bytes"
 printf '%-10s %8s %8s %8s %6s %9s %9s %8s %12s %14s %8s\n' variant wall_s cpu_s rss_MiB tiles copies contents depth triangles tileset_bytes x_MT
-for variant in plain meshopt; do
+for variant in none meshopt draco; do
   dir="$OUT/tiles-$variant"
   rm -rf "$dir"
   flags=()
-  [[ $variant == plain ]] && flags=(--no-meshopt)
+  flags=(--codec "$variant")
   /usr/bin/time -f "%e %U %S %M" -o "$OUT/time-$variant" "$BIN/mtexport" tiles "$mt" "$dir" "${flags[@]}" 2>"$OUT/log-$variant"
   read -r wall user sys rss < "$OUT/time-$variant"
   line=$(grep "tiles (" "$OUT/log-$variant")
@@ -51,6 +51,6 @@ if [[ "${CESIUM:-0}" == 1 ]]; then
   # The default tileset in CesiumJS, the camera flown to where PROJ puts the model (the MT file's CRS).
   crs=$("$BIN/mtinfo" "$mt" --json | node -e 'console.log(JSON.parse(require("fs").readFileSync(0, "utf8")).crs || "")')
   [[ -n "$crs" ]] || { echo "tiles: CESIUM=1 needs an MT file with a CRS (mtbuild --crs; GEO=1)" >&2; exit 1; }
-  bash "$root/tests/interop_checks.sh" cesium-show "$BIN" "$mt" "$crs" "$OUT/tiles-meshopt" "$OUT/cesium.png"
+  bash "$root/tests/interop_checks.sh" cesium-show "$BIN" "$mt" "$crs" "$OUT/tiles-draco" "$OUT/cesium.png"
 fi
 echo "tiles: outputs in $OUT (remove when done)" >&2

@@ -138,6 +138,7 @@ TilesReport exportTiles(const MtFileReader& r, const std::string& dir, const Til
       const GltfMeshView view = gltfMeshViewOf(mesh, origin, h.gridStep);
       GltfOptions go;
       go.meshopt = options.meshopt;
+      go.draco = options.draco;
       go.quantize = options.quantize;
       go.zUpToYUp = true;
       for (int a = 0; a < 3; ++a) go.frame[a] = origin[a];

@@ -27,7 +27,10 @@
 namespace mt::interop {
 
 struct TilesOptions {
-  bool meshopt = true;    // EXT_meshopt_compression in every GLB (docs/interop.md: 3.5x smaller)
+  // The contents' compression (docs/interop.md, sizes measured): KHR_draco_mesh_compression (the
+  // default, needs quantize), else EXT_meshopt_compression when meshopt, else plain buffers.
+  bool draco = true;
+  bool meshopt = false;
   bool quantize = true;   // KHR_mesh_quantization (grid coordinates as uint16; float where a tile is wider)
   bool progress = false;  // a line on stderr every few seconds
   // The CRS of the model's coordinates; empty: the MT file's (mtbuild --crs), if any.

@@ -3,7 +3,7 @@
 #   tests/interop_checks.sh validate BIN_DIR   every glTF variant mtextract writes and a 3D Tiles export,
 #                                              through the Khronos glTF-Validator (no error, no warning)
 #                                              and the tileset rules (interop/checks/validate.mjs); meshopt
-#                                              files also decoded and validated again; CesiumGS's
+#                                              and Draco files also decoded and validated again; CesiumGS's
 #                                              3d-tiles-validator too where MT_TILES_VALIDATOR names one
 #   tests/interop_checks.sh cesium BIN_DIR     a scan at UTM zone 33N coordinates, built with its CRS and
 #                                              exported to 3D Tiles (placed on the WGS84 globe), drawn by
@@ -61,10 +61,11 @@ case "$mode" in
       "$bin/mtextract" "$t/$mt.mt" --error 0 --quantize -o "$t/$mt-quantized.glb" 2>/dev/null
       "$bin/mtextract" "$t/$mt.mt" --error 0 --meshopt -o "$t/$mt-meshopt.glb" 2>/dev/null
       "$bin/mtextract" "$t/$mt.mt" --triangles 5000 --quantize --meshopt -o "$t/$mt-qm.gltf" 2>/dev/null
-      "$bin/mtexport" tiles "$t/$mt.mt" "$t/$mt-tiles" --no-meshopt 2>/dev/null
-      "$bin/mtexport" tiles "$t/$mt.mt" "$t/$mt-tiles-meshopt" 2>/dev/null
+      "$bin/mtexport" tiles "$t/$mt.mt" "$t/$mt-tiles" --codec none 2>/dev/null
+      "$bin/mtexport" tiles "$t/$mt.mt" "$t/$mt-tiles-meshopt" --codec meshopt 2>/dev/null
+      "$bin/mtexport" tiles "$t/$mt.mt" "$t/$mt-tiles-draco" 2>/dev/null
       files+=("$t/$mt-full.glb" "$t/$mt-coarse.gltf" "$t/$mt-quantized.glb" "$t/$mt-meshopt.glb" "$t/$mt-qm.gltf"
-              "$t/$mt-tiles" "$t/$mt-tiles-meshopt")
+              "$t/$mt-tiles" "$t/$mt-tiles-meshopt" "$t/$mt-tiles-draco")
     done
     node "$checks/validate.mjs" "${files[@]}"
     # CesiumGS's 3d-tiles-validator is not in the npm registry this project installs from (docs/interop.md

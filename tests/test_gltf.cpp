@@ -357,7 +357,7 @@ TEST(GltfWriter, EveryGltfWeWriteCarriesTheMtsColours) {
     ASSERT_EQ(ex.exitCode, 0) << ex.output;
     files.push_back(dir.file(variant.substr(0, variant.find(' '))));
   }
-  for (const std::string variant : {"tiles", "tiles-m --meshopt", "tiles-f --no-quantize"}) {
+  for (const std::string variant : {"tiles", "tiles-m --codec meshopt", "tiles-n --codec none", "tiles-f --no-quantize"}) {
     auto ex = runTool("mtexport", "tiles " + dir.file("scan.mt") + " " + dir.path() + "/" + variant);
     ASSERT_EQ(ex.exitCode, 0) << ex.output;
     for (auto& e : std::filesystem::directory_iterator(dir.file(variant.substr(0, variant.find(' ')) + "/tiles")))

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <filesystem>
 #include <functional>
@@ -23,10 +24,33 @@ using nlohmann::json;
 using test::runTool;
 using test::TempDir;
 
-struct Count : MeshSink {
-  uint64_t t = 0;
-  void vertices(const InputVertex*, size_t, uint64_t) override {}
-  void triangles(const uint32_t*, size_t n) override { t += n; }
+// A tile content's triangles as MT grid points (each rotated to start at its smallest corner, so
+// orientation counts): the content's frame is the grid origin's, +Z up turned to glTF's +Y up.
+using GridTri = std::array<int64_t, 9>;
+struct OnGrid : MeshSink {
+  const double* origin;
+  double step;
+  std::vector<std::array<int64_t, 3>> v;
+  std::vector<GridTri>* out;
+  OnGrid(const double* o, double s, std::vector<GridTri>* t) : origin(o), step(s), out(t) {}
+  void vertices(const InputVertex* p, size_t n, uint64_t) override {
+    for (size_t i = 0; i < n; ++i) {
+      const double model[3] = {p[i].p[0], -p[i].p[2], p[i].p[1]};  // glTF y-up -> the tiles' z-up
+      v.push_back({std::llround(model[0] / step), std::llround(model[1] / step), std::llround(model[2] / step)});
+    }
+  }
+  void triangles(const uint32_t* idx, size_t n) override {
+    for (size_t t = 0; t < n; ++t) out->push_back(rotated({v[idx[3 * t]], v[idx[3 * t + 1]], v[idx[3 * t + 2]]}));
+  }
+  static GridTri rotated(std::array<std::array<int64_t, 3>, 3> c) {
+    int m = 0;
+    for (int k = 1; k < 3; ++k)
+      if (c[k] < c[m]) m = k;
+    GridTri g;
+    for (int k = 0; k < 3; ++k)
+      for (int a = 0; a < 3; ++a) g[3 * k + a] = c[(m + k) % 3][a];
+    return g;
+  }
 };
 
 TEST(Tiles, ExportOfAGeoreferencedBuildFollowsTheTreeRules) {
@@ -51,7 +75,7 @@ TEST(Tiles, ExportOfAGeoreferencedBuildFollowsTheTreeRules) {
   EXPECT_GT(h.gridOrigin[0], 499000.0);
 
   std::set<std::string> contents;
-  uint64_t leafTriangles = 0;
+  std::vector<GridTri> leaves;
   int depth = 0;
   std::function<void(const json&, const json*, int)> walk = [&](const json& t, const json* parent, int d) {
     depth = std::max(depth, d);
@@ -70,9 +94,8 @@ TEST(Tiles, ExportOfAGeoreferencedBuildFollowsTheTreeRules) {
       ASSERT_TRUE(test::fileExists(dir.file("tiles/" + uri))) << uri;
       // The source's pieces (geometricError 0) hold the full resolution, each once.
       if (e == 0 && uri.find("tiles/s") == 0 && contents.insert(uri).second) {
-        Count c;
+        OnGrid c(h.gridOrigin, h.gridStep, &leaves);
         openMesh(dir.file("tiles/" + uri))->read(c);
-        leafTriangles += c.t;
       }
     }
     if (t.contains("children"))
@@ -82,7 +105,18 @@ TEST(Tiles, ExportOfAGeoreferencedBuildFollowsTheTreeRules) {
   EXPECT_GE(depth, 2);
   // The finest cut, welded, against the leaves (degenerate triangles are dropped in both).
   WeldedMesh finest = assembleCut(*reader, cutArcs(*reader, finestCut(*reader).inSet));
-  EXPECT_EQ(leafTriangles, finest.triangleCount());
+  // Exactly, on the grid (the default contents are Draco-coded grid coordinates: lossless).
+  std::vector<GridTri> cut;
+  for (uint32_t t = 0; t < finest.triangleCount(); ++t) {
+    std::array<std::array<int64_t, 3>, 3> c;
+    for (int k = 0; k < 3; ++k)
+      for (int a = 0; a < 3; ++a) c[k][a] = finest.q[3 * finest.triangles[3 * t + k] + a];
+    cut.push_back(OnGrid::rotated(c));
+  }
+  std::sort(cut.begin(), cut.end());
+  std::sort(leaves.begin(), leaves.end());
+  EXPECT_EQ(leaves.size(), cut.size());
+  EXPECT_TRUE(leaves == cut) << "the full-resolution leaves are not the finest cut's triangles";
   EXPECT_NE(ex.output.find("tiles"), std::string::npos);
 
   // An existing directory is refused, and nothing is written or left beside it.

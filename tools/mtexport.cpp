@@ -1,5 +1,5 @@
 // mtexport: an MT file in formats other tools read.
-//   mtexport tiles OUT.mt DIR [--no-meshopt] [--no-quantize] [--crs CRS | --model-frame]
+//   mtexport tiles OUT.mt DIR [--codec draco|meshopt|none] [--no-quantize] [--crs CRS | --model-frame]
 //                                                           a 3D Tiles 1.1 tileset (interop/tiles_export.h)
 // DIR must not exist; it is made under a temporary name beside it and renamed when complete.
 #include <CLI/CLI.hpp>
@@ -24,16 +24,21 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
   auto* tiles = app.add_subcommand("tiles", "Export a 3D Tiles 1.1 tileset");
   std::string input, dir;
-  bool meshopt = true, noQuantize = false, modelFrame = false;
+  bool noQuantize = false, modelFrame = false;
+  std::string codec = "draco";
   std::string crs;
   tiles->add_option("file", input, "The MT file")->required();
   tiles->add_option("dir", dir, "The tileset directory to create (must not exist)")->required();
-  tiles->add_flag("--meshopt,!--no-meshopt", meshopt,
-                  "Compress every GLB's buffer views with EXT_meshopt_compression (the default: 3.5x smaller than plain\n"
-                  "GLBs, decoded by CesiumJS and most 3D Tiles viewers); --no-meshopt writes plain buffers");
+  tiles->add_option("--codec", codec,
+                    "How the GLB contents are compressed (docs/interop.md, measured on a 53M build):\n"
+                    "  draco    KHR_draco_mesh_compression (the default): Draco's edgebreaker and parallelogram coding of the\n"
+                    "           grid coordinates, lossless; the tileset about the MT file's size\n"
+                    "  meshopt  EXT_meshopt_compression: about 3x the MT file, faster to decode\n"
+                    "  none     plain buffers (KHR_mesh_quantization only): about 11x the MT file")
+      ->check(CLI::IsMember({"draco", "meshopt", "none"}));
   tiles->add_flag("--no-quantize", noQuantize,
                   "Float positions instead of KHR_mesh_quantization (the default stores the MT grid's coordinates as uint16,\n"
-                  "exactly; a tile wider than 65536 grid steps falls back to float by itself)");
+                  "exactly; a tile wider than 65536 grid steps falls back to float by itself, and to no Draco)");
   auto* crsOption = tiles->add_option(
       "--crs", crs,
       "The CRS of the model's coordinates (e.g. EPSG:32633, a WKT, a PROJ string), instead of the one the MT file\n"
@@ -50,7 +55,8 @@ int main(int argc, char** argv) {
     mt::requireRegularFile(input, "an MT file");
     auto reader = mt::MtFileReader::open(input);
     mt::interop::TilesOptions o;
-    o.meshopt = meshopt;
+    o.meshopt = codec == "meshopt";
+    o.draco = codec == "draco";
     o.quantize = !noQuantize;
     o.progress = true;
     o.crs = crs;
