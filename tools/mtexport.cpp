@@ -33,7 +33,7 @@ int main(int argc, char** argv) {
                     "How the GLB contents are compressed (docs/interop.md, measured on a 53M build):\n"
                     "  draco    KHR_draco_mesh_compression (the default): Draco's edgebreaker and parallelogram coding of the\n"
                     "           grid coordinates, lossless; the tileset about the MT file's size\n"
-                    "  meshopt  EXT_meshopt_compression: about 3x the MT file, faster to decode\n"
+                    "  meshopt  EXT_meshopt_compression: about 3x the MT file, a simpler decoder (byte codecs)\n"
                     "  none     plain buffers (KHR_mesh_quantization only): about 11x the MT file")
       ->check(CLI::IsMember({"draco", "meshopt", "none"}));
   tiles->add_flag("--no-quantize", noQuantize,
