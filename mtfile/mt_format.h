@@ -196,6 +196,13 @@ constexpr char kMetadataCrs[] = "crs";
 // ---- Patch payloads (the bytes a PatchRecord points at) ----
 //
 // Every payload starts with this header; the rest depends on the file's codec.
+// Its counts agree with the patch's record (triangleCount == PatchRecord::triangles), every vertex
+// is used by a triangle (vertexCount <= 3 * triangleCount), and a payload holds at most
+// kMaxPayloadTriangles triangles (2^22, 42x the builder's largest patch target): readers refuse
+// more before allocating, so a damaged count cannot ask for gigabytes. The payload's size bounds
+// nothing: a flat, regular patch codes at hundreds of triangles per byte (Draco: 355 on a
+// 256 x 256 grid).
+constexpr uint32_t kMaxPayloadTriangles = 1u << 22;
 struct PayloadHeader {
   uint32_t vertexCount;
   uint32_t triangleCount;

@@ -79,7 +79,7 @@ PatchView Engine::baselineFetch(uint32_t id) {
   const MtFileReader& reader = scene_->reader(sp.file);
   const format::PatchRecord& rec = reader.patches()[sp.local];
   try {
-    DecodedPatch d = decodePatch(maps_[sp.file] + rec.offset, rec.size, reader.codec(), reader.grid());
+    DecodedPatch d = decodePatch(maps_[sp.file] + rec.offset, rec.size, reader.codec(), reader.grid(), rec.triangles);
     auto counts = decodeInto(*scene_, id, d, scratch_.data(), scratch_.size(), &v.bound);
     v.vertices = reinterpret_cast<const RenderVertex*>(scratch_.data());
     v.vertexCount = counts.first;
