@@ -33,88 +33,17 @@
 #include "mtrender/scene.h"
 #include "testing/test_meshes.h"
 #include "tests/test_support.h"
+#include "tests/test_support_render.h"
 
 using namespace mt::render;
+using mt::test::Csv;
+using mt::test::imageDiff;
+using mt::test::readCsv;
 using mt::test::runTool;
 using mt::test::TempDir;
+using Rig = mt::test::RenderRig;
 
 namespace {
-
-// A binary little-endian PLY with double coordinates (read exactly).
-void writePly(const std::string& path, const mt::test::TestMesh& m) {
-  std::ofstream out(path, std::ios::binary);
-  out << "ply\nformat binary_little_endian 1.0\nelement vertex " << m.vertexCount()
-      << "\nproperty double x\nproperty double y\nproperty double z\nelement face " << m.triangleCount()
-      << "\nproperty list uchar int vertex_indices\nend_header\n";
-  out.write(reinterpret_cast<const char*>(m.positions.data()), std::streamsize(m.positions.size() * sizeof(double)));
-  for (size_t t = 0; t < m.triangleCount(); ++t) {
-    const uint8_t three = 3;
-    out.write(reinterpret_cast<const char*>(&three), 1);
-    const int32_t idx[3] = {int32_t(m.triangles[3 * t]), int32_t(m.triangles[3 * t + 1]), int32_t(m.triangles[3 * t + 2])};
-    out.write(reinterpret_cast<const char*>(idx), sizeof idx);
-  }
-}
-
-struct Csv {
-  std::vector<std::string> header;
-  std::vector<std::vector<double>> rows;
-  size_t col(const std::string& name) const {
-    auto it = std::find(header.begin(), header.end(), name);
-    if (it == header.end()) throw std::runtime_error("no column " + name);
-    return size_t(it - header.begin());
-  }
-  double at(size_t row, const std::string& name) const { return rows[row][col(name)]; }
-  double sum(const std::string& name) const {
-    double s = 0;
-    for (const auto& r : rows) s += r[col(name)];
-    return s;
-  }
-};
-
-Csv readCsv(const std::string& path) {
-  Csv csv;
-  std::ifstream in(path);
-  std::string line;
-  bool first = true;
-  while (std::getline(in, line)) {
-    std::vector<std::string> cells;
-    std::stringstream ss(line);
-    std::string cell;
-    while (std::getline(ss, cell, ',')) cells.push_back(cell);
-    if (first) csv.header = cells, first = false;
-    else {
-      std::vector<double> r;
-      for (const auto& c : cells) r.push_back(std::stod(c));
-      csv.rows.push_back(r);
-    }
-  }
-  return csv;
-}
-
-std::map<std::string, std::string> summary(const std::string& out) {
-  std::map<std::string, std::string> m;
-  std::stringstream ss(out);
-  std::string line;
-  while (std::getline(ss, line)) {
-    auto sp = line.find(' ');
-    if (sp != std::string::npos) m[line.substr(0, sp)] = line.substr(sp + 1);
-  }
-  return m;
-}
-
-// Pixels differing by more than 40/255 in some channel, and the mean difference.
-std::pair<size_t, double> imageDiff(const Image& a, const Image& b) {
-  size_t differ = 0;
-  double sum = 0;
-  for (int y = 0; y < a.height; ++y)
-    for (int x = 0; x < a.width; ++x) {
-      int d = 0;
-      for (int k = 0; k < 3; ++k) d = std::max(d, std::abs(int(a.pixel(x, y)[k]) - int(b.pixel(x, y)[k])));
-      differ += d > 40;
-      sum += d;
-    }
-  return {differ, sum / (double(a.width) * a.height)};
-}
 
 // The suite's models: a scan-like torus (mtgen), a flat wall in front of it (a second, different
 // MT file), and a small bumpy tile with centimetre features built at the origin and at a UTM-like
@@ -123,15 +52,9 @@ class RenderPolicies : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
     dir_ = new TempDir();
-    auto g = runTool("mtgen", "-o " + dir_->file("s.ply") + " --triangles 40k --holes 4 --seed 7");
-    ASSERT_EQ(g.exitCode, 0) << g.output;
-    auto b = runTool("mtbuild", dir_->file("s.ply") + " -o " + model() + " --patch-triangles 300 --threads 2 -q");
-    ASSERT_EQ(b.exitCode, 0) << b.output;
+    mt::test::buildScanMt(*dir_, "s");
     // A finer DAG for occlusion: nodes small enough to lie wholly behind the wall.
-    g = runTool("mtgen", "-o " + dir_->file("big.ply") + " --triangles 150k --holes 4 --seed 7");
-    ASSERT_EQ(g.exitCode, 0) << g.output;
-    b = runTool("mtbuild", dir_->file("big.ply") + " -o " + dir_->file("big.mt") + " --patch-triangles 300 --threads 2 -q");
-    ASSERT_EQ(b.exitCode, 0) << b.output;
+    mt::test::buildScanMt(*dir_, "big", "150k");
     auto reader = mt::MtFileReader::open(model());
     for (int a = 0; a < 3; ++a) lo_[a] = reader->header().boundsMin[a], hi_[a] = reader->header().boundsMax[a];
     // The wall: a plane y = const in front of the model (seen from -y), higher than the model,
@@ -143,9 +66,7 @@ class RenderPolicies : public ::testing::Test {
       p[2] = lo_[2] - 1.5 * sz + v * 4.0 * sz;
       p[1] = y + 0.002 * sx * std::sin(40 * u) * std::sin(30 * v);
     });
-    writePly(dir_->file("wall.ply"), wall);
-    b = runTool("mtbuild", dir_->file("wall.ply") + " -o " + wallMt() + " --patch-triangles 300 --threads 2 -q");
-    ASSERT_EQ(b.exitCode, 0) << b.output;
+    mt::test::buildMeshMt(*dir_, "wall", wall);
     // The georeferenced tile: 1 m x 1 m at 1 cm spacing, 1-3 cm bumps.
     for (int utm = 0; utm < 2; ++utm) {
       const double ox = utm ? 500000.0 : 0.0, oy = utm ? 4000000.0 : 0.0, oz = utm ? 100.0 : 0.0;
@@ -155,9 +76,7 @@ class RenderPolicies : public ::testing::Test {
         p[2] = oz + 0.02 * std::sin(31 * u) * std::cos(23 * v) + 0.01 * std::sin(97 * u + 41 * v);
       });
       const std::string name = utm ? "utm" : "origin";
-      writePly(dir_->file(name + ".ply"), tile);
-      b = runTool("mtbuild", dir_->file(name + ".ply") + " -o " + dir_->file(name + ".mt") + " --patch-triangles 300 --threads 2 -q");
-      ASSERT_EQ(b.exitCode, 0) << b.output;
+      mt::test::buildMeshMt(*dir_, name, tile);
     }
   }
   static void TearDownTestSuite() {
@@ -174,25 +93,6 @@ class RenderPolicies : public ::testing::Test {
 };
 TempDir* RenderPolicies::dir_ = nullptr;
 double RenderPolicies::lo_[3], RenderPolicies::hi_[3];
-
-// The scene's pieces for in-process tests of ExtractRender.
-struct Rig {
-  Scene scene;
-  std::unique_ptr<PatchCache> cache;
-  std::unique_ptr<PatchServer> server;
-  glm::dvec3 center;
-  double radius;
-  explicit Rig(const std::vector<std::string>& files, uint64_t cacheBytes = 16ull << 20) : scene(files) {
-    std::vector<uint64_t> bounds(scene.patches().size());
-    for (uint32_t p = 0; p < bounds.size(); ++p) bounds[p] = scene.decodedBytesBound(p);
-    cache = std::make_unique<PatchCache>(cacheBytes, bounds, scene.moveGroups());
-    server = std::make_unique<PatchServer>(scene, *cache, PatchServer::Options{});
-    double c[3];
-    scene.boundingSphere(c, radius);
-    center = {c[0], c[1], c[2]};
-  }
-  View view(const CameraPose& p) const { return makeView(p, 256, 256, center, radius); }
-};
 
 // ---- the interruptible update -----------------------------------------------------------------
 
@@ -518,7 +418,7 @@ TEST_F(RenderPolicies, AModelBehindAWallIsNeitherDrawnNorLoadedAndLooksTheSame) 
                                      "--cache 32M --still-frames 1 --screenshots " + dir + " --screenshot-every 1000 --stats " +
                                      csv + " " + extra);
     EXPECT_EQ(r.exitCode, 0) << r.output;
-    return std::make_tuple(readCsv(csv), readPng(dir + "/frame_00059.png"), summary(r.output));
+    return std::make_tuple(readCsv(csv), readPng(dir + "/frame_00059.png"), mt::test::parseSummary(r.output));
   };
   auto [on, onImg, onSum] = render("", "on");
   ASSERT_EQ(onImg.width, 640);
