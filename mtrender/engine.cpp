@@ -356,7 +356,7 @@ FrameRecord Engine::frame(const CameraPose& pose, const CameraPose& prev, GlRend
     rec.cacheBytes = cache_->stats().usedBytes;
   } else {
     rec.loads = baselineLoads_;
-    rec.misses = baselineLoads_;  // every patch not on the GPU is a synchronous read
+    rec.misses = rec.newMisses = baselineLoads_;  // every patch not on the GPU is a synchronous read
   }
   rec.gpuBytes = gl.gpuBytes();
   return rec;

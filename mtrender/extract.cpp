@@ -359,6 +359,7 @@ void ExtractRender::submitRequests(uint64_t frame, FrameStats& st) {
   if (!cache_) return;
   std::vector<RequestCandidate> reqs;
   std::unordered_map<uint32_t, uint32_t> nextConsecutive;
+  std::unordered_set<uint32_t> missed;
   touched_.clear();
   for (const auto& [id, w] : wanted_) {
     PatchCache::State s = cache_->state(id);
@@ -367,7 +368,11 @@ void ExtractRender::submitRequests(uint64_t frame, FrameStats& st) {
       continue;
     }
     if (s == PatchCache::State::Bad) continue;
-    if (w.urgency != Urgency::Prefetch) ++st.misses;
+    if (w.urgency != Urgency::Prefetch) {
+      ++st.misses;
+      missed.insert(id);
+      st.newMisses += missed_.count(id) == 0;
+    }
     auto it = consecutive_.find(id);
     const uint32_t c = (it == consecutive_.end() ? 0 : it->second) + 1;
     nextConsecutive[id] = c;
@@ -375,6 +380,7 @@ void ExtractRender::submitRequests(uint64_t frame, FrameStats& st) {
     reqs.push_back({id, w.urgency, c, w.rank});
   }
   consecutive_.swap(nextConsecutive);
+  missed_.swap(missed);
   cache_->touch(touched_.data(), touched_.size(), frame);
   uint32_t loadBudget = options_.loadBudget;
   if (!loadBudget) {

@@ -28,6 +28,7 @@
 #include <chrono>
 #include <cstdint>
 #include <unordered_map>
+#include <unordered_set>
 #include <vector>
 
 #include "mtrender/camera.h"
@@ -94,6 +95,7 @@ struct FrameStats {
   uint32_t drawnPatches = 0;     // after culling
   uint64_t drawnTriangles = 0;
   uint32_t misses = 0;           // patches wanted for a move but not resident
+  uint32_t newMisses = 0;        // ... of which were not a miss the frame before: each wait counted once
   uint32_t requests = 0, prefetches = 0;
   uint32_t refinements = 0, coarsenings = 0;
   double maxScreenError = 0;     // pixels, over the visible part of the cut
@@ -220,6 +222,7 @@ class ExtractRender {
   mutable uint32_t keyed_ = 0;  // screen errors computed since the update began
   const std::vector<uint8_t>* occluded_ = nullptr;
   std::unordered_map<uint32_t, uint32_t> consecutive_;  // frames in a row a patch was requested
+  std::unordered_set<uint32_t> missed_;                 // the last frame's misses
   std::vector<uint32_t> touched_;
   double smoothBudget_ = 0;
   uint32_t slackFrames_ = 0;  // frames since the last probe

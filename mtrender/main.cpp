@@ -50,17 +50,17 @@ void writeCsv(const std::string& path, const std::vector<FrameRecord>& frames) {
     out << "frame,frame_ms,extract_ms,triangles,patches,loads,misses,cache_bytes,max_screen_error,"
            "drawn_triangles,drawn_patches,budget_triangles,gpu_bytes,lod_scale,moving,requests,prefetches,"
            "refinements,coarsenings,model_fixed_ms,model_ms_per_mtri,accumulating,image_frames,"
-           "occluded_arcs,occluded_nodes,coned_patches,nodes_keyed,interrupted,loaded_triangles\n";
+           "occluded_arcs,occluded_nodes,coned_patches,nodes_keyed,interrupted,loaded_triangles,new_misses\n";
     char buf[512];
     for (size_t i = 0; i < frames.size(); ++i) {
       const FrameRecord& f = frames[i];
-      std::snprintf(buf, sizeof buf, "%zu,%.3f,%.4f,%llu,%u,%u,%u,%llu,%.4f,%llu,%u,%llu,%llu,%.3f,%d,%u,%u,%u,%u,%.3f,%.1f,%d,%u,%u,%u,%u,%u,%d,%llu\n", i,
+      std::snprintf(buf, sizeof buf, "%zu,%.3f,%.4f,%llu,%u,%u,%u,%llu,%.4f,%llu,%u,%llu,%llu,%.3f,%d,%u,%u,%u,%u,%.3f,%.1f,%d,%u,%u,%u,%u,%u,%d,%llu,%u\n", i,
                     f.frameMs, f.extractMs, (unsigned long long)f.triangles, f.patches, f.loads, f.misses,
                     (unsigned long long)f.cacheBytes, f.maxScreenError, (unsigned long long)f.drawnTriangles,
                     f.drawnPatches, (unsigned long long)f.budgetTriangles, (unsigned long long)f.gpuBytes, f.lodScale,
                     f.moving ? 1 : 0, f.requests, f.prefetches, f.refinements, f.coarsenings, f.modelA, f.modelB,
                     f.accumulating ? 1 : 0, f.imageFrames, f.occludedArcs, f.occludedNodes, f.conedPatches, f.nodesKeyed,
-                    f.interrupted ? 1 : 0, (unsigned long long)f.loadedTriangles);
+                    f.interrupted ? 1 : 0, (unsigned long long)f.loadedTriangles, f.newMisses);
       out << buf;
     }
     if (!out) mt::fail(path, "write failed");
@@ -370,7 +370,7 @@ void printSummary(const CliOptions& o, const EngineOptions& eo, const std::vecto
   const int frames = int(recs.size());
   size_t within = 0;
   uint64_t maxCache = 0, maxGpu = 0, drawnSum = 0, loadedSum = 0;
-  double wantedSum = 0, missSum = 0;
+  double wantedSum = 0, missSum = 0, newMissSum = 0;
   size_t extractWithin = 0;
   const double deadline = eo.extract.extractMs > 0 ? eo.extract.extractMs : std::min(2.0, o.budgetMs / 20);
   std::vector<double> extract, frameMs;
@@ -384,6 +384,7 @@ void printSummary(const CliOptions& o, const EngineOptions& eo, const std::vecto
     extract.push_back(r.extractMs);
     frameMs.push_back(r.frameMs);
     missSum += r.misses;
+    newMissSum += r.newMisses;
     wantedSum += r.misses + r.drawnPatches;
   }
   const double missRate = wantedSum > 0 ? missSum / wantedSum : 0;
@@ -423,6 +424,7 @@ void printSummary(const CliOptions& o, const EngineOptions& eo, const std::vecto
   std::printf("gpu_cap_bytes %llu\n", (unsigned long long)(eo.gpuCacheBytes ? eo.gpuCacheBytes : eo.cacheBytes));
   std::printf("miss_rate %.4f\n", missRate);
   std::printf("misses_total %.0f\n", missSum);
+  std::printf("new_misses_total %.0f\n", newMissSum);
   std::printf("second_chance %llu evictions %llu urgent_evictions %llu given_up %llu\n",
               (unsigned long long)cs.secondChance, (unsigned long long)cs.evictions,
               (unsigned long long)cs.urgentEvictions, (unsigned long long)cs.givenUp);
