@@ -167,46 +167,74 @@ void Engine::drawArcs(size_t from, size_t to, GlRenderer& gl, FrameRecord& rec, 
   }
 }
 
-void Engine::markOccluded() {
-  for (uint32_t n : occludedList_) occluded_[n] = 0;
-  occludedList_.clear();
-  if (pyramid_.empty()) return;
+void Engine::collectFront(std::vector<uint32_t>& out) {
+  out.clear();
   const auto& nodes = scene_->nodes();
-  auto mark = [&](uint32_t n) {
-    if (occluded_[n] || nodes[n].sink) return;
-    if (pyramid_.occluded(nodes[n].center, nodes[n].radius)) {
-      occluded_[n] = 1;
-      occludedList_.push_back(n);
-    }
+  if (frontStamp_.size() != nodes.size()) frontStamp_.assign(nodes.size(), 0);
+  if (++frontVisit_ == 0) {
+    std::fill(frontStamp_.begin(), frontStamp_.end(), 0);
+    frontVisit_ = 1;
+  }
+  auto add = [&](uint32_t n) {
+    if (nodes[n].sink || frontStamp_[n] == frontVisit_) return;
+    frontStamp_[n] = frontVisit_;
+    out.push_back(n);
   };
-  for (uint32_t n : extract_->coarsenCandidates()) mark(n);
-  for (uint32_t a : extract_->cutArcs()) mark(scene_->arcs()[a].cullNode);
-  // The refinements, and two levels of what follows them (what prefetching and the requests
-  // ahead of a still image look at): spheres nest, so what an occluded node replaces is hidden
-  // too and needs no test.
+  for (uint32_t n : extract_->coarsenCandidates()) add(n);
+  for (uint32_t a : extract_->cutArcs()) add(scene_->arcs()[a].cullNode);
   const auto& arcs = scene_->arcs();
   const auto& inArcs = scene_->inArcs();
   for (uint32_t n : extract_->refineCandidates()) {
-    mark(n);
-    if (occluded_[n]) continue;
+    add(n);
     const SceneNode& s = nodes[n];
     for (uint32_t k = 0; k < s.inArcCount; ++k) {
       const uint32_t m = arcs[inArcs[s.firstInArc + k]].from;
       if (nodes[m].source) continue;
-      mark(m);
-      if (occluded_[m]) continue;
+      add(m);
       const SceneNode& sm = nodes[m];
       for (uint32_t j = 0; j < sm.inArcCount; ++j) {
         const uint32_t g = arcs[inArcs[sm.firstInArc + j]].from;
-        if (!nodes[g].source) mark(g);
+        if (!nodes[g].source) add(g);
       }
     }
   }
 }
 
+void Engine::testHidden(const std::vector<uint32_t>& list, std::vector<uint8_t>& hidden, GlRenderer* gl, FrameRecord& rec,
+                        bool presented) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const auto& nodes = scene_->nodes();
+  hidden.assign(list.size(), 0);
+  if (options_.occlusionTest == OcclusionTest::Queries && gl) {
+    querySpheres_.resize(list.size());
+    for (size_t i = 0; i < list.size(); ++i) {
+      const SceneNode& s = nodes[list[i]];
+      querySpheres_[i] = {{s.center[0], s.center[1], s.center[2]}, double(s.radius)};
+    }
+    gl->queryHidden(querySpheres_, hidden, presented);
+  } else if (!pyramid_.empty()) {
+    for (size_t i = 0; i < list.size(); ++i) hidden[i] = pyramid_.occluded(nodes[list[i]].center, nodes[list[i]].radius);
+  }
+  rec.occlusionTests += uint32_t(list.size());
+  rec.occlusionMs += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+
+void Engine::markOccluded(GlRenderer* gl, FrameRecord& rec, bool presented) {
+  for (uint32_t n : occludedList_) occluded_[n] = 0;
+  occludedList_.clear();
+  // Spheres nest, so what an occluded node replaces is hidden too; the set is tested whole (the
+  // queries are issued together and their results read once).
+  collectFront(testNodes_);
+  testHidden(testNodes_, hiddenScratch_, gl, rec, presented);
+  for (size_t i = 0; i < testNodes_.size(); ++i)
+    if (hiddenScratch_[i]) {
+      occluded_[testNodes_[i]] = 1;
+      occludedList_.push_back(testNodes_[i]);
+    }
+}
+
 void Engine::drawWithOcclusion(const View& view, GlRenderer& gl, FrameRecord& rec) {
   const auto& arcs = scene_->arcs();
-  const auto& nodes = scene_->nodes();
   // Phase 1: what was not hidden last frame, front to back.
   std::vector<std::pair<double, uint32_t>> all;
   all.swap(drawOrder_);
@@ -216,16 +244,25 @@ void Engine::drawWithOcclusion(const View& view, GlRenderer& gl, FrameRecord& re
   // This frame's depth so far: phase 2 draws what it does not hide (so nothing visible is ever
   // skipped), and it marks the front hidden for the next update (the LOD lags one frame, as in
   // Derzapf et al. 4.2).
-  gl.readDepth(depth_);
-  pyramid_.build(depth_, view.width, view.height, view);
+  // The drawing so far is finished first, so the time measured is the tests' own (the read-back
+  // or the queries' results wait for the rasterizer either way).
+  gl.finish();
+  if (options_.occlusionTest == OcclusionTest::Pyramid) {
+    const auto t0 = std::chrono::steady_clock::now();
+    gl.readDepth(depth_);
+    pyramid_.build(depth_, view.width, view.height, view);
+    rec.occlusionMs += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  }
+  std::vector<uint32_t> deferredNodes;
+  for (const auto& e : deferred_) deferredNodes.push_back(arcs[e.second].cullNode);
+  testHidden(deferredNodes, hiddenScratch_, &gl, rec, false);
   drawOrder_.clear();
-  for (const auto& e : deferred_) {
-    const SceneNode& s = nodes[arcs[e.second].cullNode];
-    if (pyramid_.occluded(s.center, s.radius)) ++rec.occludedArcs;
-    else drawOrder_.push_back(e);
+  for (size_t i = 0; i < deferred_.size(); ++i) {
+    if (hiddenScratch_[i]) ++rec.occludedArcs;
+    else drawOrder_.push_back(deferred_[i]);
   }
   drawArcs(0, drawOrder_.size(), gl, rec, view);
-  markOccluded();
+  markOccluded(&gl, rec);
   // drawOrder_ back to every visible arc (the still path reuses it).
   drawOrder_.swap(all);
 }
@@ -256,21 +293,21 @@ FrameRecord Engine::frame(const CameraPose& pose, const CameraPose& prev, GlRend
     static_cast<FrameStats&>(rec) = extract_->update(frame_, view, ahead);
     gl.beginFrame(view, settings);
     orderVisibleArcs(view);
-    // The depth read-back costs several ms on llvmpipe (a full-frame sync and copy; 27 vs 6 ms a
-    // frame at 1280x720 on a busy machine): it runs on every k-th frame, k keeping its measured
-    // cost near 5% of the budget; the other frames draw every visible arc and keep the last flags.
+    // The occlusion tests cost several ms on llvmpipe (docs/mtrender.md): they run on every k-th
+    // frame, k keeping their measured cost near 5% of the budget; the other frames draw every
+    // visible arc and keep the last flags.
     if (occlusionOn() && frame_ >= nextOcclusionFrame_) {
-      const auto o0 = std::chrono::steady_clock::now();
       drawWithOcclusion(view, gl, rec);
-      const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - o0).count();
+      const double ms = rec.occlusionMs;
       occlusionMs_ = occlusionMs_ == 0 ? ms : 0.8 * occlusionMs_ + 0.2 * ms;
       const double share = 0.05 * options_.extract.budgetMs;
       nextOcclusionFrame_ = frame_ + std::clamp<uint64_t>(uint64_t(occlusionMs_ / share) + 1, 1, 16);
     } else {
       drawArcs(0, drawOrder_.size(), gl, rec, view);
       // The cut's new front is marked against the last depth read (its own view: a few frames old
-      // while moving, exact while still), so no frame refines and loads blindly.
-      if (occlusionOn()) markOccluded();
+      // while moving, exact while still), so no frame refines and loads blindly. (Queries have no
+      // depth of their own to keep: the flags of their last frame stay.)
+      if (occlusionOn() && options_.occlusionTest == OcclusionTest::Pyramid) markOccluded(nullptr, rec);
     }
     lastScreenError_ = rec.maxScreenError;
   } else {
@@ -318,9 +355,13 @@ FrameRecord Engine::frame(const CameraPose& pose, const CameraPose& prev, GlRend
         gl.presentAccumulation();
         if (occlusionOn()) {
           // The finished image's depth marks the front hidden for the next image's cut (same view).
-          gl.readDepth(depth_, true);
-          pyramid_.build(depth_, view.width, view.height, view);
-          markOccluded();
+          if (options_.occlusionTest == OcclusionTest::Pyramid) {
+            const auto o0 = std::chrono::steady_clock::now();
+            gl.readDepth(depth_, true);
+            pyramid_.build(depth_, view.width, view.height, view);
+            rec.occlusionMs += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - o0).count();
+          }
+          markOccluded(&gl, rec, true);
         }
         still_.presentedError = still_.imageError;
         still_.presentedIsCut = true;

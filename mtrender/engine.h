@@ -34,6 +34,11 @@
 
 namespace mt::render {
 
+// How occlusion culling finds what is hidden (Derzapf et al. 4.2): a max-depth pyramid of the
+// frame's depth read back and tested on the CPU, or hardware occlusion queries of the spheres'
+// boxes. docs/mtrender.md has the measurement that chose the default.
+enum class OcclusionTest { Pyramid, Queries };
+
 struct EngineOptions {
   std::vector<std::string> files;
   uint64_t cacheBytes = 256ull << 20;  // RAM patch cache cap
@@ -45,12 +50,15 @@ struct EngineOptions {
   // Progressive refinement of a still view (above): a still image may take up to this many
   // frames; 1 turns it off (every frame draws the whole cut).
   uint32_t stillFrames = 16;
+  OcclusionTest occlusionTest = OcclusionTest::Pyramid;
 };
 
 struct FrameRecord : FrameStats {
   double frameMs = 0;
   uint32_t occludedArcs = 0;  // cut arcs in the frustum not drawn: hidden in this frame's depth
   uint32_t conedPatches = 0;  // finest patches not drawn: back-facing by their own normal cones
+  double occlusionMs = 0;     // occlusion tests: depth read-back + pyramid + tests, or the queries
+  uint32_t occlusionTests = 0;  // spheres tested for occlusion
   uint32_t loads = 0;        // patches loaded (server) or decoded in the frame (baseline)
   uint64_t loadedTriangles = 0;  // their triangles (server loads only)
   uint64_t cacheBytes = 0;   // RAM cache in use (place holders holding a patch)
@@ -109,8 +117,15 @@ class Engine {
   // not hidden last frame, reads the depth back, draws those of the rest that this frame's depth
   // does not hide, and marks the front nodes the depth hides for the next cut update.
   void drawWithOcclusion(const View& view, GlRenderer& gl, FrameRecord& rec);
-  // Marks the front of the cut (and the cut arcs' nodes) hidden in pyramid_.
-  void markOccluded();
+  // Marks the front of the cut (and the cut arcs' nodes) hidden: against pyramid_, or by queries
+  // against the depth the output holds (of the presented image when `presented`).
+  void markOccluded(GlRenderer* gl, FrameRecord& rec, bool presented = false);
+  // The nodes markOccluded tests, each once: the coarsenings, the cut arcs' nodes, the refinements
+  // and two levels past them (what prefetching and the requests ahead of a still image look at).
+  void collectFront(std::vector<uint32_t>& out);
+  // Which of `nodes` are hidden (by the frame's method); adds the time and tests to rec.
+  void testHidden(const std::vector<uint32_t>& nodes, std::vector<uint8_t>& hidden, GlRenderer* gl, FrameRecord& rec,
+                  bool presented);
   bool occlusionOn() const { return options_.extract.cull && options_.extract.occlusion; }
   DepthPyramid pyramid_;
   uint64_t nextOcclusionFrame_ = 0;
@@ -119,6 +134,10 @@ class Engine {
   std::vector<uint8_t> occluded_;       // per node, for ExtractRender::setOccluded
   std::vector<uint32_t> occludedList_;  // the nodes set in occluded_
   std::vector<std::pair<double, uint32_t>> deferred_;
+  std::vector<uint32_t> frontStamp_, testNodes_;
+  uint32_t frontVisit_ = 0;
+  std::vector<uint8_t> hiddenScratch_;
+  std::vector<GlRenderer::QuerySphere> querySpheres_;
   // Progressive refinement of a still view.
   struct Still {
     bool active = false;       // the camera has stopped; the screen shows `presented`

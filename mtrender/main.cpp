@@ -50,17 +50,19 @@ void writeCsv(const std::string& path, const std::vector<FrameRecord>& frames) {
     out << "frame,frame_ms,extract_ms,triangles,patches,loads,misses,cache_bytes,max_screen_error,"
            "drawn_triangles,drawn_patches,budget_triangles,gpu_bytes,lod_scale,moving,requests,prefetches,"
            "refinements,coarsenings,model_fixed_ms,model_ms_per_mtri,accumulating,image_frames,"
-           "occluded_arcs,occluded_nodes,coned_patches,nodes_keyed,interrupted,loaded_triangles,new_misses\n";
+           "occluded_arcs,occluded_nodes,coned_patches,nodes_keyed,interrupted,loaded_triangles,new_misses,"
+           "occlusion_ms,occlusion_tests\n";
     char buf[512];
     for (size_t i = 0; i < frames.size(); ++i) {
       const FrameRecord& f = frames[i];
-      std::snprintf(buf, sizeof buf, "%zu,%.3f,%.4f,%llu,%u,%u,%u,%llu,%.4f,%llu,%u,%llu,%llu,%.3f,%d,%u,%u,%u,%u,%.3f,%.1f,%d,%u,%u,%u,%u,%u,%d,%llu,%u\n", i,
+      std::snprintf(buf, sizeof buf, "%zu,%.3f,%.4f,%llu,%u,%u,%u,%llu,%.4f,%llu,%u,%llu,%llu,%.3f,%d,%u,%u,%u,%u,%.3f,%.1f,%d,%u,%u,%u,%u,%u,%d,%llu,%u,%.3f,%u\n", i,
                     f.frameMs, f.extractMs, (unsigned long long)f.triangles, f.patches, f.loads, f.misses,
                     (unsigned long long)f.cacheBytes, f.maxScreenError, (unsigned long long)f.drawnTriangles,
                     f.drawnPatches, (unsigned long long)f.budgetTriangles, (unsigned long long)f.gpuBytes, f.lodScale,
                     f.moving ? 1 : 0, f.requests, f.prefetches, f.refinements, f.coarsenings, f.modelA, f.modelB,
                     f.accumulating ? 1 : 0, f.imageFrames, f.occludedArcs, f.occludedNodes, f.conedPatches, f.nodesKeyed,
-                    f.interrupted ? 1 : 0, (unsigned long long)f.loadedTriangles, f.newMisses);
+                    f.interrupted ? 1 : 0, (unsigned long long)f.loadedTriangles, f.newMisses,
+                    f.occlusionMs, f.occlusionTests);
       out << buf;
     }
     if (!out) mt::fail(path, "write failed");
@@ -142,6 +144,7 @@ struct CliOptions {
   std::vector<std::string> files;
   bool headless = false, baseline = false, noPrefetch = false, noCull = false, quiet = false, wireframe = false;
   bool noOcclusion = false;
+  std::string occlusionTest = "pyramid";
   bool cold = false;
   std::string cameraPath, statsPath, screenshotDir, plotDir, cacheText = "256M", gpuCacheText, colorMode = "shaded";
   std::string screenshotPath, recordPath = "mtrender-path.txt";
@@ -206,6 +209,12 @@ void addRenderOptions(CLI::App& app, CliOptions& o) {
   app.add_flag("--no-occlusion", o.noOcclusion,
                "no occlusion culling (by default patches hidden behind nearer geometry in the frame's depth are "
                "neither refined, loaded nor drawn)");
+  app.add_option("--occlusion-test", o.occlusionTest,
+                 "how occlusion culling finds what is hidden: pyramid (the frame's depth read back into a max-depth "
+                 "pyramid, spheres tested on the CPU) or queries (GL occlusion queries of the spheres' boxes); "
+                 "docs/mtrender.md compares them")
+      ->check(CLI::IsMember({"pyramid", "queries"}))
+      ->capture_default_str();
 }
 
 // Drawing, pacing, test hooks and the viewer's options.
@@ -275,6 +284,7 @@ EngineOptions engineOptions(const CliOptions& o) {
   eo.extract.prefetch = !o.noPrefetch && !o.baseline;
   eo.extract.cull = !o.noCull;
   eo.extract.occlusion = !o.noOcclusion;
+  eo.occlusionTest = o.occlusionTest == "queries" ? OcclusionTest::Queries : OcclusionTest::Pyramid;
   return eo;
 }
 
