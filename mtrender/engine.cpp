@@ -176,12 +176,11 @@ void Engine::collectFront(std::vector<uint32_t>& out) {
     frontVisit_ = 1;
   }
   auto add = [&](uint32_t n) {
-    if (nodes[n].sink || frontStamp_[n] == frontVisit_) return;
+    if (nodes[n].sink || nodes[n].source || frontStamp_[n] == frontVisit_) return;
     frontStamp_[n] = frontVisit_;
     out.push_back(n);
   };
   for (uint32_t n : extract_->coarsenCandidates()) add(n);
-  for (uint32_t a : extract_->cutArcs()) add(scene_->arcs()[a].cullNode);
   const auto& arcs = scene_->arcs();
   const auto& inArcs = scene_->inArcs();
   for (uint32_t n : extract_->refineCandidates()) {
@@ -192,60 +191,116 @@ void Engine::collectFront(std::vector<uint32_t>& out) {
       if (nodes[m].source) continue;
       add(m);
       const SceneNode& sm = nodes[m];
-      for (uint32_t j = 0; j < sm.inArcCount; ++j) {
-        const uint32_t g = arcs[inArcs[sm.firstInArc + j]].from;
-        if (!nodes[g].source) add(g);
-      }
+      for (uint32_t j = 0; j < sm.inArcCount; ++j) add(arcs[inArcs[sm.firstInArc + j]].from);
     }
   }
 }
 
-void Engine::testHidden(const std::vector<uint32_t>& list, std::vector<uint8_t>& hidden, GlRenderer* gl, FrameRecord& rec,
-                        bool presented) {
-  const auto t0 = std::chrono::steady_clock::now();
-  const auto& nodes = scene_->nodes();
-  hidden.assign(list.size(), 0);
-  if (options_.occlusionTest == OcclusionTest::Queries && gl) {
-    querySpheres_.resize(list.size());
-    for (size_t i = 0; i < list.size(); ++i) {
-      const SceneNode& s = nodes[list[i]];
-      querySpheres_[i] = {{s.center[0], s.center[1], s.center[2]}, double(s.radius)};
-    }
-    gl->queryHidden(querySpheres_, hidden, presented);
-  } else if (!pyramid_.empty()) {
-    for (size_t i = 0; i < list.size(); ++i) hidden[i] = pyramid_.occluded(nodes[list[i]].center, nodes[list[i]].radius);
+bool Engine::patchSphere(uint32_t id, double grow, std::vector<GlRenderer::QuerySphere>& out) const {
+  if (!cache_) return false;
+  const PatchView v = cache_->view(id);
+  if (!v.vertexCount || v.bound.radius <= 0) return false;
+  const double* o = scene_->patchOrigin(id);
+  out.push_back({{o[0] + v.bound.center[0], o[1] + v.bound.center[1], o[2] + v.bound.center[2]}, double(v.bound.radius) + grow});
+  return true;
+}
+
+void Engine::moveSpheres(uint32_t n, std::vector<GlRenderer::QuerySphere>& out) const {
+  const SceneNode& s = scene_->nodes()[n];
+  const auto& arcs = scene_->arcs();
+  const auto& inArcs = scene_->inArcs();
+  const auto& inS = extract_->inSet();
+  const size_t start = out.size();
+  bool tight = false;
+  // A refinement of n replaces the patches of its out-arcs (its fragment, on screen); a coarsening
+  // replaces those of its in-arcs. Either way the other side lies within n's error of them.
+  auto patchesOf = [&](const SceneArc& a) {
+    for (uint32_t k = 0; k < a.patchCount; ++k)
+      if (!patchSphere(scene_->arcPatches()[a.firstPatch + k], double(s.error), out)) return false;
+    return true;
+  };
+  if (inS[n]) {
+    tight = s.arcCount > 0;
+    for (uint32_t k = 0; k < s.arcCount && tight; ++k) tight = patchesOf(arcs[s.firstArc + k]);
+  } else {
+    tight = s.inArcCount > 0;
+    for (uint32_t k = 0; k < s.inArcCount && tight; ++k) tight = patchesOf(arcs[inArcs[s.firstInArc + k]]);
   }
-  rec.occlusionTests += uint32_t(list.size());
+  if (tight) return;
+  out.resize(start);
+  out.push_back({{s.center[0], s.center[1], s.center[2]}, double(s.radius)});
+}
+
+void Engine::testHidden(const std::vector<GlRenderer::QuerySphere>& spheres, std::vector<uint8_t>& hidden, GlRenderer* gl,
+                        FrameRecord& rec, bool presented) {
+  const auto t0 = std::chrono::steady_clock::now();
+  hidden.assign(spheres.size(), 0);
+  if (options_.occlusionTest == OcclusionTest::Queries && gl) {
+    gl->queryHidden(spheres, hidden, presented);
+  } else if (!pyramid_.empty()) {
+    for (size_t i = 0; i < spheres.size(); ++i) hidden[i] = pyramid_.occluded(spheres[i].center, spheres[i].radius);
+  }
+  rec.occlusionTests += uint32_t(spheres.size());
   rec.occlusionMs += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
 }
 
 void Engine::markOccluded(GlRenderer* gl, FrameRecord& rec, bool presented) {
   for (uint32_t n : occludedList_) occluded_[n] = 0;
   occludedList_.clear();
-  // Spheres nest, so what an occluded node replaces is hidden too; the set is tested whole (the
-  // queries are issued together and their results read once).
+  if (arcHidden_.size() != scene_->arcs().size()) arcHidden_.assign(scene_->arcs().size(), 0);
+  for (uint32_t a : hiddenArcs_) arcHidden_[a] = 0;
+  hiddenArcs_.clear();
+  // One batch (the queries are issued together and their results read once): each front node's
+  // move spheres, then each cut arc's patches; a node or an arc is hidden when all of its are.
   collectFront(testNodes_);
-  testHidden(testNodes_, hiddenScratch_, gl, rec, presented);
-  for (size_t i = 0; i < testNodes_.size(); ++i)
-    if (hiddenScratch_[i]) {
+  spheres_.clear();
+  sphereOwner_.clear();
+  for (uint32_t i = 0; i < testNodes_.size(); ++i) {
+    moveSpheres(testNodes_[i], spheres_);
+    sphereOwner_.resize(spheres_.size(), i);
+  }
+  const auto& cut = extract_->cutArcs();
+  const uint32_t arcBase = uint32_t(testNodes_.size());
+  for (uint32_t i = 0; i < cut.size(); ++i) {
+    const SceneArc& a = scene_->arcs()[cut[i]];
+    const size_t start = spheres_.size();
+    bool tight = true;
+    for (uint32_t k = 0; k < a.patchCount && tight; ++k) tight = patchSphere(scene_->arcPatches()[a.firstPatch + k], 0, spheres_);
+    if (!tight) {
+      spheres_.resize(start);
+      const SceneNode& s = scene_->nodes()[a.cullNode];
+      spheres_.push_back({{s.center[0], s.center[1], s.center[2]}, double(s.radius)});
+    }
+    sphereOwner_.resize(spheres_.size(), arcBase + i);
+  }
+  testHidden(spheres_, hiddenScratch_, gl, rec, presented);
+  std::vector<uint8_t> all(testNodes_.size() + cut.size(), 1);
+  for (size_t i = 0; i < spheres_.size(); ++i) all[sphereOwner_[i]] &= hiddenScratch_[i];
+  for (uint32_t i = 0; i < testNodes_.size(); ++i)
+    if (all[i]) {
       occluded_[testNodes_[i]] = 1;
       occludedList_.push_back(testNodes_[i]);
+    }
+  for (uint32_t i = 0; i < cut.size(); ++i)
+    if (all[arcBase + i]) {
+      arcHidden_[cut[i]] = 1;
+      hiddenArcs_.push_back(cut[i]);
     }
 }
 
 void Engine::drawWithOcclusion(const View& view, GlRenderer& gl, FrameRecord& rec) {
   const auto& arcs = scene_->arcs();
-  // Phase 1: what was not hidden last frame, front to back.
+  if (arcHidden_.size() != arcs.size()) arcHidden_.assign(arcs.size(), 0);
+  // Phase 1: what was not hidden at the last test, front to back.
   std::vector<std::pair<double, uint32_t>> all;
   all.swap(drawOrder_);
   deferred_.clear();
-  for (const auto& e : all) (occluded_[arcs[e.second].cullNode] ? deferred_ : drawOrder_).push_back(e);
+  for (const auto& e : all) (arcHidden_[e.second] ? deferred_ : drawOrder_).push_back(e);
   drawArcs(0, drawOrder_.size(), gl, rec, view);
   // This frame's depth so far: phase 2 draws what it does not hide (so nothing visible is ever
   // skipped), and it marks the front hidden for the next update (the LOD lags one frame, as in
-  // Derzapf et al. 4.2).
-  // The drawing so far is finished first, so the time measured is the tests' own (the read-back
-  // or the queries' results wait for the rasterizer either way).
+  // Derzapf et al. 4.2). The drawing so far is finished first, so the time measured is the tests'
+  // own (the read-back or the queries' results wait for the rasterizer either way).
   gl.finish();
   if (options_.occlusionTest == OcclusionTest::Pyramid) {
     const auto t0 = std::chrono::steady_clock::now();
@@ -253,12 +308,28 @@ void Engine::drawWithOcclusion(const View& view, GlRenderer& gl, FrameRecord& re
     pyramid_.build(depth_, view.width, view.height, view);
     rec.occlusionMs += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   }
-  std::vector<uint32_t> deferredNodes;
-  for (const auto& e : deferred_) deferredNodes.push_back(arcs[e.second].cullNode);
-  testHidden(deferredNodes, hiddenScratch_, &gl, rec, false);
+  // Each deferred arc is tested by its patches' own spheres (its node's sphere nests every finer
+  // one and hides far less often).
+  spheres_.clear();
+  sphereOwner_.clear();
+  for (uint32_t i = 0; i < deferred_.size(); ++i) {
+    const SceneArc& a = arcs[deferred_[i].second];
+    const size_t start = spheres_.size();
+    bool tight = true;
+    for (uint32_t k = 0; k < a.patchCount && tight; ++k) tight = patchSphere(scene_->arcPatches()[a.firstPatch + k], 0, spheres_);
+    if (!tight) {
+      spheres_.resize(start);
+      const SceneNode& s = scene_->nodes()[a.cullNode];
+      spheres_.push_back({{s.center[0], s.center[1], s.center[2]}, double(s.radius)});
+    }
+    sphereOwner_.resize(spheres_.size(), i);
+  }
+  testHidden(spheres_, hiddenScratch_, &gl, rec, false);
+  std::vector<uint8_t> hiddenArc(deferred_.size(), 1);
+  for (size_t i = 0; i < spheres_.size(); ++i) hiddenArc[sphereOwner_[i]] &= hiddenScratch_[i];
   drawOrder_.clear();
   for (size_t i = 0; i < deferred_.size(); ++i) {
-    if (hiddenScratch_[i]) ++rec.occludedArcs;
+    if (hiddenArc[i]) ++rec.occludedArcs;
     else drawOrder_.push_back(deferred_[i]);
   }
   drawArcs(0, drawOrder_.size(), gl, rec, view);

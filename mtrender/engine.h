@@ -117,15 +117,24 @@ class Engine {
   // not hidden last frame, reads the depth back, draws those of the rest that this frame's depth
   // does not hide, and marks the front nodes the depth hides for the next cut update.
   void drawWithOcclusion(const View& view, GlRenderer& gl, FrameRecord& rec);
-  // Marks the front of the cut (and the cut arcs' nodes) hidden: against pyramid_, or by queries
-  // against the depth the output holds (of the presented image when `presented`).
+  // Marks the front of the cut hidden (occluded_, for the cut update) and the cut arcs whose
+  // patches are all hidden (arcHidden_, deferred by the next test's drawing): against pyramid_, or
+  // by queries against the depth the output holds (of the presented image when `presented`).
   void markOccluded(GlRenderer* gl, FrameRecord& rec, bool presented = false);
-  // The nodes markOccluded tests, each once: the coarsenings, the cut arcs' nodes, the refinements
-  // and two levels past them (what prefetching and the requests ahead of a still image look at).
+  // The nodes markOccluded tests, each once: the coarsenings, the refinements and two levels past
+  // them (what prefetching and the requests ahead of a still image look at).
   void collectFront(std::vector<uint32_t>& out);
-  // Which of `nodes` are hidden (by the frame's method); adds the time and tests to rec.
-  void testHidden(const std::vector<uint32_t>& nodes, std::vector<uint8_t>& hidden, GlRenderer* gl, FrameRecord& rec,
-                  bool presented);
+  // The spheres that bound what a move on node n would change on screen, appended to `out`:
+  // for a refinement, the patches of its fragment (in the cut), each patch's own sphere grown by
+  // the node's error (the finer patches that replace them lie within it); for a coarsening, the
+  // patches it would replace, grown the same way; otherwise (or when a patch's bound is unknown)
+  // the node's sphere from the file, which nests every finer sphere and is far looser.
+  void moveSpheres(uint32_t n, std::vector<GlRenderer::QuerySphere>& out) const;
+  // Appends patch id's own sphere (world space) grown by `grow`; false when its bound is unknown.
+  bool patchSphere(uint32_t id, double grow, std::vector<GlRenderer::QuerySphere>& out) const;
+  // Which of `spheres` are hidden (by the frame's method); adds the time and tests to rec.
+  void testHidden(const std::vector<GlRenderer::QuerySphere>& spheres, std::vector<uint8_t>& hidden, GlRenderer* gl,
+                  FrameRecord& rec, bool presented);
   bool occlusionOn() const { return options_.extract.cull && options_.extract.occlusion; }
   DepthPyramid pyramid_;
   uint64_t nextOcclusionFrame_ = 0;
@@ -134,10 +143,11 @@ class Engine {
   std::vector<uint8_t> occluded_;       // per node, for ExtractRender::setOccluded
   std::vector<uint32_t> occludedList_;  // the nodes set in occluded_
   std::vector<std::pair<double, uint32_t>> deferred_;
-  std::vector<uint32_t> frontStamp_, testNodes_;
+  std::vector<uint32_t> frontStamp_, testNodes_, sphereOwner_;
   uint32_t frontVisit_ = 0;
-  std::vector<uint8_t> hiddenScratch_;
-  std::vector<GlRenderer::QuerySphere> querySpheres_;
+  std::vector<uint8_t> hiddenScratch_, arcHidden_;
+  std::vector<uint32_t> hiddenArcs_;  // the arcs set in arcHidden_
+  std::vector<GlRenderer::QuerySphere> spheres_;
   // Progressive refinement of a still view.
   struct Still {
     bool active = false;       // the camera has stopped; the screen shows `presented`
