@@ -302,6 +302,7 @@ void Engine::drawWithOcclusion(const View& view, GlRenderer& gl, FrameRecord& re
   // Derzapf et al. 4.2). The drawing so far is finished first, so the time measured is the tests'
   // own (the read-back or the queries' results wait for the rasterizer either way).
   gl.finish();
+  rec.occlusionFrame = true;
   if (options_.occlusionTest == OcclusionTest::Pyramid) {
     const auto t0 = std::chrono::steady_clock::now();
     gl.readDepth(depth_);
@@ -426,6 +427,7 @@ FrameRecord Engine::frame(const CameraPose& pose, const CameraPose& prev, GlRend
         gl.presentAccumulation();
         if (occlusionOn()) {
           // The finished image's depth marks the front hidden for the next image's cut (same view).
+          rec.occlusionFrame = true;
           if (options_.occlusionTest == OcclusionTest::Pyramid) {
             const auto o0 = std::chrono::steady_clock::now();
             gl.readDepth(depth_, true);

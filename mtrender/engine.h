@@ -59,6 +59,7 @@ struct FrameRecord : FrameStats {
   uint32_t conedPatches = 0;  // finest patches not drawn: back-facing by their own normal cones
   double occlusionMs = 0;     // occlusion tests: depth read-back + pyramid + tests, or the queries
   uint32_t occlusionTests = 0;  // spheres tested for occlusion
+  bool occlusionFrame = false;  // the frame tested its own depth (read back, or queried) and culled by it
   uint32_t loads = 0;        // patches loaded (server) or decoded in the frame (baseline)
   uint64_t loadedTriangles = 0;  // their triangles (server loads only)
   uint64_t cacheBytes = 0;   // RAM cache in use (place holders holding a patch)

@@ -51,18 +51,18 @@ void writeCsv(const std::string& path, const std::vector<FrameRecord>& frames) {
            "drawn_triangles,drawn_patches,budget_triangles,gpu_bytes,lod_scale,moving,requests,prefetches,"
            "refinements,coarsenings,model_fixed_ms,model_ms_per_mtri,accumulating,image_frames,"
            "occluded_arcs,occluded_nodes,coned_patches,nodes_keyed,interrupted,loaded_triangles,new_misses,"
-           "occlusion_ms,occlusion_tests\n";
+           "occlusion_ms,occlusion_tests,occlusion_frame\n";
     char buf[512];
     for (size_t i = 0; i < frames.size(); ++i) {
       const FrameRecord& f = frames[i];
-      std::snprintf(buf, sizeof buf, "%zu,%.3f,%.4f,%llu,%u,%u,%u,%llu,%.4f,%llu,%u,%llu,%llu,%.3f,%d,%u,%u,%u,%u,%.3f,%.1f,%d,%u,%u,%u,%u,%u,%d,%llu,%u,%.3f,%u\n", i,
+      std::snprintf(buf, sizeof buf, "%zu,%.3f,%.4f,%llu,%u,%u,%u,%llu,%.4f,%llu,%u,%llu,%llu,%.3f,%d,%u,%u,%u,%u,%.3f,%.1f,%d,%u,%u,%u,%u,%u,%d,%llu,%u,%.3f,%u,%d\n", i,
                     f.frameMs, f.extractMs, (unsigned long long)f.triangles, f.patches, f.loads, f.misses,
                     (unsigned long long)f.cacheBytes, f.maxScreenError, (unsigned long long)f.drawnTriangles,
                     f.drawnPatches, (unsigned long long)f.budgetTriangles, (unsigned long long)f.gpuBytes, f.lodScale,
                     f.moving ? 1 : 0, f.requests, f.prefetches, f.refinements, f.coarsenings, f.modelA, f.modelB,
                     f.accumulating ? 1 : 0, f.imageFrames, f.occludedArcs, f.occludedNodes, f.conedPatches, f.nodesKeyed,
                     f.interrupted ? 1 : 0, (unsigned long long)f.loadedTriangles, f.newMisses,
-                    f.occlusionMs, f.occlusionTests);
+                    f.occlusionMs, f.occlusionTests, f.occlusionFrame ? 1 : 0);
       out << buf;
     }
     if (!out) mt::fail(path, "write failed");
