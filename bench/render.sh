@@ -168,6 +168,10 @@ for o in pyramid queries off; do
     "$(tail -20 "$f" | awk -F, '{ s += $10 } END { printf "%.0f", s / NR }')" "$(val occ-$o loaded_triangles_total)" \
     "$(tail -n +2 "$f" | awk -F, '$33 == 1 { n++; ms += $31; t += $32 } END { if (n) printf "%12d %16.2f %14.0f", n, ms / n, t / n; else printf "%12d %16s %14s", 0, "-", "-" }')"
 done
+last=$(printf "frame_%05d.png" $((OCC_FRAMES - 1)))
+for o in pyramid queries; do
+  echo "image, $o vs off: $(python3 "$HERE/png_diff.py" "$OUT/occ-$o/$last" "$OUT/occ-off/$last")"
+done
 echo "(the last frames' images: $OUT/occ-{pyramid,queries,off}/; drawn_min_20 is a frame that tested its own depth)"
 
 # 3. Raw llvmpipe throughput on this machine: the path's final (held) view, a fixed cut of N

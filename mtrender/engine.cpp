@@ -362,13 +362,16 @@ FrameRecord Engine::frame(const CameraPose& pose, const CameraPose& prev, GlRend
     // Moving (or refinement off): the whole cut, within one frame's budget, straight to the output.
     still_ = Still();
     extract_->setBudgetScale(1);
-    static_cast<FrameStats&>(rec) = extract_->update(frame_, view, ahead);
-    gl.beginFrame(view, settings);
-    orderVisibleArcs(view);
     // The occlusion tests cost several ms on llvmpipe (docs/mtrender.md): they run on every k-th
     // frame, k keeping their measured cost near 5% of the budget; the other frames draw every
-    // visible arc and keep the last flags.
-    if (occlusionOn() && frame_ >= nextOcclusionFrame_) {
+    // visible arc and keep the last flags. A frame that runs them draws that much less.
+    const bool testFrame = occlusionOn() && frame_ >= nextOcclusionFrame_;
+    extract_->setFrameOverheadMs(testFrame ? occlusionMs_ : 0);
+    static_cast<FrameStats&>(rec) = extract_->update(frame_, view, ahead);
+    extract_->setFrameOverheadMs(0);
+    gl.beginFrame(view, settings);
+    orderVisibleArcs(view);
+    if (testFrame) {
       drawWithOcclusion(view, gl, rec);
       const double ms = rec.occlusionMs;
       occlusionMs_ = occlusionMs_ == 0 ? ms : 0.8 * occlusionMs_ + 0.2 * ms;
@@ -458,8 +461,9 @@ FrameRecord Engine::frame(const CameraPose& pose, const CameraPose& prev, GlRend
     if (left > 1) server_->waitIdle(left);
   }
   rec.frameMs = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-  // The first frame pays for shader compilation: not a sample of the draw cost.
-  if (frame_ > 1) extract_->frameDone(rec.drawnTriangles, rec.frameMs);
+  // The first frame pays for shader compilation: not a sample of the draw cost. Nor are the
+  // occlusion tests (the time model is of drawing; a test frame's budget gives up their time).
+  if (frame_ > 1) extract_->frameDone(rec.drawnTriangles, std::max(0.0, rec.frameMs - rec.occlusionMs));
   if (server_) {
     uint64_t l = server_->loads();
     rec.loads = uint32_t(l - lastLoads_);

@@ -90,6 +90,7 @@ std::vector<LoadRequest> orderRequests(std::vector<RequestCandidate> candidates,
 
 struct FrameStats {
   double extractMs = 0;
+  double extractCpuMs = 0;       // the update's thread CPU time (its own cost, without waits for a core)
   uint64_t triangles = 0;        // in the cut
   uint32_t patches = 0;          // in the cut
   uint32_t drawnPatches = 0;     // after culling
@@ -143,6 +144,9 @@ class ExtractRender {
   // The cut may hold `scale` frames' worth of the render budget (progressive refinement of a still
   // view draws it over that many frames, engine.h); 1 = one frame's worth, the default.
   void setBudgetScale(double scale) { budgetScale_ = scale; }
+  // Milliseconds the next frame spends besides the update and the drawing (the occlusion tests of
+  // engine.h): its render budget gives up that many milliseconds' worth of triangles.
+  void setFrameOverheadMs(double ms) { frameOverheadMs_ = ms; }
   // The render budget of one frame (triangles) at the last update, before the scale above.
   double frameBudget() const { return frameBudget_; }
   uint32_t cutPatchCount() const { return cutPatchCount_; }
@@ -206,7 +210,7 @@ class ExtractRender {
   int64_t visibleDelta(uint32_t n, bool refine, const View& view) const;
   uint32_t cutPatchCount_ = 0;
   double lodScale_ = 1;
-  double budgetScale_ = 1, frameBudget_ = 0;
+  double budgetScale_ = 1, frameBudget_ = 0, frameOverheadMs_ = 0;
   bool frozen_ = false;
   bool lastMemoryFull_ = false;
   uint64_t frame_ = 0;
