@@ -265,6 +265,16 @@ export class ExtractRender {
       if (w === undefined || u > w) this.wanted.set(id, u);
     }
   }
+  /**
+   * A frame whose time says nothing about drawing (it drew nothing; the browser kept the image):
+   * it does not feed the model, and the last drawn frame's time no longer caps the budget (one slow
+   * frame before a run of such frames, e.g. the one that made the still image's target, would
+   * otherwise pin the budget at its floor for as long as the run lasts).
+   */
+  frameSkipped() {
+    this.lastDrawn = 0;
+    this.lastFrameMs = 0;
+  }
   frameDone(drawnTriangles, frameMs) {
     this.time.add(drawnTriangles, frameMs);
     this.frameMsAvg = this.frameMsAvg === 0 ? frameMs : 0.9 * this.frameMsAvg + 0.1 * frameMs;
@@ -360,6 +370,8 @@ export class ExtractRender {
     }
     this.submitRequests(frame, st);
     st.budgetTriangles = budget;
+    st.modelA = this.time.a;
+    st.modelB = this.time.b * 1e6;
     st.triangles = this.triangles;
     st.patches = this.cutPatchCount;
     st.lodScale = this.lodScale;
@@ -400,7 +412,9 @@ export class ExtractRender {
     p.pinLimit = this.cache ? this.options.memoryFraction * this.cache.capBytes : Number.POSITIVE_INFINITY;
     this.fillHeaps(p);
     if (!this.frozen) {
-      this.coarsenOverBudget(p);
+      // A still view only gets finer: its image is drawn over as many frames as it takes, each
+      // within one frame's budget, so its cut need not shrink when the budget does (extract.cpp).
+      if (this.budgetScale === 1) this.coarsenOverBudget(p);
       this.refineWithinBudget(p);
       this.coarsenFarBelow(p);
     }
