@@ -739,7 +739,11 @@ FrameStats ExtractRender::update(uint64_t frame, const View& view, const std::ve
     for (uint32_t n : refineSet_) st.occludedNodes += (*occluded_)[n];
 
   if (!frozen_) {
-    coarsenOverBudget(p);
+    // A still view's image is drawn over as many frames as it takes, each within one frame's
+    // budget (engine.h), so its cut need not shrink when the budget does: a still view only gets
+    // finer. (Under a fluctuating load the budget swung by 2-4x and the still image with it, coarser
+    // and finer again while nothing moved.)
+    if (budgetScale_ == 1) coarsenOverBudget(p);
     refineWithinBudget(p);
     coarsenFarBelow(p);
   }
