@@ -387,7 +387,10 @@ export class ExtractRender {
     };
   }
 
-  /** One frame's cut update for `view`; `predicted` is the view extrapolated 10 frames ahead. */
+  /**
+   * One frame's cut update for `view`; `predicted`: the views of the next frames, extrapolated (an
+   * array, or one view), whose frusta prefetching enlarges the current one to.
+   */
   update(frame, view, predicted) {
     const st = this.newStats();
     const t0 = now();
@@ -557,15 +560,42 @@ export class ExtractRender {
       this.want(this.collectOut(node, this.scratch), Urgency.Prefetch);
       ++k;
     }
-    if (!predicted) return;
-    const ahead = [];
+    // The frustum enlarged to contain the frusta of the next 10 frames (Derzapf et al. 4.3): the
+    // refinements the extrapolated views want (a node's error is its largest over them), the
+    // largest first, two levels deep (as if applied), within twice the render budget's triangles.
+    const ahead = !predicted ? [] : Array.isArray(predicted) ? predicted : [predicted];
+    if (!ahead.length || now() >= p.deadline + (p.deadline - p.t0)) return;
+    const errAhead = (n) => {
+      let e = 0;
+      for (const v of ahead) e = Math.max(e, this.screenError(n, v));
+      return e;
+    };
+    const heap = new Heap(true);
+    const depth = new Map();
     for (let n = 0; n < nodes.count; ++n)
       if (this.isRefineCandidate(n) && !this.badNode[n]) {
-        const e = this.screenError(n, predicted);
-        if (e > p.tau) ahead.push([e, n]);
+        const e = errAhead(n);
+        if (e > p.tau) heap.push(e, n), depth.set(n, 0);
       }
-    ahead.sort((a, b) => b[0] - a[0]);
-    for (let i = 0; i < ahead.length && i < 32; ++i) this.want(this.collectIn(ahead[i][1], this.scratch), Urgency.Prefetch);
+    const seen = new Uint8Array(nodes.count);
+    let triangles = 0;
+    while (!heap.empty()) {
+      const node = heap.topNode();
+      heap.pop();
+      if (seen[node]) continue;
+      seen[node] = 1;
+      triangles += nodes.inTriangles[node];
+      if (triangles > 2 * p.budget) break;
+      this.want(this.collectIn(node, this.scratch), Urgency.Prefetch);
+      const d = depth.get(node) || 0;
+      if (d >= 1) continue;
+      for (let k = 0; k < nodes.inArcCount[node]; ++k) {
+        const m = arcs.from[inArcs[nodes.firstInArc[node] + k]];
+        if (nodes.source[m] || this.badNode[m] || seen[m]) continue;
+        const e = errAhead(m);
+        if (e > p.tau) heap.push(e, m), depth.set(m, d + 1);
+      }
+    }
   }
 
   /** Nodes of the cut's set S (sorted): what the cut comparison prints. */

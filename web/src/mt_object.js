@@ -151,7 +151,10 @@ export class MTObject extends THREE.Group {
     const still = this.frame > 1 && ['eye', 'target', 'up'].every((k) => pose[k].every((x, i) => Math.abs(x - prev[k][i]) <= 1e-9 * this.mt.radius));
     this.stillCount = still ? this.stillCount + 1 : 0;
     const view = makeView(pose, width, height, this.mt.center, this.mt.radius);
-    const ahead = makeView(extrapolate(prev, pose, 10), width, height, this.mt.center, this.mt.radius);
+    // Prefetching's enlarged frustum (Derzapf et al. 4.3): the views 2, 4, ..., 10 frames ahead.
+    const ahead = [];
+    if (this.stillCount === 0 && this.frame > 1)
+      for (let k = 2; k <= 10; k += 2) ahead.push(makeView(extrapolate(prev, pose, k), width, height, this.mt.center, this.mt.radius));
     this.progressiveNow = this.progressive && this.stillCount >= 2 && this.stillFrames > 1;
     let st;
     if (!this.progressiveNow) {
