@@ -22,7 +22,7 @@
 # CACHES ("32M 64M 128M 256M"), OUT (a fresh directory under /tmp), BIN (build/bin),
 # THROUGHPUT (1: also section 3, raw draw throughput for RAW_TRIANGLES="60000 100000 200000 400000"),
 # OCC_FRAMES (200), OCC_TRIANGLES (4000000), OCC_WINDOW (0.15), OCC_ONLY (1: only the occlusion
-# section). Needs python3 (the wall).
+# section), OCCLUSION (0: not the occlusion section). Needs python3 (the wall).
 # Miss rate = patches wanted for a cut move but not resident / (those + patches drawn), per run.
 set -euo pipefail
 if [[ $# -lt 1 ]]; then
@@ -114,6 +114,7 @@ fi
 # bounds) just in front of the model's -y side, filling the view of a camera close to it; the
 # window shows OCC_WINDOW^2 of the image. A fixed budget (the culling is measured, not the time
 # model), one frame's cut each (--still-frames 1), frames 40 ms apart so the loads keep up.
+if [[ ${OCCLUSION:-1} == 1 ]]; then
 OCC_FRAMES=${OCC_FRAMES:-200}
 OCC_TRIANGLES=${OCC_TRIANGLES:-4000000}
 OCC_WINDOW=${OCC_WINDOW:-0.15}
@@ -173,6 +174,7 @@ for o in pyramid queries; do
   echo "image, $o vs off: $(python3 "$HERE/png_diff.py" "$OUT/occ-$o/$last" "$OUT/occ-off/$last")"
 done
 echo "(the last frames' images: $OUT/occ-{pyramid,queries,off}/; drawn_min_20 is a frame that tested its own depth)"
+fi
 
 # 3. Raw llvmpipe throughput on this machine: the path's final (held) view, a fixed cut of N
 #    triangles (--fixed-triangles, the time model off), 60 frames each; ms per frame and the
