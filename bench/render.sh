@@ -108,6 +108,7 @@ for n in main noprefetch; do
 done
 awk -v a="$(val main misses_total)" -v b="$(val noprefetch misses_total)" 'BEGIN { if (a > 0) printf "misses without / with prefetch: %.2fx\n", b / a }'
 echo "cut update within its deadline (heaps, prefetch, requests included): $(rest main extract_within_deadline_pct)"
+echo "its own CPU time within the deadline: $(val main extract_cpu_within_deadline_pct) %, max $(val main extract_cpu_ms_max) ms"
 printf "GPU peak vs cap            %s / %s\n" "$(val main gpu_peak_bytes)" "$(val main gpu_cap_bytes)"
 fi
 # Occlusion culling: a flat wall with a window (a second MT file, made here from the first file's

@@ -2,8 +2,9 @@
 // leaves a conforming cut and the next frame resumes), the load order (no region starves), prefetch
 // over the enlarged frustum (fewer misses), the global LOD scale (raised while the cache is full,
 // relaxed when it frees, no oscillation), the hard GPU cap, normal-cone culling (node cones, and the
-// finest patches' own cones), occlusion culling (a wall hides most of a model: fewer triangles
-// drawn and loaded, the same image), two different files sharing one cache and one budget,
+// finest patches' own cones), occlusion culling (a wall with a window hides most of a model: far
+// fewer triangles drawn and loaded, the same image, by the depth pyramid and by occlusion queries),
+// two different files sharing one cache and one budget,
 // --plot, and camera-relative drawing of a georeferenced model.
 //
 // Each policy has an internal switch (ExtractOptions::deadline, starvationOrder, lodScalePolicy,
