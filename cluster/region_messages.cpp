@@ -82,6 +82,7 @@ std::string encodeTask(uint64_t index, const RegionTask& t) {
   w.put(t.level);
   w.put(t.region);
   w.put<uint8_t>(t.root ? 1 : 0);
+  w.put(t.rootDeviationLimit);
   w.put(t.loadSeconds);
   const LoadedMesh& m = t.mesh;
   putVector(w, m.patches);
@@ -104,6 +105,7 @@ RegionTask decodeTask(const std::string& bytes, uint64_t& index) {
   t.level = r.get<uint32_t>();
   t.region = r.get<uint32_t>();
   t.root = r.get<uint8_t>() != 0;
+  t.rootDeviationLimit = r.get<double>();
   t.loadSeconds = r.get<double>();
   LoadedMesh& m = t.mesh;
   const size_t n = bytes.size();

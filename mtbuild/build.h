@@ -168,6 +168,9 @@ struct RegionTask {
   uint32_t level = 0;                 // the level being built (1 = first simplification)
   uint32_t region = 0;                // the V(level) cell
   bool root = false;                  // the last partition level: one region, everything
+  // Root levels only: the largest deviation a root simplification that had to fall back to a
+  // halving may add (twice the previous level's largest node error); 0: none. See processRegion.
+  double rootDeviationLimit = 0;
   LoadedMesh mesh;
   double loadSeconds = 0;             // measured by whoever loaded it
 };

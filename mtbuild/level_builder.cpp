@@ -367,6 +367,7 @@ RegionTask LevelBuilder::loadRegion(size_t i) const {
   task.level = s.builtLevels + 1;
   task.region = s.regionIds.at(i);
   task.root = s.root;
+  if (s.root && !s.report.levels.empty()) task.rootDeviationLimit = 2 * s.report.levels.back().maxError;
   std::vector<Patch> floor;
   for (PatchId id : s.floors[i]) floor.push_back(s.store->patch(id));
   task.mesh = s.store->assemble(floor);
@@ -460,7 +461,12 @@ void LevelBuilder::endLevel() {
   s.report.levels.push_back(s.lr);
   s.liveTriangles = s.outTriangles;
   ++s.builtLevels;
-  if (s.root || s.outTriangles <= s.ctx.rootTriangles || s.outTriangles * 10 > s.lr.trianglesIn * 9) s.finished = true;
+  // The root level simplifies the whole model at once; when it could only halve it
+  // (processRegion's settleRoot), another root level follows while the root is over twice its
+  // size and each level gains.
+  if ((s.root && s.outTriangles <= 2 * s.ctx.rootTriangles) || s.outTriangles <= s.ctx.rootTriangles ||
+      s.outTriangles * 10 > s.lr.trianglesIn * 9)
+    s.finished = true;
   // The level is durable: the checkpoint a resumed build restarts from.
   s.writeCheckpoint();
   if (s.taskTimes) std::fflush(s.taskTimes);

@@ -99,6 +99,34 @@ uint64_t resultBytes(const RegionResult& r) {
          m.origin.size() * 4 + m.triangleCell.size() * 8;
 }
 
+// The root region goes from a few tens of thousands of triangles to ctx.rootTriangles / 2 in one
+// step. On a scan whose welded input keeps non-manifold edges (which both simplifiers freeze),
+// that can break the builder's rules on every run (simplifyRegion then keeps the region whole:
+// a 53 M armadillo scan's root stayed at level 10's 51,858 triangles) or, past the first root
+// level, reach the count only by folding the model (deviations of a third of its size). So when
+// the direct step kept the region whole, or, on a further root level, went over the deviation
+// limit, the root is halved instead, and a halving over the limit keeps the region whole, which
+// ends the level loop (LevelBuilder::endLevel: another root level follows while one gains). The
+// first root level's direct step is never limited, so builds it served keep their bytes.
+static SimplifiedRegion settleRoot(SimplifiedRegion sr, const LoadedMesh& lm, SimplifyRegionOptions so, const RegionTask& task,
+                            const RegionContext& ctx) {
+  const size_t n = lm.triangleCount();
+  const double limit = task.rootDeviationLimit;
+  const bool firstRoot = task.level <= ctx.partitionLevels;
+  const bool keptWhole = sr.triangleCount() == n;
+  const bool overLimit = !firstRoot && limit > 0 && sr.error > limit;
+  if ((!keptWhole && !overLimit) || so.targetTriangles >= n / 2 || n < 2) return sr;
+  const uint32_t attempts = sr.attempts;
+  so.targetTriangles = n / 2;
+  sr = simplifyRegion(lm, so);
+  if (limit > 0 && sr.error > limit) {
+    so.targetTriangles = n;  // no collapse: the region as it is
+    sr = simplifyRegion(lm, so);
+  }
+  sr.attempts += attempts;
+  return sr;
+}
+
 RegionResult processRegion(const RegionTask& task, const RegionContext& ctx) {
   auto start = Clock::now();
   RegionResult out;
@@ -116,9 +144,10 @@ RegionResult processRegion(const RegionTask& task, const RegionContext& ctx) {
   for (int a = 0; a < 3; ++a) so.gridOrigin[a] = ctx.grid.origin[a];
   // At least one triangle: a region that had some must keep some, or its node would carry no
   // patch and have no arc to the sink (a one-triangle input built such a file).
-  so.targetTriangles = std::max<size_t>(
-      1, task.root ? std::min<size_t>(lm.triangleCount() / 2, ctx.rootTriangles / 2) : lm.triangleCount() / 2);
+  const size_t n = lm.triangleCount();
+  so.targetTriangles = std::max<size_t>(1, task.root ? std::min<size_t>(n / 2, ctx.rootTriangles / 2) : n / 2);
   SimplifiedRegion sr = simplifyRegion(lm, so);
+  if (task.root) sr = settleRoot(std::move(sr), lm, so, task, ctx);
   out.deviation = sr.error;
   out.colorDeviation = sr.colorError;
   ReplacementMesh& rep = out.replacement;
