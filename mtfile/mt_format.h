@@ -54,10 +54,13 @@ constexpr char kFooterMagic[8] = {'B', 'M', 'T', '-', 'E', 'N', 'D', '\n'};
 // kPayloadPositionContexts (another residual model) and kPayloadRangeIndices (the index code
 // range-coded ahead of the positions). Version 4: meshopt payloads may also set
 // kPayloadConnectivity (the triangles by the connectivity code instead of the meshopt index code);
-// version-4 writers no longer set kPayloadRangeIndices. Readers accept
-// kMinReadableVersion..kVersion; the payload flags say how each payload is coded, so one decoder
-// reads all four.
-constexpr uint32_t kVersion = 4;
+// version-4 writers no longer set kPayloadRangeIndices. Version 5: NodeRecord::colorError (the
+// word was reserved and zero before, so an older file reads as "colour error not measured", 0).
+// Readers accept kMinReadableVersion..kVersion; the payload flags say how each payload is coded,
+// so one decoder reads all five.
+constexpr uint32_t kVersion = 5;
+// The first version whose nodes carry NodeRecord::colorError.
+constexpr uint32_t kFirstColorErrorVersion = 5;
 constexpr uint32_t kMinReadableVersion = 1;
 constexpr uint32_t kHeaderSize = 256;
 constexpr uint32_t kFooterSize = 32;
@@ -131,7 +134,13 @@ struct NodeRecord {
   uint32_t firstBackArc; // backward star: backArcs[firstBackArc, firstBackArc + backArcCount)
   uint32_t backArcCount;
   uint32_t triangles;    // triangles of the node's fragment (sum over its out-arcs' patches)
-  uint32_t reserved;
+  // Version 5 (was reserved, zero): the fragment's colour error bound, like `error` a measured,
+  // accumulated bound (the max of the predecessors' plus the colour deviation measured against
+  // them, mtbuild/color_error.h): the RGBA distance (Euclidean, in 8-bit levels, 0..510) between a
+  // point's colour and the colour of the nearest point of the full-resolution surface. 0 for the
+  // source and in files without kHasColors; +inf for the sink of a file with kHasColors; monotone
+  // towards the sink like `error`. 0 everywhere in files before version 5 (not measured).
+  float colorError;
 };
 static_assert(sizeof(NodeRecord) == 80, "NodeRecord layout");
 
