@@ -1,22 +1,27 @@
 // Fault injection for every file a build writes: each write, fsync and rename that goes through
 // the Env (the patch store of the work directory, the checkpoint side file, the MT file) fails in
-// turn, on a small build; what is left under the output's name is nothing or the complete file,
-// and --resume then gives the same bytes as a build that never failed. A disk that fills up
-// (ENOSPC, with half of the failing write on disk) gives a message naming the file, exit code 4
-// (base/exit_code.h), and no partial output under the final name.
+// turn, on a small build, as a disk that fills up fails it (ENOSPC, with half of a failing write on
+// disk): the message names the file, the exit code is 4 (base/exit_code.h), what is left under the
+// output's name is nothing or the complete file, and --resume then gives the same bytes as a build
+// that never failed. The same for the PLY, glTF and 3D Tiles outputs and for heal's updates.
 #include <gtest/gtest.h>
 
 #include <cerrno>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <sstream>
 
 #include "base/env.h"
 #include "base/error.h"
 #include "base/exit_code.h"
+#include "interop/gltf_writer.h"
+#include "interop/tiles_export.h"
 #include "mtbuild/build.h"
 #include "mtbuild/work_dir.h"
+#include "mtfile/mt_cut.h"
+#include "mtfile/mt_file.h"
 #include "patchstore/cell_assigner.h"
 #include "patchstore/heal/heal.h"
 #include "patchstore/io/ply_writer.h"
@@ -113,7 +118,8 @@ TEST(Faults, EveryWriteFsyncAndRenameOfABuildLeavesNothingOrTheWholeFileAndResum
     for (int64_t k = 1; k <= count; ++k) {
       SCOPED_TRACE(std::string(opName(op)) + " " + std::to_string(k) + " of " + std::to_string(count));
       removeOutputs(out);
-      env.failAfter(op, k);
+      // A full disk: ENOSPC, with half of a failing write on disk.
+      env.failAfter(op, k, ENOSPC, /*partial=*/true);
       bool failed = false;
       {
         mt::ScopedDefaultEnv scoped(&env);
@@ -121,8 +127,11 @@ TEST(Faults, EveryWriteFsyncAndRenameOfABuildLeavesNothingOrTheWholeFileAndResum
           mt::buildMt(input, out, options);
         } catch (const mt::Error& e) {
           failed = true;
-          EXPECT_NE(std::string(e.what()).find("injected"), std::string::npos) << e.what();
-          EXPECT_EQ(mt::exitCodeFor(e), mt::kExitIo) << e.what();
+          const std::string message = e.what();
+          EXPECT_NE(message.find("injected"), std::string::npos) << message;
+          EXPECT_NE(message.find("No space left on device"), std::string::npos) << message;
+          EXPECT_NE(message.find(tmp.path() + "/"), std::string::npos) << "names the file: " << message;
+          EXPECT_EQ(mt::exitCodeFor(e), mt::kExitIo) << message;
         }
       }
       env.disarm();
@@ -172,47 +181,6 @@ TEST(Faults, EveryWriteFsyncAndRenameOfABuildLeavesNothingOrTheWholeFileAndResum
   EXPECT_GT(checkedFiles, 0);
 }
 
-TEST(Faults, DiskFullAnywhereNamesTheFileAndLeavesNoPartialOutput) {
-  TempDir tmp;
-  const std::string input = writeGrid(tmp);
-  const mt::BuildOptions options = smallBuild();
-  mt::buildMt(input, tmp.file("ref.mt"), options);
-  const std::string reference = readFile(tmp.file("ref.mt"));
-  mt::FaultInjectionEnv env(mt::Env::Default());
-  {
-    mt::ScopedDefaultEnv scoped(&env);
-    mt::buildMt(input, tmp.file("count.mt"), options);
-  }
-  const int64_t writes = env.writes;
-  const std::string out = tmp.file("full.mt");
-  // The first write, some in the middle, and the last (the MT file's footer and header).
-  for (int64_t k : {int64_t(1), writes / 3, writes / 2, 2 * writes / 3, writes - 1, writes}) {
-    SCOPED_TRACE("ENOSPC at write " + std::to_string(k) + " of " + std::to_string(writes));
-    removeOutputs(out);
-    env.failAfter(mt::FaultInjectionEnv::Op::Write, k, ENOSPC, /*partial=*/true);
-    std::string message;
-    int code = 0;
-    {
-      mt::ScopedDefaultEnv scoped(&env);
-      try {
-        mt::buildMt(input, out, options);
-      } catch (const mt::Error& e) {
-        message = e.what();
-        code = mt::exitCodeFor(e);
-      }
-    }
-    env.disarm();
-    EXPECT_NE(message.find("No space left on device"), std::string::npos) << message;
-    EXPECT_NE(message.find(tmp.path()), std::string::npos) << "names the file: " << message;
-    EXPECT_EQ(code, mt::kExitIo) << message;
-    EXPECT_FALSE(fs::exists(out)) << message;
-    mt::BuildOptions resume = options;
-    resume.resume = true;
-    mt::buildMt(input, out, resume);
-    EXPECT_EQ(readFile(out), reference);
-  }
-}
-
 // mtextract's and mtstore export's writer: every write, fsync and rename of a PLY fails in turn;
 // nothing is left under the final name, nor the temporary file.
 TEST(Faults, EveryWriteOfAPlyOutputLeavesNothingUnderItsName) {
@@ -257,6 +225,72 @@ TEST(Faults, EveryWriteOfAPlyOutputLeavesNothingUnderItsName) {
       EXPECT_EQ(filesOf(tmp.file("out.ply")), std::vector<std::string>{}) << message;
     }
   std::printf("[ faults ] PLY output: %d failures injected\n", injected);
+}
+
+// mtextract's and mtexport's glTF outputs (a .glb; a .gltf and its .bin; a 3D Tiles directory)
+// go through the Env: every write, fsync and rename fails in turn (ENOSPC, half written); the
+// error names a file of the output, and nothing is left under the final names, nor a temporary.
+TEST(Faults, EveryWriteOfAGltfOrTilesOutputLeavesNothingUnderItsName) {
+  TempDir tmp;
+  const std::string input = writeGrid(tmp);
+  mt::buildMt(input, tmp.file("in.mt"), smallBuild());
+  auto reader = mt::MtFileReader::open(tmp.file("in.mt"));
+  std::vector<uint32_t> finest;  // the arcs leaving the source: the full-resolution cut
+  for (uint32_t a = 0; a < reader->arcs().size(); ++a)
+    if (reader->arcs()[a].from == 0) finest.push_back(a);
+  const mt::WeldedMesh mesh = mt::assembleCut(*reader, finest);
+  ASSERT_GT(mesh.triangleCount(), 0u);
+  const mt::interop::GltfMeshView view = mt::interop::gltfMeshViewOf(mesh, reader->header().gridOrigin, reader->header().gridStep);
+  struct Output {
+    std::string name;
+    std::vector<std::string> finals;  // every name the output appears under
+    std::function<void(const std::string&)> write;
+  };
+  mt::interop::GltfOptions draco;
+  draco.quantize = draco.draco = true;
+  const Output outputs[] = {
+      {"cut.glb", {"cut.glb"}, [&](const std::string& p) { mt::interop::writeGltfFile(p, view, draco); }},
+      {"cut.gltf", {"cut.gltf", "cut.bin"}, [&](const std::string& p) { mt::interop::writeGltfFile(p, view, {}); }},
+      {"tiles", {"tiles"}, [&](const std::string& p) { mt::interop::exportTiles(*reader, p, {}); }},
+  };
+  int injected = 0;
+  for (const Output& o : outputs) {
+    mt::FaultInjectionEnv env(mt::Env::Default());
+    {
+      mt::ScopedDefaultEnv scoped(&env);
+      o.write(tmp.file("count_" + o.name));
+    }
+    const int64_t counts[3] = {env.writes, env.syncs, env.renames};
+    ASSERT_GE(counts[0], 1) << o.name;
+    ASSERT_GE(counts[1], 1) << o.name;
+    ASSERT_GE(counts[2], 1) << o.name;
+    for (auto op : {mt::FaultInjectionEnv::Op::Write, mt::FaultInjectionEnv::Op::Sync, mt::FaultInjectionEnv::Op::Rename})
+      for (int64_t k = 1; k <= counts[int(op)]; ++k) {
+        SCOPED_TRACE(o.name + ": " + opName(op) + " " + std::to_string(k));
+        env.failAfter(op, k, ENOSPC, /*partial=*/true);
+        std::string message;
+        int code = 0;
+        {
+          mt::ScopedDefaultEnv scoped(&env);
+          try {
+            o.write(tmp.file(o.name));
+          } catch (const mt::Error& e) {
+            message = e.what();
+            code = mt::exitCodeFor(e);
+          }
+        }
+        env.disarm();
+        ASSERT_TRUE(env.fired());
+        ++injected;
+        EXPECT_NE(message.find(tmp.path()), std::string::npos) << "names the file: " << message;
+        EXPECT_NE(message.find("No space left on device"), std::string::npos) << message;
+        EXPECT_EQ(code, mt::kExitIo) << message;
+        for (const std::string& name : o.finals) {
+          EXPECT_EQ(filesOf(tmp.file(name)), std::vector<std::string>{}) << message;
+        }
+      }
+  }
+  std::printf("[ faults ] glTF and 3D Tiles outputs: %d failures injected\n", injected);
 }
 
 // heal's updates go through the store's Env: every write, fsync and rename of a heal pass fails in
