@@ -5,6 +5,9 @@
 // or the section, with exit code 3 (or 1 for the magic and version bytes: not an MT file of this
 // version).
 #include <gtest/gtest.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
 
 #include <filesystem>
 #include <fstream>
@@ -123,6 +126,26 @@ TEST_F(ExitCodes, IoFailureIsFour) {
     const std::string name = e.path().filename().string();
     EXPECT_TRUE(name != "cut.ply" && name != "big.mt") << "left under the final name: " << name;
   }
+}
+
+TEST_F(ExitCodes, MtserveOnAPortInUseIsAnIoError) {
+  // The system refuses the port (another process listens on it): exit 4 with the kind, as in the
+  // other tools.
+  TempDir tmp;
+  const int busy = ::socket(AF_INET, SOCK_STREAM, 0);
+  ASSERT_GE(busy, 0);
+  sockaddr_in addr{};
+  addr.sin_family = AF_INET;
+  addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  ASSERT_EQ(::bind(busy, reinterpret_cast<sockaddr*>(&addr), sizeof addr), 0);
+  ASSERT_EQ(::listen(busy, 1), 0);
+  socklen_t len = sizeof addr;
+  ASSERT_EQ(::getsockname(busy, reinterpret_cast<sockaddr*>(&addr), &len), 0);
+  CommandResult r = runTool("mtserve", tmp.path() + " --port " + std::to_string(ntohs(addr.sin_port)) + " -q");
+  ::close(busy);
+  EXPECT_EQ(r.exitCode, mt::kExitIo) << r.output;
+  EXPECT_TRUE(has(r.output, "mtserve: cannot listen on 127.0.0.1:")) << r.output;
+  EXPECT_TRUE(has(r.output, "[I/O error]")) << r.output;
 }
 
 TEST_F(ExitCodes, ResourceLimitIsFive) {

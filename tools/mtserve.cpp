@@ -25,6 +25,8 @@
 #include <string>
 #include <thread>
 
+#include "base/exit_code.h"
+
 namespace {
 
 struct Config {
@@ -281,8 +283,10 @@ int main(int argc, char** argv) {
   int one = 1;
   ::setsockopt(gListen, SOL_SOCKET, SO_REUSEADDR, &one, sizeof one);
   if (gListen < 0 || ::bind(gListen, reinterpret_cast<sockaddr*>(&addr), sizeof addr) != 0 || ::listen(gListen, 64) != 0) {
-    std::fprintf(stderr, "mtserve: cannot listen on %s:%d: %s\n", bind.c_str(), port, std::strerror(errno));
-    return 1;
+    // The system refused (port in use, no permission): an I/O error, as in every tool.
+    std::fprintf(stderr, "mtserve: cannot listen on %s:%d: %s [%s]\n", bind.c_str(), port, std::strerror(errno),
+                 mt::errorKindLabel(mt::ErrorKind::Io));
+    return mt::kExitIo;
   }
   socklen_t len = sizeof addr;
   ::getsockname(gListen, reinterpret_cast<sockaddr*>(&addr), &len);
