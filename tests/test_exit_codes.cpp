@@ -105,6 +105,13 @@ TEST_F(ExitCodes, CorruptFileIsThreeInEveryReader) {
     EXPECT_TRUE(has(r.output, "[corrupt file]")) << r.output;
   }
   EXPECT_EQ(runTool("mtextract", index + " --error 0 -o " + tmp.file("x.ply")).exitCode, mt::kExitCorruption);
+  CommandResult tiles = runTool("mtexport", "tiles " + index + " " + tmp.file("tiles"));
+  EXPECT_EQ(tiles.exitCode, mt::kExitCorruption) << tiles.output;
+  EXPECT_TRUE(has(tiles.output, "mtexport: " + index + ": ")) << tiles.output;
+  EXPECT_FALSE(fs::exists(tmp.file("tiles")));
+  CommandResult render = runTool("mtrender", index + " --headless --width 32 --height 32 --frames 1");
+  EXPECT_EQ(render.exitCode, mt::kExitCorruption) << render.output;
+  EXPECT_TRUE(has(render.output, "[corrupt file]")) << render.output;
 }
 
 TEST_F(ExitCodes, IoFailureIsFour) {

@@ -20,7 +20,8 @@ int main(int argc, char** argv) {
                "  mtexport tiles OUT.mt DIR   a 3D Tiles 1.1 tileset: DIR/tileset.json and DIR/tiles/*.glb, one tile per\n"
                "                              DAG node (REPLACE refinement, geometricError in model units), placed on the\n"
                "                              WGS84 globe when the model has a CRS; see docs/interop.md\n"
-               "On any error: one line, exit 1, and nothing under DIR."};
+               "On any error: one line, the exit code of its kind (1 invalid input, 3 corrupt file, 4 I/O error,\n"
+               "5 resource limit: README, \"Exit codes\"), and nothing under DIR."};
   app.require_subcommand(1);
   auto* tiles = app.add_subcommand("tiles", "Export a 3D Tiles 1.1 tileset");
   std::string input, dir;

@@ -264,8 +264,9 @@ int main(int argc, char** argv) {
                "  --triangles N  the best cut of at most N triangles (refine largest error first)\n"
                "  --eye/--target view-dependent: refine while a node's error, projected at its bounding sphere's\n"
                "                 nearest point, exceeds --pixels; --triangles N then caps the triangles.\n"
-               "Prints the cut's triangles, nodes and max error on stderr. On any error: one line, exit 1, and no\n"
-               "file under the output name."};
+               "Prints the cut's triangles, nodes and max error on stderr. On any error: one line, the exit code of\n"
+               "its kind (1 invalid input, 3 corrupt file, 4 I/O error, 5 resource limit: README, \"Exit codes\"),\n"
+               "and no file under the output name."};
   Options o;
   app.add_option("file", o.input, "The MT file")->required();
   app.add_option("-o,--output", o.output,
