@@ -5,6 +5,7 @@
 // the cut; the object is placed at the model's centre (the patches' positions are relative to it,
 // so float32 keeps its precision on georeferenced coordinates).
 
+import { ClosedSurface, coarsestArcs, weldParts } from './closed_surface.js';
 import * as THREE from 'three';
 import { HttpSource } from './source.js';
 import { openMtFile } from './mtfile.js';
@@ -45,7 +46,7 @@ export class MTObject extends THREE.Group {
     this.mt = scene;
     this.options = options;
     this.position.set(scene.center[0], scene.center[1], scene.center[2]);
-    this.material = options.material || new THREE.MeshLambertMaterial({ color: scene.hasColors ? 0xffffff : 0xd8cfc0, vertexColors: scene.hasColors });
+    this.material = options.material || new THREE.MeshLambertMaterial({ color: scene.hasColors ? 0xffffff : 0xd8cfc0, vertexColors: scene.hasColors, side: THREE.DoubleSide });
     this.cache = new PatchCache(options.cacheBytes || 256 * 2 ** 20, (id, e) => this._evicted(id, e));
     this.warnings = [];
     this.fatal = null;
@@ -95,6 +96,25 @@ export class MTObject extends THREE.Group {
       poll();
     });
     this.extract.pinStart();
+    this.extract.setSurface(this._coarsestSurface());
+  }
+
+  // The coarsest cut, welded, as a ClosedSurface in object space (when normal cones may cull:
+  // closed_surface.js); null when one of its patches did not arrive whole (no cone culling).
+  _coarsestSurface() {
+    const { arcs: list, margin } = coarsestArcs(this.mt);
+    const { arcs, arcPatches } = this.mt;
+    const c = this.mt.center, parts = [];
+    for (const a of list)
+      for (let k = 0; k < arcs.patchCount[a]; ++k) {
+        const e = this.cache.get(arcPatches[arcs.firstPatch[a] + k]);
+        if (!e || !e.data || !e.data.index) return null;
+        const rel = e.data.attributes.position.array, positions = new Float64Array(rel.length);
+        for (let i = 0; i < rel.length; ++i) positions[i] = rel[i] + c[i % 3];
+        parts.push({ positions, triangles: e.data.index.array });
+      }
+    const m = weldParts(parts);
+    return new ClosedSurface(m.positions, m.triangles, margin);
   }
 
   _geometry(r) {
