@@ -46,7 +46,7 @@ export class MTObject extends THREE.Group {
     this.mt = scene;
     this.options = options;
     this.position.set(scene.center[0], scene.center[1], scene.center[2]);
-    this.material = options.material || new THREE.MeshLambertMaterial({ color: scene.hasColors ? 0xffffff : 0xd8cfc0, vertexColors: scene.hasColors, side: THREE.DoubleSide });
+    this.material = options.material || MTObject.defaultMaterial(scene.hasColors);
     this.cache = new PatchCache(options.cacheBytes || 256 * 2 ** 20, (id, e) => this._evicted(id, e));
     this.warnings = [];
     this.fatal = null;
@@ -82,6 +82,24 @@ export class MTObject extends THREE.Group {
     this.accum = null;  // {list: Mesh[], next, err}
     this.shownErr = 0;
     this.blitted = false;  // the last render() made the still image's target or showed an image
+  }
+
+  /**
+   * The material mtrender draws with: both sides of every triangle (an open scan's inside shows
+   * through its holes); per-vertex colours unlit (`mtrender --color vertex`: scan colours carry
+   * their shading), shown as stored (interpolated in their sRGB bytes, as mtrender does); without
+   * colours, a Lambert surface lit by the page's lights.
+   */
+  static defaultMaterial(hasColors) {
+    if (!hasColors) return new THREE.MeshLambertMaterial({ color: 0xd8cfc0, side: THREE.DoubleSide });
+    const m = new THREE.MeshBasicMaterial({ vertexColors: true, side: THREE.DoubleSide });
+    // three takes vertex colours as linear and encodes the output to sRGB: decode the stored bytes
+    // per fragment so the screen shows them.
+    m.onBeforeCompile = (sh) => {
+      sh.fragmentShader = sh.fragmentShader.replace('#include <color_fragment>',
+        '#include <color_fragment>\n\tdiffuseColor.rgb = sRGBTransferEOTF( vec4( diffuseColor.rgb, 1.0 ) ).rgb;');
+    };
+    return m;
   }
 
   async _start() {
