@@ -22,7 +22,8 @@
 # CACHES ("32M 64M 128M 256M"), OUT (a fresh directory under /tmp), BIN (build/bin),
 # THROUGHPUT (1: also section 3, raw draw throughput for RAW_TRIANGLES="60000 100000 200000 400000"),
 # OCC_FRAMES (200), OCC_TRIANGLES (4000000), OCC_WINDOW (0.15), OCC_ONLY (1: only the occlusion
-# section), OCCLUSION (0: not the occlusion section). Needs python3 (the wall).
+# section), OCCLUSION (0: not the occlusion section), CONES (0: no --cones off run), POLICIES_ONLY
+# (1: no cache-size table, no baseline). Needs python3 (the wall).
 # Miss rate = patches wanted for a cut move but not resident / (those + patches drawn), per run.
 set -euo pipefail
 if [[ $# -lt 1 ]]; then
@@ -71,6 +72,7 @@ printf "extract within deadline   %s %%, max %s ms\n" "$(val main extract_within
 printf "first frame (cold start)  %s ms from process start\n" "$(val main first_frame_ms)"
 printf "<= 1 px after the stop    %s (ms; camera stops at frame %s)\n" "$(rest main settle_ms)" "$(val main stop_frame)"
 printf "peak RSS                  %s KiB\n" "$(val main peak_rss_kib)"
+printf "closed surfaces           %s\n" "$(rest main closed_files)"
 echo "charts: $OUT/plots/*.png"
 
 [[ ${POLICIES_ONLY:-0} == 1 ]] && CACHES=256M
@@ -99,6 +101,8 @@ fi
 
 # 4. The run-time policies.
 run noprefetch "$@" --cache 256M --cold --no-prefetch
+# What normal-cone culling buys (used only on closed surfaces seen from outside: docs/mtrender.md).
+[[ ${CONES:-1} == 1 ]] && run nocones "$@" --cache 256M --cold --cones off
 echo
 echo "== prefetch (same path, cold start, 256 MiB)"
 printf "%-14s %10s %12s %10s %10s %12s\n" mode misses new_misses miss_rate within_% extract_max
@@ -107,6 +111,15 @@ for n in main noprefetch; do
     "$(val $n within_budget_pct)" "$(val $n extract_ms_max)"
 done
 awk -v a="$(val main misses_total)" -v b="$(val noprefetch misses_total)" 'BEGIN { if (a > 0) printf "misses without / with prefetch: %.2fx\n", b / a }'
+if [[ ${CONES:-1} == 1 ]]; then
+  echo
+  echo "== normal cones (same path, cold start, 256 MiB): with them (main) and --cones off"
+  printf "%-14s %10s %14s %16s %16s\n" mode within_% frame_med_ms drawn_total loaded_total
+  for n in main nocones; do
+    printf "%-14s %10s %14s %16s %16s\n" "$n" "$(val $n within_budget_pct)" "$(val $n frame_ms_median)" \
+      "$(val $n drawn_triangles_total)" "$(val $n loaded_triangles_total)"
+  done
+fi
 echo "cut update within its deadline (heaps, prefetch, requests included): $(rest main extract_within_deadline_pct)"
 echo "its own CPU time within the deadline: $(val main extract_cpu_within_deadline_pct) %, max $(val main extract_cpu_ms_max) ms"
 printf "GPU peak vs cap            %s / %s\n" "$(val main gpu_peak_bytes)" "$(val main gpu_cap_bytes)"

@@ -136,7 +136,8 @@ void Engine::drawArcs(size_t from, size_t to, GlRenderer& gl, FrameRecord& rec, 
     const uint32_t level = nodes[arc.from].level;
     // The finest patches have no node cone of their own (the `to` node's cone bounds another
     // fragment): their own cones, measured at decode, cull them.
-    const bool ownCone = cull && options_.extract.patchCones && nodes[arc.from].source;
+    const bool ownCone = cull && options_.extract.patchCones && nodes[arc.from].source &&
+                         extract_->coneOn(nodes[arc.from].file, view);
     for (uint32_t k = 0; k < arc.patchCount; ++k) {
       const uint32_t id = scene_->arcPatches()[arc.firstPatch + k];
       const double* origin = scene_->patchOrigin(id);

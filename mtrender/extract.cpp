@@ -178,7 +178,7 @@ bool ExtractRender::arcVisible(uint32_t arc, const View& view) const {
     if (glm::dot(glm::dvec3(p), c) + p.w < -double(s.radius)) return false;
   // The cone describes `from`'s own fragment; for a source arc (cullNode = to) it does not bound
   // these patches, so only the sphere test applies.
-  if (a.cullNode == a.from && s.coneCutoff > 0.0f) {
+  if (a.cullNode == a.from && s.coneCutoff > 0.0f && coneOn(s.file, view)) {
     glm::dvec3 v = c - view.eye;
     double d = glm::length(v);
     if (d > s.radius) {
@@ -211,7 +211,7 @@ double ExtractRender::screenError(uint32_t node, const View& view) const {
     for (const auto& p : view.planes)
       if (glm::dot(glm::dvec3(p), c) + p.w < -double(s.radius)) return 0;
     // Normal cone (back-face) culling of the node's fragment.
-    if (s.coneCutoff > 0.0f) {
+    if (s.coneCutoff > 0.0f && coneOn(s.file, view)) {
       glm::dvec3 v = c - view.eye;
       double d = glm::length(v);
       if (d > s.radius) {
@@ -230,8 +230,25 @@ double ExtractRender::screenError(uint32_t node, const View& view) const {
 
 double ExtractRender::screenErrorAhead(uint32_t node, const std::vector<View>& views) const {
   double e = 0;
+  // The views ahead share the current eye's cone flags (their eyes are a few frames away; the eye
+  // test per view would cost more than prefetching gains).
+  coneHeld_ = coneValid_;
   for (const View& v : views) e = std::max(e, screenError(node, v));
+  coneHeld_ = false;
   return e;
+}
+
+bool ExtractRender::coneOn(uint32_t file, const View& view) const {
+  if (options_.cones == ExtractOptions::Cones::Always) return true;
+  if (options_.cones == ExtractOptions::Cones::Off) return false;
+  const double eye[3] = {view.eye.x, view.eye.y, view.eye.z};
+  if (!coneHeld_ && (!coneValid_ || eye[0] != coneEye_[0] || eye[1] != coneEye_[1] || eye[2] != coneEye_[2])) {
+    coneFiles_.resize(scene_.fileCount());
+    for (uint32_t f = 0; f < scene_.fileCount(); ++f) coneFiles_[f] = scene_.surface(f).eyeOutside(eye);
+    for (int a = 0; a < 3; ++a) coneEye_[a] = eye[a];
+    coneValid_ = true;
+  }
+  return coneFiles_[file] != 0;
 }
 
 bool ExtractRender::tryRefine(uint32_t n) {

@@ -66,6 +66,12 @@ struct ExtractOptions {
   uint32_t loadBudget = 0;       // patches requested per frame; 0: from the measured load time
   bool prefetch = true;
   bool cull = true;              // frustum + normal-cone culling (per node for errors, per arc for drawing)
+  // Normal-cone (back-face) culling, within `cull`: Closed uses the cones only for files whose
+  // surface is closed and seen from outside (closed_surface.h: both sides are lit, so elsewhere a
+  // back face can show through a hole); Always is the unconditional rule (it changes the image of
+  // an open scan: kept for measurement); Off never.
+  enum class Cones : uint8_t { Off, Closed, Always };
+  Cones cones = Cones::Closed;
   double memoryFraction = 0.6;   // the cut may pin at most this share of the cache's place holders
                                  // (all of them when the cache holds every patch of the scene)
   // Internal switches, so a test can show each policy matters (all on in production):
@@ -159,6 +165,9 @@ class ExtractRender {
   bool arcVisible(uint32_t arc, const View& view) const;
   const std::vector<uint8_t>& inSet() const { return inS_; }
   double screenError(uint32_t node, const View& view) const;
+  // Whether normal-cone culling applies to the nodes and patches of `file` seen from `view`'s eye
+  // (ExtractOptions::cones; memoised for the last eye asked).
+  bool coneOn(uint32_t file, const View& view) const;
   // Largest screen error of the node over several views (the enlarged frustum of prefetching).
   double screenErrorAhead(uint32_t node, const std::vector<View>& views) const;
   uint64_t cutTriangles() const { return triangles_; }
@@ -212,6 +221,11 @@ class ExtractRender {
   double lodScale_ = 1;
   double budgetScale_ = 1, frameBudget_ = 0, frameOverheadMs_ = 0;
   bool frozen_ = false;
+  // coneOn's memo: the flags per file for coneEye_; coneHeld_ keeps them for the views ahead of
+  // prefetching (the eye test costs up to ~0.1 ms a file inside the model's box).
+  mutable std::vector<uint8_t> coneFiles_;
+  mutable double coneEye_[3] = {0, 0, 0};
+  mutable bool coneValid_ = false, coneHeld_ = false;
   bool lastMemoryFull_ = false;
   uint64_t frame_ = 0;
   std::vector<uint32_t> scratch_, scratch2_;

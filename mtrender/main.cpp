@@ -145,7 +145,7 @@ struct CliOptions {
   std::vector<std::string> files;
   bool headless = false, baseline = false, noPrefetch = false, noCull = false, quiet = false, wireframe = false;
   bool noOcclusion = false;
-  std::string occlusionTest = "pyramid";
+  std::string occlusionTest = "pyramid", cones = "closed";
   bool cold = false;
   std::string cameraPath, statsPath, screenshotDir, plotDir, cacheText = "256M", gpuCacheText, colorMode = "auto";
   std::string screenshotPath, recordPath = "mtrender-path.txt";
@@ -210,6 +210,11 @@ void addRenderOptions(CLI::App& app, CliOptions& o) {
   app.add_flag("--no-occlusion", o.noOcclusion,
                "no occlusion culling (by default patches hidden behind nearer geometry in the frame's depth are "
                "neither refined, loaded nor drawn)");
+  app.add_option("--cones", o.cones,
+                 "normal-cone (back-face) culling: closed (default: only for a file whose surface is closed, seen "
+                 "from outside it; both sides are lit, so elsewhere a back face can show through a hole), always "
+                 "(every cone: changes the image of an open scan), off")
+      ->check(CLI::IsMember({"closed", "always", "off"}));
   app.add_option("--occlusion-test", o.occlusionTest,
                  "how occlusion culling finds what is hidden: pyramid (the frame's depth read back into a max-depth "
                  "pyramid, spheres tested on the CPU) or queries (GL occlusion queries of the spheres' boxes); "
@@ -287,6 +292,9 @@ EngineOptions engineOptions(const CliOptions& o) {
   eo.extract.loadBudget = o.loadBudget;
   eo.extract.prefetch = !o.noPrefetch && !o.baseline;
   eo.extract.cull = !o.noCull;
+  eo.extract.cones = o.cones == "always" ? ExtractOptions::Cones::Always
+                     : o.cones == "off"  ? ExtractOptions::Cones::Off
+                                         : ExtractOptions::Cones::Closed;
   eo.extract.occlusion = !o.noOcclusion;
   eo.occlusionTest = o.occlusionTest == "queries" ? OcclusionTest::Queries : OcclusionTest::Pyramid;
   return eo;
@@ -451,6 +459,13 @@ void printSummary(const CliOptions& o, const EngineOptions& eo, const std::vecto
               (unsigned long long)cs.urgentEvictions, (unsigned long long)cs.givenUp);
   std::printf("bad_patches %llu\n", (unsigned long long)engine.badPatches());
   std::printf("undrawn_files %zu\n", engine.warnUndrawnFiles());
+  {
+    const Scene& sc = engine.scene();
+    uint32_t closed = 0, coarse = 0;
+    for (uint32_t f = 0; f < sc.fileCount(); ++f) closed += sc.surface(f).closed(), coarse += sc.surface(f).triangleCount();
+    std::printf("closed_files %u of %zu (normal cones cull only these, seen from outside; coarsest cuts %u triangles)\n", closed,
+                sc.fileCount(), coarse);
+  }
   std::printf("stop_frame %d\n", stop);
   if (stop >= frames) std::printf("settle_ms none (the camera never stops)\n");
   else if (settleMs < 0) std::printf("settle_ms not_reached (final error %.2f px)\n", recs.back().maxScreenError);

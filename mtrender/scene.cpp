@@ -70,6 +70,7 @@ Scene::Scene(const std::vector<std::string>& paths) {
     }
     for (const auto& p : reader->patches())
       patches_.push_back({file, uint32_t(patches_.size()) - patchBase, arcBase + p.arc, p.triangles, p.vertices, p.size});
+    surfaces_.push_back(ClosedSurface::ofFile(*reader));
     readers_.push_back(std::move(reader));
   }
   for (auto& n : nodes_) {

@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "mtfile/mt_file.h"
+#include "mtrender/closed_surface.h"
 
 namespace mt::render {
 
@@ -62,6 +63,9 @@ class Scene {
   size_t fileCount() const { return readers_.size(); }
   const MtFileReader& reader(uint32_t file) const { return *readers_[file]; }
   bool hasColors() const { return hasColors_; }
+  // The file's coarsest cut as a surface: whether it is closed and an eye outside it (when normal
+  // cones may cull, closed_surface.h). Read at open.
+  const ClosedSurface& surface(uint32_t file) const { return surfaces_[file]; }
 
   // Bounding box of all files (object space; the files share one world space).
   double boundsMin[3], boundsMax[3];
@@ -93,6 +97,7 @@ class Scene {
   std::vector<ScenePatch> patches_;
   std::vector<uint32_t> sources_, sinks_;
   bool hasColors_ = false;
+  std::vector<ClosedSurface> surfaces_;
 };
 
 }  // namespace mt::render

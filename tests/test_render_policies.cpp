@@ -407,18 +407,128 @@ TEST_F(RenderPolicies, ABackFacingPatchSetIsCulledByItsCones) {
   // Which side is the front depends on the winding: the jump that goes from the front to the back
   // is the one where the culled run drew something before the jump and nothing after it.
   for (double side : {1.0, -1.0}) {
-    const auto [beforeCull, afterCull, conedCull] = runSide(side, "");
+    const auto [beforeCull, afterCull, conedCull] = runSide(side, "--cones always");
     if (!(beforeCull > 0 && afterCull == 0)) continue;
     // The same jump with a tiny deadline, so the finest patches are still in the cut after it.
-    const auto [beforeAll, afterAll, conedAll] = runSide(side, "--no-cull --extract-ms 0.000001");
-    const auto [beforeTiny, afterTiny, conedTiny] = runSide(side, "--extract-ms 0.000001");
+    const auto [beforeAll, afterAll, conedAll] = runSide(side, "--cones always --no-cull --extract-ms 0.000001");
+    const auto [beforeTiny, afterTiny, conedTiny] = runSide(side, "--cones always --extract-ms 0.000001");
     ASSERT_GT(afterAll, 0) << "without culling the back of the wall is drawn";
     EXPECT_GT(conedTiny, 0) << "the finest patches were not culled by their own cones";
     EXPECT_LT(afterTiny, 0.05 * afterAll) << "from the back, " << afterTiny << " triangles were drawn";
-    (void)conedCull, (void)beforeAll, (void)conedAll, (void)beforeTiny;
+    // The default rule: the wall is an open surface (both sides lit, its back is seen), so its
+    // cones cull nothing.
+    const auto [beforeOpen, afterOpen, conedOpen] = runSide(side, "--extract-ms 0.000001");
+    EXPECT_EQ(conedOpen, 0) << "an open surface's patches were culled by their cones";
+    EXPECT_EQ(afterOpen, afterAll) << "the back of an open surface is drawn as with culling off";
+    (void)conedCull, (void)beforeAll, (void)conedAll, (void)beforeTiny, (void)beforeOpen;
     return;
   }
   FAIL() << "no side of the wall was culled from behind";
+}
+
+// Culling never changes the image. Both sides of every triangle are lit, so the inside of a scan
+// shows through its holes: normal cones may cull only a closed surface seen from outside
+// (closed_surface.h). Renders a few still views at full resolution of an mtgen torus with 20
+// holes and of the same torus closed, with culling on (the default) and off; the unconditional
+// cone rule of before (`--cones always`) must show the difference this guards against.
+struct StillShot {
+  mt::render::Image image;
+  double conedPatches = 0, drawn = 0, cut = 0;
+};
+StillShot stillShot(const TempDir& dir, const std::string& mt, const double pose[6], const std::string& extra) {
+  const std::string path = dir.file("still.path"), csv = dir.file("still.csv"), shots = dir.file("still_shots");
+  std::filesystem::remove_all(shots);
+  std::filesystem::create_directories(shots);
+  {
+    std::ofstream out(path);
+    out << "space unit\n";
+    for (int i = 0; i < 6; ++i) out << pose[i] << (i == 5 ? '\n' : ' ');
+  }
+  auto res = runTool("mtrender", mt + " --headless --quiet --width 200 --height 200 --camera-path " + path +
+                                     " --frames 30 --frame-interval-ms 5 --tolerance 0.05 --fixed-triangles 10000000 "
+                                     "--still-frames 1 --screenshot-every 29 --screenshots " + shots + " --stats " + csv +
+                                     " " + extra);
+  EXPECT_EQ(res.exitCode, 0) << res.output;
+  Csv c = readCsv(csv);
+  StillShot s;
+  s.image = readPng(shots + "/frame_00029.png");
+  s.conedPatches = c.sum("coned_patches");
+  s.drawn = c.at(29, "drawn_triangles");
+  s.cut = c.at(29, "triangles");
+  return s;
+}
+
+TEST_F(RenderPolicies, CullingNeverChangesTheImageOfAHoledScanAndConesStillCullAClosedOne) {
+  for (const char* name : {"holed", "closed"}) {
+    const std::string ply = dir_->file(std::string(name) + ".ply"), mt = dir_->file(std::string(name) + ".mt");
+    const bool holed = std::string(name) == "holed";
+    auto g = runTool("mtgen", "-o " + ply + " --triangles 40k --seed 11" + (holed ? " --holes 20" : ""));
+    ASSERT_EQ(g.exitCode, 0) << g.output;
+    auto b = runTool("mtbuild", ply + " -o " + mt + " --patch-triangles 300 --threads 2 -q");
+    ASSERT_EQ(b.exitCode, 0) << b.output;
+    double finest = 0;
+    {
+      auto reader = mt::MtFileReader::open(mt);
+      EXPECT_EQ(ClosedSurface::ofFile(*reader).closed(), !holed) << name;
+      finest = double(reader->header().inputTriangles - reader->header().weldedTriangles);
+    }
+    // Views from outside (unit space: the scene's bounding sphere), several sides.
+    const double poses[2][6] = {{1.6, 0.4, 0.9, 0, 0, 0}, {-1.2, 1.1, -0.6, 0, 0, 0}};
+    size_t alwaysDiffer = 0;
+    double conedClosed = 0;
+    for (const auto& pose : poses) {
+      const StillShot on = stillShot(*dir_, mt, pose, ""), off = stillShot(*dir_, mt, pose, "--no-cull");
+      if (holed) alwaysDiffer += imageDiff(stillShot(*dir_, mt, pose, "--cones always").image, off.image).first;
+      EXPECT_EQ(on.cut, finest) << name << ": the view did not reach full resolution";
+      const auto [differ, mean] = imageDiff(on.image, off.image);
+      // Identical cuts give identical images; the depth pyramid may leave a sliver's worth.
+      EXPECT_LE(differ, size_t(20)) << name << ": culling changed " << differ << " pixels (mean " << mean << ")";
+      if (holed) {
+        EXPECT_EQ(on.conedPatches, 0) << "a holed scan's patches were culled by their cones";
+      } else {
+        conedClosed += on.conedPatches;
+      }
+    }
+    if (holed) {
+      EXPECT_GT(alwaysDiffer, 30u) << "the unconditional cone rule should lose the inside seen through the holes";
+    } else {
+      EXPECT_GT(conedClosed, 0) << "the closed torus seen from outside should be culled by its cones";
+    }
+  }
+}
+
+TEST(ClosedSurface, AnEyeInsideTheSolidOrNearItsSurfaceTurnsTheConesOff) {
+  // A unit cube, outward: closed; flipped: not (inside out); one face missing: not.
+  std::vector<double> p = {0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0, 0, 0, 1, 1, 0, 1, 1, 1, 1, 0, 1, 1};
+  std::vector<uint32_t> t = {0, 2, 1, 0, 3, 2, 4, 5, 6, 4, 6, 7, 0, 1, 5, 0, 5, 4,
+                             1, 2, 6, 1, 6, 5, 2, 3, 7, 2, 7, 6, 3, 0, 4, 3, 4, 7};
+  const ClosedSurface cube = ClosedSurface::ofMesh(p, t, 0.05);
+  ASSERT_TRUE(cube.closed());
+  auto outside = [&](double x, double y, double z) {
+    const double e[3] = {x, y, z};
+    return cube.eyeOutside(e);
+  };
+  EXPECT_TRUE(outside(3, 0.5, 0.5));
+  EXPECT_TRUE(outside(0.5, 0.5, 1.2));     // above the top, farther than the margin
+  EXPECT_FALSE(outside(0.5, 0.5, 0.5));    // inside the solid
+  EXPECT_FALSE(outside(0.5, 0.5, 0.99));   // inside, near the top
+  EXPECT_FALSE(outside(0.5, 0.5, 1.03));   // outside but within the margin of the surface
+  EXPECT_FALSE(outside(0.0, 0.0, 0.0));    // on a vertex
+  // Two cubes apart: between them the eye is inside the box and outside both solids (even parity).
+  std::vector<double> p2 = p;
+  for (size_t i = 0; i < p.size(); ++i) p2.push_back(p[i] + 3);
+  std::vector<uint32_t> t2 = t;
+  for (uint32_t v : t) t2.push_back(v + 8);
+  const ClosedSurface two = ClosedSurface::ofMesh(p2, t2, 0.05);
+  ASSERT_TRUE(two.closed());
+  const double between[3] = {2, 2, 2}, inSecond[3] = {3.5, 3.4, 3.6};
+  EXPECT_TRUE(two.eyeOutside(between));
+  EXPECT_FALSE(two.eyeOutside(inSecond));
+  std::vector<uint32_t> flipped = t;
+  for (size_t i = 0; i < flipped.size(); i += 3) std::swap(flipped[i + 1], flipped[i + 2]);
+  EXPECT_FALSE(ClosedSurface::ofMesh(p, flipped, 0.05).closed());
+  std::vector<uint32_t> open(t.begin() + 6, t.end());
+  EXPECT_FALSE(ClosedSurface::ofMesh(p, open, 0.05).closed());
 }
 
 // ---- occlusion culling --------------------------------------------------------------------------

@@ -15,5 +15,8 @@ run() { "$@" >"$t/log" 2>&1 || { cat "$t/log" >&2; echo "web_browser: failed: $*
 run "$bin/mtgen" -o "$t/t.ply" --triangles 200k
 run "$bin/mtbuild" "$t/t.ply" -o "$t/t.mt" --threads 2
 run "$bin/mtbuild" "$t/t.ply" -o "$t/t-draco.mt" --threads 2 --codec draco
-rm -f "$t/t.ply"
+# Per-vertex colours (the colours test): a coloured scan with holes.
+run "$bin/mtgen" -o "$t/c.ply" --triangles 60k --colors --holes 10 --seed 3
+run "$bin/mtbuild" "$t/c.ply" -o "$t/c.mt" --threads 2
+rm -f "$t/t.ply" "$t/c.ply"
 node "$src/web/test/browser.mjs" "$bin" "$t"

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Web.CutMatchesExtractRender: for the same file, view and tolerance the web viewer's cut
 # (web/src/extract.js, run in node by web/test/cut_nodes.mjs) is ExtractRender's (mtrender/extract.h,
-# printed by web_cut_nodes), node for node, both run to convergence. 3 files x 8 views x 2 tolerances.
+# printed by web_cut_nodes), node for node, both run to convergence. 5 files x 8 views x 2 tolerances.
 # And the web decoder decodes every patch of the meshopt files to the C++ decoder's grid coordinates.
 # Usage: web_cut_compare.sh BIN_DIR SOURCE_DIR
 set -euo pipefail
@@ -17,6 +17,12 @@ run "$bin/mtgen" -o "$t/b.ply" --triangles 100k --colors --holes 4 --seed 3
 run "$bin/mtbuild" "$t/b.ply" -o "$t/b.mt" --threads 2 --codec draco
 run "$bin/mtgen" -o "$t/c.ply" --triangles 200k --components 3 --seed 5
 run "$bin/mtbuild" "$t/c.ply" -o "$t/c.mt" --threads 2 --partition regular
+# Smooth spheres (narrow normal cones, so cone culling moves the cut; mtgen's noise makes cones too
+# wide to cull): d closed, e with 6 holes (no cone may cull it, closed_surface.h).
+run node "$src/web/test/sphere_ply.mjs" "$t/d.ply" 120
+run node "$src/web/test/sphere_ply.mjs" "$t/e.ply" 120 6
+run "$bin/mtbuild" "$t/d.ply" -o "$t/d.mt" --threads 2 --patch-triangles 300
+run "$bin/mtbuild" "$t/e.ply" -o "$t/e.mt" --threads 2 --patch-triangles 300
 # Unit-space views (eye, target): the default view, close-ups grazing the surface, views from
 # inside the sphere, from above and below, one looking away from most of the model.
 cat > "$t/views" <<'VIEWS'
@@ -30,10 +36,13 @@ cat > "$t/views" <<'VIEWS'
 0.6 0 0.1 2 0 0.1
 VIEWS
 fail=0 compared=0
-for f in a b c; do
+for f in a b c d e; do
   for tol in 1 3; do
     "$bin/web_cut_nodes" "$t/$f.mt" "$t/views" $tol 1280 720 >"$t/cpp"
-    node "$src/web/test/cut_nodes.mjs" "$t/$f.mt" "$t/views" $tol 1280 720 >"$t/js"
+    node "$src/web/test/cut_nodes.mjs" "$t/$f.mt" "$t/views" $tol 1280 720 >"$t/js" 2>"$t/jserr" || { cat "$t/jserr" >&2; exit 1; }
+    # Normal cones cull only a closed surface (closed_surface.js): a, c and d are closed, b and e have holes.
+    want=true; [[ $f == b || $f == e ]] && want=false
+    grep -q "closed $want" "$t/jserr" || { echo "web_cut_compare: $f.mt: expected closed $want: $(cat "$t/jserr")" >&2; exit 1; }
     n=$(wc -l <"$t/cpp")
     [[ $n -eq 8 ]] || { echo "web_cut_compare: $f.mt: web_cut_nodes printed $n views, expected 8" >&2; exit 1; }
     if ! diff -q "$t/cpp" "$t/js" >/dev/null; then

@@ -85,6 +85,8 @@ async function main() {
   const path = q.get('path');
   const frames = Number(q.get('frames') || 600);
   state.canvas = renderer.domElement;
+  state.camera = camera;
+  state.mt = mt;
   state.ready = true;
   state.fileSize = mt.mt.fileSize;
   state.crs = mt.mt.crs;  // the file's coordinate reference system ('' when it names none)
@@ -219,6 +221,33 @@ state.compare = async (url, tol = 48) => {
     if (d > tol) ++off;
   }
   return { differing: off / n, mean: sum / (3 * n) };
+};
+// The colours on screen against the stored ones: on a grid of pixels, a ray through the pixel's
+// centre finds the surface (the cut's meshes); the expected colour is the stored per-vertex colour
+// interpolated at the hit (the decoded patch's RGBA8, as in the file). Returns the hits, how many are
+// within `tol` levels in every channel, and the median of the largest channel difference.
+state.colours = (grid = 32, tol = 8) => {
+  const { width: w, height: h, data } = pixels();
+  const ray = new THREE.Raycaster();
+  const meshes = state.mt.children.filter((m) => m.isMesh && m.geometry.attributes.color);
+  const diffs = [];
+  for (let gy = 1; gy < grid; ++gy)
+    for (let gx = 1; gx < grid; ++gx) {
+      const px = Math.floor((gx * w) / grid), py = Math.floor((gy * h) / grid);
+      ray.setFromCamera(new THREE.Vector2(((px + 0.5) / w) * 2 - 1, 1 - ((py + 0.5) / h) * 2), state.camera);
+      const hit = ray.intersectObjects(meshes, false)[0];
+      if (!hit || !hit.barycoord) continue;
+      const col = hit.object.geometry.attributes.color, f = hit.face, b = hit.barycoord;
+      let d = 0;
+      for (let k = 0; k < 3; ++k) {
+        const get = (i) => col.getComponent(i, k);
+        const want = 255 * (b.x * get(f.a) + b.y * get(f.b) + b.z * get(f.c));
+        d = Math.max(d, Math.abs(data[4 * (py * w + px) + k] - want));
+      }
+      diffs.push(d);
+    }
+  diffs.sort((a, b) => a - b);
+  return { hits: diffs.length, within: diffs.filter((d) => d <= tol).length, median: diffs.length ? diffs[diffs.length >> 1] : NaN };
 };
 state.png = () => state.canvas.toDataURL('image/png');
 main().catch((e) => showError(e.stack || e.message));

@@ -50,6 +50,9 @@ export const defaultExtractOptions = () => ({
   loadBudget: 0,
   prefetch: true,
   cull: true,
+  // Normal-cone culling within `cull` (mtrender's ExtractOptions::Cones): 'closed' only for a
+  // closed surface seen from outside (closed_surface.js; setSurface gives it), 'always', 'off'.
+  cones: 'closed',
   memoryFraction: 0.6,
 });
 
@@ -77,6 +80,27 @@ export class ExtractRender {
     this.lastDrawn = 0;
     this.wanted = new Map();
     this.consecutive = new Map();
+    this.surface = null;  // ClosedSurface of the coarsest cut; null: not known yet (no cone culling)
+    this.coneEye = null;
+    this.coneFlag = false;
+    this.coneHeld = false;
+  }
+
+  /** The file's coarsest cut as a ClosedSurface (closed_surface.js), once it is decoded. */
+  setSurface(surface) {
+    this.surface = surface;
+    this.coneEye = null;
+  }
+  /** Whether normal cones cull for this view's eye (memoised for the last eye; held for the views ahead). */
+  coneOn(view) {
+    if (this.options.cones === 'always') return true;
+    if (this.options.cones === 'off' || !this.surface) return false;
+    const e = view.eye;
+    if (!this.coneHeld && !(this.coneEye && this.coneEye[0] === e[0] && this.coneEye[1] === e[1] && this.coneEye[2] === e[2])) {
+      this.coneFlag = this.surface.eyeOutside(e);
+      this.coneEye = [e[0], e[1], e[2]];
+    }
+    return this.coneFlag;
   }
 
   collectIn(n, out) {
@@ -169,7 +193,7 @@ export class ExtractRender {
     const c0 = nodes.center[3 * s], c1 = nodes.center[3 * s + 1], c2 = nodes.center[3 * s + 2];
     const radius = nodes.radius[s];
     for (const p of view.planes) if (p[0] * c0 + p[1] * c1 + p[2] * c2 + p[3] < -radius) return false;
-    if (s === arcs.from[arc] && nodes.coneCutoff[s] > 0) {
+    if (s === arcs.from[arc] && nodes.coneCutoff[s] > 0 && this.coneOn(view)) {
       if (this.coneAway(s, c0, c1, c2, radius, view)) return false;
     }
     return true;
@@ -194,7 +218,7 @@ export class ExtractRender {
     const radius = nodes.radius[node];
     if (this.options.cull) {
       for (const p of view.planes) if (p[0] * c0 + p[1] * c1 + p[2] * c2 + p[3] < -radius) return 0;
-      if (nodes.coneCutoff[node] > 0 && this.coneAway(node, c0, c1, c2, radius, view)) return 0;
+      if (nodes.coneCutoff[node] > 0 && this.coneOn(view) && this.coneAway(node, c0, c1, c2, radius, view)) return 0;
     }
     const v0 = c0 - view.eye[0], v1 = c1 - view.eye[1], v2 = c2 - view.eye[2];
     let d = Math.sqrt(v0 * v0 + v1 * v1 + v2 * v2) - radius;
@@ -567,7 +591,10 @@ export class ExtractRender {
     if (!ahead.length || now() >= p.deadline + (p.deadline - p.t0)) return;
     const errAhead = (n) => {
       let e = 0;
+      // The views ahead share the current eye's cone flag (as screenErrorAhead in extract.cpp).
+      this.coneHeld = this.coneEye !== null;
       for (const v of ahead) e = Math.max(e, this.screenError(n, v));
+      this.coneHeld = false;
       return e;
     };
     const heap = new Heap(true);

@@ -5,6 +5,7 @@
 // the cut; the object is placed at the model's centre (the patches' positions are relative to it,
 // so float32 keeps its precision on georeferenced coordinates).
 
+import { ClosedSurface, coarsestArcs, weldParts } from './closed_surface.js';
 import * as THREE from 'three';
 import { HttpSource } from './source.js';
 import { openMtFile } from './mtfile.js';
@@ -45,7 +46,7 @@ export class MTObject extends THREE.Group {
     this.mt = scene;
     this.options = options;
     this.position.set(scene.center[0], scene.center[1], scene.center[2]);
-    this.material = options.material || new THREE.MeshLambertMaterial({ color: scene.hasColors ? 0xffffff : 0xd8cfc0, vertexColors: scene.hasColors });
+    this.material = options.material || MTObject.defaultMaterial(scene.hasColors);
     this.cache = new PatchCache(options.cacheBytes || 256 * 2 ** 20, (id, e) => this._evicted(id, e));
     this.warnings = [];
     this.fatal = null;
@@ -83,6 +84,24 @@ export class MTObject extends THREE.Group {
     this.blitted = false;  // the last render() made the still image's target or showed an image
   }
 
+  /**
+   * The material mtrender draws with: both sides of every triangle (an open scan's inside shows
+   * through its holes); per-vertex colours unlit (`mtrender --color vertex`: scan colours carry
+   * their shading), shown as stored (interpolated in their sRGB bytes, as mtrender does); without
+   * colours, a Lambert surface lit by the page's lights.
+   */
+  static defaultMaterial(hasColors) {
+    if (!hasColors) return new THREE.MeshLambertMaterial({ color: 0xd8cfc0, side: THREE.DoubleSide });
+    const m = new THREE.MeshBasicMaterial({ vertexColors: true, side: THREE.DoubleSide });
+    // three takes vertex colours as linear and encodes the output to sRGB: decode the stored bytes
+    // per fragment so the screen shows them.
+    m.onBeforeCompile = (sh) => {
+      sh.fragmentShader = sh.fragmentShader.replace('#include <color_fragment>',
+        '#include <color_fragment>\n\tdiffuseColor.rgb = sRGBTransferEOTF( vec4( diffuseColor.rgb, 1.0 ) ).rgb;');
+    };
+    return m;
+  }
+
   async _start() {
     await this.server.ready;
     this.extract.start();
@@ -95,6 +114,25 @@ export class MTObject extends THREE.Group {
       poll();
     });
     this.extract.pinStart();
+    this.extract.setSurface(this._coarsestSurface());
+  }
+
+  // The coarsest cut, welded, as a ClosedSurface in object space (when normal cones may cull:
+  // closed_surface.js); null when one of its patches did not arrive whole (no cone culling).
+  _coarsestSurface() {
+    const { arcs: list, margin } = coarsestArcs(this.mt);
+    const { arcs, arcPatches } = this.mt;
+    const c = this.mt.center, parts = [];
+    for (const a of list)
+      for (let k = 0; k < arcs.patchCount[a]; ++k) {
+        const e = this.cache.get(arcPatches[arcs.firstPatch[a] + k]);
+        if (!e || !e.data || !e.data.index) return null;
+        const rel = e.data.attributes.position.array, positions = new Float64Array(rel.length);
+        for (let i = 0; i < rel.length; ++i) positions[i] = rel[i] + c[i % 3];
+        parts.push({ positions, triangles: e.data.index.array });
+      }
+    const m = weldParts(parts);
+    return new ClosedSurface(m.positions, m.triangles, margin);
   }
 
   _geometry(r) {

@@ -116,4 +116,15 @@ console.log(`triangles drawn           median ${pathFrames.map((x) => x.drawn).s
 console.log(`cache                     max ${mib(maxCache)} MiB of a ${mib(cap)} MiB cap (${maxCache <= cap ? 'never above' : 'ABOVE'} the cap)`);
 console.log(`bytes fetched             ${mib(bytesPath)} MiB over the path (${(bytesPath / frames / 1024).toFixed(1)} KiB/frame), ${mib(f.at(-1).bytesRead)} MiB in all = ${(100 * f.at(-1).bytesRead / s.fileSize).toFixed(1)}% of the file`);
 console.log(`screen error after stop   ${reach ? `reached ${tol} px ${(reach.t - stillFrom).toFixed(0)} ms after the camera stopped` : `not at ${tol} px within 20 s (last ${f.at(-1).err.toFixed(2)} px, ${f.at(-1).drawn} triangles)`}`);
+// The still stretch: how fast SwiftShader drew (triangles drawn / wall time from the stop to the
+// tolerance, or to the end) and how many triangles the cut at the tolerance holds: the floor of
+// the time to the tolerance is that cut drawn once at that rate.
+{
+  const end = reach || f.at(-1);
+  const st = f.filter((x) => x.t >= stillFrom && x.t <= end.t);
+  const drawn = st.reduce((a, x) => a + x.drawn, 0), wall = end.t - stillFrom;
+  const rate = drawn / Math.max(wall, 1) / 1000;  // M triangles/s
+  console.log(`still stretch             ${st.length} frames, ${(drawn / 1e6).toFixed(2)} M triangles drawn in ${(wall / 1000).toFixed(1)} s = ${rate.toFixed(2)} M triangles/s; ` +
+    `cut ${reach ? 'at the tolerance' : 'at the end'} ${(end.triangles / 1e6).toFixed(2)} M triangles: drawn once at that rate ${(end.triangles / rate / 1e6).toFixed(1)} s`);
+}
 console.log(`damaged patches skipped   ${s.warnings}`);

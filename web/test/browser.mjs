@@ -1,7 +1,7 @@
 // The web viewer in a real browser: Debian's chromium, headless, driven by playwright-core, WebGL
 // on SwiftShader, the MT files served by mtserve.
 //   node test/browser.mjs BIN_DIR DATA_DIR [--update-golden]
-// DATA_DIR holds t.mt and t-draco.mt (tests/web_browser.sh builds them). Tests:
+// DATA_DIR holds t.mt, t-draco.mt and c.mt (tests/web_browser.sh builds them). Tests:
 //   golden        a fixed view at a fixed tolerance, converged, against test/golden/torus.png
 //                 (at most 2% of the pixels differ by more than 48 in RGB);
 //   cracks        several views and tolerances, converged: no background pixel enclosed by the
@@ -12,7 +12,10 @@
 //                 redone; the frame times are printed (the timed figures are bench/web.sh's);
 //   corrupted     a copy of the file with damaged payloads: warnings naming the patches, the page
 //                 keeps drawing frames;
-//   no-ranges     mtserve --no-ranges (200 instead of 206): the page shows the clear message.
+//   no-ranges     mtserve --no-ranges (200 instead of 206): the page shows the clear message;
+//   colours       a coloured scan (c.mt) converged: on a grid of pixels the colour on screen is the
+//                 stored per-vertex colour interpolated at the surface point a ray through the
+//                 pixel hits, unlit (as mtrender --color vertex draws it): >= 90% within 8 levels.
 // Prints one line per test and "N passed, M failed"; exits 1 on any failure.
 import fs from 'node:fs';
 import path from 'node:path';
@@ -197,6 +200,21 @@ await test('no-ranges', async () => {
   check(st.err && /instead of 206/.test(st.err) && /Range/.test(st.err), `no clear message: ${st.err}`);
   check(st.shown === 'block', 'the message is not shown on the page');
   return `"${st.err.slice(0, 90)}..."`;
+});
+
+await test('colours', async () => {
+  const notes = [];
+  for (const view of ['0.4,-1.6,0.9,0,0,0', '-1.3,0.8,0.5,0,0,0']) {
+    const { page } = await open(`file=/data/c.mt&tol=1&fixed=3000000&view=${view}`);
+    await converge(page);
+    await page.waitForTimeout(200);
+    const r = await page.evaluate(() => window.mtViewer.colours(32, 8));
+    await page.close();
+    check(r.hits > 200, `view ${view}: only ${r.hits} sample pixels hit the surface`);
+    check(r.within >= 0.9 * r.hits, `view ${view}: ${r.within} of ${r.hits} pixels within 8 levels of the stored colour (median difference ${r.median.toFixed(1)})`);
+    notes.push(`${r.within}/${r.hits} within 8 levels, median ${r.median.toFixed(1)}`);
+  }
+  return notes.join('; ');
 });
 
 await browser.close();
