@@ -67,6 +67,10 @@ struct Stats {
   double edgeSum = 0, edgeWeight = 0;            // edges: length-weighted
   double vertexSum = 0;
   size_t vertices = 0;
+  double at[3] = {0, 0, 0};  // where the maximum is
+  void top(double d, const double* p) {
+    if (d > max) max = d, at[0] = p[0], at[1] = p[1], at[2] = p[2];
+  }
 };
 
 // Samples of `from` (n x n sub-triangle centroids per triangle, plus the vertices for the max)
@@ -105,12 +109,12 @@ Stats distances(const Mesh& from, const Mesh& to, int n, int threads) {
               double q[3];
               for (int a = 0; a < 3; ++a) q[a] = p[0][a] + u * (p[1][a] - p[0][a]) + v * (p[2][a] - p[0][a]);
               const double d = grid.distance(q);
-              s.weightedSum += w * d, s.weight += w, s.max = std::max(s.max, d);
+              s.weightedSum += w * d, s.weight += w, s.top(d, q);
             }
       }
       for (size_t v = size_t(k); v < nv; v += size_t(threads)) {
         const double d = grid.distance(&from.positions[3 * v]);
-        s.max = std::max(s.max, d), s.vertexSum += d, ++s.vertices;
+        s.top(d, &from.positions[3 * v]), s.vertexSum += d, ++s.vertices;
       }
       // Each edge once: n samples at the centres of n equal pieces, weighted by length.
       for (size_t e = size_t(k); e < edges.size(); e += size_t(threads)) {
@@ -122,14 +126,14 @@ Stats distances(const Mesh& from, const Mesh& to, int n, int threads) {
           double q[3];
           for (int x = 0; x < 3; ++x) q[x] = pa[x] + u * (pb[x] - pa[x]);
           const double d = grid.distance(q);
-          s.edgeSum += len / n * d, s.edgeWeight += len / n, s.max = std::max(s.max, d);
+          s.edgeSum += len / n * d, s.edgeWeight += len / n, s.top(d, q);
         }
       }
     });
   for (std::thread& t : pool) t.join();
   Stats all;
   for (const Stats& s : part) {
-    all.weightedSum += s.weightedSum, all.weight += s.weight, all.max = std::max(all.max, s.max);
+    all.weightedSum += s.weightedSum, all.weight += s.weight, all.top(s.max, s.at);
     all.edgeSum += s.edgeSum, all.edgeWeight += s.edgeWeight, all.vertexSum += s.vertexSum, all.vertices += s.vertices;
   }
   return all;
@@ -218,6 +222,8 @@ int main(int argc, char** argv) {
     std::printf("  c->in face %.6f edge %.6f vertex %.6f; in->c face %.6f edge %.6f vertex %.6f\n",
                 c.weightedSum / c.weight, c.edgeSum / c.edgeWeight, c.vertexSum / double(c.vertices),
                 i.weightedSum / i.weight, i.edgeSum / i.edgeWeight, i.vertexSum / double(i.vertices));
+    std::printf("  max c->in at (%.4g %.4g %.4g); max in->c at (%.4g %.4g %.4g)\n", c.at[0], c.at[1], c.at[2], i.at[0],
+                i.at[1], i.at[2]);
   } catch (const Error& e) {
     std::fprintf(stderr, "cut_distance: %s\n", e.what());
     return 1;
