@@ -10,6 +10,8 @@
 #     nxsedit -t drops whole nodes and counts differently from us, so its budget is searched (up to
 #     10 tries) for the cut closest to ours in triangles.
 #   env SAMPLES: MeshLab's sample count (default 2000000; vertex, edge and face samples).
+#   env EXACT=1: exact distances (bench_cut_distance, deterministic, no MeshLab) instead of
+#     MeshLab's sampled ones; use it to compare builds, MeshLab as the independent reference.
 # Prints one row per (tool, fraction): triangles, mean and max cut->input, mean and max input->cut.
 # Needs meshlab (Debian package) and xvfb-run.
 set -euo pipefail
@@ -26,7 +28,9 @@ while [[ $# -gt 0 ]]; do
   esac
 done
 [[ -n "$input" && -f "$input" ]] || { echo "usage: bench/quality.sh INPUT.ply [OUT.mt] [--fractions \"2 8\"] [--nexus DIR] [--nxs F.nxs]" >&2; exit 2; }
-command -v meshlabserver >/dev/null || { echo "quality: needs meshlabserver (apt-get install meshlab)" >&2; exit 1; }
+exact="${EXACT:-0}"
+[[ "$exact" == 1 ]] || command -v meshlabserver >/dev/null ||
+  { echo "quality: needs meshlabserver (apt-get install meshlab), or EXACT=1" >&2; exit 1; }
 work="$(mktemp -d "${TMPDIR:-/tmp}/quality.XXXXXX")"
 trap 'rm -rf "$work"' EXIT
 if [[ -z "$mt" ]]; then mt="$work/in.mt"; fi
@@ -41,6 +45,11 @@ oneway() { hausdorff_oneway "$@"; }
 faces() { grep -a -m1 '^element face' "$1" | awk '{print $3}'; }
 row() {  # $1 tool, $2 fraction, $3 cut.ply
   local a b
+  if [[ "$exact" == 1 ]]; then
+    "$bin/bench_cut_distance" "$input" "$3" --samples "$samples" |
+      awk -v t="$1" -v f="$2" '$2 == "c->in" && $1 ~ /^[0-9]+$/ { printf "%-6s 1/%-4s %10s %12s %12s %12s %12s\n", t, f, $1, $3, $4, $6, $7 }'
+    return
+  fi
   a=$(oneway "$3" "$input")
   b=$(oneway "$input" "$3")
   read -r am ax <<<"$a"
@@ -53,7 +62,9 @@ if [[ -n "$nexus" && ! -f "$nxs" ]]; then
   "$nexus/src/nxsbuild/nxsbuild" "$input" -o "$nxs" >"$work/nxsbuild.log" 2>&1 ||
     { tail -5 "$work/nxsbuild.log" >&2; echo "quality: nxsbuild failed" >&2; exit 1; }
 fi
-echo "quality: $input ($n triangles), $mt${nexus:+, Nexus $nxs}; MeshLab Hausdorff, $samples samples"
+how="MeshLab Hausdorff, $samples samples"
+[[ "$exact" == 1 ]] && how="exact distances (bench_cut_distance)"
+echo "quality: $input ($n triangles), $mt${nexus:+, Nexus $nxs}; $how"
 printf '%-6s %-6s %10s %12s %12s %12s %12s\n' tool cut triangles "mean c->in" "max c->in" "mean in->c" "max in->c"
 for f in $fractions; do
   target=$((n / f))

@@ -2,6 +2,7 @@
 #include "mtbuild/quadric_simplify.h"
 
 #include "mtbuild/attribute_quadric.h"
+#include "mtbuild/surface_distance.h"
 
 #include <algorithm>
 #include <cassert>
@@ -255,6 +256,14 @@ constexpr double kMinQuality = 0.05;  // a face below this is a sliver; none is 
 // shape penalty of vcg's TriEdgeCollapseQuadric, which Nexus uses, with its threshold 0.3): at a
 // given triangle count, well-shaped triangles follow the surface more closely on average.
 constexpr double kFairQuality = 0.3;
+// A collapse costs at least kAwayWeight x (its ends' total face area) x the squared distance from
+// an old position of its ends to the faces it makes (check()'s away2_): as if that much surface
+// were that far off. A quadric sums area x squared distance, so a thin feature (a needle, a
+// claw's tip, a fin's rim: a few faces whose planes run along it) is cheap to collapse along its
+// length although its tip then ends far from the result; the input->cut maximum comes from
+// such spots. Where the old positions lie near the new faces (most collapses) the quadric's
+// cost stands. 0.5, measured against 0.15-2 and against adding the term (docs/mtbuild.md).
+constexpr double kAwayWeight = 0.5;
 
 class Simplifier {
  public:
@@ -324,6 +333,7 @@ class Simplifier {
   std::vector<uint32_t> markS_, markR_, usesS_, usesR_;
   uint32_t stamp_ = 0;
   double minQuality_ = 1;
+  double away2_ = 0;  // squared distance from the collapse's old positions to its new faces
   // the worst quality of a face the checked collapse changes
 };
 
@@ -579,6 +589,7 @@ void Simplifier::neighbours(uint32_t v, std::vector<uint32_t>& n) const {
 Verdict Simplifier::check(const Candidate& c) {
   const uint32_t s = c.s, r = c.r;
   minQuality_ = 1;
+  double awayR = DBL_MAX, awayS = c.moves ? DBL_MAX : 0;
   auto liveOf = [&](uint32_t v, std::vector<uint32_t>& out) {
     out.clear();
     for (uint32_t i = start_[v]; i < start_[v] + count_[v]; ++i)
@@ -644,7 +655,12 @@ Verdict Simplifier::check(const Candidate& c) {
       const double qa = quality(n[0], n[1], n[2], after);
       if (qa < kMinQuality && qa < quality(q[0], q[1], q[2], before)) return Verdict::Refused;
       minQuality_ = std::min(minQuality_, qa);
+      // How far the ends' old positions are from the new faces (kAwayWeight): r's from the faces
+      // it becomes part of, a moved s's from all of them.
+      awayR = std::min(awayR, squaredPointTriangleDistance(&pos_[r * 3], n[0], n[1], n[2]));
+      if (c.moves) awayS = std::min(awayS, squaredPointTriangleDistance(&pos_[s * 3], n[0], n[1], n[2]));
     }
+  away2_ = std::max(awayR == DBL_MAX ? 0 : awayR, awayS == DBL_MAX ? 0 : awayS);
   if (c.moves && options_.gridStep > 0) {
     const Cell k = cellOf(c.g);
     uint32_t n = cells_.count(k);
@@ -788,11 +804,16 @@ void Simplifier::run(size_t targetTriangles) {
     }
     heapPop(heap_);
     const Verdict verdict = check(c);
-    // The shape penalty needs the neighbourhood, so it is applied when popped (the raw cost is a
-    // lower bound): a penalized collapse that is no longer the cheapest goes back in.
-    if (verdict == Verdict::Ok && !e.penalized() && minQuality_ < kFairQuality) {
+    // The shape penalty and the distance floor (kAwayWeight) need the neighbourhood, so they are
+    // applied when popped (the raw cost is a lower bound): a penalized collapse that is no longer
+    // the cheapest goes back in.
+    if (verdict == Verdict::Ok && !e.penalized() && (minQuality_ < kFairQuality || away2_ > 0)) {
+      double cost = c.cost;
+      if (minQuality_ < kFairQuality) cost *= kFairQuality / std::max(minQuality_, 1e-6);
+      const Quadric &qs = quadric_[c.s], &qr = quadric_[c.r];
+      cost = std::max(cost, kAwayWeight * (qs.a00 + qs.a11 + qs.a22 + qr.a00 + qr.a11 + qr.a22) * away2_);
       Entry p = e;
-      p.setCost(float(c.cost * (kFairQuality / std::max(minQuality_, 1e-6))));
+      p.setCost(float(cost));
       p.versionS |= 0x8000;
       if (!heap_.empty() && !Later()(heap_.front(), p)) {
         heapPush(heap_, p);
