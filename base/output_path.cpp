@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <random>
 
+#include "base/env.h"
 #include "base/error.h"
 
 namespace mt {
@@ -60,6 +61,24 @@ std::string uniqueTempName(const std::string& finalPath) {
   char buf[64];
   std::snprintf(buf, sizeof buf, ".tmp.%ld.%08llx", long(::getpid()), static_cast<unsigned long long>(rng() & 0xffffffffu));
   return finalPath + buf;
+}
+
+void writeWholeFile(const std::string& path, const std::string& bytes, Env* env) {
+  if (!env) env = Env::Default();
+  const std::string tmp = uniqueTempName(path);
+  try {
+    auto f = env->newWritableFile(tmp);
+    f->append(bytes.data(), bytes.size());
+    f->sync();
+    f->close();
+    env->renameFile(tmp, path);
+  } catch (...) {
+    try {
+      env->removeFile(tmp);
+    } catch (const Error&) {
+    }
+    throw;
+  }
 }
 
 }  // namespace mt

@@ -10,6 +10,8 @@
 
 namespace mt {
 
+class Env;
+
 // Throws mt::Error "PATH: no such file" / "is a directory, not a mesh file" / "is a FIFO, not a
 // regular file" ... unless `path` is a regular file (after following links). `expected` names
 // what the tool wanted ("a mesh file", "an MT file").
@@ -25,5 +27,10 @@ bool sameFile(const std::string& a, const std::string& b);
 
 // "FINAL.tmp.PID.RANDOM": a temporary name beside `finalPath` that no other process uses.
 std::string uniqueTempName(const std::string& finalPath);
+
+// A small file (a report, a stats JSON) written whole under uniqueTempName(path) through `env`
+// (nullptr: Env::Default()), synced and renamed over `path`: on any error (mt::Error naming the
+// file, kind Io) nothing is left under either name.
+void writeWholeFile(const std::string& path, const std::string& bytes, Env* env = nullptr);
 
 }  // namespace mt

@@ -6,10 +6,10 @@
 #include <cinttypes>
 #include <cstdio>
 #include <cstdlib>
-#include <fstream>
 
 #include "base/exit_code.h"
 #include "base/interrupt.h"
+#include "base/output_path.h"
 #include "cluster/cluster_build.h"
 #include "patchstore/patch_store.h"
 #include "tools/build_cli.h"
@@ -58,9 +58,7 @@ int main(int argc, char** argv) {
                    r.inputTriangles, output.c_str(), r.nodes, r.patches, double(r.fileBytes) / double(r.inputTriangles),
                    r.totalSeconds, double(r.inputTriangles) / r.totalSeconds / 1e6, double(r.peakRssBytes) / (1 << 20));
       if (!cli.statsJson.empty()) {
-        std::ofstream f(cli.statsJson);
-        f << report.build.toJson();
-        if (!f) throw mt::Error(cli.statsJson + ": cannot write");
+        mt::writeWholeFile(cli.statsJson, report.build.toJson());
       }
     }
   } catch (const mt::BuildInterrupted& e) {

@@ -133,6 +133,14 @@ TEST_F(ExitCodes, IoFailureIsFour) {
     const std::string name = e.path().filename().string();
     EXPECT_TRUE(name != "cut.ply" && name != "big.mt") << "left under the final name: " << name;
   }
+  // The build's report (--stats-json) is written as every output is: a place that cannot take it
+  // is an I/O error naming it.
+  const std::string stats = tmp.file("missing/stats.json");
+  CommandResult s = runTool("mtbuild", dir_->file("in.ply") + " -o " + tmp.file("s.mt") +
+                                           " --patch-triangles 100 --threads 1 -q --stats-json " + stats);
+  EXPECT_EQ(s.exitCode, mt::kExitIo) << s.output;
+  EXPECT_TRUE(has(s.output, "mtbuild: " + stats)) << s.output;
+  EXPECT_TRUE(has(s.output, "[I/O error]")) << s.output;
 }
 
 TEST_F(ExitCodes, MtserveOnAPortInUseIsAnIoError) {

@@ -3,10 +3,10 @@
 
 #include <cinttypes>
 #include <cstdio>
-#include <fstream>
 
 #include "base/exit_code.h"
 #include "base/interrupt.h"
+#include "base/output_path.h"
 #include "mtbuild/build.h"
 #include "patchstore/patch_store.h"
 #include "tools/build_cli.h"
@@ -34,9 +34,7 @@ int main(int argc, char** argv) {
                  double(r.inputTriangles) / r.totalSeconds / 1e6, double(r.peakRssBytes) / (1 << 20),
                  double(r.peakTempBytes) / (1 << 20));
     if (!cli.statsJson.empty()) {
-      std::ofstream f(cli.statsJson);
-      f << r.toJson();
-      if (!f) throw mt::Error(cli.statsJson + ": cannot write");
+      mt::writeWholeFile(cli.statsJson, r.toJson());
     }
   } catch (const mt::BuildInterrupted& e) {
     std::fprintf(stderr, "mtbuild: %s\n", e.what());
