@@ -81,11 +81,12 @@ bool ExtractRender::isCoarsenCandidate(uint32_t n) const {
 }
 
 void ExtractRender::syncCandidate(uint32_t n) {
-  auto sync = [](std::vector<uint32_t>& set, std::vector<uint32_t>& pos, uint32_t n, bool member) {
+  auto sync = [this](std::vector<uint32_t>& set, std::vector<uint32_t>& pos, uint32_t n, bool member) {
     if (member == (pos[n] != UINT32_MAX)) return;
     if (member) {
       pos[n] = uint32_t(set.size());
       set.push_back(n);
+      key_[n] = std::numeric_limits<double>::quiet_NaN();  // a new candidate: keyed at its first heap fill
     } else {
       const uint32_t last = set.back();
       set[pos[n]] = last;
@@ -142,6 +143,8 @@ void ExtractRender::start(double timeoutMs) {
   coarsenSet_.clear();
   refinePos_.assign(n, UINT32_MAX);
   coarsenPos_.assign(n, UINT32_MAX);
+  key_.assign(n, std::numeric_limits<double>::quiet_NaN());
+  rekeyCursor_ = 0;
   stamp_.assign(n, 0);
   stampNow_ = 0;
   // The coarsest cut: every node but the sinks.
@@ -446,11 +449,25 @@ FrameStats ExtractRender::requestAhead(uint64_t frame, const View& view) {
   };
   std::priority_queue<Entry> heap;
   keyed_ = 0;
-  for (uint32_t n : refineSet_)
-    if (!badNode_[n]) heap.push({screenError(n, view), n, 0});
+  // Bounded as the update's heaps are (fillHeaps): fresh keys within half the deadline, the last
+  // keys after it (the view is still: they were made for it or for a view a few frames before);
+  // the walk below stops at the deadline.
+  const auto deadline = t0 + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double, std::milli>(extractMs));
+  const auto half = t0 + (deadline - t0) / 2;
+  const bool bounded = options_.deadline && options_.boundedRekey;
+  bool fresh = true;
+  for (size_t i = 0; i < refineSet_.size(); ++i) {
+    const uint32_t n = refineSet_[i];
+    if (badNode_[n]) continue;
+    if (fresh && bounded && (i & 63) == 63 && Clock::now() >= half) fresh = false;
+    if (fresh || std::isnan(key_[n])) key_[n] = screenError(n, view);
+    else ++st.staleKeys;
+    heap.push({key_[n], n, 0});
+  }
   double triangles = double(visibleTriangles_);
   const uint32_t visit = ++stampNow_;
-  while (!heap.empty()) {
+  for (uint32_t ops = 0; !heap.empty(); ++ops) {
+    if (bounded && (ops & 15) == 15 && Clock::now() >= deadline) break;
     Entry e = heap.top();
     heap.pop();
     if (e.err <= tau || stamp_[e.node] == visit) continue;
@@ -525,11 +542,34 @@ struct ExtractRender::Pass {
 // Re-keys the heaps for the new view from the candidate sets (kept by every move): the work is
 // the front of the cut, not the DAG.
 void ExtractRender::fillHeaps(Pass& p) const {
+  // The keys depend on the view, so every candidate is re-keyed for the new one: O(front of the
+  // cut). On a DAG of small patches the front holds thousands of nodes, so the re-keying is
+  // bounded: it runs within the first half of the deadline, from a cursor that rotates over the
+  // candidates, and the candidates it does not reach keep the key of the last frame that reached
+  // them (BMT 5: the heaps persist between frames; consecutive views differ little, and every key
+  // is fresh again within a few frames). Candidates never keyed are always keyed. Without the
+  // deadline, or with time enough, every key is fresh (the cut is the same as unbounded).
+  const size_t nr = refineSet_.size(), total = nr + coarsenSet_.size();
+  const auto half = p.t0 + (p.deadline - p.t0) / 2;
+  size_t fresh = 0;
+  for (size_t start = total ? rekeyCursor_ % total : 0; fresh < total; ++fresh) {
+    if (p.useDeadline && options_.boundedRekey && (fresh & 63) == 63 && Clock::now() >= half) break;
+    const size_t j = (start + fresh) % total;
+    const uint32_t n = j < nr ? refineSet_[j] : coarsenSet_[j - nr];
+    key_[n] = screenError(n, p.view);
+  }
+  rekeyCursor_ = total ? (rekeyCursor_ % total + fresh) % total : 0;
+  size_t late = 0;  // candidates past the bound keyed anyway (never keyed before)
+  auto keyOf = [&](uint32_t n) {
+    if (std::isnan(key_[n])) key_[n] = screenError(n, p.view), ++late;
+    return key_[n];
+  };
   std::vector<Pass::Entry> r, c;
   r.reserve(refineSet_.size());
   c.reserve(coarsenSet_.size());
-  for (uint32_t n : refineSet_) r.push_back({screenError(n, p.view), n});
-  for (uint32_t n : coarsenSet_) c.push_back({screenError(n, p.view), n});
+  for (uint32_t n : refineSet_) r.push_back({keyOf(n), n});
+  for (uint32_t n : coarsenSet_) c.push_back({keyOf(n), n});
+  p.st.staleKeys = uint32_t(total - fresh - late);
   p.refine = decltype(p.refine)(Pass::LargestFirst(), std::move(r));
   p.coarse = decltype(p.coarse)(Pass::SmallestFirst(), std::move(c));
   for (uint32_t n : scene_.sources())
@@ -698,11 +738,16 @@ void ExtractRender::prefetch(Pass& p, const std::vector<View>& ahead) {
   };
   std::vector<Entry> start;
   start.reserve(refineSet_.size());
-  for (uint32_t n : refineSet_)
+  // The whole front keyed for the views ahead is O(front x views): it stops at the deadline too
+  // (what it reached is prefetched; the next frame starts over).
+  for (size_t i = 0; i < refineSet_.size(); ++i) {
+    if ((i & 63) == 63 && !timeLeft()) break;
+    const uint32_t n = refineSet_[i];
     if (!badNode_[n]) {
       const double e = screenErrorAhead(n, ahead);
       if (e > p.tau) start.push_back({e, n, 0});
     }
+  }
   std::priority_queue<Entry> heap(std::less<Entry>(), std::move(start));
   const uint32_t visit = ++stampNow_;
   double triangles = 0;

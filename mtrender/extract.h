@@ -80,6 +80,7 @@ struct ExtractOptions {
   bool lodScalePolicy = true;    // the global LOD scale grows while the cache is full
   bool occlusion = true;         // nodes the last frame's depth hides get screen error 0 (setOccluded)
   bool patchCones = true;        // the finest patches are culled by their own normal cones (engine.cpp)
+  bool boundedRekey = true;      // the heaps' re-keying stops at half the deadline (the rest keep their keys)
 };
 
 // One wanted, non-resident patch, as the load order sees it.
@@ -111,6 +112,7 @@ struct FrameStats {
   bool memoryFull = false;
   bool interrupted = false;      // the deadline stopped the update
   uint32_t nodesKeyed = 0;       // screen errors computed (heaps re-keyed, prefetch): O(front), not O(DAG)
+  uint32_t staleKeys = 0;        // candidates whose key the bounded re-keying left at an earlier frame's
   uint32_t occludedNodes = 0;    // front nodes hidden by the last frame's depth (error 0)
   double modelA = 0, modelB = 0; // time model: ms fixed, ms per million triangles
 };
@@ -235,6 +237,10 @@ class ExtractRender {
   };
   std::unordered_map<uint32_t, Want> wanted_;           // this frame
   std::vector<uint32_t> refineSet_, coarsenSet_, refinePos_, coarsenPos_;  // indexed candidate sets
+  // Each candidate's screen error as last keyed (NaN: not yet) and where the next frame's bounded
+  // re-keying starts (fillHeaps).
+  mutable std::vector<double> key_;
+  mutable size_t rekeyCursor_ = 0;
   std::vector<uint32_t> stamp_;                          // per node: last requestAhead/prefetch visit
   uint32_t stampNow_ = 0;
   mutable uint32_t keyed_ = 0;  // screen errors computed since the update began

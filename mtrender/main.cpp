@@ -52,18 +52,18 @@ void writeCsv(const std::string& path, const std::vector<FrameRecord>& frames) {
            "drawn_triangles,drawn_patches,budget_triangles,gpu_bytes,lod_scale,moving,requests,prefetches,"
            "refinements,coarsenings,model_fixed_ms,model_ms_per_mtri,accumulating,image_frames,"
            "occluded_arcs,occluded_nodes,coned_patches,nodes_keyed,interrupted,loaded_triangles,new_misses,"
-           "occlusion_ms,occlusion_tests,occlusion_frame,extract_cpu_ms\n";
+           "occlusion_ms,occlusion_tests,occlusion_frame,extract_cpu_ms,stale_keys\n";
     char buf[512];
     for (size_t i = 0; i < frames.size(); ++i) {
       const FrameRecord& f = frames[i];
-      std::snprintf(buf, sizeof buf, "%zu,%.3f,%.4f,%llu,%u,%u,%u,%llu,%.4f,%llu,%u,%llu,%llu,%.3f,%d,%u,%u,%u,%u,%.3f,%.1f,%d,%u,%u,%u,%u,%u,%d,%llu,%u,%.3f,%u,%d,%.4f\n", i,
+      std::snprintf(buf, sizeof buf, "%zu,%.3f,%.4f,%llu,%u,%u,%u,%llu,%.4f,%llu,%u,%llu,%llu,%.3f,%d,%u,%u,%u,%u,%.3f,%.1f,%d,%u,%u,%u,%u,%u,%d,%llu,%u,%.3f,%u,%d,%.4f,%u\n", i,
                     f.frameMs, f.extractMs, (unsigned long long)f.triangles, f.patches, f.loads, f.misses,
                     (unsigned long long)f.cacheBytes, f.maxScreenError, (unsigned long long)f.drawnTriangles,
                     f.drawnPatches, (unsigned long long)f.budgetTriangles, (unsigned long long)f.gpuBytes, f.lodScale,
                     f.moving ? 1 : 0, f.requests, f.prefetches, f.refinements, f.coarsenings, f.modelA, f.modelB,
                     f.accumulating ? 1 : 0, f.imageFrames, f.occludedArcs, f.occludedNodes, f.conedPatches, f.nodesKeyed,
                     f.interrupted ? 1 : 0, (unsigned long long)f.loadedTriangles, f.newMisses,
-                    f.occlusionMs, f.occlusionTests, f.occlusionFrame ? 1 : 0, f.extractCpuMs);
+                    f.occlusionMs, f.occlusionTests, f.occlusionFrame ? 1 : 0, f.extractCpuMs, f.staleKeys);
       out << buf;
     }
     if (!out) mt::fail(path, "write failed");
@@ -145,7 +145,7 @@ struct CliOptions {
   std::vector<std::string> files;
   bool headless = false, baseline = false, noPrefetch = false, noCull = false, quiet = false, wireframe = false;
   bool noOcclusion = false;
-  std::string occlusionTest = "pyramid", cones = "closed";
+  std::string occlusionTest = "pyramid", cones = "closed", rekey = "bounded";
   bool cold = false;
   std::string cameraPath, statsPath, screenshotDir, plotDir, cacheText = "256M", gpuCacheText, colorMode = "auto";
   std::string screenshotPath, recordPath = "mtrender-path.txt";
@@ -215,6 +215,11 @@ void addRenderOptions(CLI::App& app, CliOptions& o) {
                  "from outside it; both sides are lit, so elsewhere a back face can show through a hole), always "
                  "(every cone: changes the image of an open scan), off")
       ->check(CLI::IsMember({"closed", "always", "off"}));
+  app.add_option("--rekey", o.rekey,
+                 "how the cut update re-keys its heaps for the new view: bounded (default: within half the extract "
+                 "deadline, from a rotating start; the candidates it does not reach keep their last key) or all (every "
+                 "candidate every frame, whatever the deadline: for measuring what the bound saves)")
+      ->check(CLI::IsMember({"bounded", "all"}));
   app.add_option("--occlusion-test", o.occlusionTest,
                  "how occlusion culling finds what is hidden: pyramid (the frame's depth read back into a max-depth "
                  "pyramid, spheres tested on the CPU) or queries (GL occlusion queries of the spheres' boxes); "
@@ -296,6 +301,7 @@ EngineOptions engineOptions(const CliOptions& o) {
                      : o.cones == "off"  ? ExtractOptions::Cones::Off
                                          : ExtractOptions::Cones::Closed;
   eo.extract.occlusion = !o.noOcclusion;
+  eo.extract.boundedRekey = o.rekey != "all";
   eo.occlusionTest = o.occlusionTest == "queries" ? OcclusionTest::Queries : OcclusionTest::Pyramid;
   return eo;
 }

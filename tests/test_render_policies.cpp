@@ -158,6 +158,60 @@ TEST_F(RenderPolicies, ATinyDeadlineLeavesAConformingCutAndTheNextFrameResumes) 
   EXPECT_EQ(lastTriangles, double(rs.triangles)) << "the interrupted updates did not reach the same cut";
 }
 
+// On a DAG of small patches the cut's front holds hundreds to thousands of candidates, and re-keying
+// them all for every view is the update's largest fixed cost: it is bounded by half the deadline
+// (fillHeaps), the candidates it does not reach keep an earlier frame's key, and the cut still
+// converges to the one an unbounded update reaches.
+TEST_F(RenderPolicies, TheHeapsAreReKeyedWithinTheDeadlineAndTheCutStillConverges) {
+  const std::string ply = dir_->file("small.ply"), mt = dir_->file("small.mt");
+  auto g = runTool("mtgen", "-o " + ply + " --triangles 100k --holes 4 --seed 7");
+  ASSERT_EQ(g.exitCode, 0) << g.output;
+  auto b = runTool("mtbuild", ply + " -o " + mt + " --patch-triangles 100 --threads 2 -q");
+  ASSERT_EQ(b.exitCode, 0) << b.output;
+  Rig rig({mt});
+  CameraPose pose = defaultPose(rig.center, rig.radius);
+  pose.eye = rig.center + (pose.eye - rig.center) * 0.6;
+  const View v = rig.view(pose);
+  ExtractOptions eo;
+  eo.fixedTriangles = 1'000'000;
+  eo.pixelTolerance = 0.2;
+  eo.prefetch = false;
+  eo.extractMs = 1e-6;  // a nanosecond: the re-keying stops at its first look at the clock
+  ExtractRender ex(rig.scene, rig.cache.get(), rig.server.get(), eo);
+  ex.start(10000);
+  uint64_t stale = 0;
+  uint32_t bigFronts = 0, frames = 0;
+  FrameStats st;
+  for (uint64_t f = 1; f <= 3000; ++f) {
+    const size_t front = ex.refineCandidates().size() + ex.coarsenCandidates().size();
+    st = ex.update(f, v, v);
+    ++frames;
+    stale += st.staleKeys;
+    if (front >= 128) {
+      ++bigFronts;
+      EXPECT_LT(st.nodesKeyed, front) << "frame " << f << ": the whole front of " << front << " was re-keyed";
+    }
+    rig.server->waitIdle(2000);
+    if (!st.interrupted && st.maxScreenError <= eo.pixelTolerance) break;
+  }
+  std::printf("%u frames, %u with a front of >= 128 candidates, %llu stale keys in all\n", frames, bigFronts,
+              (unsigned long long)stale);
+  EXPECT_GT(bigFronts, 10u) << "the front never grew: the test tests nothing";
+  EXPECT_GT(stale, 0u);
+  ExtractOptions full = eo;
+  full.extractMs = 60000;
+  ExtractRender ref(rig.scene, rig.cache.get(), rig.server.get(), full);
+  ref.start(10000);
+  FrameStats rs;
+  for (uint64_t f = 1; f <= 60; ++f) {
+    rs = ref.update(f, v, v);
+    EXPECT_EQ(rs.staleKeys, 0u);
+    rig.server->waitIdle(2000);
+  }
+  EXPECT_LT(frames, 3000u) << "never converged";
+  EXPECT_EQ(st.triangles, rs.triangles) << "the bounded re-keying did not reach the unbounded update's cut";
+}
+
 // ---- load order -------------------------------------------------------------------------------
 
 TEST_F(RenderPolicies, ARegionStarvedOfLoadsIsServedFirstAfterAFewFrames) {

@@ -2,7 +2,7 @@
 // [&path=orbit|fixed&frames=600][&view=EX,EY,EZ,TX,TY,TZ (unit space)]. Orbit/pan/zoom with the
 // mouse (three's OrbitControls); the HUD shows fps, triangles, cache, loads and the screen error,
 // and the file's coordinate reference system when its metadata block names one.
-// `plain` draws with renderer.render (no progressive still image). `capture` keeps the drawing buffer for reading the image back (the tests). `path` plays a recorded camera path frame by frame (the browser tests and bench/web.sh); the
+// `side=front` culls back faces (measurement). `plain` draws with renderer.render (no progressive still image). `capture` keeps the drawing buffer for reading the image back (the tests). `path` plays a recorded camera path frame by frame (the browser tests and bench/web.sh); the
 // per-frame figures are in window.mtViewer.frames.
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
@@ -57,6 +57,9 @@ async function main() {
       pixelTolerance: Number(q.get('tol') || 1),
       budgetMs: Number(q.get('budget') || 50),
       fixedTriangles: Number(q.get('fixed') || 0),
+      // side=front: back faces culled by the GL (measurement only: an open scan's inside then shows
+      // the background through its holes; docs/web.md has what drawing both sides costs).
+      material: q.get('side') === 'front' ? new THREE.MeshLambertMaterial({ color: 0xd8cfc0 }) : undefined,
       cacheBytes: Number(q.get('cache') || 256) * 2 ** 20,
       onWarning: (m) => {
         state.warnings.push(m);
@@ -87,6 +90,22 @@ async function main() {
   state.canvas = renderer.domElement;
   state.camera = camera;
   state.mt = mt;
+  // The cut's meshes drawn whole, straight to the screen, `reps` times, each waited for (one pixel
+  // read back): the software renderer's raw rate on this cut (bench/web.sh: the floor under the
+  // time a still view takes to reach the tolerance).
+  state.drawRate = (reps = 3) => {
+    const gl = renderer.getContext(), px = new Uint8Array(4), ms = [];
+    let triangles = 0;
+    for (const m of mt.children) if (m.isMesh && m.visible) triangles += m.geometry.index.count / 3;
+    for (let k = 0; k < reps; ++k) {
+      const t = performance.now();
+      renderer.setRenderTarget(null);
+      renderer.render(scene, camera);
+      gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, px);
+      ms.push(performance.now() - t);
+    }
+    return { triangles, ms };
+  };
   state.ready = true;
   state.fileSize = mt.mt.fileSize;
   state.crs = mt.mt.crs;  // the file's coordinate reference system ('' when it names none)
@@ -117,7 +136,7 @@ async function main() {
     if (i > 0) fpsAvg = fpsAvg ? 0.9 * fpsAvg + 0.1 * (1000 / dt) : 1000 / dt;
     state.frames.push({
       t: now, frameMs: i > 0 ? dt : 0, updateMs, renderMs, drawn: st.drawnTriangles, patches: st.drawnPatches, cacheBytes: st.cacheBytes,
-      cacheCap: st.cacheCap, bytesRead: st.bytesRead, err: st.maxScreenError, pending: st.loadsPending,
+      cacheCap: st.cacheCap, bytesRead: st.bytesRead, err: st.maxScreenError, cutErr: st.cutErr, accumulating: mtAccumulating(mt), pending: st.loadsPending,
       budget: st.budgetTriangles, modelA: st.modelA, modelB: st.modelB, loads: st.loads, moves: st.refinements + st.coarsenings, evictions: st.evictions, givenUp: st.givenUp, triangles: st.triangles, still: path === 'orbit' ? i >= Math.floor(frames * 0.85) : null,
     });
     if (state.frames.length > 5000) state.frames.shift();
@@ -133,6 +152,10 @@ async function main() {
     requestAnimationFrame(loop);
   };
   requestAnimationFrame(loop);
+}
+// Whether a still image is being drawn (its chunks go to the accumulation target).
+function mtAccumulating(mt) {
+  return !!(mt.progressiveNow && mt.accum);
 }
 // The image as RGBA bytes (the drawing buffer is preserved).
 function pixels() {

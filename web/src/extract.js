@@ -71,6 +71,7 @@ export class ExtractRender {
     this.time = new TimeModel();
     this.lodScale = 1;
     this.budgetScale = 1;
+    this.stillTriangles = 0;  // a still view's cut may hold this many triangles (MTObject: K chunks at their measured rate)
     this.frameBudget = 0;
     this.frozen = false;
     this.smoothBudget = 0;
@@ -323,6 +324,7 @@ export class ExtractRender {
       budget = Math.max(this.smoothBudget, 1000.0);
     }
     this.frameBudget = budget;
+    if (this.budgetScale > 1 && !this.options.fixedTriangles) return Math.max(budget * this.budgetScale, this.stillTriangles);
     return budget * this.budgetScale;
   }
   submitRequests(frame, st) {
@@ -347,6 +349,10 @@ export class ExtractRender {
     if (!loadBudget) {
       const ms = this.server.meanLoadMs();
       loadBudget = Math.floor(Math.min(Math.max(ms > 0 ? this.options.budgetMs / ms : 64, 8), 512));
+      // A still view (budgetScale > 1: its image is drawn over many frames): the loads no longer
+      // compete with a frame that must show motion, and a longer queue lets the server coalesce
+      // neighbouring payloads into fewer range reads. Measured on the 53 M build: docs/web.md.
+      if (this.budgetScale > 1) loadBudget = 512;
     }
     const out = [];
     for (const r of reqs) {

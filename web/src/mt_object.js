@@ -78,9 +78,16 @@ export class MTObject extends THREE.Group {
     // an accumulation target, at most one frame's budget a frame; the screen keeps the last
     // complete image meanwhile. render() does this; update() + renderer.render() draws plainly.
     this.stillFrames = options.stillFrames ?? 128;
+    // The still image's chunks are sized by the rate at which they were measured to draw (each
+    // chunk's frame waits for its drawing), not by the moving frames' time model: a moving frame's
+    // cost here is mostly fixed (SwiftShader clears and presents 1280x720 whatever the cut), so that
+    // model left the chunks at 1-6 k triangles and the still cut at 128 x its 1000-triangle floor.
+    this.stillRate = { triangles: 0, ms: 0 };  // decayed sums over the chunks drawn
+    this.stillChunk = 0;  // triangles a still frame draws (0: not measured yet)
     this.stillCount = 0;
     this.accum = null;  // {list: Mesh[], next, err}
     this.shownErr = 0;
+    this.shownTriangles = 0;  // triangles of the image on screen
     this.blitted = false;  // the last render() made the still image's target or showed an image
   }
 
@@ -195,25 +202,41 @@ export class MTObject extends THREE.Group {
       for (let k = 2; k <= 10; k += 2) ahead.push(makeView(extrapolate(prev, pose, k), width, height, this.mt.center, this.mt.radius));
     this.progressiveNow = this.progressive && this.stillCount >= 2 && this.stillFrames > 1;
     let st;
+    const drawingImage = this.progressiveNow && this.accum && this.accum.next < this.accum.list.length;
     if (!this.progressiveNow) {
       this.accum = null;
       this.extract.budgetScale = 1;
+      this.extract.stillTriangles = 0;
       st = this.extract.update(this.frame, view, ahead);
-    } else if (this.accum && this.accum.next < this.accum.list.length) {
+    } else if (drawingImage) {
       st = this.extract.requestAhead(this.frame, view);  // the image being drawn keeps its cut
       st.maxScreenError = this.shownErr;
     } else {
       this.extract.budgetScale = this.stillFrames;
+      // The next image may hold K chunks, or 4x the image on screen: the images drawn before the
+      // one at the tolerance then cost at most a third of its drawing (1/4 + 1/16 + ...), and the
+      // screen still improves in steps meanwhile.
+      this.extract.stillTriangles = Math.max(this.stillFrames * this.stillChunk, 4 * this.shownTriangles);
       st = this.extract.update(this.frame, view, ahead);
       this.cutChanged = st.refinements + st.coarsenings > 0 || !this.accum;
     }
+    // The error of the cut the update last chose (the image in progress is of it); the screen shows
+    // `maxScreenError`, the last complete image's. Their gap is the drawing's share of a still view.
+    if (!drawingImage) this.cutErr = st.maxScreenError;
+    st.cutErr = this.cutErr;
     this.lastView = view;
-    // The meshes: one per patch of the cut's visible arcs.
+    // The meshes: one per patch of the cut's visible arcs, drawn front to back (as mtrender does):
+    // three sorts opaque meshes by renderOrder first, here the distance from the eye to the arc's
+    // sphere, so nearer surfaces fill the depth buffer first and the fragments they hide (the back
+    // of the model, drawn since both sides are) fail the depth test before they are shaded.
     const { arcs, arcPatches } = this.mt;
+    const { center, radius } = this.mt.nodes;
     const keep = new Set();
     let drawnTriangles = 0, drawnPatches = 0;
     for (const a of this.extract.cutArcs) {
       if (!this.extract.arcVisible(a, view)) continue;
+      const s = arcs.cullNode[a];
+      const order = Math.hypot(center[3 * s] - view.eye[0], center[3 * s + 1] - view.eye[1], center[3 * s + 2] - view.eye[2]) - radius[s];
       for (let k = 0; k < arcs.patchCount[a]; ++k) {
         const id = arcPatches[arcs.firstPatch[a] + k];
         const e = this.cache.get(id);
@@ -227,6 +250,7 @@ export class MTObject extends THREE.Group {
           this.meshes.set(id, m);
           this.add(m);
         }
+        m.renderOrder = order;
         drawnTriangles += e.data.index.count / 3;
         ++drawnPatches;
       }
@@ -237,7 +261,7 @@ export class MTObject extends THREE.Group {
         this.meshes.delete(id);
       }
     if (this.progressiveNow && this.cutChanged && (!this.accum || this.accum.next >= this.accum.list.length)) {
-      this.accum = { list: [...this.meshes.values()], next: 0, err: st.maxScreenError, fresh: true };
+      this.accum = { list: [...this.meshes.values()].sort((x, y) => x.renderOrder - y.renderOrder), next: 0, err: st.maxScreenError, fresh: true, triangles: drawnTriangles };
       this.cutChanged = false;
     }
     this.drawnTriangles = drawnTriangles;
@@ -261,6 +285,7 @@ export class MTObject extends THREE.Group {
    * (meanwhile the screen keeps the last image). Call after update(). Returns the triangles drawn.
    */
   render(renderer, scene, camera) {
+    const t0 = performance.now();
     this.progressive = true;
     let drawn = 0;
     if (!this.progressiveNow || !this.accum) {
@@ -269,6 +294,7 @@ export class MTObject extends THREE.Group {
       renderer.render(scene, camera);
       drawn = this.drawnTriangles;
       this.shownErr = this.stats ? this.stats.maxScreenError : 0;
+      this.shownTriangles = this.drawnTriangles;
     } else if (this.accum.next < this.accum.list.length) {
       // Still, an image in progress: its next chunk into the accumulation target. The screen is
       // not touched, so the browser keeps showing the last image presented.
@@ -283,7 +309,7 @@ export class MTObject extends THREE.Group {
         this.blitCamera = new THREE.OrthographicCamera(-1, 1, 1, -1, 0, 1);
       }
       const a = this.accum;
-      const budget = Math.max(this.extract.frameBudget, 1000);
+      const budget = Math.max(this.extract.frameBudget, this.stillChunk, 1000);
       const chunk = new Set();
       while (a.next < a.list.length && (chunk.size === 0 || drawn + a.list[a.next].geometry.index.count / 3 <= budget)) {
         const m = a.list[a.next++];
@@ -312,6 +338,7 @@ export class MTObject extends THREE.Group {
         renderer.render(this.blitScene, this.blitCamera);  // the complete image, shown once
         this.blitted = true;
         this.shownErr = a.err;
+        this.shownTriangles = a.triangles;
       }
     }
     // Still and complete: nothing to draw; the screen keeps the image.
@@ -324,6 +351,7 @@ export class MTObject extends THREE.Group {
       // gl.finish() does not wait in Chromium; reading one pixel back does.
       const gl = renderer.getContext();
       gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, this.syncPixel || (this.syncPixel = new Uint8Array(4)));
+      if (!this.blitted && drawn > 0) this._measureChunk(drawn, performance.now() - t0);
     }
     this.drawnTriangles = drawn;
     if (this.stats) {
@@ -331,6 +359,18 @@ export class MTObject extends THREE.Group {
       if (this.progressiveNow) this.stats.maxScreenError = this.shownErr;
     }
     return drawn;
+  }
+
+  // A chunk of `triangles` took `ms` to draw (synchronised): the still chunk becomes what fits in
+  // the frame's drawing share (70% of the budget, less the update's deadline), from the decayed
+  // rate of the chunks so far, at most doubling a frame (a wrong rate costs one frame, not many).
+  _measureChunk(triangles, ms) {
+    const r = this.stillRate;
+    r.triangles = 0.7 * r.triangles + triangles;
+    r.ms = 0.7 * r.ms + Math.max(ms, 0.1);
+    const extractMs = Math.min(2, this.extract.options.budgetMs / 20);
+    const fit = (r.triangles / r.ms) * (0.7 * this.extract.options.budgetMs - extractMs);
+    this.stillChunk = Math.max(1000, Math.min(fit, 2 * Math.max(triangles, this.stillChunk)));
   }
 
   dispose() {

@@ -1,6 +1,7 @@
 // node test/bench.mjs BIN_DIR FILE.mt [--frames 600] [--budget 33] [--tol 1] [--cache 256] [--shots DIR]
 //                    [--dump FRAMES.json] (the per-frame records of window.mtViewer.frames)
 //                    [--fixed N] (a fixed render budget of N triangles instead of the time model: raw draw cost)
+//                    [--query K=V&...] (more viewer.html parameters, e.g. side=front)
 // The web viewer's figures on one MT file served by mtserve, in headless Chromium at 1280x720
 // (bench/web.sh runs it): time to the first image after page load, the share of frames within the
 // page's budget over a 600-frame orbit path, the cache against its cap, bytes fetched per frame and
@@ -67,7 +68,7 @@ function browserCpuMs() {
 const loadavg = () => fs.readFileSync('/proc/loadavg', 'utf8').split(' ').slice(0, 3).join(' ');
 const page = await browser.newPage({ viewport: { width: 1280, height: 720 } });
 page.on('pageerror', (e) => console.error('pageerror:', e.message));
-const q = `file=/model.mt&tol=${tol}&budget=${budget}&cache=${cacheMiB}&path=orbit&frames=${frames}` + (fixed ? `&fixed=${fixed}` : '');
+const q = `file=/model.mt&tol=${tol}&budget=${budget}&cache=${cacheMiB}&path=orbit&frames=${frames}` + (fixed ? `&fixed=${fixed}` : '') + (opt('--query', '') ? `&${opt('--query', '')}` : '');
 await page.goto(`${srv.base}/web/viewer.html?${q}`);
 const loadMs = await page.evaluate(() => performance.timing.loadEventEnd - performance.timing.navigationStart);
 await page.waitForFunction(() => window.mtViewer.firstImageMs !== null || window.mtViewer.error, null, { timeout: 60000 });
@@ -87,6 +88,8 @@ await page.waitForFunction((tol) => {
   return f.err <= tol && f.pending === 0;
 }, tol, { timeout: 20000, polling: 50 }).catch(() => {});
 if (shots) await page.screenshot({ path: path.join(shots, 'web-viewer-still.png') });
+// The final cut drawn whole, three times, each waited for: SwiftShader's raw rate on it.
+const raw = await page.evaluate(() => window.mtViewer.drawRate(3));
 const s = await page.evaluate(() => ({ frames: window.mtViewer.frames, first: window.mtViewer.firstImageMs, fileSize: window.mtViewer.fileSize,
   openBytes: window.mtViewer.openBytes, error: window.mtViewer.error, warnings: window.mtViewer.warnings.length }));
 await browser.close();
@@ -126,5 +129,15 @@ console.log(`screen error after stop   ${reach ? `reached ${tol} px ${(reach.t -
   const rate = drawn / Math.max(wall, 1) / 1000;  // M triangles/s
   console.log(`still stretch             ${st.length} frames, ${(drawn / 1e6).toFixed(2)} M triangles drawn in ${(wall / 1000).toFixed(1)} s = ${rate.toFixed(2)} M triangles/s; ` +
     `cut ${reach ? 'at the tolerance' : 'at the end'} ${(end.triangles / 1e6).toFixed(2)} M triangles: drawn once at that rate ${(end.triangles / rate / 1e6).toFixed(1)} s`);
+}
+{
+  // The still stretch's milestones: the update's cut at the tolerance (its patches resident, since
+  // a cut only holds resident patches), nothing left loading, and that cut's image on screen.
+  const st = f.filter((x) => x.t >= stillFrom);
+  const at = (pred) => { const x = st.find(pred); return x ? `${((x.t - stillFrom) / 1000).toFixed(2)} s` : 'never'; };
+  const rawMs = [...raw.ms].sort((a, b) => a - b);
+  console.log(`still milestones          cut chosen at ${tol} px ${at((x) => x.cutErr <= tol)}, and nothing loading ${at((x) => x.cutErr <= tol && x.pending === 0)}, on screen ${at((x) => x.err <= tol)}; ` +
+    `images shown ${st.filter((x, i) => i > 0 && x.err !== st[i - 1].err).length}, triangles drawn ${(st.filter((x) => !reach || x.t <= reach.t).reduce((a, x) => a + x.drawn, 0) / 1e6).toFixed(2)} M until then`);
+  console.log(`raw draw of the last cut  ${(raw.triangles / 1e6).toFixed(2)} M triangles in ${rawMs.map((x) => x.toFixed(0)).join(' / ')} ms = ${(raw.triangles / rawMs[1] / 1000).toFixed(2)} M triangles/s (median; one full draw, synchronised)`);
 }
 console.log(`damaged patches skipped   ${s.warnings}`);
