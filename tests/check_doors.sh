@@ -10,6 +10,7 @@ root="${1:-$(cd "$(dirname "$0")/.." && pwd)}"
 cd "$root"
 declare -A allowed=(
   [base]=""
+  [texture]="base"
   [patchstore/io]="base"
   [patchstore]="base patchstore/io patchstore/heal"
   [patchstore/heal]="base patchstore/io patchstore"
