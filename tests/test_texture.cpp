@@ -2,9 +2,14 @@
 // with the file and byte offset.
 #include <gtest/gtest.h>
 
+#include <gmock/gmock.h>
+
+#include <array>
 #include <cmath>
+#include <cstdio>
 
 #include "base/error.h"
+#include "patchstore/io/mesh_reader.h"
 #include "test_support.h"
 #include "texture/image_codec.h"
 
@@ -117,6 +122,175 @@ TEST(TextureImage, FilesThroughEnvAndBadImages) {
   png[png.size() / 2] ^= 0x5a;
   test::writeFile(dir.file("flip.png"), png);
   expectError(dir.file("flip.png"), "damaged PNG image");
+}
+
+// ---- Readers: texture coordinates, materials, images -------------------------------------------
+
+struct Collect : MeshSink {
+  MeshHeader header;
+  std::vector<InputVertex> v;
+  std::vector<uint32_t> t;
+  void begin(const MeshHeader& h) override { header = h; }
+  void vertices(const InputVertex* p, size_t n, uint64_t first) override {
+    EXPECT_EQ(first, v.size());
+    v.insert(v.end(), p, p + n);
+  }
+  void triangles(const uint32_t* p, size_t n) override {
+    for (size_t i = 0; i < 3 * n; ++i) EXPECT_LT(p[i], v.size());
+    t.insert(t.end(), p, p + 3 * n);
+  }
+  // The (u, v, material) of corner k of triangle i, through its vertex.
+  std::array<double, 3> corner(size_t i, int k) const {
+    const InputVertex& x = v[t[3 * i + size_t(k)]];
+    return {x.uv[0], x.uv[1], double(x.material)};
+  }
+  std::array<double, 3> pos(size_t i, int k) const {
+    const InputVertex& x = v[t[3 * i + size_t(k)]];
+    return {x.p[0], x.p[1], x.p[2]};
+  }
+};
+
+Collect readAll(const std::string& path) {
+  Collect c;
+  auto r = openMesh(path);
+  r->read(c);
+  return c;
+}
+
+std::string errorOf(const std::string& path) {
+  try {
+    Collect c;
+    openMesh(path)->read(c);
+  } catch (const Error& e) {
+    std::string m = e.what();
+    EXPECT_EQ(m.find('\n'), std::string::npos) << m;
+    return m;
+  }
+  ADD_FAILURE() << path << " did not fail";
+  return "";
+}
+
+// A unit square of two triangles with a seam down its diagonal's vertices: 4 positions, the
+// corners of the two triangles naming different texture coordinates for vertices 0 and 2.
+void writeSquareObj(const test::TempDir& dir, const std::string& extraFace = "") {
+  tex::writeFileAtomically(dir.file("tex a.png"), tex::encodePng(testPicture(16, 16)));
+  tex::writeFileAtomically(dir.file("b.jpg"), tex::encodeJpeg(testPicture(8, 8), 90));
+  test::writeFile(dir.file("m.mtl"),
+                  "newmtl A\nKd 1 0 0\nmap_Kd -s 1 1 1 -clamp on tex a.png\n\nnewmtl B\nKd 0 1 0\nmap_Kd b.jpg\n"
+                  "newmtl Plain\nKd 0 0 1\n");
+  test::writeFile(dir.file("sq.obj"),
+                  "mtllib m.mtl\n"
+                  "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n"
+                  "vt 0 0\nvt 0.5 0\nvt 0.5 0.5\nvt 0.6 0.6\nvt 1 1\nvt 0.6 1\n"
+                  "usemtl A\nf 1/1 2/2 3/3\n"
+                  "usemtl B\nf 1/4/1 3/5/1 4/6/1\n" + extraFace);
+}
+
+TEST(TextureReaders, ObjCornersBecomeWedges) {
+  test::TempDir dir;
+  writeSquareObj(dir, "usemtl Plain\nf 2 3 4\n");
+  Collect c = readAll(dir.file("sq.obj"));
+  EXPECT_TRUE(c.header.hasTexcoords);
+  EXPECT_FALSE(c.header.cornerTexcoords);
+  ASSERT_EQ(c.header.materials.size(), 3u);
+  EXPECT_EQ(c.header.materials[0].name, "A");
+  EXPECT_EQ(c.header.materials[0].texture, dir.file("tex a.png"));
+  EXPECT_EQ(c.header.materials[0].diffuse[0], 255);
+  EXPECT_EQ(c.header.materials[1].texture, dir.file("b.jpg"));
+  EXPECT_EQ(c.header.materials[2].texture, "");
+  ASSERT_EQ(c.t.size(), 9u);
+  // Corners keep their own coordinates and positions (the untextured face's corners have no
+  // material, so they get wedges of their own).
+  EXPECT_EQ(c.corner(0, 0), (std::array<double, 3>{0, 0, 0}));
+  EXPECT_EQ(c.corner(0, 2), (std::array<double, 3>{0.5, 0.5, 0}));
+  EXPECT_EQ(c.corner(1, 0), (std::array<double, 3>{0.6f, 0.6f, 1}));
+  EXPECT_EQ(c.corner(1, 1), (std::array<double, 3>{1, 1, 1}));
+  EXPECT_EQ(c.corner(2, 0)[2], double(kNoMaterial));
+  EXPECT_EQ(c.pos(0, 0), c.pos(1, 0));
+  EXPECT_EQ(c.pos(0, 2), c.pos(1, 1));
+  EXPECT_NE(c.t[0], c.t[3]);  // the seam: two vertices, one position
+  EXPECT_EQ(c.pos(1, 2), (std::array<double, 3>{0, 1, 0}));
+  // 4 positions: 0 (2 wedges), 1 (2: A and none), 2 (3), 3 (2) = 9 vertices, in position order.
+  ASSERT_EQ(c.v.size(), 9u);
+  const int order[9] = {0, 0, 1, 1, 2, 2, 2, 3, 3};
+  const double xy[4][2] = {{0, 0}, {1, 0}, {1, 1}, {0, 1}};
+  for (size_t i = 0; i < 9; ++i) EXPECT_EQ(c.v[i].p[0], xy[order[i]][0]) << i;
+  for (size_t i = 0; i < 9; ++i) EXPECT_EQ(c.v[i].p[1], xy[order[i]][1]) << i;
+}
+
+TEST(TextureReaders, PlyPerVertexPerCornerAndTexnumber) {
+  test::TempDir dir;
+  tex::writeFileAtomically(dir.file("t0.png"), tex::encodePng(testPicture(4, 4)));
+  tex::writeFileAtomically(dir.file("t1.png"), tex::encodePng(testPicture(4, 4)));
+  // Per vertex: passed through with material 0.
+  test::writeFile(dir.file("pv.ply"),
+                  "ply\nformat ascii 1.0\ncomment TextureFile t0.png\nelement vertex 3\nproperty float x\nproperty float y\n"
+                  "property float z\nproperty float texture_u\nproperty float texture_v\nelement face 1\n"
+                  "property list uchar int vertex_indices\nend_header\n0 0 0 0 0\n1 0 0 1 0\n0 1 0 0 1\n3 0 1 2\n");
+  Collect a = readAll(dir.file("pv.ply"));
+  EXPECT_TRUE(a.header.hasTexcoords);
+  ASSERT_EQ(a.v.size(), 3u);
+  EXPECT_EQ(a.v[1].uv[0], 1.0f);
+  EXPECT_EQ(a.v[2].uv[1], 1.0f);
+  EXPECT_EQ(a.v[2].material, 0u);
+  // Per corner with texnumber (MeshLab's layout), binary.
+  std::string body =
+      "ply\nformat binary_little_endian 1.0\ncomment TextureFile t0.png\ncomment TextureFile t1.png\nelement vertex 4\n"
+      "property float x\nproperty float y\nproperty float z\nelement face 2\nproperty list uchar int vertex_indices\n"
+      "property list uchar float texcoord\nproperty int texnumber\nend_header\n";
+  auto put = [&](auto x) { body.append(reinterpret_cast<const char*>(&x), sizeof x); };
+  const float p[4][3] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}};
+  for (auto& q : p) put(q[0]), put(q[1]), put(q[2]);
+  put(uint8_t(3)), put(int32_t(0)), put(int32_t(1)), put(int32_t(2));
+  put(uint8_t(6)), put(0.f), put(0.f), put(1.f), put(0.f), put(1.f), put(1.f), put(int32_t(0));
+  put(uint8_t(3)), put(int32_t(0)), put(int32_t(2)), put(int32_t(3));
+  put(uint8_t(6)), put(0.f), put(0.f), put(.5f), put(.5f), put(0.f), put(.5f), put(int32_t(1));
+  test::writeFile(dir.file("pc.ply"), body);
+  Collect b = readAll(dir.file("pc.ply"));
+  ASSERT_EQ(b.t.size(), 6u);
+  EXPECT_EQ(b.corner(0, 1), (std::array<double, 3>{1, 0, 0}));
+  EXPECT_EQ(b.corner(1, 1), (std::array<double, 3>{.5, .5, 1}));
+  EXPECT_NE(b.t[0], b.t[3]);  // vertex 0: (0, 0) in both faces, but two images
+  EXPECT_EQ(b.v.size(), 6u);
+}
+
+TEST(TextureReaders, BadReferencesAreClearErrors) {
+  using ::testing::HasSubstr;
+  test::TempDir dir;
+  writeSquareObj(dir);
+  auto variant = [&](const std::string& name, const std::string& from, const std::string& to) {
+    std::string s = test::readFile(dir.file("sq.obj"));
+    size_t at = s.find(from);
+    EXPECT_NE(at, std::string::npos) << from;
+    s.replace(at, from.size(), to);
+    test::writeFile(dir.file(name), s);
+    return dir.file(name);
+  };
+  EXPECT_THAT(errorOf(variant("vt.obj", "f 1/1 2/2 3/3", "f 1/1 2/2 3/7")),
+              AllOf(HasSubstr("texture coordinate index 7 out of range (6 vt so far) at face 0"), HasSubstr("(line 13)")));
+  EXPECT_THAT(errorOf(variant("uv.obj", "vt 1 1", "vt 1 1.5")), AllOf(HasSubstr("outside [0, 1]"), HasSubstr("line 10")));
+  EXPECT_THAT(errorOf(variant("mtl.obj", "usemtl B", "usemtl Nope")), HasSubstr("usemtl 'Nope' names no material"));
+  // A missing library: read untextured, as before textures were read.
+  EXPECT_FALSE(readAll(variant("lib.obj", "mtllib m.mtl", "mtllib gone.mtl")).header.hasTexcoords);
+  EXPECT_THAT(errorOf(variant("novt.obj", "f 1/1 2/2 3/3", "f 1 2/2 3/3")), HasSubstr("corner without a texture coordinate"));
+  std::remove(dir.file("b.jpg").c_str());
+  EXPECT_THAT(errorOf(dir.file("sq.obj")), AllOf(HasSubstr("b.jpg"), HasSubstr("texture image of material 'B'"),
+                                                 HasSubstr("m.mtl (line 7)"), HasSubstr("No such file")));
+  // PLY: texnumber out of range, texcoord count, a coordinate out of range.
+  tex::writeFileAtomically(dir.file("t0.png"), tex::encodePng(testPicture(4, 4)));
+  const std::string head =
+      "ply\nformat ascii 1.0\ncomment TextureFile t0.png\nelement vertex 3\nproperty float x\nproperty float y\n"
+      "property float z\nelement face 1\nproperty list uchar int vertex_indices\nproperty list uchar float texcoord\n"
+      "property int texnumber\nend_header\n0 0 0\n1 0 0\n0 1 0\n";
+  test::writeFile(dir.file("n.ply"), head + "3 0 1 2 6 0 0 1 0 0 1 1\n");
+  EXPECT_THAT(errorOf(dir.file("n.ply")), AllOf(HasSubstr("texnumber 1 of face 0 out of range (1 TextureFile"), HasSubstr("line 16")));
+  test::writeFile(dir.file("c.ply"), head + "3 0 1 2 4 0 0 1 0 0\n");
+  EXPECT_THAT(errorOf(dir.file("c.ply")), HasSubstr("4 texcoord values for 3 corners"));
+  test::writeFile(dir.file("r.ply"), head + "3 0 1 2 6 0 0 1 0 0 -1 0\n");
+  EXPECT_THAT(errorOf(dir.file("r.ply")), AllOf(HasSubstr("face 0 corner 2 is outside [0, 1]"), HasSubstr("line 16")));
+  test::writeFile(dir.file("f.ply"), "ply\nformat ascii 1.0\ncomment TextureFile nothere.png\n" + head.substr(head.find("element")) +
+                                         "3 0 1 2 6 0 0 1 0 0 1 0\n");
+  EXPECT_THAT(errorOf(dir.file("f.ply")), AllOf(HasSubstr("nothere.png"), HasSubstr("line 3")));
 }
 
 }  // namespace
