@@ -9,9 +9,21 @@
 #include <cstdio>
 
 #include "base/error.h"
+#include <filesystem>
+#include <map>
+
+#include "mtbuild/build.h"
+#include "mtfile/mt_file.h"
+#include "mtfile/texture_payload.h"
+#include "patchstore/heal/heal.h"
 #include "patchstore/io/mesh_reader.h"
+#include "patchstore/patch_store.h"
+#include "patchstore/store_textures.h"
 #include "test_support.h"
+#include "testing/textured_grid.h"
+#include "texture/bake.h"
 #include "texture/image_codec.h"
+#include "texture/tiled_image.h"
 
 namespace mt {
 namespace {
@@ -291,6 +303,289 @@ TEST(TextureReaders, BadReferencesAreClearErrors) {
   test::writeFile(dir.file("f.ply"), "ply\nformat ascii 1.0\ncomment TextureFile nothere.png\n" + head.substr(head.find("element")) +
                                          "3 0 1 2 6 0 0 1 0 0 1 0\n");
   EXPECT_THAT(errorOf(dir.file("f.ply")), AllOf(HasSubstr("nothere.png"), HasSubstr("line 3")));
+}
+
+// ---- Tiled images --------------------------------------------------------------------------------
+
+TEST(TextureTiles, TiledFileRoundTripsAndScalesToFitMemory) {
+  test::TempDir dir;
+  RgbImage img = testPicture(300, 200);
+  tex::writeFileAtomically(dir.file("big.png"), tex::encodePng(img));
+  tex::TiledInfo full = tex::writeTiledImage(dir.file("big.png"), dir.file("full.tiles"), 64 << 20, Env::Default(), 64);
+  EXPECT_EQ(full.shift, 0);
+  auto t = tex::TiledImage::open(dir.file("full.tiles"));
+  EXPECT_EQ(t->width(), 300);
+  EXPECT_EQ(t->header().tilesX, 5u);
+  t->verify();
+  tex::TileCache cache({std::shared_ptr<const tex::TiledImage>(std::move(t))}, 3 * 64 * 64 * 3);
+  std::vector<uint8_t> rect(50 * 70 * 3);
+  cache.copyRect(0, 40, 100, 50, 70, rect.data());  // crosses tile borders
+  for (int y = 0; y < 70; ++y)
+    for (int x = 0; x < 50; ++x)
+      for (int c = 0; c < 3; ++c) ASSERT_EQ(rect[(size_t(y) * 50 + size_t(x)) * 3 + size_t(c)], img.pixel(40 + x, 100 + y)[c]);
+  EXPECT_LE(cache.peakBytes(), 4u * 64 * 64 * 3);  // the cap (one tile over while it is read)
+  // A band of 64 rows x 300 x 3 bytes is 57600, twice that must fit: with 60000 bytes the image
+  // is halved.
+  tex::TiledInfo half = tex::writeTiledImage(dir.file("big.png"), dir.file("half.tiles"), 60000, Env::Default(), 64);
+  EXPECT_EQ(half.shift, 1);
+  EXPECT_EQ(half.width, 150);
+  EXPECT_EQ(half.sourceWidth, 300);
+  // Damage: a flipped byte in a tile is found and named.
+  std::string bytes = test::readFile(dir.file("full.tiles"));
+  bytes[100] ^= 0x40;
+  test::writeFile(dir.file("bad.tiles"), bytes);
+  try {
+    tex::TiledImage::open(dir.file("bad.tiles"))->verify();
+    ADD_FAILURE() << "damage not found";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.kind(), ErrorKind::Corruption);
+    EXPECT_THAT(e.what(), ::testing::HasSubstr("tile (0, 0) at byte offset 64 is damaged"));
+  }
+}
+
+// ---- The store -----------------------------------------------------------------------------------
+
+std::unique_ptr<PatchStore> ingestTextured(const std::string& input, const std::string& dir, uint64_t memory = 1ull << 30) {
+  auto assigner = makeGridAssigner(500);
+  IngestOptions o;
+  o.memoryBytes = memory;
+  o.progress = false;
+  PatchStore::ingest(input, dir, *assigner, o);
+  return PatchStore::open(dir);
+}
+
+std::string segments(const std::string& dir) {
+  std::vector<std::string> names;
+  for (auto& e : std::filesystem::directory_iterator(dir))
+    if (e.path().filename().string().rfind("SEG-", 0) == 0) names.push_back(e.path().string());
+  std::sort(names.begin(), names.end());
+  std::string all;
+  for (auto& n : names) all += test::readFile(n);
+  return all;
+}
+
+// The texture coordinates textured_grid gives the corner at (x, y) of a triangle with centroid
+// (cx, cy) (the chart is the centroid's): recomputed here from the positions alone.
+std::array<double, 2> expectedUV(double x, double y, double cx, double cy, int C, int T) {
+  const int ci = std::min(C - 1, int(cx * C)), cj = std::min(C - 1, int(cy * C));
+  std::vector<int> perm(size_t(C * C));
+  for (int c = 0; c < C * C; ++c) perm[size_t(c)] = (c * 7 + 3) % (C * C);
+  for (int c = 0; c < C * C; ++c)
+    for (int d = 0; d < c; ++d)
+      if (perm[size_t(d)] == perm[size_t(c)]) perm[size_t(c)] = (perm[size_t(c)] + 1) % (C * C), d = -1;
+  const int p = perm[size_t(cj * C + ci)];
+  const double cell = 1.0 / C, margin = 2.0 / T;
+  const double fx = (x - ci * cell) / cell, fy = (y - cj * cell) / cell;
+  return {(p % C) * cell + margin + fx * (cell - 2 * margin), (p / C) * cell + margin + fy * (cell - 2 * margin)};
+}
+
+// Every corner of every patch has the texture coordinates of the input; returns the triangles.
+size_t checkCornerUVs(const PatchStore& store, int C, int T) {
+  size_t triangles = 0;
+  for (PatchId id : store.patchIds()) {
+    Patch p = store.patch(id);
+    EXPECT_EQ(p.cornerUV.size(), 6 * size_t(p.triangleCount()));
+    for (uint32_t t = 0; t < p.triangleCount(); ++t) {
+      EXPECT_EQ(p.triangleMaterial[t], 0u);
+      double cx = 0, cy = 0;
+      for (int k = 0; k < 3; ++k) cx += p.positions[3 * p.triangles[3 * t + k]] / 3, cy += p.positions[3 * p.triangles[3 * t + k] + 1] / 3;
+      for (int k = 0; k < 3; ++k) {
+        const double* q = &p.positions[3 * p.triangles[3 * t + k]];
+        std::array<double, 2> uv = expectedUV(q[0], q[1], cx, cy, C, T);
+        EXPECT_NEAR(p.cornerUV[6 * t + 2 * k], uv[0], 1e-5) << "patch " << id << " triangle " << t;
+        EXPECT_NEAR(p.cornerUV[6 * t + 2 * k + 1], uv[1], 1e-5);
+      }
+      ++triangles;
+    }
+  }
+  return triangles;
+}
+
+TEST(TextureStore, IngestKeepsCornersAndTilesTheImage) {
+  test::TempDir dir;
+  testing::TexturedGridOptions go;
+  go.n = 40;
+  go.charts = 2;
+  const std::string obj = testing::writeTexturedGrid(dir.path(), "g", go);
+  auto store = ingestTextured(obj, dir.file("s"));
+  EXPECT_TRUE(store->layout().texcoords);
+  std::vector<StoreMaterial> mats = storeMaterials(*store);
+  ASSERT_EQ(mats.size(), 1u);
+  EXPECT_EQ(mats[0].name, "skin");
+  EXPECT_EQ(mats[0].width, 64);
+  EXPECT_TRUE(std::filesystem::exists(dir.file("s/") + mats[0].file));
+  EXPECT_EQ(checkCornerUVs(*store, 2, 64), 3200u);
+  EXPECT_TRUE(store->check().ok);
+  // The chunked path writes the same bytes as the resident one.
+  auto chunked = ingestTextured(obj, dir.file("c"), 24ull << 20);
+  EXPECT_TRUE(segments(dir.file("s")) == segments(dir.file("c")));
+  // The PLY form (per-face texcoord lists) gives the same texture coordinates.
+  go.ply = true;
+  auto plyStore = ingestTextured(testing::writeTexturedGrid(dir.path(), "p", go), dir.file("p"));
+  EXPECT_EQ(checkCornerUVs(*plyStore, 2, 64), 3200u);
+}
+
+TEST(TextureStore, GridWeldClosesSeamsAndKeepsCorners) {
+  test::TempDir dir;
+  testing::TexturedGridOptions go;
+  go.n = 40;
+  go.charts = 4;
+  auto store = ingestTextured(testing::writeTexturedGrid(dir.path(), "g", go), dir.file("s"));
+  uint64_t verticesBefore = 0;
+  std::map<std::array<double, 3>, int> distinct;
+  for (PatchId id : store->patchIds()) {
+    Patch p = store->patch(id);
+    for (uint32_t v = 0; v < p.vertexCount(); ++v) distinct[{p.positions[3 * v], p.positions[3 * v + 1], p.positions[3 * v + 2]}]++;
+  }
+  const auto unique = [&] {
+    // Distinct store vertices: an exported PLY has each once.
+    struct Count : MeshSink {
+      uint64_t n = 0;
+      void vertices(const InputVertex*, size_t k, uint64_t) override { n += k; }
+      void triangles(const uint32_t*, size_t) override {}
+    } c;
+    store->exportPly(dir.file("x.ply"));
+    openMesh(dir.file("x.ply"))->read(c);
+    return c.n;
+  };
+  verticesBefore = unique();
+  EXPECT_EQ(distinct.size(), 41u * 41u);
+  EXPECT_GT(verticesBefore, 41u * 41u);  // the seams' twins
+  heal::GridCells cells;
+  cells.step = 1e-4;
+  heal::HealOptions ho;
+  ho.progress = false;
+  heal::PassReport r = heal::weldToGrid(*store, cells, ho);
+  EXPECT_EQ(r.get("merged"), verticesBefore - 41 * 41);
+  EXPECT_EQ(r.get("degenerate"), 0u);
+  EXPECT_EQ(unique(), 41u * 41u);
+  EXPECT_EQ(checkCornerUVs(*store, 4, 64), 3200u);  // seams kept per corner
+  EXPECT_TRUE(store->check().ok);
+}
+
+TEST(TextureStore, CheckFindsDamagedTiles) {
+  test::TempDir dir;
+  auto store = ingestTextured(testing::writeTexturedGrid(dir.path(), "g", {}), dir.file("s"));
+  const std::string tiles = dir.file("s/") + storeMaterials(*store)[0].file;
+  std::string bytes = test::readFile(tiles);
+  bytes[80] ^= 1;
+  test::writeFile(tiles, bytes);
+  CheckReport r = PatchStore::open(dir.file("s"))->check();
+  EXPECT_FALSE(r.ok);
+  ASSERT_FALSE(r.problems.empty());
+  EXPECT_THAT(r.problems[0], ::testing::HasSubstr("is damaged"));
+}
+
+// ---- The MT file ---------------------------------------------------------------------------------
+
+struct LevelFidelity {
+  uint64_t triangles = 0, off = 0;  // triangles whose centroid's colour is off by more than 48
+  double meanError = 0;             // mean over triangles of the largest channel difference
+};
+
+// Every patch's texture checked against the colour function the textured grid shows: the atlas
+// colour at each triangle's centroid (through the decoded corner coordinates) against
+// texturedColor at its position. Per level.
+std::map<uint32_t, LevelFidelity> textureFidelity(const std::string& path) {
+  auto r = MtFileReader::open(path);
+  EXPECT_TRUE(r->hasTextures());
+  std::map<uint32_t, LevelFidelity> out;
+  for (uint32_t a = 0; a < r->arcs().size(); ++a) {
+    const uint32_t level = r->nodes()[r->arcs()[a].from].level;
+    for (uint32_t k = 0; k < r->arcs()[a].patchCount; ++k) {
+      const uint32_t p = r->patchRefs()[r->arcs()[a].firstPatchRef + k];
+      DecodedPatch d = r->readPatch(p);
+      std::vector<uint8_t> bytes = r->readTexturePayload(p);
+      EXPECT_FALSE(bytes.empty()) << "patch " << p;
+      if (bytes.empty()) continue;
+      TexturePayload tp = decodeTexturePayload(bytes.data(), bytes.size(), d.triangles.data(), d.triangleCount(), d.vertexCount());
+      EXPECT_EQ(tp.width, r->textures()[p].width);
+      tex::RgbImage img = tex::decodeImage(tp.image.data(), tp.image.size(), "atlas");
+      LevelFidelity& f = out[level];
+      for (uint32_t t = 0; t < d.triangleCount(); ++t) {
+        double x = 0, y = 0, u = 0, v = 0;
+        for (int c = 0; c < 3; ++c) {
+          x += d.positions[3 * d.triangles[3 * t + c]] / 3, y += d.positions[3 * d.triangles[3 * t + c] + 1] / 3;
+          u += tp.cornerUV[6 * t + 2 * c] / 3, v += tp.cornerUV[6 * t + 2 * c + 1] / 3;
+        }
+        uint8_t got[3], want[3];
+        tex::sampleBilinear(img, u, v, got);
+        testing::texturedColor(x, y, want);
+        double e = 0;
+        for (int c = 0; c < 3; ++c) e = std::max(e, std::fabs(double(got[c]) - want[c]));
+        f.meanError += e;
+        f.off += e > 48;
+        ++f.triangles;
+      }
+    }
+  }
+  for (auto& [level, f] : out) f.meanError /= double(std::max<uint64_t>(1, f.triangles));
+  return out;
+}
+
+TEST(TextureBuild, EveryLevelShowsTheInputsColours) {
+  test::TempDir dir;
+  testing::TexturedGridOptions go;
+  go.n = 120;
+  go.charts = 4;
+  go.textureSize = 512;
+  const std::string obj = testing::writeTexturedGrid(dir.path(), "g", go);
+  BuildOptions o;
+  o.progress = false;
+  o.patchTriangles = 600;
+  o.threads = 2;
+  BuildReport rep = buildMt(obj, dir.file("g.mt"), o);
+  EXPECT_GT(rep.textureBytes, 0u);
+  std::map<uint32_t, LevelFidelity> f = textureFidelity(dir.file("g.mt"));
+  ASSERT_GE(f.size(), 3u) << "levels";
+  for (auto& [level, lf] : f) {
+    // The finest level keeps the input's texels (JPEG 90 aside); coarser ones are re-baked, each
+    // from the one below, so they blur a little more per level.
+    EXPECT_LT(lf.meanError, level == 0 ? 8.0 : 8.0 + 4.0 * level) << "level " << level;
+    // Triangles whose centroid lies within a texel or two of a sharp edge of the pattern may be off:
+    // a band that widens with the texels (sqrt(2) per level).
+    EXPECT_LT(double(lf.off), 0.04 * (1 + level) * double(lf.triangles)) << "level " << level;
+    std::printf("level %u: %llu triangles, mean error %.2f, off %llu\n", level, (unsigned long long)lf.triangles, lf.meanError, (unsigned long long)lf.off);
+  }
+  // The same bytes on one thread; mtverify's checks hold (checksums, crack-free random cuts).
+  o.threads = 1;
+  buildMt(obj, dir.file("g1.mt"), o);
+  EXPECT_TRUE(test::readFile(dir.file("g.mt")) == test::readFile(dir.file("g1.mt")));
+  test::CommandResult v = test::runTool("mtverify", dir.file("g.mt") + " --cuts 8");
+  EXPECT_EQ(v.exitCode, 0) << v.output;
+
+  // mtextract: the finest and a coarse cut as OBJ + MTL + PNG, read back by our own reader, show
+  // the same colours.
+  for (const char* cut : {"--error 0", "--triangles 2000"}) {
+    test::CommandResult x = test::runTool("mtextract", dir.file("g.mt") + " " + cut + " -o " + dir.file("cut.obj"));
+    ASSERT_EQ(x.exitCode, 0) << x.output;
+    Collect c = readAll(dir.file("cut.obj"));
+    ASSERT_TRUE(c.header.hasTexcoords);
+    std::vector<tex::RgbImage> pages;
+    for (const InputMaterial& m : c.header.materials)
+      pages.push_back(m.texture.empty() ? tex::RgbImage() : tex::readImageFile(m.texture));
+    double err = 0;
+    for (size_t t = 0; t < c.t.size() / 3; ++t) {
+      double x0 = 0, y0 = 0, u = 0, w = 0;
+      for (int k = 0; k < 3; ++k) {
+        const InputVertex& q = c.v[c.t[3 * t + size_t(k)]];
+        x0 += q.p[0] / 3, y0 += q.p[1] / 3, u += q.uv[0] / 3, w += q.uv[1] / 3;
+      }
+      ASSERT_LT(c.v[c.t[3 * t]].material, pages.size());
+      uint8_t got[3], want[3];
+      tex::sampleBilinear(pages[c.v[c.t[3 * t]].material], u, w, got);
+      testing::texturedColor(x0, y0, want);
+      double e = 0;
+      for (int k = 0; k < 3; ++k) e = std::max(e, std::fabs(double(got[k]) - want[k]));
+      err += e;
+    }
+    EXPECT_LT(err / double(c.t.size() / 3), 14.0) << cut;
+  }
+  // A .obj of a cut too large for --memory is refused (exit 5), and nothing is left.
+  test::CommandResult big = test::runTool("mtextract", dir.file("g.mt") + " --error 0 --memory 1M -o " + dir.file("big.obj"));
+  EXPECT_EQ(big.exitCode, 5) << big.output;
+  EXPECT_FALSE(test::fileExists(dir.file("big.obj")));
+  EXPECT_FALSE(test::fileExists(dir.file("big.mtl")));
 }
 
 }  // namespace

@@ -13,6 +13,7 @@
 
 #include <jpeglib.h>
 #include <png.h>
+#include <zstd.h>
 
 #include "base/output_path.h"
 
@@ -22,6 +23,7 @@ const char* imageFormatName(ImageFormat f) {
   switch (f) {
     case ImageFormat::Jpeg: return "JPEG";
     case ImageFormat::Png: return "PNG";
+    case ImageFormat::Raw: return "RGBZ";
     default: return "unknown";
   }
 }
@@ -30,6 +32,7 @@ ImageFormat sniffImage(const uint8_t* d, size_t n) {
   if (n >= 3 && d[0] == 0xFF && d[1] == 0xD8 && d[2] == 0xFF) return ImageFormat::Jpeg;
   static const uint8_t kPng[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1A, '\n'};
   if (n >= 8 && std::memcmp(d, kPng, 8) == 0) return ImageFormat::Png;
+  if (n >= 8 && std::memcmp(d, "RGBZ", 4) == 0) return ImageFormat::Raw;
   return ImageFormat::Unknown;
 }
 
@@ -472,6 +475,29 @@ std::vector<uint8_t> encodePng(const RgbImage& image) {
   if (png) png_destroy_write_struct(&png, info ? &info : nullptr);
   if (!ok) throw Error(std::string("encodePng: ") + st.message);
   return out;
+}
+
+std::vector<uint8_t> encodeRaw(const RgbImage& image) {
+  if (image.width <= 0 || image.height <= 0 || image.width > 65535 || image.height > 65535)
+    throw Error("encodeRaw: image size out of range");
+  std::vector<uint8_t> out(8 + ZSTD_compressBound(image.rgb.size()));
+  std::memcpy(out.data(), "RGBZ", 4);
+  const uint16_t wh[2] = {uint16_t(image.width), uint16_t(image.height)};
+  std::memcpy(out.data() + 4, wh, 4);
+  const size_t n = ZSTD_compress(out.data() + 8, out.size() - 8, image.rgb.data(), image.rgb.size(), 1);
+  if (ZSTD_isError(n)) throw Error(std::string("encodeRaw: ") + ZSTD_getErrorName(n));
+  out.resize(8 + n);
+  return out;
+}
+
+RgbImage decodeAnyImage(const uint8_t* data, size_t size, const std::string& name) {
+  if (sniffImage(data, size) != ImageFormat::Raw) return decodeImage(data, size, name);
+  uint16_t wh[2];
+  std::memcpy(wh, data + 4, 4);
+  RgbImage img(wh[0], wh[1]);
+  const size_t n = ZSTD_decompress(img.rgb.data(), img.rgb.size(), data + 8, size - 8);
+  if (ZSTD_isError(n) || n != img.rgb.size()) fail(name, "damaged RGBZ image");
+  return img;
 }
 
 void writeFileAtomically(const std::string& path, const std::vector<uint8_t>& bytes, Env* env) {

@@ -14,7 +14,7 @@
 
 namespace mt::tex {
 
-enum class ImageFormat : uint8_t { Unknown = 0, Jpeg = 1, Png = 2 };
+enum class ImageFormat : uint8_t { Unknown = 0, Jpeg = 1, Png = 2, Raw = 3 };
 const char* imageFormatName(ImageFormat f);
 // By the magic bytes (JPEG FF D8 FF, PNG's 8-byte signature).
 ImageFormat sniffImage(const uint8_t* data, size_t size);
@@ -72,6 +72,11 @@ RgbImage readImageFile(const std::string& path, Env* env = Env::Default());
 // integer DCT (the same bytes on every machine). quality 1..100.
 std::vector<uint8_t> encodeJpeg(const RgbImage& image, int quality);
 std::vector<uint8_t> encodePng(const RgbImage& image);
+// Lossless and fast, for images that are decoded again by us (the patch store's atlases): the
+// magic "RGBZ", uint16 width, height, then one zstd frame (level 1) of the RGB rows.
+std::vector<uint8_t> encodeRaw(const RgbImage& image);
+// Any of the three formats (by the magic bytes).
+RgbImage decodeAnyImage(const uint8_t* data, size_t size, const std::string& name);
 // Written under PATH.tmp.PID.RANDOM through Env and renamed.
 void writeFileAtomically(const std::string& path, const std::vector<uint8_t>& bytes, Env* env = Env::Default());
 

@@ -59,6 +59,8 @@ struct MeshHeader {
   // The reader gives texture coordinates per face corner (MeshSink::cornerTexcoords) instead:
   // only between a reader and openMesh's wedge split; a sink never sees it set.
   bool cornerTexcoords = false;
+  // The vertices (and the faces' indices) are the wedge split's, not the file's.
+  bool splitAtSeams = false;
 };
 
 struct InputVertex {

@@ -82,6 +82,8 @@ class WedgeSplitReader final : public MeshReader {
     header_ = source_->header();
     header_.cornerTexcoords = false;
     header_.hasTexcoords = true;
+    header_.splitAtSeams = true;
+    header_.declaredVertices = -1;  // known once split
   }
   const MeshHeader& header() const override { return header_; }
 
