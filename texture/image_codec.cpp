@@ -500,6 +500,98 @@ RgbImage decodeAnyImage(const uint8_t* data, size_t size, const std::string& nam
   return img;
 }
 
+// ---- JpegRowWriter ----------------------------------------------------------------------------
+
+struct JpegRowWriter::State {
+  std::string path, tmp;
+  Env* env = nullptr;
+  std::unique_ptr<WritableFile> file;
+  jpeg_compress_struct c{};
+  JpegError err{};
+  JpegDest dest{};
+  std::vector<uint8_t> out;  // bytes the destination filled, appended to the file in chunks
+  bool created = false, done = false;
+  int rows = 0;
+};
+
+namespace {
+bool startRowWriter(JpegRowWriter::State& s, int width, int height, int quality) {
+  if (setjmp(s.err.jump)) return false;
+  jpeg_create_compress(&s.c);
+  s.created = true;
+  s.c.dest = &s.dest.mgr;
+  s.c.image_width = JDIMENSION(width);
+  s.c.image_height = JDIMENSION(height);
+  s.c.input_components = 3;
+  s.c.in_color_space = JCS_RGB;
+  jpeg_set_defaults(&s.c);
+  s.c.dct_method = JDCT_ISLOW;
+  jpeg_set_quality(&s.c, quality, TRUE);
+  if (quality >= 90) s.c.comp_info[0].h_samp_factor = s.c.comp_info[0].v_samp_factor = 1;
+  jpeg_start_compress(&s.c, TRUE);
+  return true;
+}
+bool rowToWriter(JpegRowWriter::State& s, const uint8_t* rgb) {
+  if (setjmp(s.err.jump)) return false;
+  JSAMPROW row[1] = {const_cast<uint8_t*>(rgb)};
+  jpeg_write_scanlines(&s.c, row, 1);
+  return true;
+}
+bool finishRowWriter(JpegRowWriter::State& s) {
+  if (setjmp(s.err.jump)) return false;
+  jpeg_finish_compress(&s.c);
+  return true;
+}
+}  // namespace
+
+JpegRowWriter::JpegRowWriter(const std::string& path, int width, int height, int quality, Env* env) : s_(std::make_unique<State>()) {
+  if (width <= 0 || height <= 0 || width > kMaxImageSide || height > kMaxImageSide)
+    fail(path, "JPEG size " + std::to_string(width) + " x " + std::to_string(height) + " out of range");
+  s_->path = path;
+  s_->tmp = uniqueTempName(path);
+  s_->env = env;
+  s_->file = env->newWritableFile(s_->tmp);
+  s_->c.err = jpeg_std_error(&s_->err.mgr);
+  s_->err.mgr.error_exit = jpegErrorExit;
+  s_->err.mgr.emit_message = jpegSilent;
+  s_->dest.out = &s_->out;
+  s_->dest.mgr.init_destination = jdInit;
+  s_->dest.mgr.empty_output_buffer = jdEmpty;
+  s_->dest.mgr.term_destination = jdTerm;
+  if (!startRowWriter(*s_, width, height, std::clamp(quality, 1, 100))) fail(path, std::string("JPEG: ") + s_->err.message);
+}
+
+JpegRowWriter::~JpegRowWriter() {
+  if (!s_) return;
+  if (s_->created) jpeg_destroy_compress(&s_->c);
+  if (!s_->done && s_->file) {
+    try {
+      s_->file->close();
+      s_->env->removeFile(s_->tmp);
+    } catch (...) {
+    }
+  }
+}
+
+void JpegRowWriter::writeRow(const uint8_t* rgb) {
+  if (!rowToWriter(*s_, rgb)) fail(s_->path, std::string("JPEG: ") + s_->err.message);
+  ++s_->rows;
+  if (s_->out.size() >= (1 << 20)) {
+    s_->file->append(s_->out.data(), s_->out.size());
+    s_->out.clear();
+  }
+}
+
+void JpegRowWriter::finish() {
+  if (!finishRowWriter(*s_)) fail(s_->path, std::string("JPEG: ") + s_->err.message);
+  s_->file->append(s_->out.data(), s_->out.size());
+  s_->out.clear();
+  s_->file->sync();
+  s_->file->close();
+  s_->env->renameFile(s_->tmp, s_->path);
+  s_->done = true;
+}
+
 void writeFileAtomically(const std::string& path, const std::vector<uint8_t>& bytes, Env* env) {
   const std::string tmp = uniqueTempName(path);
   try {

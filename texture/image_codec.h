@@ -77,6 +77,22 @@ std::vector<uint8_t> encodePng(const RgbImage& image);
 std::vector<uint8_t> encodeRaw(const RgbImage& image);
 // Any of the three formats (by the magic bytes).
 RgbImage decodeAnyImage(const uint8_t* data, size_t size, const std::string& name);
+// A JPEG written row by row (images larger than memory: generated textures), through Env under
+// PATH.tmp.PID.RANDOM, renamed by finish(); the destructor removes an unfinished file.
+class JpegRowWriter {
+ public:
+  JpegRowWriter(const std::string& path, int width, int height, int quality, Env* env = Env::Default());
+  ~JpegRowWriter();
+  JpegRowWriter(const JpegRowWriter&) = delete;
+  JpegRowWriter& operator=(const JpegRowWriter&) = delete;
+  void writeRow(const uint8_t* rgb);  // width * 3 bytes, top row first
+  void finish();
+  struct State;
+
+ private:
+  std::unique_ptr<State> s_;
+};
+
 // Written under PATH.tmp.PID.RANDOM through Env and renamed.
 void writeFileAtomically(const std::string& path, const std::vector<uint8_t>& bytes, Env* env = Env::Default());
 
