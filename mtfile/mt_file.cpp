@@ -363,7 +363,7 @@ void MtFileReader::readIndex(const Footer& f) {
   section(h.patchRefsOffset, h.patchRefCount * 4, "patch reference array");
   section(h.patchesOffset, h.patchCount * sizeof(PatchRecord), "patch index");
   const bool textured = (h.vertexFlags & kHasTextures) != 0;
-  if (textured && h.version < 5) failCorrupt(path, "textures flagged in a version " + std::to_string(h.version) + " file");
+  if (textured && h.version < kFirstTextureVersion) failCorrupt(path, "textures flagged in a version " + std::to_string(h.version) + " file");
   const uint64_t texturesOffset = expect;
   if (textured) expect += h.patchCount * sizeof(TextureRecord);
   if (h.metadataSize > kMaxMetadataSize || (h.metadataSize == 0 && h.metadataOffset != 0))
@@ -549,7 +549,7 @@ TexturePayload MtFileReader::readTexture(uint32_t patch, const DecodedPatch& d) 
 DecodedPatch MtFileReader::readPatch(uint32_t patch) const {
   std::vector<uint8_t> data = readPayload(patch);
   try {
-    DecodedPatch d = decodePatch(data.data(), data.size(), codec(), grid());
+    DecodedPatch d = decodePatch(data.data(), data.size(), codec(), grid(), patches_[patch].triangles);
     const PatchRecord& p = patches_[patch];
     if (d.triangleCount() != p.triangles)
       throw Error("triangle count " + std::to_string(d.triangleCount()) + " differs from the index (" +

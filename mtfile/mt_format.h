@@ -15,7 +15,7 @@
 //                       uint32 backArcs[arcCount]    arc ids sorted by (to, from): backward stars
 //                       uint32 patchRefs[patchRefCount]  arc -> its patches
 //                       PatchRecord[patchCount]      the patch index
-//                       TextureRecord[patchCount]    textured files only (kHasTextures, version 5)
+//                       TextureRecord[patchCount]    textured files only (kHasTextures, version 6)
 //   header.metadataOffset  metadata block (metadataSize bytes; optional, absent when 0)
 //   end - kFooterSize   Footer
 //
@@ -55,14 +55,19 @@ constexpr char kFooterMagic[8] = {'B', 'M', 'T', '-', 'E', 'N', 'D', '\n'};
 // kPayloadPositionContexts (another residual model) and kPayloadRangeIndices (the index code
 // range-coded ahead of the positions). Version 4: meshopt payloads may also set
 // kPayloadConnectivity (the triangles by the connectivity code instead of the meshopt index code);
-// version-4 writers no longer set kPayloadRangeIndices. Readers accept
-// kMinReadableVersion..kVersion; the payload flags say how each payload is coded, so one decoder
-// reads all four. Version 5: textured files (kHasTextures): a texture payload per patch and a
-// TextureRecord per patch (below). Writers write version 4 when a file has no textures (the same
-// bytes as before), version 5 only with kHasTextures; a version-4 reader refuses a textured file
-// by its version instead of misreading it.
-constexpr uint32_t kVersion = 5;
-constexpr uint32_t kUntexturedVersion = 4;  // what a writer writes for a file without textures
+// version-4 writers no longer set kPayloadRangeIndices. Version 5: NodeRecord::colorError (the
+// word was reserved and zero before, so an older file reads as "colour error not measured", 0).
+// Version 6: textured files (kHasTextures): a texture payload per patch and a TextureRecord per
+// patch (below). Writers write version 5 when a file has no textures (the same bytes as before),
+// version 6 only with kHasTextures; a version-5 reader refuses a textured file by its version
+// instead of misreading it. Readers accept kMinReadableVersion..kVersion; the payload flags say
+// how each payload is coded, so one decoder reads all six.
+constexpr uint32_t kVersion = 6;
+constexpr uint32_t kUntexturedVersion = 5;  // what a writer writes for a file without textures
+// The first version whose nodes carry NodeRecord::colorError.
+constexpr uint32_t kFirstColorErrorVersion = 5;
+// The first version that may set kHasTextures.
+constexpr uint32_t kFirstTextureVersion = 6;
 constexpr uint32_t kMinReadableVersion = 1;
 constexpr uint32_t kHeaderSize = 256;
 constexpr uint32_t kFooterSize = 32;
@@ -81,7 +86,7 @@ enum class Codec : uint32_t {
 // FileHeader::vertexFlags
 constexpr uint32_t kHasNormals = 1u << 0;  // every patch stores octahedral normals
 constexpr uint32_t kHasColors = 1u << 1;   // every patch stores RGBA8 colours
-constexpr uint32_t kHasTextures = 1u << 2; // a TextureRecord per patch (version 5)
+constexpr uint32_t kHasTextures = 1u << 2; // a TextureRecord per patch (version 6)
 
 struct FileHeader {
   char magic[8];             // kMagic
@@ -137,7 +142,13 @@ struct NodeRecord {
   uint32_t firstBackArc; // backward star: backArcs[firstBackArc, firstBackArc + backArcCount)
   uint32_t backArcCount;
   uint32_t triangles;    // triangles of the node's fragment (sum over its out-arcs' patches)
-  uint32_t reserved;
+  // Version 5 (was reserved, zero): the fragment's colour error bound, like `error` a measured,
+  // accumulated bound (the max of the predecessors' plus the colour deviation measured against
+  // them, mtbuild/color_error.h): the RGBA distance (Euclidean, in 8-bit levels, 0..510) between a
+  // point's colour and the colour of the nearest point of the full-resolution surface. 0 for the
+  // source and in files without kHasColors; +inf for the sink of a file with kHasColors; monotone
+  // towards the sink like `error`. 0 everywhere in files before version 5 (not measured).
+  float colorError;
 };
 static_assert(sizeof(NodeRecord) == 80, "NodeRecord layout");
 
@@ -159,7 +170,7 @@ struct PatchRecord {
 };
 static_assert(sizeof(PatchRecord) == 32, "PatchRecord layout");
 
-// ---- Textures (version 5, FileHeader::vertexFlags & kHasTextures) ----
+// ---- Textures (version 6, FileHeader::vertexFlags & kHasTextures) ----
 //
 // Each patch may have a texture payload: its atlas image and the texture coordinates of every
 // corner of its triangles. TextureRecord[patchCount] follows the PatchRecord array (at
@@ -239,6 +250,13 @@ constexpr char kMetadataCrs[] = "crs";
 // ---- Patch payloads (the bytes a PatchRecord points at) ----
 //
 // Every payload starts with this header; the rest depends on the file's codec.
+// Its counts agree with the patch's record (triangleCount == PatchRecord::triangles), every vertex
+// is used by a triangle (vertexCount <= 3 * triangleCount), and a payload holds at most
+// kMaxPayloadTriangles triangles (2^22, 42x the builder's largest patch target): readers refuse
+// more before allocating, so a damaged count cannot ask for gigabytes. The payload's size bounds
+// nothing: a flat, regular patch codes at hundreds of triangles per byte (Draco: 355 on a
+// 256 x 256 grid).
+constexpr uint32_t kMaxPayloadTriangles = 1u << 22;
 struct PayloadHeader {
   uint32_t vertexCount;
   uint32_t triangleCount;
