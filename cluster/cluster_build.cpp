@@ -253,6 +253,9 @@ struct Master {
   }
 
   void run() {
+    // A rank has no patch store, so no tiled input images to cut the finest atlases from.
+    if (builder.context().texture)
+      throw Error("mtcluster: textured inputs are not supported on MPI ranks yet; build them with mtbuild");
     const std::string context = encodeContext(builder.context(), builder.sequenceBytes());
     for (int r = 1; r < size; ++r) send(context, r, kContext, stats[0].bytesSent);
     // Rank 0 also processes regions when there are few workers (its own load/commit work is

@@ -36,8 +36,11 @@ std::string BuildReport::toJson() const {
     << ",\n  \"resumed_at_level\": " << resumedAtLevel << ",\n  \"peak_temp_bytes\": " << peakTempBytes
     << ",\n  \"checkpoint_bytes\": " << checkpointBytes << ",\n  \"level_loop_bytes\": " << levelLoopBytes
     << ",\n  \"level_loop_peak_bytes\": " << levelLoopPeakBytes << ",\n  \"level_loop_peak_regions\": " << levelLoopPeakRegions
-    << ",\n  \"level_loop_largest_region_bytes\": " << levelLoopLargestRegionBytes
-    << extraJson << ",\n  \"levels\": [";
+    << ",\n  \"level_loop_largest_region_bytes\": " << levelLoopLargestRegionBytes;
+  if (textureBytes)
+    s << ",\n  \"texture_bytes\": " << textureBytes << ",\n  \"texture_image_bytes\": " << textureImageBytes
+      << ",\n  \"texture_bytes_per_input_triangle\": " << (inputTriangles ? double(textureBytes) / double(inputTriangles) : 0);
+  s << extraJson << ",\n  \"levels\": [";
   for (size_t i = 0; i < levels.size(); ++i) {
     const LevelReport& l = levels[i];
     s << (i ? "," : "") << "\n    {\"level\": " << l.level << ", \"regions\": " << l.regions << ", \"triangles_in\": "

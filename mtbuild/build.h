@@ -81,6 +81,8 @@ struct BuildOptions {
   std::string crs;
   // The tool's name in messages ("mtbuild", "mtcluster").
   std::string toolName = "mtbuild";
+  // Textured inputs: the JPEG quality of the atlases in the file (--texture-quality).
+  int textureQuality = 90;
 };
 
 struct LevelReport {
@@ -108,6 +110,8 @@ struct BuildReport {
   // estimate (the bound is max(levelLoopBytes, that) when levelLoopBytes is not 0).
   uint64_t levelLoopBytes = 0, levelLoopPeakBytes = 0, levelLoopLargestRegionBytes = 0;
   uint32_t levelLoopPeakRegions = 0;
+  // Textured builds: bytes of the texture payloads (their images), texels baked above the finest level.
+  uint64_t textureBytes = 0, textureImageBytes = 0;
   std::vector<LevelReport> levels;
   std::string extraJson;              // more members (",\n  \"name\": value" ...), e.g. cluster stats
   std::string toJson() const;
@@ -152,6 +156,8 @@ RegionBytes estimateRegionBytes(uint64_t triangles, uint64_t vertices, bool colo
 // LevelBuilder, so the file is the same bytes either way.
 
 // What every worker needs for a whole build (fixed once the level-0 store exists).
+struct TextureContext;  // region_texture.h (textured builds)
+
 struct RegionContext {
   QuantizationGrid grid;
   PatchCodecOptions codec;
@@ -159,6 +165,7 @@ struct RegionContext {
   uint32_t partitionLevels = 0;       // sequence->levels()
   uint64_t rootTriangles = 0;
   RegionSimplifier simplifier = RegionSimplifier::Meshopt;
+  const TextureContext* texture = nullptr;  // textured stores: the input's images and the atlas options
   double colorWeight = 0;             // SimplifyRegionOptions::colorWeight (0 without colours)
 };
 
@@ -180,6 +187,10 @@ struct EncodedPatch {
   PatchId storeId = 0;
   std::vector<uint8_t> payload;
   uint32_t triangles = 0, vertices = 0;
+  // Textured builds: the texture payload (mt_format.h "Textures"; empty: none) and its atlas size.
+  std::vector<uint8_t> texture;
+  uint16_t textureWidth = 0, textureHeight = 0;
+  uint32_t imageBytes = 0;
 };
 
 struct RegionResult {

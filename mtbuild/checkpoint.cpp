@@ -124,6 +124,7 @@ std::string fingerprint(const std::string& input, const BuildOptions& o, bool st
   s << "simplifier=" << (o.simplifierByInput ? "auto" : o.simplifier == RegionSimplifier::Meshopt ? "meshopt" : "quadric") << "\n";
   if (o.colorWeight != kDefaultColorWeight) s << "color_weight=" << o.colorWeight << "\n";
   s << "root_triangles=" << o.rootTriangles << "\n";
+  s << "texture_quality=" << o.textureQuality << "\n";
   return s.str();
 }
 
@@ -181,6 +182,10 @@ void LevelBuilder::State::appendSideChunk() {
   const auto& records = writer->patchRecords();
   std::vector<format::PatchRecord> newRecords(records.begin() + long(ckPatches), records.end());
   putVector(w, newRecords);
+  if (writer->textured()) {
+    const auto& textures = writer->textureRecords();
+    putVector(w, std::vector<format::TextureRecord>(textures.begin() + long(ckPatches), textures.end()));
+  }
   putVector(w, std::vector<format::NodeRecord>(nodes.begin() + long(ckNodes), nodes.end()));
   putVector(w, std::vector<Sphere>(spheres.begin() + long(ckNodes), spheres.end()));
   uint64_t arcs = 0;
@@ -209,7 +214,9 @@ void LevelBuilder::State::appendSideChunk() {
 }
 
 // Reads the side file up to `length`, checking the chained hash; fills records, nodes, spheres, arcs.
-std::vector<format::PatchRecord> LevelBuilder::State::readSideFile(uint64_t length, uint64_t hash) {
+std::vector<format::PatchRecord> LevelBuilder::State::readSideFile(uint64_t length, uint64_t hash,
+                                                                   std::vector<format::TextureRecord>& textures) {
+  const bool textured = (header.vertexFlags & format::kHasTextures) != 0;
   const std::string path = work + "/checkpoint.dat";
   std::vector<format::PatchRecord> records;
   Env* env = Env::Default();
@@ -231,6 +238,8 @@ std::vector<format::PatchRecord> LevelBuilder::State::readSideFile(uint64_t leng
     h = XXH64(chunk.data(), chunk.size(), h);
     ByteReader r(chunk.data() + 8, size_t(size), path, at + 8);
     for (auto& rec : getVector<format::PatchRecord>(r)) records.push_back(rec);
+    if (textured)
+      for (auto& rec : getVector<format::TextureRecord>(r)) textures.push_back(rec);
     for (auto& n : getVector<format::NodeRecord>(r)) nodes.push_back(n);
     for (auto& sp : getVector<Sphere>(r)) spheres.push_back(sp);
     uint64_t arcs = r.get<uint64_t>();
@@ -277,7 +286,8 @@ void LevelBuilder::State::restore(const std::string& bytes) {
   report.ingestSeconds = r.get<double>();
   report.peakTempBytes = r.get<uint64_t>();
   report.levels = getVector<LevelReport>(r);
-  std::vector<format::PatchRecord> records = readSideFile(sideLen, sideH);
+  std::vector<format::TextureRecord> textures;
+  std::vector<format::PatchRecord> records = readSideFile(sideLen, sideH, textures);
   if (records.size() != patchCount || nodes.size() != nodeCount || nodes.size() != spheres.size() || nodes.empty())
     fail(where, "checkpoint and " + work + "/checkpoint.dat disagree (rerun without --resume to start over)");
   ckPatches = records.size();
@@ -285,7 +295,7 @@ void LevelBuilder::State::restore(const std::string& bytes) {
   for (PatchId id : store->patchIds())
     if (!producer.count(id)) fail(where, "checkpoint does not know live patch " + std::to_string(id));
   if (producer.size() != store->patchIds().size()) fail(where, "checkpoint names patches the store does not hold");
-  writer = std::make_unique<MtFileWriter>(output, header, length, std::move(records), tempPath);
+  writer = std::make_unique<MtFileWriter>(output, header, length, std::move(records), tempPath, Env::Default(), std::move(textures));
 }
 
 void LevelBuilder::State::writeCheckpoint() {

@@ -155,7 +155,8 @@ void LevelBuilder::State::startFile(const StoreInfo& info, const QuantizationGri
   const double qError = grid.maxError();
   header = format::FileHeader{};
   header.codec = uint32_t(options.codec);
-  header.vertexFlags = (options.normals ? format::kHasNormals : 0) | (info.layout.colors ? format::kHasColors : 0);
+  header.vertexFlags = (options.normals ? format::kHasNormals : 0) | (info.layout.colors ? format::kHasColors : 0) |
+                       (info.layout.texcoords ? format::kHasTextures : 0);
   header.payloadAlignment = format::kDefaultPayloadAlignment;
   header.inputTriangles = report.inputTriangles;
   header.inputVertices = info.vertices;  // (copies of shared vertices counted once per patch)
@@ -284,6 +285,15 @@ LevelBuilder::LevelBuilder(const std::string& input, const std::string& output, 
     s.say("the input has per-vertex colours: simplifying with the quadric simplifier, colour-aware (--simplifier meshopt "
           "ignores colours)");
   s.ctx.rootTriangles = options.rootTriangles ? options.rootTriangles : 2ull * patchTriangles;
+  if (s.store->layout().texcoords) {
+    // Textured store: the input's tiled images through one cache of decoded tiles (a fixed share:
+    // 1/16 of --memory, at least 8 MiB), and the atlas options.
+    s.texture = std::make_unique<TextureContext>();
+    s.texture->materials = storeMaterials(*s.store);
+    s.texture->tiles = openTextureCache(*s.store, s.texture->materials, std::max<uint64_t>(8ull << 20, options.memoryBytes / 16));
+    s.texture->quality = options.textureQuality;
+    s.ctx.texture = s.texture.get();
+  }
   if (!options.taskTimesPath.empty()) {
     s.taskTimes = std::fopen(options.taskTimesPath.c_str(), resumed ? "a" : "w");
     if (!s.taskTimes) fail(options.taskTimesPath, "cannot write");
@@ -381,6 +391,15 @@ RegionTask LevelBuilder::loadRegion(size_t i) const {
   return task;
 }
 
+void LevelBuilder::State::appendPatchOf(const EncodedPatch& e, uint32_t& mtPatch) {
+  mtPatch = writer->appendPatch(e.payload.data(), e.payload.size(), e.triangles, e.vertices);
+  if (!e.texture.empty()) {
+    writer->appendTexture(mtPatch, e.texture.data(), e.texture.size(), e.textureWidth, e.textureHeight, e.imageBytes);
+    report.textureBytes += e.texture.size();
+    report.textureImageBytes += e.imageBytes;
+  }
+}
+
 // Appends the region's node to the DAG (BMT 3.1, 4.1): the floor patches become the payloads of
 // the arcs from the nodes that produced them; the error and the sphere are bounds over those
 // predecessors. Returns the node's id.
@@ -398,7 +417,8 @@ uint32_t LevelBuilder::State::addNode(const RegionTask& task, const RegionResult
     if (e.storeId != task.mesh.patches[k]) fail(output, "region result names the wrong floor patch");
     uint32_t from = producer.at(e.storeId);
     assert(from < node && "a floor patch comes from an earlier node");
-    uint32_t mtPatch = writer->appendPatch(e.payload.data(), e.payload.size(), e.triangles, e.vertices);
+    uint32_t mtPatch;
+    appendPatchOf(e, mtPatch);
     arcPatches[{from, node}].push_back(mtPatch);
     predecessorError = std::max(predecessorError, nodes[from].error);
     predecessorColorError = std::max(predecessorColorError, nodes[from].colorError);
@@ -492,8 +512,10 @@ BuildReport LevelBuilder::finish() {
     PatchCodecOptions codec = s.ctx.codec;
     codec.simplified = isSimplifiedOutput(level);
     std::vector<EncodedPatch> encoded = encodePatches(top, s.ctx.grid, codec);
+    if (s.texture) encodeTextures(top, floorAtlases(top, *s.texture), s.ctx.grid, *s.texture, codec.codec, encoded);
     for (const EncodedPatch& e : encoded) {
-      uint32_t mtPatch = s.writer->appendPatch(e.payload.data(), e.payload.size(), e.triangles, e.vertices);
+      uint32_t mtPatch;
+      s.appendPatchOf(e, mtPatch);
       s.arcPatches[{s.producer.at(e.storeId), sink}].push_back(mtPatch);
     }
     format::NodeRecord rec{};

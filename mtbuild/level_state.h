@@ -17,6 +17,7 @@
 #include "base/progress.h"
 #include "mtbuild/build.h"
 #include "mtbuild/dag_node.h"
+#include "mtbuild/region_texture.h"
 #include "mtfile/mt_file.h"
 
 namespace mt {
@@ -30,7 +31,7 @@ inline double secondsSince(Clock::time_point t) { return std::chrono::duration<d
 // The checkpoint: a blob of the work store, committed with each level's write-backs.
 constexpr char kCheckpointBlob[] = "mtbuild.checkpoint";
 constexpr uint64_t kCheckpointMagic = 0x31544b43544d4dull;  // "MMTCKT1"
-constexpr uint32_t kCheckpointVersion = 3;  // 3: the input hash covers the whole file
+constexpr uint32_t kCheckpointVersion = 4;  // 3: the input hash covers the whole file; 4: texture records
 
 // "key=value" lines: the input's identity and every option that changes the bytes (not --threads,
 // --memory or levelLoopBytes, which do not). Compared line by line so that a refused resume can
@@ -52,6 +53,7 @@ struct LevelBuilder::State {
   PartitionSequence sequence;
   std::string sequenceBytes;
   RegionContext ctx;
+  std::unique_ptr<TextureContext> texture;  // textured stores (ctx.texture points here)
   std::string fingerprint;
   std::unique_ptr<MtFileWriter> writer;
   format::FileHeader header{};
@@ -86,7 +88,8 @@ struct LevelBuilder::State {
   size_t ckPatches = 0, ckNodes = 0;
   std::string checkpointBytes() const;
   void appendSideChunk();
-  std::vector<format::PatchRecord> readSideFile(uint64_t length, uint64_t hash);
+  std::vector<format::PatchRecord> readSideFile(uint64_t length, uint64_t hash, std::vector<format::TextureRecord>& textures);
+  void appendPatchOf(const EncodedPatch& e, uint32_t& mtPatch);  // payload, then texture
   void restore(const std::string& bytes);
   void writeCheckpoint();
   // A fresh start: the level-0 store (ingestLevelZero), the grid weld, the file's header and the

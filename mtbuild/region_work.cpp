@@ -7,6 +7,7 @@
 
 #include "base/error.h"
 #include "mtbuild/dag_node.h"
+#include "mtbuild/region_texture.h"
 #include "mtbuild/simplify_region.h"
 
 namespace mt {
@@ -37,8 +38,14 @@ std::vector<Patch> floorPatches(const LoadedMesh& m) {
       if (!m.normals.empty()) p.normals.insert(p.normals.end(), &m.normals[3 * size_t(u)], &m.normals[3 * size_t(u)] + 3);
       if (!m.colors.empty()) p.colors.insert(p.colors.end(), &m.colors[4 * size_t(u)], &m.colors[4 * size_t(u)] + 4);
     }
-    for (; t < m.trianglePatch.size() && m.trianglePatch[t] == p.id; ++t)
+    for (; t < m.trianglePatch.size() && m.trianglePatch[t] == p.id; ++t) {
       for (int c = 0; c < 3; ++c) p.triangles.push_back(localOf[m.triangles[3 * t + c]]);
+      if (!m.triangleMaterial.empty()) {
+        p.cornerUV.insert(p.cornerUV.end(), &m.cornerUV[6 * t], &m.cornerUV[6 * t] + 6);
+        p.triangleMaterial.push_back(m.triangleMaterial[t]);
+      }
+    }
+    if (!m.atlases.empty()) p.atlas = m.atlases[k];
     for (uint32_t u : map) localOf[u] = kNoVertex;
   }
   if (t != m.trianglePatch.size()) fail("region", "assembled triangles are not grouped by patch");
@@ -93,7 +100,7 @@ uint64_t taskBytes(const LoadedMesh& m) {
 }
 uint64_t resultBytes(const RegionResult& r) {
   uint64_t n = 0;
-  for (const EncodedPatch& e : r.encoded) n += e.payload.size() + 16;
+  for (const EncodedPatch& e : r.encoded) n += e.payload.size() + e.texture.size() + 24;
   const ReplacementMesh& m = r.replacement;
   return n + m.positions.size() * 8 + m.normals.size() * 4 + m.colors.size() + m.triangles.size() * 4 +
          m.origin.size() * 4 + m.triangleCell.size() * 8;
@@ -135,7 +142,14 @@ RegionResult processRegion(const RegionTask& task, const RegionContext& ctx) {
   // The floor patches become the payloads of the arcs into this region's node.
   PatchCodecOptions codec = ctx.codec;
   codec.simplified = isSimplifiedOutput(task.level - 1);
-  out.encoded = encodePatches(floorPatches(lm), ctx.grid, codec);
+  const std::vector<Patch> floor = floorPatches(lm);
+  out.encoded = encodePatches(floor, ctx.grid, codec);
+  // Textured stores: the floor's atlases and texture payloads (region_texture.h).
+  FloorAtlases atlases;
+  if (ctx.texture) {
+    atlases = floorAtlases(floor, *ctx.texture);
+    encodeTextures(floor, atlases, ctx.grid, *ctx.texture, codec.codec, out.encoded);
+  }
   // Simplify to about half with the region's border locked (BMT 4), split by V*(level).
   SimplifyRegionOptions so;
   so.simplifier = ctx.simplifier;
@@ -175,6 +189,8 @@ RegionResult processRegion(const RegionTask& task, const RegionContext& ctx) {
   out.sphere[3] = sphere.r;
   normalCone(sr.positions, sr.triangles, out.coneAxis, out.coneCutoff);
   rep.positions = std::move(sr.positions);
+  // The new patches' own atlases, baked from the floor.
+  if (ctx.texture) bakeRegion(lm, atlases, sr.error, *ctx.texture, rep);
   out.seconds = std::chrono::duration<double>(Clock::now() - start).count();
   return out;
 }

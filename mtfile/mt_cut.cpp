@@ -268,6 +268,7 @@ std::vector<PatchDamage> checkAllPatches(const MtFileReader& r,
     DecodedPatch d;
     try {
       d = r.readPatch(p);
+      if (r.hasTextures()) r.readTexture(p, d);  // checksum, coordinates, image format
     } catch (const Error& e) {
       std::lock_guard<std::mutex> g(lock);
       damaged.push_back({p, e.what()});

@@ -148,6 +148,8 @@ struct WeldedMesh {
 // readPatch error. Peak memory: the welded mesh, its weld index (16 bytes per slot, at most 2/3
 // full) and one batch of decoded patches: 2.75 GB for the 53M finest cut, written by mtextract.
 WeldedMesh assembleCut(const MtFileReader& reader, const std::vector<uint32_t>& arcs);
+// The arcs' patches in that order (assembleCut's).
+std::vector<uint32_t> cutPatchIdsOf(const MtFileReader& reader, const std::vector<uint32_t>& arcs);
 
 // ---- Conformity -----------------------------------------------------------------------------
 

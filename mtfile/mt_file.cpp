@@ -74,9 +74,11 @@ void MtFileWriter::abandon() {
 }
 
 MtFileWriter::MtFileWriter(const std::string& path, const FileHeader& header, uint64_t length,
-                           std::vector<PatchRecord> patches, const std::string& tempPath, Env* env)
+                           std::vector<PatchRecord> patches, const std::string& tempPath, Env* env,
+                           std::vector<TextureRecord> textures)
     : path_(path), tmp_(tempPath.empty() ? path + ".tmp" : tempPath), env_(env), offset_(length), header_(header),
-      patches_(std::move(patches)) {
+      patches_(std::move(patches)), textures_(std::move(textures)) {
+  if (textured() && textures_.size() != patches_.size()) fail(tmp_, "cannot resume: texture records do not match the patches");
   // On failure the file is kept: it is the killed build's, not ours to remove.
   if (!env_->exists(tmp_)) failIo(tmp_, "cannot reopen to resume: no such file");
   if (uint64_t have = env_->fileSize(tmp_); have < length)
@@ -130,7 +132,33 @@ uint32_t MtFileWriter::appendPatch(const uint8_t* data, size_t size, uint32_t tr
   r.checksum = XXH64(data, size, 0);
   write(data, size);
   patches_.push_back(r);
+  if (textured()) textures_.push_back(TextureRecord{});
   return uint32_t(patches_.size() - 1);
+}
+
+void MtFileWriter::appendTexture(uint32_t patch, const uint8_t* data, size_t size, uint16_t width, uint16_t height,
+                                 uint32_t imageBytes) {
+  if (!textured()) fail(path_, "texture for patch " + std::to_string(patch) + " in a file without textures");
+  if (patch + 1 != patches_.size() || textures_[patch].size != 0)
+    fail(path_, "texture for patch " + std::to_string(patch) + " does not follow its patch");
+  if (size == 0 || size > 0xFFFFFFFFu || imageBytes > size || width == 0 || height == 0 || width > kMaxAtlasSide ||
+      height > kMaxAtlasSide)
+    fail(path_, "texture for patch " + std::to_string(patch) + " has a bad size");
+  static const uint8_t zeros[4096] = {};
+  uint64_t pad = (header_.payloadAlignment - offset_ % header_.payloadAlignment) % header_.payloadAlignment;
+  while (pad > 0) {
+    size_t n = size_t(std::min<uint64_t>(pad, sizeof zeros));
+    write(zeros, n);
+    pad -= n;
+  }
+  TextureRecord& t = textures_[patch];
+  t.offset = offset_;
+  t.size = uint32_t(size);
+  t.width = width;
+  t.height = height;
+  t.checksum = XXH64(data, size, 0);
+  t.imageBytes = imageBytes;
+  write(data, size);
 }
 
 MtFileWriter::Stars MtFileWriter::linkArcs(std::vector<NodeRecord>& nodes, std::vector<DagArc>& arcs) {
@@ -180,7 +208,7 @@ MtFileWriter::Stars MtFileWriter::linkArcs(std::vector<NodeRecord>& nodes, std::
 void MtFileWriter::fillHeader(size_t nodeCount, const Stars& s) {
   FileHeader& h = header_;
   std::memcpy(h.magic, kMagic, 8);
-  h.version = kVersion;
+  h.version = textured() ? kVersion : kUntexturedVersion;
   h.headerSize = kHeaderSize;
   h.nodeCount = nodeCount;
   h.arcCount = s.arcs.size();
@@ -209,7 +237,7 @@ void MtFileWriter::writeTail(const std::vector<uint8_t>& meta) {
   Footer f{};
   f.metaOffset = header_.metaOffset;
   f.checksum = metaChecksum(header_, meta.data(), meta.size());
-  f.version = kVersion;
+  f.version = header_.version;
   std::memcpy(f.magic, kFooterMagic, 8);
   write(&f, sizeof f);
   try {
@@ -238,6 +266,7 @@ void MtFileWriter::finish(std::vector<NodeRecord> nodes, std::vector<DagArc> arc
   appendVec(meta, stars.patchRefs);
   appendVec(meta, patches_);
   assert(header_.metaOffset + meta.size() == header_.patchesOffset + patches_.size() * sizeof(PatchRecord));
+  if (textured()) appendVec(meta, textures_);  // right after the patch index (mt_format.h "Textures")
   if (!metadata_.empty()) {
     // The metadata block, after the patch index, inside the checksummed range (mt_format.h).
     std::vector<uint8_t> block;
@@ -333,6 +362,10 @@ void MtFileReader::readIndex(const Footer& f) {
   section(h.backArcsOffset, h.arcCount * 4, "backward-star array");
   section(h.patchRefsOffset, h.patchRefCount * 4, "patch reference array");
   section(h.patchesOffset, h.patchCount * sizeof(PatchRecord), "patch index");
+  const bool textured = (h.vertexFlags & kHasTextures) != 0;
+  if (textured && h.version < kFirstTextureVersion) failCorrupt(path, "textures flagged in a version " + std::to_string(h.version) + " file");
+  const uint64_t texturesOffset = expect;
+  if (textured) expect += h.patchCount * sizeof(TextureRecord);
   if (h.metadataSize > kMaxMetadataSize || (h.metadataSize == 0 && h.metadataOffset != 0))
     failCorrupt(path, "bad metadata block size " + std::to_string(h.metadataSize) + " in header (byte offset " + std::to_string(offsetof(FileHeader, metadataSize)) + ")");
   if (h.metadataSize) section(h.metadataOffset, h.metadataSize, "metadata block");
@@ -356,6 +389,7 @@ void MtFileReader::readIndex(const Footer& f) {
   take(h.backArcsOffset, &backArcs_, h.arcCount);
   take(h.patchRefsOffset, &patchRefs_, h.patchRefCount);
   take(h.patchesOffset, &patches_, h.patchCount);
+  if (textured) take(texturesOffset, &textures_, h.patchCount);
   if (h.metadataSize) {
     // Entries: uint32 length + key, uint32 length + value, filling the block exactly.
     const uint8_t* p = meta.data() + (h.metadataOffset - h.metaOffset);
@@ -404,6 +438,18 @@ void MtFileReader::checkIndex() const {
                      std::to_string(p.size) + " outside the payload area");
     if (p.arc >= h.arcCount) failCorrupt(path, "patch " + std::to_string(i) + ": arc " + std::to_string(p.arc) + " out of range");
   }
+  for (size_t i = 0; i < textures_.size(); ++i) {
+    const TextureRecord& t = textures_[i];
+    const PatchRecord& p = patches_[i];
+    const uint64_t next = i + 1 < patches_.size() ? patches_[i + 1].offset : h.metaOffset;
+    const bool empty = t.size == 0 && t.offset == 0 && t.width == 0 && t.height == 0 && t.imageBytes == 0 && t.checksum == 0;
+    if (t.reserved != 0 ||
+        (!empty && (t.size == 0 || t.offset < p.offset + p.size || t.offset % h.payloadAlignment || t.offset + t.size > next ||
+                    t.width == 0 || t.height == 0 || t.width > kMaxAtlasSide || t.height > kMaxAtlasSide ||
+                    t.imageBytes > t.size)))
+      failCorrupt(path, "texture of patch " + std::to_string(i) + ": record (payload at byte offset " + std::to_string(t.offset) +
+                            " size " + std::to_string(t.size) + ") is damaged or outside its place");
+  }
   for (size_t i = 0; i < arcs_.size(); ++i) {
     const ArcRecord& a = arcs_[i];
     if (a.from >= h.nodeCount || a.to >= h.nodeCount || uint64_t(a.firstPatchRef) + a.patchCount > h.patchRefCount)
@@ -444,7 +490,8 @@ std::vector<uint8_t> MtFileReader::readPayload(uint32_t patch) const {
   // last one), in one read: no checksum covers the padding, so a flipped byte there is found by
   // its not being zero. Gaps the writer never makes (over 4 KiB) are not read.
   const uint64_t end = p.offset + p.size;
-  const uint64_t next = patch + 1 < patches_.size() ? patches_[patch + 1].offset : header_.metaOffset;
+  uint64_t next = patch + 1 < patches_.size() ? patches_[patch + 1].offset : header_.metaOffset;
+  if (!textures_.empty() && textures_[patch].size) next = textures_[patch].offset;  // the patch's texture follows it
   const size_t gap = next > end && next - end <= 4096 ? size_t(next - end) : 0;
   std::vector<uint8_t> data(p.size + gap);
   file_->read(p.offset, data.size(), data.data());  // checked against the file size by open()
@@ -457,6 +504,46 @@ std::vector<uint8_t> MtFileReader::readPayload(uint32_t patch) const {
                       std::to_string(p.offset + i));
   data.resize(p.size);
   return data;
+}
+
+std::vector<uint8_t> MtFileReader::readTexturePayload(uint32_t patch) const {
+  if (patch >= patches_.size())
+    fail(path_, "patch " + std::to_string(patch) + " does not exist (" + std::to_string(patches_.size()) + " patches)");
+  if (textures_.empty() || textures_[patch].size == 0) return {};
+  const TextureRecord& t = textures_[patch];
+  const uint64_t end = t.offset + t.size;
+  const uint64_t next = patch + 1 < patches_.size() ? patches_[patch + 1].offset : header_.metaOffset;
+  const size_t gap = next > end && next - end <= 4096 ? size_t(next - end) : 0;
+  std::vector<uint8_t> data(t.size + gap);
+  file_->read(t.offset, data.size(), data.data());
+  if (kChecksumsChecked && XXH64(data.data(), t.size, 0) != t.checksum)
+    failCorrupt(path_, "texture of patch " + std::to_string(patch) + " is damaged: checksum mismatch in payload at byte offset " +
+                           std::to_string(t.offset) + " (" + std::to_string(t.size) + " bytes)");
+  for (size_t i = t.size; i < data.size(); ++i)
+    if (data[i] != 0)
+      failCorrupt(path_, "texture of patch " + std::to_string(patch) + " is damaged: padding after its payload is not zero at byte offset " +
+                             std::to_string(t.offset + i));
+  data.resize(t.size);
+  return data;
+}
+
+TexturePayload MtFileReader::readTexture(uint32_t patch, const DecodedPatch& d) const {
+  std::vector<uint8_t> data = readTexturePayload(patch);
+  if (data.empty()) return {};
+  try {
+    TexturePayload t = decodeTexturePayload(data.data(), data.size(), d.triangles.data(), d.triangleCount(), d.vertexCount());
+    const TextureRecord& rec = textures_[patch];
+    if (t.width != rec.width || t.height != rec.height || t.image.size() != rec.imageBytes)
+      throw Error("image size differs from the index");
+    static const uint8_t kJpeg[3] = {0xFF, 0xD8, 0xFF}, kPng[4] = {0x89, 'P', 'N', 'G'};
+    const bool magic = t.imageFormat == kImageJpeg ? t.image.size() >= 3 && std::memcmp(t.image.data(), kJpeg, 3) == 0
+                                                    : t.image.size() >= 4 && std::memcmp(t.image.data(), kPng, 4) == 0;
+    if (!magic) throw Error("the image is not the format the payload names");
+    return t;
+  } catch (const Error& e) {
+    failCorrupt(path_, "texture of patch " + std::to_string(patch) + " at byte offset " + std::to_string(textures_[patch].offset) +
+                           ": " + e.what());
+  }
 }
 
 DecodedPatch MtFileReader::readPatch(uint32_t patch) const {

@@ -25,6 +25,7 @@
 #include "base/env.h"
 #include "mtfile/mt_format.h"
 #include "mtfile/patch_codec.h"
+#include "mtfile/texture_payload.h"
 
 namespace mt {
 
@@ -48,6 +49,9 @@ class MtFileWriter {
 
   // Appends one payload (aligned); returns its patch id (0, 1, 2, ... in call order).
   uint32_t appendPatch(const uint8_t* data, size_t size, uint32_t triangles, uint32_t vertices);
+  // Textured files (header vertexFlags & kHasTextures): the texture payload of the patch just
+  // appended (mt_format.h "Textures"), at most once per patch; a patch without one has none.
+  void appendTexture(uint32_t patch, const uint8_t* data, size_t size, uint16_t width, uint16_t height, uint32_t imageBytes);
   uint32_t patchCount() const { return uint32_t(patches_.size()); }
   // An entry of the file's metadata block (mt_format.h "The metadata block"), e.g. "crs"; an empty
   // value removes the key. No entries: no block (the file is as without this call).
@@ -75,10 +79,13 @@ class MtFileWriter {
   // checkpoint was taken (after syncPayloads()). Bytes past `length` (payloads of an unfinished
   // level) are cut off. Throws mt::Error when the file is missing or shorter than `length`.
   MtFileWriter(const std::string& path, const format::FileHeader& header, uint64_t length,
-               std::vector<format::PatchRecord> patches, const std::string& tempPath = {}, Env* env = Env::Default());
+               std::vector<format::PatchRecord> patches, const std::string& tempPath = {}, Env* env = Env::Default(),
+               std::vector<format::TextureRecord> textures = {});
   // Makes every payload appended so far durable (fdatasync), so a checkpoint may refer to them.
   void syncPayloads();
   const std::vector<format::PatchRecord>& patchRecords() const { return patches_; }
+  const std::vector<format::TextureRecord>& textureRecords() const { return textures_; }
+  bool textured() const { return (header_.vertexFlags & format::kHasTextures) != 0; }
   // Closes the temporary file but keeps it, for a build that stopped after a checkpoint and may resume.
   void detach();
 
@@ -99,6 +106,7 @@ class MtFileWriter {
   uint64_t offset_ = 0;
   format::FileHeader header_;
   std::vector<format::PatchRecord> patches_;
+  std::vector<format::TextureRecord> textures_;  // textured files: one per patch
   std::map<std::string, std::string> metadata_;
 };
 
@@ -128,6 +136,16 @@ class MtFileReader {
   // readPayload + decodePatch; a damaged payload throws "PATH: patch N: ...".
   DecodedPatch readPatch(uint32_t patch) const;
 
+  // Textured files (mt_format.h "Textures"): one record per patch (empty for other files), and a
+  // patch's texture payload, checksum verified (empty when the patch has none). Thread-safe.
+  bool hasTextures() const { return !textures_.empty(); }
+  const std::vector<format::TextureRecord>& textures() const { return textures_; }
+  std::vector<uint8_t> readTexturePayload(uint32_t patch) const;
+  // readTexturePayload + decodeTexturePayload over the patch as decoded (its triangles name the
+  // vertices the coordinates go with); the image is checked to be the format it says, not
+  // decoded. A damaged one throws Corruption "PATH: texture of patch N ...". No texture: empty.
+  TexturePayload readTexture(uint32_t patch, const DecodedPatch& decoded) const;
+
  private:
   MtFileReader() = default;
   // open()'s steps: the footer (after the header's magic and version); the index section, checked
@@ -144,6 +162,7 @@ class MtFileReader {
   std::vector<format::ArcRecord> arcs_;
   std::vector<uint32_t> backArcs_, patchRefs_;
   std::vector<format::PatchRecord> patches_;
+  std::vector<format::TextureRecord> textures_;
   std::map<std::string, std::string> metadata_;
 };
 

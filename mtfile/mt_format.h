@@ -15,6 +15,7 @@
 //                       uint32 backArcs[arcCount]    arc ids sorted by (to, from): backward stars
 //                       uint32 patchRefs[patchRefCount]  arc -> its patches
 //                       PatchRecord[patchCount]      the patch index
+//                       TextureRecord[patchCount]    textured files only (kHasTextures, version 6)
 //   header.metadataOffset  metadata block (metadataSize bytes; optional, absent when 0)
 //   end - kFooterSize   Footer
 //
@@ -56,11 +57,17 @@ constexpr char kFooterMagic[8] = {'B', 'M', 'T', '-', 'E', 'N', 'D', '\n'};
 // kPayloadConnectivity (the triangles by the connectivity code instead of the meshopt index code);
 // version-4 writers no longer set kPayloadRangeIndices. Version 5: NodeRecord::colorError (the
 // word was reserved and zero before, so an older file reads as "colour error not measured", 0).
-// Readers accept kMinReadableVersion..kVersion; the payload flags say how each payload is coded,
-// so one decoder reads all five.
-constexpr uint32_t kVersion = 5;
+// Version 6: textured files (kHasTextures): a texture payload per patch and a TextureRecord per
+// patch (below). Writers write version 5 when a file has no textures (the same bytes as before),
+// version 6 only with kHasTextures; a version-5 reader refuses a textured file by its version
+// instead of misreading it. Readers accept kMinReadableVersion..kVersion; the payload flags say
+// how each payload is coded, so one decoder reads all six.
+constexpr uint32_t kVersion = 6;
+constexpr uint32_t kUntexturedVersion = 5;  // what a writer writes for a file without textures
 // The first version whose nodes carry NodeRecord::colorError.
 constexpr uint32_t kFirstColorErrorVersion = 5;
+// The first version that may set kHasTextures.
+constexpr uint32_t kFirstTextureVersion = 6;
 constexpr uint32_t kMinReadableVersion = 1;
 constexpr uint32_t kHeaderSize = 256;
 constexpr uint32_t kFooterSize = 32;
@@ -79,6 +86,7 @@ enum class Codec : uint32_t {
 // FileHeader::vertexFlags
 constexpr uint32_t kHasNormals = 1u << 0;  // every patch stores octahedral normals
 constexpr uint32_t kHasColors = 1u << 1;   // every patch stores RGBA8 colours
+constexpr uint32_t kHasTextures = 1u << 2; // a TextureRecord per patch (version 6)
 
 struct FileHeader {
   char magic[8];             // kMagic
@@ -161,6 +169,52 @@ struct PatchRecord {
   uint64_t checksum;     // XXH64 of the payload bytes, seed 0
 };
 static_assert(sizeof(PatchRecord) == 32, "PatchRecord layout");
+
+// ---- Textures (version 6, FileHeader::vertexFlags & kHasTextures) ----
+//
+// Each patch may have a texture payload: its atlas image and the texture coordinates of every
+// corner of its triangles. TextureRecord[patchCount] follows the PatchRecord array (at
+// patchesOffset + patchCount * sizeof(PatchRecord)); the metadata block, if any, comes after it,
+// and the sections still tile [metaOffset, footer) exactly, inside the footer's checksum. A
+// texture payload is written right after its patch's payload (aligned the same way, zero padding
+// between), so a reader loads both with one read; size 0: the patch has no texture (its triangles
+// are shown untextured). Each texture payload has its own XXH64, checked when it is read.
+struct TextureRecord {
+  uint64_t offset;       // absolute file offset (a multiple of payloadAlignment), 0 when size is 0
+  uint32_t size;         // payload bytes
+  uint16_t width;        // of the atlas image, <= kMaxAtlasSide
+  uint16_t height;
+  uint64_t checksum;     // XXH64 of the payload bytes, seed 0
+  uint32_t imageBytes;   // the image's bytes at the payload's end
+  uint32_t reserved;     // zero
+};
+static_assert(sizeof(TextureRecord) == 32, "TextureRecord layout");
+constexpr uint32_t kMaxAtlasSide = 2048;
+
+// A texture payload: TexturePayloadHeader, uvBytes of corner coordinates, the image (imageBytes,
+// to the payload's end).
+struct TexturePayloadHeader {
+  uint32_t triangleCount;  // the patch's triangles, in the order its payload decodes them
+  uint16_t width, height;  // of the image
+  uint8_t imageFormat;     // kImageJpeg or kImagePng
+  uint8_t uvCoding;        // kUvCornerLists
+  uint16_t reserved;       // zero
+  uint32_t uvBytes;
+};
+static_assert(sizeof(TexturePayloadHeader) == 16, "TexturePayloadHeader layout");
+constexpr uint8_t kImageJpeg = 1, kImagePng = 2;
+// kUvCornerLists: uvBytes are one zstd frame holding 3 * triangleCount kind bytes, then the
+// values. The corners are walked in the decoded patch's order (triangle t, corner c = 0, 1, 2 of
+// its (a, b, c) as the geometry payload decodes them); each vertex keeps the list of distinct
+// coordinates its corners had so far. Kind k < 255: the corner has the vertex's k-th coordinate;
+// 255: a new one, added to the vertex's list: its (s, t) in 1/16 texel of the image, each coded
+// as zigzag(x - previous new value's x) (the previous starting at (0, 0)) in an unsigned LEB128
+// varint, s then t; s in [0, 16 * width], t in [0, 16 * height]. The coordinate is
+// (s / (16 * width), t / (16 * height)), t = 0 at the image's bottom row (OpenGL's and OBJ's
+// convention). A vertex with 255 distinct coordinates is an error. (Consecutive new coordinates
+// are neighbours in fan order, so the deltas are small: on a textured 120 x 120 grid, 0.40 bytes
+// per triangle at the finest level where raw 16-bit pairs over [0, 1] took 2.17.)
+constexpr uint8_t kUvCornerLists = 1;
 
 struct Footer {
   uint64_t metaOffset;   // == header.metaOffset (lets a reader find the index from the end)

@@ -72,6 +72,8 @@ class WeldIndex {
 
 }  // namespace
 
+std::vector<uint32_t> cutPatchIdsOf(const MtFileReader& r, const std::vector<uint32_t>& arcs) { return cutPatchIds(r, arcs); }
+
 WeldedMesh assembleCut(const MtFileReader& r, const std::vector<uint32_t>& arcs) {
   const std::vector<uint32_t> patchIds = cutPatchIds(r, arcs);
   const QuantizationGrid grid = r.grid();

@@ -67,6 +67,9 @@ RewriteSet readRewrites(const PatchStore& store, const std::vector<PatchRewrite>
       if ((l.normals && next.normals.size() != next.positions.size()) ||
           (l.colors && next.colors.size() != next.positions.size() / 3 * 4))
         bad("patch " + std::to_string(id) + ": normals or colours missing");
+      if (l.texcoords && (next.cornerUV.size() != 6 * size_t(next.triangleCount()) ||
+                          next.triangleMaterial.size() != next.triangleCount()))
+        bad("patch " + std::to_string(id) + ": texture coordinates missing");
       for (uint32_t i : next.triangles)
         if (i >= next.vertexCount()) bad("patch " + std::to_string(id) + ": triangle index out of range");
     }

@@ -55,6 +55,7 @@
 #include "base/file_lock.h"
 #include "base/output_path.h"
 #include "patchstore/ingest_internal.h"
+#include "patchstore/store_textures.h"
 
 namespace mt {
 namespace ingest {
@@ -172,12 +173,12 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
   ParsedInput in = parseInput(input, ctx);
   impl->env = env;
   impl->dir = dir;
-  impl->layout = {in.layout.doublePrecision, in.layout.normals, in.layout.colors};
+  impl->layout = {in.layout.doublePrecision, in.layout.normals, in.layout.colors, in.layout.texcoords};
   impl->bounds = in.bounds;
   PatchStageOutput patches;
   if (in.resident)
     residentStages(ctx, in, patches);
-  else if (in.layout.doublePrecision || in.layout.normals || in.layout.colors)
+  else if (in.layout.doublePrecision || in.layout.normals || in.layout.colors || in.layout.texcoords)
     chunkedStages<true>(ctx, in, patches);
   else
     chunkedStages<false>(ctx, in, patches);
@@ -186,6 +187,11 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
   report.nonManifoldEdges += countCrossEdges(*patches.edges);
   clock.mark("edges");
   boundaryStage(ctx, patches);
+  if (in.layout.texcoords) {
+    // The materials' images, tiled into the store (store_textures.h).
+    impl->blobs[kMaterialsBlob] = encodeMaterials(tileTextures(in.materials, dir, opt.memoryBytes / 4, opt.progress, env));
+    clock.mark("textures");
+  }
   commit(ctx, uint32_t(patches.patchKey.size()), std::chrono::duration<double>(Clock::now() - t0).count());
   return report;
 }

@@ -260,10 +260,11 @@ template <>
 struct VertexData<true> {
   uint64_t key;
   uint32_t holders;
-  uint32_t pad;
+  uint32_t material;  // texture coordinates (textured inputs): the material, then u, v
   double p[3];
   float n[3];
   uint8_t c[4];
+  float uv[2];
 };
 template <class T>
 struct KeyLess {
@@ -429,6 +430,10 @@ VertexData<Full> vertexData(const VertexRecordLayout& layout, const char* rec, u
       rec += 12;
     }
     if (layout.colors) std::memcpy(d.c, rec, 4);
+    if (layout.texcoords) {
+      std::memcpy(d.uv, rec + (layout.colors ? 4 : 0), 8);
+      std::memcpy(&d.material, rec + (layout.colors ? 4 : 0) + 8, 4);
+    }
   } else {
     std::memcpy(d.p, rec, 12);
   }
@@ -574,6 +579,10 @@ void gatherPatch(PatchWork& w, uint32_t k, const ParsedInput& in, PatchSorter<Fu
     if constexpr (Full) {
       if (in.layout.normals) w.p.normals.insert(w.p.normals.end(), d.n, d.n + 3);
       if (in.layout.colors) w.p.colors.insert(w.p.colors.end(), d.c, d.c + 4);
+      if (in.layout.texcoords) {  // the per-vertex form (store_format.h), as the resident path writes it
+        w.p.texcoords.insert(w.p.texcoords.end(), d.uv, d.uv + 2);
+        w.p.vertexMaterial.push_back(d.material);
+      }
     }
     have = byPatch.next(d);
   }

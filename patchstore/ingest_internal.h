@@ -30,7 +30,9 @@ namespace ingest {
 // The vertex record layout in vert.bin, fixed by the input's header.
 struct VertexRecordLayout {
   bool doublePrecision, normals, colors;
-  size_t size() const { return (doublePrecision ? 24 : 12) + (normals ? 12 : 0) + (colors ? 4 : 0); }
+  bool texcoords = false;  // u, v (float32) and the material (uint32) last: the geometry block's per-vertex form
+  size_t size() const { return (doublePrecision ? 24 : 12) + (normals ? 12 : 0) + (colors ? 4 : 0) + (texcoords ? 12 : 0); }
+  size_t texcoordOffset() const { return size() - 12; }
   void encode(const InputVertex& v, char* out) const {
     if (doublePrecision) {
       std::memcpy(out, v.p, 24);
@@ -44,7 +46,14 @@ struct VertexRecordLayout {
       std::memcpy(out, v.n, 12);
       out += 12;
     }
-    if (colors) std::memcpy(out, v.c, 4);
+    if (colors) {
+      std::memcpy(out, v.c, 4);
+      out += 4;
+    }
+    if (texcoords) {
+      std::memcpy(out, v.uv, 8);
+      std::memcpy(out + 8, &v.material, 4);
+    }
   }
   void position(const char* rec, double p[3]) const {
     if (doublePrecision) {
@@ -354,6 +363,7 @@ struct ParsedInput {
   bool resident = false;       // the vertex records are in `records` (else in scratch/vert.bin)
   std::vector<char> records;   // resident: every vertex record, in vertex order
   std::unique_ptr<MortonSort> morton;  // resident: the Morton sort, filled if the parse could
+  std::vector<InputMaterial> materials;  // textured inputs: the materials, images to tile
 };
 
 // What the patch stages of both paths hand to the boundary stage.

@@ -99,7 +99,7 @@ class ScratchSink : public MeshSink {
       : vert_(dir + "/vert.bin", 4 << 20), face_(dir + "/face.bin", 4 << 20), progress_(progress), residentLimit_(residentLimit) {}
   void begin(const MeshHeader& h) override {
     header = h;
-    layout = {h.doublePrecision, h.hasNormals, h.hasColors};
+    layout = {h.doublePrecision, h.hasNormals, h.hasColors, h.hasTexcoords};
     record_.resize(layout.size());
     for (int a = 0; a < 3; ++a) {
       bounds.lo[a] = std::numeric_limits<double>::infinity();
@@ -510,9 +510,10 @@ void reportRead(const MeshHeader& header, const ReadStats& stats, IngestReport& 
 }  // namespace
 
 ParsedInput parseInput(const std::string& input, IngestContext& ctx) {
-  auto reader = openMesh(input);
+  // Per-corner texture coordinates are split into wedges with scratch files here (wedge_split.cpp).
+  auto reader = openMesh(input, MeshOpenOptions{ctx.scratch, ctx.plan.soupWeldSorter});
   const MeshHeader& header = reader->header();
-  const VertexRecordLayout expected{header.doublePrecision, header.hasNormals, header.hasColors};
+  const VertexRecordLayout expected{header.doublePrecision, header.hasNormals, header.hasColors, header.hasTexcoords};
   // The records stay in RAM when they fit the plan's limit (its reserve covers what the resident
   // passes hold besides the records at their peak: sort buffers, which shrink to fit, the
   // assigner's seeds and tables, the process itself).
@@ -521,7 +522,7 @@ ParsedInput parseInput(const std::string& input, IngestContext& ctx) {
   ScratchSink sink(ctx.scratch, parseProgress, residentLimit);
   // A resident binary PLY of triangles: its faces are read in place later, not copied.
   std::optional<FaceFile> inPlace;
-  if (header.format == MeshFormat::PlyBinaryLE && header.declaredVertices >= 0 &&
+  if (header.format == MeshFormat::PlyBinaryLE && header.declaredVertices >= 0 && !header.splitAtSeams &&
       uint64_t(header.declaredVertices) * expected.size() <= residentLimit) {
     inPlace = plyTriangleBlock(input);
     if (inPlace && int64_t(inPlace->count) != header.declaredFaces) inPlace.reset();
@@ -544,6 +545,7 @@ ParsedInput parseInput(const std::string& input, IngestContext& ctx) {
   if (stats.triangles == 0) fail(input, "mesh has no triangles");
   if (stats.triangles > 0xFFFFFFF0ull) fail(input, "more than 4 billion triangles are not supported");
   in.layout = sink.layout;
+  in.materials = header.materials;
   in.bounds = sink.bounds;
   in.vertices = sink.vertexCount;
   in.faces = sink.faceCount;

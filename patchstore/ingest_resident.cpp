@@ -295,12 +295,14 @@ void writePayload(ResidentPatch& w, const ResidentVertices& rv, const uint8_t* s
   const size_t nt = w.faces.size(), nc = 3 * nt;
   const VertexRecordLayout& L = rv.layout;
   const size_t posBytes = L.doublePrecision ? 24 : 12;
-  const size_t bytes = sizeof(store_format::GeometryHeader) + nv * (posBytes + (L.normals ? 12 : 0) + (L.colors ? 4 : 0)) + nc * 4;
+  const size_t bytes =
+      sizeof(store_format::GeometryHeader) + nv * (posBytes + (L.normals ? 12 : 0) + (L.colors ? 4 : 0) + (L.texcoords ? 12 : 0)) + nc * 4;
   w.payload.resize(bytes);
   char* out = w.payload.data();
   store_format::GeometryHeader h{nv, uint32_t(nt), (L.doublePrecision ? store_format::kGeomDouble : 0u) |
                                                        (L.normals ? store_format::kGeomNormals : 0u) |
-                                                       (L.colors ? store_format::kGeomColors : 0u),
+                                                       (L.colors ? store_format::kGeomColors : 0u) |
+                                                       (L.texcoords ? store_format::kGeomTexcoords | store_format::kGeomVertexUV : 0u),
                                  0};
   std::memcpy(out, &h, sizeof h);
   out += sizeof h;
@@ -335,6 +337,11 @@ void writePayload(ResidentPatch& w, const ResidentVertices& rv, const uint8_t* s
     for (uint32_t l = 0; l < nv; ++l) {
       std::memcpy(out, rv.record(s.globals[l]) + posBytes + (L.normals ? 12 : 0), 4);
       out += 4;
+    }
+  if (L.texcoords)  // the per-vertex form of store_format.h
+    for (uint32_t l = 0; l < nv; ++l) {
+      std::memcpy(out, rv.record(s.globals[l]) + L.texcoordOffset(), 12);
+      out += 12;
     }
   std::memcpy(out, s.local.data(), nc * 4);
   assert(size_t(out + nc * 4 - w.payload.data()) == bytes);  // every byte of the block written once

@@ -3,6 +3,7 @@
 // path and the readers, so every block the store holds was written by encodeGeometry and
 // encodeBoundary.
 #include <algorithm>
+#include <cassert>
 #include <cstring>
 #include <limits>
 
@@ -28,7 +29,8 @@ Box3 boundsOf(const std::vector<double>& positions) {
 }
 
 std::string encodeGeometry(const Patch& p, const VertexLayout& layout) {
-  GeometryHeader h{p.vertexCount(), p.triangleCount(), layoutFlags(layout), 0};
+  const bool vertexUV = layout.texcoords && !p.texcoords.empty();
+  GeometryHeader h{p.vertexCount(), p.triangleCount(), layoutFlags(layout) | (vertexUV ? kGeomVertexUV : 0), 0};
   ByteWriter w;
   w.put(h);
   if (layout.doublePrecision) {
@@ -39,7 +41,22 @@ std::string encodeGeometry(const Patch& p, const VertexLayout& layout) {
   }
   if (layout.normals) w.putRaw(p.normals.data(), p.normals.size() * sizeof(float));
   if (layout.colors) w.putRaw(p.colors.data(), p.colors.size());
+  if (vertexUV) {
+    assert(p.texcoords.size() == 2 * size_t(p.vertexCount()) && p.vertexMaterial.size() == p.vertexCount());
+    for (uint32_t v = 0; v < p.vertexCount(); ++v) {
+      w.putRaw(&p.texcoords[2 * size_t(v)], 2 * sizeof(float));
+      w.put<uint32_t>(p.vertexMaterial[v]);
+    }
+  }
   w.putRaw(p.triangles.data(), p.triangles.size() * sizeof(uint32_t));
+  if (layout.texcoords && !vertexUV) {
+    if (p.cornerUV.size() != 6 * size_t(p.triangleCount()) || p.triangleMaterial.size() != p.triangleCount())
+      fail("patch " + std::to_string(p.id), "texture coordinates missing for a textured store");
+    w.putRaw(p.triangleMaterial.data(), p.triangleMaterial.size() * sizeof(uint32_t));
+    w.putRaw(p.cornerUV.data(), p.cornerUV.size() * sizeof(float));
+    w.put<uint32_t>(uint32_t(p.atlas.size()));
+    w.putRaw(p.atlas.data(), p.atlas.size());
+  }
   return std::move(w.bytes());
 }
 
@@ -47,46 +64,89 @@ void decodeGeometry(const std::string& payload, const VertexLayout& layout, Patc
                     const std::string& source) {
   ByteReader r(payload, source);
   auto h = r.get<GeometryHeader>();
-  if (h.flags != layoutFlags(layout)) fail(source, "geometry block has the wrong vertex layout");
-  size_t nv = h.vertexCount, nt = h.triangleCount;
-  // The arrays the counts ask for must be in the block before they are allocated: a damaged count
-  // must not ask for gigabytes the block does not hold.
-  const uint64_t perVertex = (layout.doublePrecision ? 24 : 12) + (layout.normals ? 12 : 0) + (layout.colors ? 4 : 0);
-  if (uint64_t(nv) * perVertex + uint64_t(nt) * 12 > payload.size() - sizeof h)
-    fail(source, "geometry block of " + std::to_string(payload.size()) + " bytes is too short for its " + std::to_string(nv) +
-                     " vertices and " + std::to_string(nt) + " triangles");
+  const bool vertexUV = layout.texcoords && h.flags == (layoutFlags(layout) | kGeomVertexUV);
+  if (h.flags != layoutFlags(layout) && !vertexUV) fail(source, "geometry block has the wrong vertex layout");
+  const size_t nv = h.vertexCount, nt = h.triangleCount;
+  // Every array is found in the block before anything is allocated: a damaged count must not ask
+  // for gigabytes the block does not hold.
+  const size_t positionBytes = nv * 3 * (layout.doublePrecision ? sizeof(double) : sizeof(float));
+  const char* positions = r.getRaw(positionBytes);
+  const char* normals = layout.normals ? r.getRaw(nv * 3 * sizeof(float)) : nullptr;
+  const char* colors = layout.colors ? r.getRaw(nv * 4) : nullptr;
+  const char* vertexUVRaw = vertexUV ? r.getRaw(nv * 12) : nullptr;
+  const char* triangles = r.getRaw(nt * 3 * sizeof(uint32_t));
+  const char* triangleMaterial = nullptr;
+  const char* cornerUV = nullptr;
+  const char* atlas = nullptr;
+  uint32_t atlasBytes = 0;
+  if (layout.texcoords && !vertexUV) {
+    triangleMaterial = r.getRaw(nt * 4);
+    cornerUV = r.getRaw(nt * 24);
+    atlasBytes = r.get<uint32_t>();
+    atlas = r.getRaw(atlasBytes);
+  }
+  if (!r.atEnd()) fail(source, "geometry block has trailing bytes");
   out.positions.resize(nv * 3);
   if (layout.doublePrecision) {
-    const char* raw = r.getRaw(nv * 3 * sizeof(double));
-    if (nv) std::memcpy(out.positions.data(), raw, nv * 3 * sizeof(double));  // memcpy(null, ..., 0) is UB
+    if (nv) std::memcpy(out.positions.data(), positions, positionBytes);  // memcpy(null, ..., 0) is UB
   } else {
-    const char* raw = r.getRaw(nv * 3 * sizeof(float));
     for (size_t i = 0; i < nv * 3; ++i) {
       float f;
-      std::memcpy(&f, raw + i * sizeof(float), sizeof f);
+      std::memcpy(&f, positions + i * sizeof(float), sizeof f);
       out.positions[i] = f;
     }
   }
   out.normals.clear();
   out.colors.clear();
-  if (layout.normals) {
+  if (normals) {
     out.normals.resize(nv * 3);
-    const char* raw = r.getRaw(nv * 3 * sizeof(float));
-    if (nv) std::memcpy(out.normals.data(), raw, nv * 3 * sizeof(float));
+    if (nv) std::memcpy(out.normals.data(), normals, nv * 3 * sizeof(float));
   }
-  if (layout.colors) {
+  if (colors) {
     out.colors.resize(nv * 4);
-    const char* raw = r.getRaw(nv * 4);
-    if (nv) std::memcpy(out.colors.data(), raw, nv * 4);
+    if (nv) std::memcpy(out.colors.data(), colors, nv * 4);
+  }
+  std::vector<float> vertexUV2;
+  std::vector<uint32_t> vertexMat;
+  if (vertexUV) {
+    vertexUV2.resize(nv * 2);
+    vertexMat.resize(nv);
+    for (size_t v = 0; v < nv; ++v) {
+      std::memcpy(&vertexUV2[2 * v], vertexUVRaw + 12 * v, 8);
+      std::memcpy(&vertexMat[v], vertexUVRaw + 12 * v + 8, 4);
+    }
   }
   out.triangles.resize(nt * 3);
-  const char* triangles = r.getRaw(nt * 3 * sizeof(uint32_t));
   if (nt) std::memcpy(out.triangles.data(), triangles, nt * 3 * sizeof(uint32_t));
-  if (!r.atEnd()) fail(source, "geometry block has trailing bytes");
+  out.cornerUV.clear();
+  out.triangleMaterial.clear();
+  out.atlas.clear();
+  out.texcoords.clear();
+  out.vertexMaterial.clear();
+  if (triangleMaterial) {
+    out.triangleMaterial.resize(nt);
+    if (nt) std::memcpy(out.triangleMaterial.data(), triangleMaterial, nt * 4);
+    out.cornerUV.resize(nt * 6);
+    if (nt) std::memcpy(out.cornerUV.data(), cornerUV, nt * 24);
+    if (atlasBytes) out.atlas.assign(atlas, atlasBytes);
+  }
   for (size_t i = 0; i < out.triangles.size(); ++i)
     if (out.triangles[i] >= nv)
       fail(source, "triangle " + std::to_string(i / 3) + " references vertex " +
                        std::to_string(out.triangles[i]) + " of " + std::to_string(nv));
+  if (vertexUV) {
+    // Ingest's per-vertex form, as every corner's (store_format.h).
+    out.cornerUV.resize(nt * 6);
+    out.triangleMaterial.resize(nt);
+    for (size_t t = 0; t < nt; ++t) {
+      for (int c = 0; c < 3; ++c) {
+        const uint32_t v = out.triangles[3 * t + size_t(c)];
+        out.cornerUV[6 * t + 2 * size_t(c)] = vertexUV2[2 * size_t(v)];
+        out.cornerUV[6 * t + 2 * size_t(c) + 1] = vertexUV2[2 * size_t(v) + 1];
+      }
+      out.triangleMaterial[t] = vertexMat[out.triangles[3 * t]];
+    }
+  }
 }
 
 std::string encodeBoundary(const std::vector<BoundaryEntry>& entries) {

@@ -295,6 +295,11 @@ LoadedMesh PatchStore::assemble(const std::vector<Patch>& patchesIn) const {
       }
     for (uint32_t i : p.triangles) m.triangles.push_back(map[i]);
     m.trianglePatch.insert(m.trianglePatch.end(), p.triangleCount(), id);
+    if (layout.texcoords) {
+      m.cornerUV.insert(m.cornerUV.end(), p.cornerUV.begin(), p.cornerUV.end());
+      m.triangleMaterial.insert(m.triangleMaterial.end(), p.triangleMaterial.begin(), p.triangleMaterial.end());
+      m.atlases.push_back(p.atlas);
+    }
   }
   for (PatchId id : ids) m.unifiedOf.push_back(std::move(unified[id]));
   std::sort(m.external.begin(), m.external.end());

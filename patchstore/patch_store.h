@@ -35,7 +35,13 @@ struct VertexLayout {
   bool doublePrecision = false;  // positions stored as double (input needed it), else float
   bool normals = false;
   bool colors = false;
+  bool texcoords = false;  // texture coordinates per triangle corner and a material per triangle
 };
+
+// Triangle materials (store_format.h): an index into the store's materials
+// (store_textures.h), or one of these.
+constexpr uint32_t kAtlasMaterial = 0xFFFFFFFEu;  // the patch's own atlas (Patch::atlas)
+// kNoMaterial (mesh_reader.h, 0xFFFFFFFF): untextured.
 
 struct BoundaryEntry {
   uint32_t local;      // vp: vertex index inside this patch
@@ -59,6 +65,15 @@ struct Patch {
   std::vector<float> normals;      // 3 per vertex, empty when the layout has none
   std::vector<uint8_t> colors;     // 4 per vertex, empty when the layout has none
   std::vector<uint32_t> triangles; // 3 per triangle, local indices
+  // Textured stores: texture coordinates of every corner (6 per triangle) and a material per
+  // triangle; the atlas image the patch's kAtlasMaterial triangles use (empty: none). Ingest
+  // fills the per-vertex form instead (2 per vertex, 1 per vertex), which is what its vertex
+  // records carry; patch() always returns the per-corner form.
+  std::vector<float> cornerUV;
+  std::vector<uint32_t> triangleMaterial;
+  std::string atlas;
+  std::vector<float> texcoords;
+  std::vector<uint32_t> vertexMaterial;
   std::vector<BoundaryEntry> boundary;  // sorted by (local, neighbour)
   uint32_t vertexCount() const { return uint32_t(positions.size() / 3); }
   uint32_t triangleCount() const { return uint32_t(triangles.size() / 3); }
@@ -83,6 +98,9 @@ struct LoadedMesh {
   std::vector<float> normals;      // 3 per vertex or empty
   std::vector<uint8_t> colors;     // 4 per vertex or empty
   std::vector<uint32_t> triangles; // 3 per triangle, unified indices
+  std::vector<float> cornerUV;     // textured stores: 6 per triangle
+  std::vector<uint32_t> triangleMaterial;  // textured stores: 1 per triangle
+  std::vector<std::string> atlases;        // per loaded patch (as `patches`): its atlas or ""
   std::vector<PatchId> trianglePatch;  // the loaded patch each triangle came from
   std::vector<uint8_t> locked;     // 1 per vertex: used by a patch outside the loaded set
   // For each locked vertex, where outside patches hold it: (vertex, outside patch, index there).
@@ -117,6 +135,11 @@ struct ReplacementMesh {
   std::vector<uint32_t> triangles;
   std::vector<uint32_t> origin;    // 1 per vertex
   std::vector<uint64_t> triangleCell;  // the new partition: triangles with equal key form a patch
+  // Textured stores: per triangle (6 and 1), and the atlas of the new patch of each cell key
+  // (none: the patch has no atlas).
+  std::vector<float> cornerUV;
+  std::vector<uint32_t> triangleMaterial;
+  std::map<uint64_t, std::string> cellAtlas;
   uint32_t level = 0;              // recorded in every new patch
 };
 

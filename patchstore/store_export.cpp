@@ -7,6 +7,7 @@
 
 #include "patchstore/io/ply_writer.h"
 #include "patchstore/store_impl.h"
+#include "patchstore/store_textures.h"
 
 namespace mt {
 
@@ -144,6 +145,34 @@ CheckReport PatchStore::check() const {
       for (int a = 0; a < 3; ++a)
         if (self.positions[3 * e.local + a] != q->positions[3 * e.remote + a]) {
           report.problems.push_back(entry + ": the two copies of the vertex differ in position");
+          break;
+        }
+    }
+  }
+  // Textured stores: the tiled images' checksums, and every triangle's material and texture
+  // coordinates in range.
+  if (impl_->layout.texcoords) {
+    for (std::string& p : checkTextures(*this)) report.problems.push_back(std::move(p));
+    const size_t materials = storeMaterials(*this).size();
+    for (PatchId id : ids) {
+      const Patch* p = get(id);
+      if (!p) continue;
+      for (size_t t = 0; t < p->triangleMaterial.size(); ++t) {
+        const uint32_t m = p->triangleMaterial[t];
+        if (m != kNoMaterial && m != kAtlasMaterial && m >= materials) {
+          report.problems.push_back(dir_ + ": patch " + std::to_string(id) + ": triangle " + std::to_string(t) + " names material " +
+                                    std::to_string(m) + " of " + std::to_string(materials));
+          break;
+        }
+        if (m == kAtlasMaterial && p->atlas.empty()) {
+          report.problems.push_back(dir_ + ": patch " + std::to_string(id) + ": triangle " + std::to_string(t) +
+                                    " names the patch's atlas, which it has not");
+          break;
+        }
+      }
+      for (float x : p->cornerUV)
+        if (!(x >= 0.0f && x <= 1.0f)) {
+          report.problems.push_back(dir_ + ": patch " + std::to_string(id) + ": a texture coordinate is outside [0, 1]");
           break;
         }
     }

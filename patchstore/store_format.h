@@ -63,8 +63,18 @@ struct BlockHandle {
 //   positions   vertexCount * 3 * (float32 | float64 if kGeomDouble)
 //   normals     vertexCount * 3 * float32            (if kGeomNormals)
 //   colors      vertexCount * 4 * uint8              (if kGeomColors)
+//   texcoords   vertexCount * {float32 u, v, uint32 material}   (if kGeomTexcoords and kGeomVertexUV)
 //   triangles   triangleCount * 3 * uint32 local vertex indices
-constexpr uint32_t kGeomDouble = 1, kGeomNormals = 2, kGeomColors = 4;
+//   corners     (if kGeomTexcoords without kGeomVertexUV) triangleCount * uint32 material, then
+//               triangleCount * 6 * float32 (u, v of each corner), then uint32 n and n bytes:
+//               the patch's atlas image (JPEG or PNG; n = 0: none)
+// A textured store (kGeomTexcoords in the layout) holds its texture coordinates per corner, so a
+// seam survives the grid weld joining its two vertices; ingest writes them per vertex
+// (kGeomVertexUV: its vertex records carry them, one vertex per wedge, readers' wedge split), and
+// decoding turns that form into per-corner. Materials index the store's "materials" blob
+// (store_textures.h); kAtlasMaterial is the patch's own atlas, kNoMaterial untextured.
+// The layout flags stored in the manifest never include kGeomVertexUV.
+constexpr uint32_t kGeomDouble = 1, kGeomNormals = 2, kGeomColors = 4, kGeomTexcoords = 8, kGeomVertexUV = 16;
 struct GeometryHeader {
   uint32_t vertexCount;
   uint32_t triangleCount;

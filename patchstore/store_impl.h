@@ -33,7 +33,7 @@ inline uint64_t blockChecksum(const void* data, size_t size) { return XXH64(data
 
 inline uint32_t layoutFlags(const VertexLayout& l) {
   return (l.doublePrecision ? store_format::kGeomDouble : 0) | (l.normals ? store_format::kGeomNormals : 0) |
-         (l.colors ? store_format::kGeomColors : 0);
+         (l.colors ? store_format::kGeomColors : 0) | (l.texcoords ? store_format::kGeomTexcoords : 0);
 }
 
 struct PatchRecord {

@@ -97,6 +97,7 @@ void readSnapshot(PatchStore::Impl& s, ByteReader& r, const std::string& mpath, 
   s.layout.doublePrecision = flags & kGeomDouble;
   s.layout.normals = flags & kGeomNormals;
   s.layout.colors = flags & kGeomColors;
+  s.layout.texcoords = flags & kGeomTexcoords;
   s.nextPatchId = r.get<uint32_t>();
   s.nextSegment = r.get<uint32_t>();
   s.bounds = getBox(r);

@@ -98,6 +98,8 @@ void checkReplacement(const ReplacementMesh& r, const VertexLayout& layout, cons
   if (r.triangleCell.size() != nt) bad(dir, "triangleCell has the wrong size");
   if (layout.normals && r.normals.size() != nv * 3) bad(dir, "normals missing");
   if (layout.colors && r.colors.size() != nv * 4) bad(dir, "colours missing");
+  if (layout.texcoords && (r.cornerUV.size() != nt * 6 || r.triangleMaterial.size() != nt))
+    bad(dir, "texture coordinates missing");
   for (size_t i = 0; i < r.triangles.size(); ++i)
     if (r.triangles[i] >= nv) bad(dir, "triangle " + std::to_string(i / 3) + " references vertex out of range");
 }
@@ -244,6 +246,14 @@ std::vector<PatchRecord> writeNewPatches(PatchStore::Impl& impl, std::vector<New
     }
     for (uint32_t t : np.tris)
       for (int c = 0; c < 3; ++c) p.triangles.push_back(h.localIndex(k, r.triangles[3 * t + c]));
+    if (layout.texcoords) {
+      for (uint32_t t : np.tris) {
+        p.cornerUV.insert(p.cornerUV.end(), &r.cornerUV[6 * size_t(t)], &r.cornerUV[6 * size_t(t)] + 6);
+        p.triangleMaterial.push_back(r.triangleMaterial[t]);
+      }
+      auto it = r.cellAtlas.find(np.cell);
+      if (it != r.cellAtlas.end()) p.atlas = it->second;
+    }
     std::sort(p.boundary.begin(), p.boundary.end());
     PatchRecord rec;
     rec.meta = {p.id, p.cell, p.level, p.vertexCount(), p.triangleCount(), uint32_t(p.boundary.size()), boundsOf(p.positions)};

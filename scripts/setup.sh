@@ -12,7 +12,7 @@ PACKAGES=(
   libopenmpi-dev openmpi-bin libtbb-dev libzstd-dev liblz4-dev libxxhash-dev
   libcli11-dev libgtest-dev libgmock-dev libbenchmark-dev libnanoflann-dev
   xvfb xauth gnuplot-nox time
-  libimgui-dev libpng-dev libopengl-dev
+  libimgui-dev libpng-dev libjpeg62-turbo-dev libopengl-dev
   nlohmann-json3-dev nodejs chromium libproj-dev proj-bin
 )
 

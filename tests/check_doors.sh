@@ -10,19 +10,20 @@ root="${1:-$(cd "$(dirname "$0")/.." && pwd)}"
 cd "$root"
 declare -A allowed=(
   [base]=""
+  [texture]="base"
   [patchstore/io]="base"
-  [patchstore]="base patchstore/io patchstore/heal"
-  [patchstore/heal]="base patchstore/io patchstore"
+  [patchstore]="base texture patchstore/io patchstore/heal"
+  [patchstore/heal]="base texture patchstore/io patchstore"
   [vpartition]="base patchstore/io patchstore"
   [mtfile]="base"
-  [mtbuild]="base mtfile patchstore/io patchstore patchstore/heal vpartition"
+  [mtbuild]="base texture mtfile patchstore/io patchstore patchstore/heal vpartition"
   [cluster]="base mtfile patchstore/io patchstore vpartition mtbuild tools"
-  [mtrender]="base mtfile"
+  [mtrender]="base texture mtfile"
   [interop]="base mtfile"
-  [testing]="base mtfile patchstore/io patchstore vpartition mtbuild"
+  [testing]="base texture mtfile patchstore/io patchstore vpartition mtbuild"
 )
 readers="mtinfo mtverify mtextract mtexport"
-reader_allowed="base mtfile patchstore/io interop tools"
+reader_allowed="base texture mtfile patchstore/io interop tools"
 bad=0 checked=0
 check() {  # file folder allowed-list
   local file="$1" folder="$2" list="$3" n inc dir

@@ -246,7 +246,7 @@ std::vector<double> levelColourErrors(const std::string& path) {
 TEST_F(ColourBuild, TheColourErrorIsStoredMonotoneAndVerified) {
   EXPECT_THAT(*buildLog_, HasSubstr("per-vertex colours: simplifying with the quadric simplifier"));
   auto r = mt::MtFileReader::open(mt());
-  EXPECT_EQ(r->header().version, mt::format::kVersion);
+  EXPECT_EQ(r->header().version, mt::format::kUntexturedVersion);
   ASSERT_TRUE(r->header().vertexFlags & mt::format::kHasColors);
   const auto& nodes = r->nodes();
   EXPECT_EQ(nodes.front().colorError, 0.0f);

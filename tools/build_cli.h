@@ -69,6 +69,7 @@ struct BuildCli {
   std::string input, output, crs, memory = "1G", partition = "irregular", codec = "meshopt", indexOrder = "list", simplifier = "auto", statsJson, workDir, taskTimes;
   double colorWeight = kDefaultColorWeight;
   int64_t threads = 0, patchTriangles = 0;  // signed, so that -1 is refused with the range, not wrapped
+  int64_t textureQuality = 90;
   bool normals = false, noNormals = false, resume = false, quiet = false;
   CLI::Option *threadsOption = nullptr, *patchTrianglesOption = nullptr;  // given explicitly: 0 is refused
 
@@ -136,6 +137,10 @@ struct BuildCli {
     app.add_option("--crs", crs,
                    "Coordinate reference system of the input's positions (e.g. EPSG:32633, or a WKT string; 1 to 65536 bytes,\n"
                    "no NUL), stored in the MT file and printed by mtinfo; not interpreted (positions are kept as given)");
+    app.add_option("--texture-quality", textureQuality,
+                   "Textured inputs (OBJ map_Kd, PLY TextureFile): JPEG quality 1-100 of the atlases in the file (default 90).\n"
+                   "Every patch gets its own atlas: the finest keep the input's texels, coarser ones are re-baked\n"
+                   "(docs/appearance.md)");
     app.add_flag("-q,--quiet", quiet, "No progress lines on stderr");
   }
 
@@ -146,6 +151,9 @@ struct BuildCli {
     if (crs.size() > 65536 || crs.find('\0') != std::string::npos)
       throw Error("--crs: 1 to 65536 bytes without NUL (got " + std::to_string(crs.size()) + " bytes)");
     o.crs = crs;
+    if (textureQuality < 1 || textureQuality > 100)
+      throw Error("--texture-quality " + std::to_string(textureQuality) + ": out of range (accepted 1 to 100; default 90)");
+    o.textureQuality = int(textureQuality);
     o.memoryBytes = parseBuildMemory(memory);
     o.levelLoopBytes = planMemory(o.memoryBytes, 1).levelLoop;  // the plan's share for the regions in flight
     const bool threadsGiven = threadsOption && threadsOption->count() > 0;

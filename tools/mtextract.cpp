@@ -6,7 +6,8 @@
 // The cut is chosen by mtfile/mt_cut.h, its patches decoded and welded by exact grid position,
 // and written with PlyWriter under a name unique to the process (CUT.ply.tmp.PID.RANDOM), renamed
 // over CUT.ply when complete: on any error nothing is left under CUT.ply. The input is never the
-// output (refused by inode), and the output format is chosen by the extension: .ply only.
+// output (refused by inode), and the output format is chosen by the extension: .ply, .glb/.gltf,
+// or .obj (with a textured file: + .mtl and the textures re-packed into PNG pages beside it).
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
@@ -29,7 +30,9 @@
 #include "mtfile/mt_cut.h"
 #include "mtfile/mt_cut_writer.h"
 #include "mtfile/mt_file.h"
+#include "mtfile/textured_cut.h"
 #include "patchstore/io/ply_writer.h"
+#include "texture/obj_writer.h"
 #include "base/cli_checks.h"
 #include "interop/gltf_writer.h"
 
@@ -74,17 +77,51 @@ const mt::cli::Interval kFovRange{0, 180, true, true, "degrees"};
 const mt::cli::Interval kWidthRange{1, 1e6, false, false, "pixels"};
 const mt::cli::Interval kPixelsRange{0, 1e6, true, false, "pixels"};
 
-// The output's format by its extension (case-insensitive): binary PLY or glTF (.glb, .gltf); any
-// other name (.xyz, none) is refused rather than given bytes under a misleading name. True: glTF.
-bool checkOutputFormat(const std::string& output) {
+// The output's format by its extension (case-insensitive): binary PLY, glTF (.glb, .gltf) or OBJ;
+// any other name (.xyz, none) is refused rather than given bytes under a misleading name. True:
+// glTF; `obj` says .obj.
+bool checkOutputFormat(const std::string& output, bool* obj = nullptr) {
   const std::string name = output.substr(output.find_last_of('/') + 1);
   const size_t dot = name.find_last_of('.');
   std::string ext = dot == std::string::npos || dot == 0 ? "" : name.substr(dot);
   for (auto& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
-  if (ext == ".ply") return false;
+  if (obj) *obj = ext == ".obj";
+  if (ext == ".ply" || ext == ".obj") return false;
   if (ext == ".glb" || ext == ".gltf") return true;
-  if (ext.empty()) mt::fail(output, "the output name has no extension: cannot choose its format (supported: .ply, .glb, .gltf)");
-  mt::fail(output, "cannot write the format " + name.substr(dot) + " (supported: .ply, .glb, .gltf)");
+  if (ext.empty()) mt::fail(output, "the output name has no extension: cannot choose its format (supported: .ply, .glb, .gltf, .obj)");
+  mt::fail(output, "cannot write the format " + name.substr(dot) + " (supported: .ply, .glb, .gltf, .obj)");
+}
+
+// OBJ output (textured files: + MTL + PNG pages; texture/obj_writer.h), assembled in RAM.
+int writeObj(const Options& o, const mt::MtFileReader& r, const std::vector<uint32_t>& arcs, const mt::CutStats& stats) {
+  uint64_t texels = 0;
+  for (uint32_t p : mt::cutPatchIdsOf(r, arcs))
+    if (r.hasTextures()) texels += uint64_t(r.textures()[p].width) * r.textures()[p].height;
+  // The welded mesh, the decoded textures and the pages they are packed into.
+  const uint64_t need = mt::assembledCutBytes(r, arcs) + 7 * texels;
+  if (need > o.memoryBytes)
+    throw mt::Error(o.output + ": this cut needs about " + std::to_string(need >> 20) + " MiB to write as OBJ, more than --memory (" +
+                        std::to_string(o.memoryBytes >> 20) + " MiB): raise --memory, choose a coarser cut, or write .ply",
+                    mt::ErrorKind::Resource);
+  mt::TexturedCut cut = mt::assembleTexturedCut(r, arcs);
+  mt::checkInterrupt(o.output);
+  std::vector<mt::tex::RgbImage> images;
+  for (const mt::CutTexture& t : cut.textures)
+    images.push_back(mt::tex::decodeImage(t.image.data(), t.image.size(), o.input + ": texture of patch " + std::to_string(t.patch)));
+  mt::tex::TexturedMeshView view;
+  view.positions = cut.mesh.positions.data();
+  view.vertexCount = cut.mesh.vertexCount();
+  view.triangles = cut.mesh.triangles.data();
+  view.triangleCount = cut.mesh.triangleCount();
+  view.cornerUV = cut.cornerUV.data();
+  view.triangleTexture = cut.triangleTexture.data();
+  view.textures = &images;
+  const mt::tex::ObjWriteInfo info = mt::tex::writeTexturedObj(o.output, view);
+  std::fprintf(stderr, "mtextract: %s: %u triangles, %u vertices from %" PRIu64 " patches, %zu textures in %zu pages (%" PRIu64
+               " texels); %u nodes in the set, %u on the front; max error %.9g\n", o.output.c_str(), cut.mesh.triangleCount(),
+               cut.mesh.vertexCount(), cut.mesh.patches, images.size(), info.pages, info.texels, stats.nodes, stats.frontNodes,
+               stats.maxError);
+  return 0;
 }
 
 // The PLY header's choices for a welded cut, on both paths (in RAM and streamed): float coordinates
@@ -177,7 +214,8 @@ int run(const Options& o) {
   // the input.
   mt::requireRegularFile(o.input, "an MT file");
   mt::checkOutputPath(o.output, {o.input});
-  const bool gltf = checkOutputFormat(o.output);
+  bool obj = false;
+  const bool gltf = checkOutputFormat(o.output, &obj);
   if ((o.meshopt || o.quantize) && !gltf) throw mt::Error("--meshopt and --quantize are for glTF output (.glb, .gltf)");
 
   auto reader = mt::MtFileReader::open(o.input);
@@ -195,6 +233,7 @@ int run(const Options& o) {
     std::fprintf(stderr, "mtextract: warning: the coarsest cut has %" PRIu64 " triangles, more than --triangles %" PRIu64
                  "; writing it\n", stats.triangles, o.triangles);
 
+  if (obj) return writeObj(o, r, mt::cutArcs(r, cut.inSet), stats);
   // A cut whose assembled mesh would not fit --memory is welded through external sorts and
   // streamed to the PLY (same bytes, mtfile/mt_cut_writer.h).
   // glTF output is assembled in RAM (its buffers are sized before they are written), so a cut too
@@ -271,6 +310,7 @@ int main(int argc, char** argv) {
   app.add_option("file", o.input, "The MT file")->required();
   app.add_option("-o,--output", o.output,
                  "The file to write, by its extension: .ply (binary little-endian, welded), .glb or .gltf (+ .bin "
+                 "beside it), or .obj (a textured file's cut: + CUT.mtl and its textures re-packed into CUT_<k>.png pages "
                  "beside it); may not be the input")
       ->required();
   auto* err = app.add_option("--error", o.error, "Maximum object-space error of the cut")

@@ -39,6 +39,7 @@
 #include "base/cli_checks.h"
 #include "testing/color_field.h"
 #include "testing/scan_generator.h"
+#include "testing/texture_atlas.h"
 
 namespace {
 
@@ -83,7 +84,62 @@ class MeshOutput {
   virtual bool wantsCorners() const { return false; }
   virtual void vertex(const double p[3], const float* normal, const uint8_t* color) = 0;
   virtual void triangle(const uint32_t t[3], const float* corners) = 0;
+  // --texture: a triangle's corner texture coordinates and its texture page.
+  virtual void triangleUV(const uint32_t t[3], const float uv[6], uint32_t page) { (void)t, (void)uv, (void)page; }
   virtual void finish() = 0;
+};
+
+// --texture: a binary PLY with per-face texture coordinates (MeshLab's layout: "texcoord" lists
+// and "texnumber", the pages named by "comment TextureFile"), float x, y, z.
+class TexturedPlyOutput final : public MeshOutput {
+ public:
+  TexturedPlyOutput(const OutputSettings& s, uint64_t vertices, uint64_t triangles, const std::vector<std::string>& pages)
+      : settings_(s) {
+    file_ = std::fopen(s.tmpPath.c_str(), "wb");
+    if (!file_) mt::fail(s.path, std::string("cannot create output: ") + std::strerror(errno));
+    std::setvbuf(file_, nullptr, _IOFBF, 1 << 20);
+    std::string h = "ply\nformat binary_little_endian 1.0\ncomment written by mtgen --texture\n";
+    for (const std::string& p : pages) h += "comment TextureFile " + p + "\n";
+    h += "element vertex " + std::to_string(vertices) + "\nproperty float x\nproperty float y\nproperty float z\n";
+    h += "element face " + std::to_string(triangles) +
+         "\nproperty list uchar int vertex_indices\nproperty list uchar float texcoord\nproperty int texnumber\nend_header\n";
+    put(h.data(), h.size());
+  }
+  ~TexturedPlyOutput() override {
+    if (file_) std::fclose(file_);
+    if (!finished_) std::remove(settings_.tmpPath.c_str());
+  }
+  void vertex(const double p[3], const float*, const uint8_t*) override {
+    const float f[3] = {float(p[0]), float(p[1]), float(p[2])};
+    put(f, sizeof f);
+  }
+  void triangle(const uint32_t*, const float*) override { mt::fail(settings_.path, "internal: a textured face without coordinates"); }
+  void triangleUV(const uint32_t t[3], const float uv[6], uint32_t page) override {
+    char r[42];
+    r[0] = 3;
+    std::memcpy(r + 1, t, 12);
+    r[13] = 6;
+    std::memcpy(r + 14, uv, 24);
+    std::memcpy(r + 38, &page, 4);
+    put(r, sizeof r);
+  }
+  void finish() override {
+    if (std::fflush(file_) != 0 || fsync(fileno(file_)) != 0)
+      mt::fail(settings_.path, std::string("write failed: ") + std::strerror(errno));
+    std::fclose(file_);
+    file_ = nullptr;
+    if (std::rename(settings_.tmpPath.c_str(), settings_.path.c_str()) != 0)
+      mt::fail(settings_.path, std::string("cannot rename temporary output: ") + std::strerror(errno));
+    finished_ = true;
+  }
+
+ private:
+  void put(const void* data, size_t n) {
+    if (std::fwrite(data, 1, n, file_) != n) mt::fail(settings_.path, std::string("write failed: ") + std::strerror(errno));
+  }
+  OutputSettings settings_;
+  FILE* file_ = nullptr;
+  bool finished_ = false;
 };
 
 class BinaryPlyOutput final : public MeshOutput {
@@ -400,15 +456,42 @@ struct FaceChunk {
   uint64_t begin = 0, end = 0;
   std::vector<uint32_t> triangles;
   std::vector<float> corners;  // 9 floats per triangle, triangle soups only
+  std::vector<float> uv;       // --texture: 6 floats per triangle
+  std::vector<uint32_t> page;  // --texture: 1 per triangle
 };
 
+// --texture: the corner coordinates of cell row `row`'s triangles, in cellRowTriangles' order
+// (cells left to right, holes skipped; (v00, v10, v11), (v00, v11, v01), and on a T-junction line
+// (v00, v11, m), (m, v11, v01)).
+void cellRowTexcoords(const mtgen::TextureAtlas& atlas, uint32_t component, const Component& c, uint32_t row, FaceChunk& chunk) {
+  static const double kPlain[2][3][2] = {{{0, 0}, {1, 0}, {1, 1}}, {{0, 0}, {1, 1}, {0, 1}}};
+  static const double kSplit[3][3][2] = {{{0, 0}, {1, 0}, {1, 1}}, {{0, 0}, {1, 1}, {0, 0.5}}, {{0, 0.5}, {1, 1}, {0, 1}}};
+  const bool line = c.isLine(row);
+  for (uint32_t col = 0; col < c.cols; ++col) {
+    if (ScanGenerator::cellRemoved(c, row, col)) continue;
+    const int n = line ? 3 : 2;
+    for (int t = 0; t < n; ++t) {
+      uint32_t page = 0;
+      for (int k = 0; k < 3; ++k) {
+        const double* o = line ? kSplit[t][k] : kPlain[t][k];
+        float uv[2];
+        atlas.cornerUV(component, row, col, o[0], o[1], uv, page);
+        chunk.uv.insert(chunk.uv.end(), uv, uv + 2);
+      }
+      chunk.page.push_back(page);
+    }
+  }
+}
+
 void computeFaceChunk(const ScanGenerator& gen, const mtgen::FeistelPermutation* shuffle, bool corners,
-                      FaceChunk& chunk) {
+                      FaceChunk& chunk, const mtgen::TextureAtlas* atlas = nullptr) {
   if (chunk.byRows) {
     const Component& c = gen.components()[chunk.component];
     chunk.triangles.reserve(size_t(chunk.rowEnd - chunk.rowBegin) * c.cols * 6);
-    for (uint32_t row = chunk.rowBegin; row < chunk.rowEnd; ++row)
+    for (uint32_t row = chunk.rowBegin; row < chunk.rowEnd; ++row) {
       ScanGenerator::cellRowTriangles(c, row, chunk.triangles);
+      if (atlas) cellRowTexcoords(*atlas, chunk.component, c, row, chunk);
+    }
     return;
   }
   chunk.triangles.reserve(size_t(chunk.end - chunk.begin) * 3);
@@ -467,7 +550,8 @@ void streamVertices(const ScanGenerator& gen, const OutputSettings& settings, Me
   }
 }
 
-void streamFaces(const ScanGenerator& gen, bool shuffle, MeshOutput& out, Progress& progress) {
+void streamFaces(const ScanGenerator& gen, bool shuffle, MeshOutput& out, Progress& progress,
+                 const mtgen::TextureAtlas* atlas = nullptr) {
   const bool corners = out.wantsCorners();
   std::unique_ptr<mtgen::FeistelPermutation> permutation;
   if (shuffle)
@@ -508,14 +592,19 @@ void streamFaces(const ScanGenerator& gen, bool shuffle, MeshOutput& out, Progre
           tbb::make_filter<std::shared_ptr<FaceChunk>, std::shared_ptr<FaceChunk>>(
               tbb::filter_mode::parallel,
               [&](std::shared_ptr<FaceChunk> chunk) {
-                computeFaceChunk(gen, permutation.get(), corners, *chunk);
+                computeFaceChunk(gen, permutation.get(), corners, *chunk, atlas);
                 return chunk;
               }) &
           tbb::make_filter<std::shared_ptr<FaceChunk>, void>(
               tbb::filter_mode::serial_in_order, [&](std::shared_ptr<FaceChunk> chunk) {
                 size_t n = chunk->triangles.size() / 3;
-                for (size_t t = 0; t < n; ++t)
-                  out.triangle(&chunk->triangles[3 * t], corners ? &chunk->corners[9 * t] : nullptr);
+                if (atlas) {
+                  if (chunk->page.size() != n) mt::fail("mtgen", "internal: texture coordinates out of step with the faces");
+                  for (size_t t = 0; t < n; ++t) out.triangleUV(&chunk->triangles[3 * t], &chunk->uv[6 * t], chunk->page[t]);
+                } else {
+                  for (size_t t = 0; t < n; ++t)
+                    out.triangle(&chunk->triangles[3 * t], corners ? &chunk->corners[9 * t] : nullptr);
+                }
                 progress.advance(n);
               }));
 }
@@ -545,6 +634,8 @@ struct Cli {
   mtgen::GeneratorOptions gen;
   bool shuffle = false;
   unsigned threads = 0;
+  std::string textureText;           // --texture: "", charts or fragmented
+  mtgen::TextureOptions texture;
   std::string paintInput;  // --paint IN
   CLI::Option* formatOption = nullptr;
 };
@@ -604,6 +695,21 @@ void addOutputOptions(CLI::App& app, Cli& c) {
                  "for a georeferenced scan); implies --double [ply only]");
   app.add_flag("--double", c.settings.doublePrecision,
                "Binary PLY with double x,y,z (the full-precision generated values) [ply only]");
+  app.add_option("--texture", c.textureText,
+                 "A textured scan [ply only]: per-face texture coordinates (PLY texcoord lists, texnumber) and texture pages\n"
+                 "OUT_tex<k>.jpg beside the output (named by 'comment TextureFile'). charts: charts of 48 x 48 cells, each\n"
+                 "its own slot, so chart borders are seams; fragmented: charts of 1 x 2 cells (four triangles each): thousands\n"
+                 "of tiny charts. The texels show sharp checks and lines in the torus angles (testing/texture_atlas.h)")
+      ->check(CLI::IsMember({"charts", "fragmented"}));
+  app.add_option("--texels-per-cell", c.texture.texelsPerCell, "--texture: texels per grid cell side")
+      ->check(mt::cli::countIn(1, 64))
+      ->default_str("2");
+  app.add_option("--texture-page", c.texture.pageSide, "--texture: the largest texture page side, in texels (more pages when needed)")
+      ->check(mt::cli::countIn(64, 16384))
+      ->default_str("4096");
+  app.add_option("--texture-quality", c.texture.quality, "--texture: JPEG quality of the pages")
+      ->check(mt::cli::countIn(1, 100))
+      ->default_str("90");
   app.add_option("--threads", c.threads, "Worker threads (0 = all cores); the output does not depend on it")
       ->check(mt::cli::countIn(0, 4096))
       ->default_str("0");
@@ -679,15 +785,36 @@ bool chooseFormat(Cli& c) {
     settings.doublePrecision = true;
   }
   if (settings.colors && !anyPly) return refuse("--colors needs --format ply or ply-ascii");
+  if (!c.textureText.empty()) {
+    if (settings.format != Format::PlyBinary) return refuse("--texture needs --format ply");
+    if (c.shuffle) return refuse("--texture writes faces in grid order: it cannot be combined with --shuffle");
+    if (settings.normals || settings.colors || settings.doublePrecision)
+      return refuse("--texture writes float x, y, z only: it cannot be combined with --normals, --colors, --double or --offset");
+    c.texture.fragmented = c.textureText == "fragmented";
+  }
   if (settings.normals && !anyPly && settings.format != Format::Obj)
     return refuse("--normals needs --format ply, ply-ascii or obj");
   return true;
 }
 
 // Streams the mesh to the temporary name, renames it over the output and prints the summary line.
-void writeMesh(const OutputSettings& settings, const ScanGenerator& generator, bool shuffle) {
+// --texture: the pages are written first (each renamed when complete), then the mesh naming them.
+void writeMesh(const OutputSettings& settings, const ScanGenerator& generator, bool shuffle,
+               const mtgen::TextureOptions* texture = nullptr) {
   std::unique_ptr<MeshOutput> out;
-  if (settings.format == Format::PlyBinary)
+  std::unique_ptr<mtgen::TextureAtlas> atlas;
+  if (texture) {
+    atlas = std::make_unique<mtgen::TextureAtlas>(generator, *texture);
+    const std::filesystem::path p(settings.path);
+    std::vector<std::string> names;
+    for (int k = 0; k < atlas->pages(); ++k) {
+      names.push_back(p.stem().string() + "_tex" + std::to_string(k) + ".jpg");
+      atlas->writePage(k, (p.parent_path() / names.back()).string());
+    }
+    std::fprintf(stderr, "mtgen: %d texture pages of %d x up to %d texels, %llu charts\n", atlas->pages(), atlas->pageWidth(),
+                 atlas->pageHeight(0), (unsigned long long)atlas->charts());
+    out = std::make_unique<TexturedPlyOutput>(settings, generator.vertexCount(), generator.triangleCount(), names);
+  } else if (settings.format == Format::PlyBinary)
     out = std::make_unique<BinaryPlyOutput>(settings);
   else
     out = std::make_unique<TextOutput>(settings, generator.vertexCount(), generator.triangleCount());
@@ -695,7 +822,7 @@ void writeMesh(const OutputSettings& settings, const ScanGenerator& generator, b
   const uint64_t vertices = out->wantsVertices() ? generator.vertexCount() : 0;
   Progress progress(vertices + triangles, triangles, triangles > 5'000'000);
   if (out->wantsVertices()) streamVertices(generator, settings, *out, progress);
-  streamFaces(generator, shuffle, *out, progress);
+  streamFaces(generator, shuffle, *out, progress, atlas.get());
   out->finish();
   gTemporaryPath[0] = 0;
 
@@ -781,7 +908,7 @@ int run(int argc, char** argv) {
     if (c.settings.tmpPath.size() < sizeof gTemporaryPath)
       std::memcpy(gTemporaryPath, c.settings.tmpPath.c_str(), c.settings.tmpPath.size() + 1);
     for (int sig : {SIGINT, SIGTERM, SIGHUP}) signal(sig, removeTemporaryAndExit);
-    writeMesh(c.settings, generator, c.shuffle);
+    writeMesh(c.settings, generator, c.shuffle, c.textureText.empty() ? nullptr : &c.texture);
   } catch (const std::exception& e) {
     return mt::reportError("mtgen", e);
   }

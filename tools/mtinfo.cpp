@@ -117,16 +117,21 @@ int run(const std::string& path, bool json, bool check) {
   }
   if (inner) back.mean /= double(inner), forward.mean /= double(inner);
 
-  uint64_t payloadBytes = 0;
+  uint64_t payloadBytes = 0, textureBytes = 0, imageBytes = 0, texels = 0;
   for (const auto& p : reader->patches()) payloadBytes += p.size;
+  for (const auto& t : reader->textures()) textureBytes += t.size, imageBytes += t.imageBytes, texels += uint64_t(t.width) * t.height;
   auto per = [](uint64_t bytes, uint64_t count) { return count ? double(bytes) / double(count) : 0.0; };
   const char* codec = codecName(reader->codec());
   std::string flags = std::string(h.vertexFlags & mt::format::kHasNormals ? "normals" : "") +
-                      (h.vertexFlags & mt::format::kHasColors ? (h.vertexFlags & mt::format::kHasNormals ? "+colors" : "colors") : "");
+                      (h.vertexFlags & mt::format::kHasColors ? (h.vertexFlags & mt::format::kHasNormals ? "+colors" : "colors") : "") +
+                      (h.vertexFlags & mt::format::kHasTextures ? (h.vertexFlags & (mt::format::kHasNormals | mt::format::kHasColors) ? "+textures" : "textures") : "");
 
   if (json) {
     std::printf("{\n  \"file\": \"%s\",\n  \"fileBytes\": %" PRIu64 ",\n  \"payloadBytes\": %" PRIu64 ",\n", jsonEscape(path).c_str(),
                 reader->fileSize(), payloadBytes);
+    if (reader->hasTextures())
+      std::printf("  \"textureBytes\": %" PRIu64 ",\n  \"textureImageBytes\": %" PRIu64 ",\n  \"textureTexels\": %" PRIu64 ",\n",
+                  textureBytes, imageBytes, texels);
     std::printf("  \"codec\": \"%s\",\n  \"vertexAttributes\": \"%s\",\n  \"levels\": %u,\n  \"nodes\": %zu,\n  \"arcs\": %zu,\n"
                 "  \"patches\": %zu,\n",
                 codec, flags.c_str(), h.levelCount, nodes.size(), reader->arcs().size(), reader->patches().size());
@@ -158,6 +163,9 @@ int run(const std::string& path, bool json, bool check) {
   } else {
     std::printf("file              %s\n", path.c_str());
     std::printf("size              %" PRIu64 " bytes (payloads %" PRIu64 ")\n", reader->fileSize(), payloadBytes);
+    if (reader->hasTextures())
+      std::printf("textures          %" PRIu64 " bytes (%.3f per input triangle; images %" PRIu64 ", %" PRIu64 " texels)\n", textureBytes,
+                  per(textureBytes, h.inputTriangles), imageBytes, texels);
     std::printf("codec             %s%s%s\n", codec, flags.empty() ? "" : ", ", flags.c_str());
     std::printf("input             %" PRIu64 " triangles, %" PRIu64 " vertices\n", h.inputTriangles, h.inputVertices);
     std::printf("stored            %" PRIu64 " triangles in %zu patches\n", h.storedTriangles, reader->patches().size());

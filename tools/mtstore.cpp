@@ -24,6 +24,7 @@
 #include "base/size.h"
 #include "patchstore/heal/heal.h"
 #include "patchstore/patch_store.h"
+#include "patchstore/store_textures.h"
 #include "tools/partition_choice.h"
 
 namespace {
@@ -56,10 +57,19 @@ int runInfo(const std::string& dir, bool json, bool components) {
   if (json) {
     std::printf("{\n  \"store\": \"%s\",\n  \"patches\": %" PRIu64 ",\n  \"triangles\": %" PRIu64 ",\n  \"vertices\": %" PRIu64
                 ",\n  \"triangles_per_patch\": {\"min\": %u, \"mean\": %.1f, \"max\": %u},\n  \"boundary_entries\": %" PRIu64
-                ",\n  \"bytes_on_disk\": %" PRIu64 ",\n  \"layout\": {\"double\": %s, \"normals\": %s, \"colors\": %s},\n",
+                ",\n  \"bytes_on_disk\": %" PRIu64 ",\n  \"layout\": {\"double\": %s, \"normals\": %s, \"colors\": %s, \"texcoords\": %s},\n",
                 jsonEscape(dir).c_str(), s.patches, s.triangles, s.vertices, s.minPatchTriangles, s.meanPatchTriangles,
                 s.maxPatchTriangles, s.boundaryEntries, s.bytesOnDisk, s.layout.doublePrecision ? "true" : "false",
-                s.layout.normals ? "true" : "false", s.layout.colors ? "true" : "false");
+                s.layout.normals ? "true" : "false", s.layout.colors ? "true" : "false", s.layout.texcoords ? "true" : "false");
+    if (s.layout.texcoords) {
+      std::printf("  \"materials\": [");
+      const auto materials = mt::storeMaterials(*store);
+      for (size_t k = 0; k < materials.size(); ++k)
+        std::printf("%s{\"name\": \"%s\", \"image\": \"%s\", \"width\": %d, \"height\": %d, \"scaled_by\": %d, \"tiled_bytes\": %" PRIu64 "}",
+                    k ? ", " : "", jsonEscape(materials[k].name).c_str(), jsonEscape(materials[k].source).c_str(), materials[k].width,
+                    materials[k].height, 1 << materials[k].shift, materials[k].bytes);
+      std::printf("],\n");
+    }
     std::printf("  \"ingest\": {");
     bool first = true;
     for (const char* k : keys) {
@@ -80,8 +90,16 @@ int runInfo(const std::string& dir, bool json, bool components) {
     std::printf("boundary entries %" PRIu64 "\n", s.boundaryEntries);
     std::printf("bytes on disk    %" PRIu64 " (%.2f bytes/triangle)\n", s.bytesOnDisk,
                 s.triangles ? double(s.bytesOnDisk) / double(s.triangles) : 0.0);
-    std::printf("vertex layout    %s%s%s\n", s.layout.doublePrecision ? "double" : "float",
-                s.layout.normals ? " +normals" : "", s.layout.colors ? " +colours" : "");
+    std::printf("vertex layout    %s%s%s%s\n", s.layout.doublePrecision ? "double" : "float",
+                s.layout.normals ? " +normals" : "", s.layout.colors ? " +colours" : "",
+                s.layout.texcoords ? " +texture coordinates (per corner)" : "");
+    if (s.layout.texcoords)
+      for (const mt::StoreMaterial& m : mt::storeMaterials(*store))
+        std::printf("material         %s: %s\n", m.name.c_str(),
+                    m.file.empty() ? "no image"
+                                   : (m.source + " (" + std::to_string(m.width) + " x " + std::to_string(m.height) +
+                                      (m.shift ? ", scaled by 1/" + std::to_string(1 << m.shift) : std::string()) + ", " +
+                                      std::to_string(m.bytes) + " bytes tiled)").c_str());
     if (!ingest.empty()) {
       std::printf("ingested from    %s (%s), %s triangles, %s vertices, in %s s\n", ingestField(ingest, "input").c_str(),
                   ingestField(ingest, "format").c_str(), ingestField(ingest, "inputTriangles").c_str(),

@@ -29,16 +29,14 @@ double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::
 std::pair<uint64_t, uint64_t> dropTriangles(PatchStore& store, PatchId id, const std::vector<uint8_t>& drop) {
   Region r = loadRegion(store, {id});
   RegionEdit e = identityEdit(r);
-  e.triangles.clear();
-  e.trianglePatch.clear();
+  e.clearTriangles();
   uint64_t removed = 0;
   for (size_t t = 0; t < r.trianglePatch.size(); ++t) {
     if (drop[t]) {
       ++removed;
       continue;
     }
-    e.triangles.insert(e.triangles.end(), &r.triangles[3 * t], &r.triangles[3 * t] + 3);
-    e.trianglePatch.push_back(r.trianglePatch[t]);
+    e.keepTriangle(r, t);
   }
   CommitStats s = commitRegion(store, r, e);
   return {removed, s.droppedVertices};
@@ -165,8 +163,7 @@ PassReport removeDuplicateFaces(PatchStore& store, const HealOptions& options) {
           earlier.insert(f);
         }
       RegionEdit e = identityEdit(r);
-      e.triangles.clear();
-      e.trianglePatch.clear();
+      e.clearTriangles();
       uint64_t removed = 0;
       for (size_t t = 0; t < r.trianglePatch.size(); ++t) {
         if (int(r.trianglePatch[t]) == self) {
@@ -177,8 +174,7 @@ PassReport removeDuplicateFaces(PatchStore& store, const HealOptions& options) {
             continue;
           }
         }
-        e.triangles.insert(e.triangles.end(), &r.triangles[3 * t], &r.triangles[3 * t] + 3);
-        e.trianglePatch.push_back(r.trianglePatch[t]);
+        e.keepTriangle(r, t);
       }
       if (removed) {
         triangles += removed;

@@ -168,18 +168,17 @@ struct WeldCounts {
 // The edit of a region with its vertices renamed by `to`, less the triangles that become
 // degenerate (counted).
 RegionEdit withoutDegenerate(const Region& r, const std::vector<uint32_t>& to, uint64_t& degenerate) {
-  RegionEdit e = identityEdit(r);
-  RegionEdit out = e;
-  out.triangles.clear();
-  out.trianglePatch.clear();
-  for (size_t t = 0; t < e.triangles.size() / 3; ++t) {
-    uint32_t a = to[e.triangles[3 * t]], b = to[e.triangles[3 * t + 1]], c = to[e.triangles[3 * t + 2]];
-    if (a == b || b == c || a == c) {
+  RegionEdit out = identityEdit(r);
+  out.clearTriangles();
+  for (size_t t = 0; t < r.triangles.size() / 3; ++t) {
+    const uint32_t v[3] = {to[r.triangles[3 * t]], to[r.triangles[3 * t + 1]], to[r.triangles[3 * t + 2]]};
+    if (v[0] == v[1] || v[1] == v[2] || v[0] == v[2]) {
       ++degenerate;
       continue;
     }
-    out.triangles.insert(out.triangles.end(), {a, b, c});
-    out.trianglePatch.push_back(e.trianglePatch[t]);
+    // A seam (two vertices with one position, made by the readers' wedge split) closes here:
+    // its triangles keep their own texture coordinates per corner.
+    out.keepTriangle(r, t, v);
   }
   return out;
 }

@@ -204,8 +204,9 @@ void fillLoop(PatchStore& store, const std::vector<BorderEdge>& border, const Lo
   }
   auto regionVertex = [&](uint32_t b) { return b < nb ? regionOf[b] : newIds[b - nb]; };
   for (size_t i = 0; i < fill.newTriangles.size(); i += 3) {
-    for (int c = 0; c < 3; ++c) e.triangles.push_back(regionVertex(fill.newTriangles[i + c]));
-    e.trianglePatch.push_back(uint32_t(r.indexOf(home)));
+    const uint32_t v[3] = {regionVertex(fill.newTriangles[i]), regionVertex(fill.newTriangles[i + 1]),
+                           regionVertex(fill.newTriangles[i + 2])};
+    e.addTriangle(v, uint32_t(r.indexOf(home)), store.layout().texcoords);  // a filled hole has no texture
   }
   newVertexAttributes(store, r, lv, fill, nb, regionVertex, e);
   commitRegion(store, r, e);

@@ -85,6 +85,10 @@ Region loadRegion(const PatchStore& store, std::vector<PatchId> ids) {
       }
     for (uint32_t i : p.triangles) r.triangles.push_back(map[i]);
     r.trianglePatch.insert(r.trianglePatch.end(), p.triangleCount(), uint32_t(k));
+    if (layout.texcoords) {
+      r.cornerUV.insert(r.cornerUV.end(), p.cornerUV.begin(), p.cornerUV.end());
+      r.triangleMaterial.insert(r.triangleMaterial.end(), p.triangleMaterial.begin(), p.triangleMaterial.end());
+    }
     r.unifiedOf.push_back(std::move(map));
     r.original.push_back(std::move(p));
   }
@@ -119,8 +123,36 @@ uint32_t RegionEdit::addVertexCopy(const Region& r, uint32_t v) {
   return id;
 }
 
+void RegionEdit::keepTriangle(const Region& r, size_t t, const uint32_t* v) {
+  if (v) triangles.insert(triangles.end(), v, v + 3);
+  else triangles.insert(triangles.end(), &r.triangles[3 * t], &r.triangles[3 * t] + 3);
+  trianglePatch.push_back(r.trianglePatch[t]);
+  if (!r.cornerUV.empty()) {
+    cornerUV.insert(cornerUV.end(), &r.cornerUV[6 * t], &r.cornerUV[6 * t] + 6);
+    triangleMaterial.push_back(r.triangleMaterial[t]);
+  }
+}
+
+void RegionEdit::addTriangle(const uint32_t v[3], uint32_t k, bool textured) {
+  triangles.insert(triangles.end(), v, v + 3);
+  trianglePatch.push_back(k);
+  if (textured) {
+    cornerUV.insert(cornerUV.end(), 6, 0.0f);
+    triangleMaterial.push_back(kNoMaterial);
+  }
+}
+
+void RegionEdit::clearTriangles() {
+  triangles.clear();
+  trianglePatch.clear();
+  cornerUV.clear();
+  triangleMaterial.clear();
+}
+
 RegionEdit identityEdit(const Region& r) {
   RegionEdit e;
+  e.cornerUV = r.cornerUV;
+  e.triangleMaterial = r.triangleMaterial;
   e.positions = r.positions;
   e.normals = r.normals;
   e.colors = r.colors;
@@ -136,7 +168,8 @@ bool entryLess(const BoundaryEntry& a, const BoundaryEntry& b) {
   return std::tie(a.local, a.neighbour, a.remote) < std::tie(b.local, b.neighbour, b.remote);
 }
 bool samePatch(const Patch& a, const Patch& b) {
-  return a.positions == b.positions && a.triangles == b.triangles && a.normals == b.normals && a.colors == b.colors;
+  return a.positions == b.positions && a.triangles == b.triangles && a.normals == b.normals && a.colors == b.colors &&
+         a.cornerUV == b.cornerUV && a.triangleMaterial == b.triangleMaterial;
 }
 bool sameBoundary(const std::vector<BoundaryEntry>& a, const std::vector<BoundaryEntry>& b) {
   if (a.size() != b.size()) return false;
@@ -219,6 +252,15 @@ std::vector<Patch> editedPatches(const PatchStore& store, const Region& r, const
     }
     for (uint32_t t : pv.tris[k])
       for (int c = 0; c < 3; ++c) p.triangles.push_back(pv.localIn(k, e.triangles[3 * t + c]));
+    if (store.layout().texcoords) {
+      if (e.cornerUV.size() != 6 * e.trianglePatch.size() || e.triangleMaterial.size() != e.trianglePatch.size())
+        fail(store.dir(), "heal: an edit lost its texture coordinates (internal error)");
+      for (uint32_t t : pv.tris[k]) {
+        p.cornerUV.insert(p.cornerUV.end(), &e.cornerUV[6 * size_t(t)], &e.cornerUV[6 * size_t(t)] + 6);
+        p.triangleMaterial.push_back(e.triangleMaterial[t]);
+      }
+      p.atlas = r.original[k].atlas;
+    }
   }
   const auto& holders = pv.holders;
   for (size_t i = 0; i < holders.size();) {

@@ -31,6 +31,8 @@ struct Region {
   std::vector<uint8_t> colors;                  // 4 per vertex or empty
   std::vector<uint32_t> triangles;              // region vertex ids
   std::vector<uint32_t> trianglePatch;          // index into patches
+  std::vector<float> cornerUV;                  // textured stores: 6 per triangle
+  std::vector<uint32_t> triangleMaterial;       // textured stores: 1 per triangle
   std::vector<uint8_t> locked;                  // 1: an unloaded patch holds it
   struct External { uint32_t vertex; PatchId patch; uint32_t remote; };
   std::vector<External> external;               // sorted by vertex
@@ -57,8 +59,15 @@ struct RegionEdit {
   std::vector<uint32_t> origin;
   std::vector<uint32_t> triangles;
   std::vector<uint32_t> trianglePatch;  // index into Region::patches
+  std::vector<float> cornerUV;          // textured stores: 6 per triangle (kept with the triangles)
+  std::vector<uint32_t> triangleMaterial;
   uint32_t vertexCount() const { return uint32_t(positions.size() / 3); }
   uint32_t addVertexCopy(const Region& r, uint32_t regionVertex);  // same position/attributes, new identity
+  // Appends region triangle t (its corners renamed to v when given) with its patch and texture
+  // coordinates; appends a new triangle (untextured) to loaded patch k.
+  void keepTriangle(const Region& r, size_t t, const uint32_t* v = nullptr);
+  void addTriangle(const uint32_t v[3], uint32_t k, bool textured);
+  void clearTriangles();
 };
 RegionEdit identityEdit(const Region& r);
 

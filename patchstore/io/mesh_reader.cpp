@@ -102,7 +102,17 @@ Kind byExtension(const std::string& path) {
 
 }  // namespace
 
-std::unique_ptr<MeshReader> openMesh(const std::string& path) {
+std::unique_ptr<MeshReader> openFormat(const std::string& path, const MeshOpenOptions& options);
+
+std::unique_ptr<MeshReader> openMesh(const std::string& path) { return openMesh(path, MeshOpenOptions{}); }
+
+std::unique_ptr<MeshReader> openMesh(const std::string& path, const MeshOpenOptions& options) {
+  std::unique_ptr<MeshReader> reader = openFormat(path, options);
+  if (reader->header().cornerTexcoords) return io::splitWedges(std::move(reader), path, options);
+  return reader;
+}
+
+std::unique_ptr<MeshReader> openFormat(const std::string& path, const MeshOpenOptions& options) {
   auto in = std::make_unique<io::InputFile>(path);
   if (in->size() == 0) fail(path, "empty file");
   // Enough to see a PLY magic, an STL header with its count, and the first lines of a text file.
@@ -112,8 +122,8 @@ std::unique_ptr<MeshReader> openMesh(const std::string& path) {
   Kind kind = byContent(sample, in->size());
   if (kind == Kind::Unknown) kind = byExtension(path);
   switch (kind) {
-    case Kind::Ply: return io::openPly(std::move(in));
-    case Kind::Obj: return io::openObj(std::move(in));
+    case Kind::Ply: return io::openPly(std::move(in), options);
+    case Kind::Obj: return io::openObj(std::move(in), options);
     case Kind::Off: return io::openOff(std::move(in));
     case Kind::StlAscii: return io::openStl(std::move(in), false);
     case Kind::StlBinary: return io::openStl(std::move(in), true);

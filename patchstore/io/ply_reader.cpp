@@ -6,6 +6,14 @@
 // "list uchar int|uint vertex_indices" as the face's only property) has a dedicated triangle
 // loop that copies 13-byte records straight into the batch; any face that is not a triangle
 // drops to the generic path for that one record.
+//
+// Textures (MeshLab's conventions): "comment TextureFile NAME" lines name the images (material
+// k is the k-th, resolved beside the PLY); texture coordinates come per vertex (texture_u /
+// texture_v, or s / t) or per face corner (a "texcoord" list of 2 floats per corner), and a face's
+// image by "texnumber" (0 without it). Per-vertex coordinates without texnumber go to the sink as
+// they are; otherwise they go per corner and openMesh splits them (per-vertex coordinates with
+// texnumber are then held in RAM, 8 bytes a vertex). Coordinates without any TextureFile are
+// ignored (nothing to show). Errors name the element and its line or byte offset.
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -43,7 +51,7 @@ size_t typeSize(Type t) {
 bool isInteger(Type t) { return t != Type::Float32 && t != Type::Float64; }
 
 // The InputVertex field a vertex property feeds; Indices marks the face's index list.
-enum Slot : int8_t { kNone = -1, kX, kY, kZ, kNX, kNY, kNZ, kRed, kGreen, kBlue, kAlpha, kIndices };
+enum Slot : int8_t { kNone = -1, kX, kY, kZ, kNX, kNY, kNZ, kRed, kGreen, kBlue, kAlpha, kU, kV, kIndices, kTexcoords, kTexnumber };
 
 struct Property {
   std::string name;
@@ -135,6 +143,8 @@ bool store(InputVertex& v, Slot slot, double value, Type t) {
     case kGreen:
     case kBlue:
     case kAlpha: return colorByte(value, t, v.c[slot - kRed]);
+    case kU:
+    case kV: v.uv[slot - kU] = float(value); break;
     default: break;
   }
   return true;
@@ -152,7 +162,8 @@ const char* slotName(Slot slot) {
 
 class PlyReader final : public MeshReader {
  public:
-  explicit PlyReader(std::unique_ptr<InputFile> in) : in_(std::move(in)), path_(in_->path()) {
+  PlyReader(std::unique_ptr<InputFile> in, const MeshOpenOptions& options)
+      : in_(std::move(in)), path_(in_->path()), options_(options) {
     parseHeader();
   }
 
@@ -161,6 +172,7 @@ class PlyReader final : public MeshReader {
   ReadStats read(MeshSink& sink) override {
     ReadStats stats;
     Batcher batch(sink, stats);
+    if (header_.cornerTexcoords) batch.enableCorners();
     sink.begin(header_);
     for (const Element& e : elements_) {
       if (&e == vertex_) {
@@ -197,7 +209,22 @@ class PlyReader final : public MeshReader {
       if (!in_->nextLine(line)) fail(path_, "unexpected end of file in PLY header (no end_header)");
       Tokens tok{line};
       std::string_view word;
-      if (!tok.next(word) || word == "comment" || word == "obj_info") continue;
+      if (tok.next(word) && word == "comment") {
+        std::string_view key;
+        if (tok.next(key) && key == "TextureFile") {
+          InputMaterial m;
+          std::string name(tok.rest);
+          while (!name.empty() && isSpace(name.front())) name.erase(name.begin());
+          while (!name.empty() && isSpace(name.back())) name.pop_back();
+          if (name.empty()) headerError("TextureFile comment without a file name");
+          m.name = "texture" + std::to_string(header_.materials.size());
+          m.texture = resolveBeside(path_, name);
+          m.source = path_ + " (line " + std::to_string(in_->line()) + ")";
+          header_.materials.push_back(std::move(m));
+        }
+        continue;
+      }
+      if (word.empty() || word == "comment" || word == "obj_info") continue;
       if (word == "end_header") break;
       if (word == "format") {
         std::string_view kind, version;
@@ -239,6 +266,29 @@ class PlyReader final : public MeshReader {
                       std::to_string(kMaxVertices), ErrorKind::Resource);
     mapVertexProperties(*vertex_);
     mapFaceProperties(*face_);
+    if (!header_.materials.empty() && (vertexUV_ || faceUV_)) {
+      for (const InputMaterial& m : header_.materials) checkTextureFile(m);
+      header_.cornerTexcoords = faceUV_ || texnumber_;
+      header_.hasTexcoords = !header_.cornerTexcoords;
+      keepVertexUV_ = vertexUV_ && header_.cornerTexcoords && !faceUV_;
+      if (keepVertexUV_ && vertex_->count * 8 > options_.memoryBytes / 2)
+        fail(path_, "per-vertex texture coordinates with per-face texnumber need 8 bytes a vertex in memory (" +
+                        std::to_string((vertex_->count * 8) >> 20) + " MiB), more than half of the memory given",
+             ErrorKind::Resource);
+    } else {
+      // No image: texture coordinates are not kept (clear their slots).
+      for (Property& p : vertex_->properties)
+        if (p.slot == kU || p.slot == kV) p.slot = kNone;
+      for (Property& p : face_->properties)
+        if (p.slot == kTexcoords || p.slot == kTexnumber) p.slot = kNone;
+      vertexUV_ = faceUV_ = texnumber_ = false;
+    }
+    // The offsets of the fixed-record path, from the final slots.
+    for (const Property& p : vertex_->properties)
+      if (p.slot != kNone) fields_.push_back({fieldOffsetOf(*vertex_, &p), p.type, p.slot});
+    for (const Field& f : fields_)
+      if (f.slot > kZ) extraFields_.push_back(f);
+    for (int k = 0; k < 3; ++k) xyzOffset_[k] = fieldOffset(Slot(kX + k));
     header_.declaredVertices = int64_t(vertex_->count);
     header_.declaredFaces = int64_t(face_->count);
   }
@@ -293,16 +343,23 @@ class PlyReader final : public MeshReader {
         if (c[k]) c[k]->slot = Slot(kRed + k);
       header_.hasColors = true;
     }
-    // Offsets for the fixed-record path; only mapped properties are decoded.
-    size_t offset = 0;
-    for (const Property& p : e.properties) {
-      if (p.slot != kNone) fields_.push_back({offset, p.type, p.slot});
-      if (p.slot > kZ) extraFields_.push_back({offset, p.type, p.slot});
-      offset += p.isList ? 0 : typeSize(p.type);
+    Property* uv[2] = {findScalar(e, {"texture_u", "s", "texture_s"}), findScalar(e, {"texture_v", "t", "texture_t"})};
+    if (uv[0] && uv[1]) {
+      uv[0]->slot = kU;
+      uv[1]->slot = kV;
+      vertexUV_ = true;
     }
     fastXyz_ = !swap_ && e.fixedSize && xyz[0]->type == Type::Float32 &&
                xyz[1]->type == Type::Float32 && xyz[2]->type == Type::Float32;
-    for (int k = 0; k < 3; ++k) xyzOffset_[k] = fieldOffset(Slot(kX + k));
+  }
+
+  static size_t fieldOffsetOf(const Element& e, const Property* q) {
+    size_t offset = 0;
+    for (const Property& p : e.properties) {
+      if (&p == q) return offset;
+      offset += p.isList ? 0 : typeSize(p.type);
+    }
+    return offset;
   }
 
   size_t fieldOffset(Slot slot) const {
@@ -318,6 +375,17 @@ class PlyReader final : public MeshReader {
     if (!list || !list->isList) fail(path_, "PLY face element has no vertex_indices list");
     if (!isInteger(list->type)) fail(path_, "PLY vertex_indices must have an integer index type");
     list->slot = kIndices;
+    for (Property& p : e.properties) {
+      if (p.name == "texcoord" && p.isList) {
+        if (isInteger(p.type)) fail(path_, "PLY face texcoord list must have a float type");
+        p.slot = kTexcoords;
+        faceUV_ = true;
+      } else if (p.name == "texnumber" && !p.isList) {
+        if (!isInteger(p.type)) fail(path_, "PLY face texnumber must have an integer type");
+        p.slot = kTexnumber;
+        texnumber_ = true;
+      }
+    }
     fastFaces_ = binary_ && !swap_ && e.properties.size() == 1 &&
                  (list->countType == Type::UInt8 || list->countType == Type::Int8) &&
                  (list->type == Type::Int32 || list->type == Type::UInt32);
@@ -351,7 +419,20 @@ class PlyReader final : public MeshReader {
       for (const Field& f : fields_)
         if (!store(v, f.slot, values[f.slot], f.type)) badColor(i, f, values[f.slot], start);
       if (!isFinite(v)) nonFinite(i, start);
+      if (vertexUV_) texcoordOf(v, i, start);
     }
+  }
+
+  // A vertex's texture coordinates: checked, kept for the faces (texnumber) or given material 0.
+  void texcoordOf(InputVertex& v, uint64_t index, uint64_t start) {
+    double u = v.uv[0], w = v.uv[1];
+    if (!acceptTexcoord(u, w))
+      fail(path_, "texture coordinate (" + std::to_string(v.uv[0]) + ", " + std::to_string(v.uv[1]) + ") of vertex " +
+                      std::to_string(index) + " is outside [0, 1] (repeating textures are not supported)" + where(start));
+    v.uv[0] = float(u);
+    v.uv[1] = float(w);
+    if (keepVertexUV_) vertexUVTable_.insert(vertexUVTable_.end(), {v.uv[0], v.uv[1]});
+    v.material = header_.hasTexcoords ? 0 : kNoMaterial;
   }
 
   template <class F>
@@ -394,6 +475,7 @@ class PlyReader final : public MeshReader {
             const double x = loadScalar(p + fd.offset, fd.type, false);
             if (!store(v, fd.slot, x, fd.type)) badColor(i + k, fd, x, in_->offset() + uint64_t(p - in_->data()));
           }
+          if (vertexUV_) texcoordOf(v, i + k, in_->offset() + uint64_t(p - in_->data()));
           out[k] = v;
         }
       } else {
@@ -404,6 +486,7 @@ class PlyReader final : public MeshReader {
             if (!store(v, fd.slot, x, fd.type)) badColor(i + k, fd, x, in_->offset() + uint64_t(p - in_->data()));
           }
           if (!isFinite(v)) nonFinite(i + k, in_->offset() + uint64_t(p - in_->data()));
+          if (vertexUV_) texcoordOf(v, i + k, in_->offset() + uint64_t(p - in_->data()));
           out[k] = v;
         }
       }
@@ -466,10 +549,14 @@ class PlyReader final : public MeshReader {
   // the index list of a face goes to the batch as a polygon; everything else is read and dropped.
   void readRecord(const Element& e, const char* kind, uint64_t index, double* values, Batcher* batch) {
     const uint64_t start = in_->offset();
+    if (batch && header_.cornerTexcoords) {
+      readTexturedFace(e, index, *batch);
+      return;
+    }
     for (const Property& p : e.properties) {
       if (!p.isList) {
         double v = scalar(p.type, kind, index, p.slot >= kX && p.slot <= kZ);
-        if (values && p.slot != kNone) values[p.slot] = v;
+        if (values && p.slot != kNone && p.slot < kIndices) values[p.slot] = v;
         continue;
       }
       int64_t count = integer(p.countType, kind, index);
@@ -494,6 +581,62 @@ class PlyReader final : public MeshReader {
         for (int64_t k = 0; k < count; ++k) scalar(p.type, kind, index, false);
       }
     }
+  }
+
+  // A face of a per-corner textured PLY: its properties in any order, then its corners.
+  void readTexturedFace(const Element& e, uint64_t index, Batcher& batch) {
+    const uint64_t start = in_->offset();
+    corners_.clear();
+    cornerUV_.clear();
+    int64_t texnumber = 0;
+    for (const Property& p : e.properties) {
+      if (!p.isList) {
+        if (p.slot == kTexnumber) texnumber = integer(p.type, "face", index);
+        else scalar(p.type, "face", index, false);
+        continue;
+      }
+      int64_t count = integer(p.countType, "face", index);
+      if (count < 0)
+        fail(path_, "negative list length " + std::to_string(count) + " at face " + std::to_string(index) + where(start));
+      for (int64_t k = 0; k < count; ++k) {
+        if (p.slot == kIndices) {
+          int64_t vi = integer(p.type, "face", index);
+          if (vi < 0 || uint64_t(vi) >= vertex_->count)
+            fail(path_, "index " + std::to_string(vi) + " out of range (" + std::to_string(vertex_->count) +
+                            " vertices) at face " + std::to_string(index) + where(start));
+          corners_.push_back(uint32_t(vi));
+        } else if (p.slot == kTexcoords) {
+          cornerUV_.push_back(scalar(p.type, "face", index, false));
+        } else if (binary_) {
+          if (!in_->skip(typeSize(p.type))) truncated("face", index);
+        } else {
+          scalar(p.type, "face", index, false);
+        }
+      }
+    }
+    if (corners_.size() < 3)
+      fail(path_, "face " + std::to_string(index) + " has " + std::to_string(corners_.size()) + " corners (at least 3 needed)" +
+                      where(start));
+    if (faceUV_ && cornerUV_.size() != 2 * corners_.size())
+      fail(path_, "face " + std::to_string(index) + " has " + std::to_string(cornerUV_.size()) + " texcoord values for " +
+                      std::to_string(corners_.size()) + " corners (2 per corner needed)" + where(start));
+    if (texnumber < 0 || uint64_t(texnumber) >= header_.materials.size())
+      fail(path_, "texnumber " + std::to_string(texnumber) + " of face " + std::to_string(index) + " out of range (" +
+                      std::to_string(header_.materials.size()) + " TextureFile comments)" + where(start));
+    batch.beginFace(uint32_t(texnumber));
+    for (size_t k = 0; k < corners_.size(); ++k) {
+      double u, v;
+      if (faceUV_) {
+        u = cornerUV_[2 * k], v = cornerUV_[2 * k + 1];
+        if (!acceptTexcoord(u, v))
+          fail(path_, "texture coordinate (" + std::to_string(u) + ", " + std::to_string(v) + ") of face " + std::to_string(index) +
+                          " corner " + std::to_string(k) + " is outside [0, 1] (repeating textures are not supported)" + where(start));
+      } else {
+        u = vertexUVTable_[2 * size_t(corners_[k])], v = vertexUVTable_[2 * size_t(corners_[k]) + 1];
+      }
+      batch.addCorner(corners_[k], float(u), float(v));
+    }
+    batch.endFace();
   }
 
   // One scalar of the current record; ascii coordinates of float type parse to the nearest
@@ -584,7 +727,13 @@ class PlyReader final : public MeshReader {
 
   std::unique_ptr<InputFile> in_;
   std::string path_;
+  MeshOpenOptions options_;
   MeshHeader header_;
+  bool vertexUV_ = false, faceUV_ = false, texnumber_ = false;
+  bool keepVertexUV_ = false;           // per-vertex coordinates held for per-face texnumber
+  std::vector<float> vertexUVTable_;    // 2 per vertex when keepVertexUV_
+  std::vector<uint32_t> corners_;       // the current face (readTexturedFace)
+  std::vector<double> cornerUV_;
   std::vector<Element> elements_;
   Element* vertex_ = nullptr;  // into elements_, which no longer changes after the header
   Element* face_ = nullptr;
@@ -600,8 +749,8 @@ class PlyReader final : public MeshReader {
 
 }  // namespace
 
-std::unique_ptr<MeshReader> openPly(std::unique_ptr<InputFile> in) {
-  return std::make_unique<PlyReader>(std::move(in));
+std::unique_ptr<MeshReader> openPly(std::unique_ptr<InputFile> in, const MeshOpenOptions& options) {
+  return std::make_unique<PlyReader>(std::move(in), options);
 }
 
 }  // namespace mt::io

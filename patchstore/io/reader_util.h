@@ -204,7 +204,42 @@ inline InputVertex blankVertex() {
   v.p[0] = v.p[1] = v.p[2] = 0;
   v.n[0] = v.n[1] = v.n[2] = 0;
   v.c[0] = v.c[1] = v.c[2] = v.c[3] = 255;
+  v.uv[0] = v.uv[1] = 0;
+  v.material = kNoMaterial;
   return v;
+}
+
+// Texture coordinates must lie in [0, 1] (per-patch atlases cut the texels they cover out of the
+// image; a repeating texture is not supported): values within kTexcoordSlack outside (rounding
+// of writers) are clamped, others are refused. True when (u, v) is acceptable; clamps in place.
+constexpr double kTexcoordSlack = 1e-3;
+inline bool acceptTexcoord(double& u, double& v) {
+  if (!(u >= -kTexcoordSlack && u <= 1 + kTexcoordSlack && v >= -kTexcoordSlack && v <= 1 + kTexcoordSlack)) return false;
+  u = std::clamp(u, 0.0, 1.0);
+  v = std::clamp(v, 0.0, 1.0);
+  return true;
+}
+
+// A path named inside FILE, resolved against FILE's folder (absolute paths kept; Windows
+// separators turned into '/').
+inline std::string resolveBeside(const std::string& file, std::string name) {
+  for (char& c : name)
+    if (c == '\\') c = '/';
+  if (!name.empty() && name[0] == '/') return name;
+  const size_t slash = file.rfind('/');
+  return slash == std::string::npos ? name : file.substr(0, slash + 1) + name;
+}
+
+// A material's texture image must exist and be a regular file; the message names the file and
+// line that named it.
+inline void checkTextureFile(const InputMaterial& m) {
+  if (m.texture.empty()) return;
+  struct stat st;
+  if (::stat(m.texture.c_str(), &st) != 0)
+    fail(m.texture, std::string("texture image of material '") + m.name + "' (named in " + m.source +
+                        "): cannot open: " + std::strerror(errno));
+  if (!S_ISREG(st.st_mode))
+    fail(m.texture, std::string("texture image of material '") + m.name + "' (named in " + m.source + ") is not a regular file");
 }
 
 inline bool isFinite(const InputVertex& v) {
@@ -250,6 +285,13 @@ class Batcher {
     vertices_.resize(kBatch);
     indices_.resize(kBatch * 3);
   }
+  // Every triangle then carries corner texture coordinates and a material, handed to the sink's
+  // cornerTexcoords() after each triangle batch (addCorner with texture coordinates, addTriangle
+  // fills none: 0,0 and kNoMaterial).
+  void enableCorners() {
+    cornerUV_.assign(kBatch * 6, 0.0f);
+    cornerMaterial_.assign(kBatch, kNoMaterial);
+  }
   Batcher(const Batcher&) = delete;
   Batcher& operator=(const Batcher&) = delete;
 
@@ -286,7 +328,36 @@ class Batcher {
     t[0] = a;
     t[1] = b;
     t[2] = c;
+    if (!cornerUV_.empty()) {
+      std::fill_n(&cornerUV_[triangleCount_ * 6], 6, 0.0f);
+      cornerMaterial_[triangleCount_] = kNoMaterial;
+    }
     commitTriangles(1, (a == b) | (b == c) | (a == c));
+  }
+  void addTriangle(const uint32_t v[3], const float uv[6], uint32_t material) {
+    size_t room;
+    uint32_t* t = triangleSlots(room);
+    std::copy_n(v, 3, t);
+    std::copy_n(uv, 6, &cornerUV_[triangleCount_ * 6]);
+    cornerMaterial_[triangleCount_] = material;
+    commitTriangles(1, (v[0] == v[1]) | (v[1] == v[2]) | (v[0] == v[2]));
+  }
+  // A polygon corner with texture coordinates (enableCorners() first); the face's material is
+  // given at beginFace.
+  void addCorner(uint32_t index, float u, float v) {
+    if (corners_ == 0) first_ = index, firstUV_[0] = u, firstUV_[1] = v;
+    else if (corners_ >= 2) {
+      const uint32_t tri[3] = {first_, previous_, index};
+      const float uv[6] = {firstUV_[0], firstUV_[1], previousUV_[0], previousUV_[1], u, v};
+      addTriangle(tri, uv, faceMaterial_);
+    }
+    previous_ = index;
+    previousUV_[0] = u, previousUV_[1] = v;
+    ++corners_;
+  }
+  void beginFace(uint32_t material) {
+    corners_ = 0;
+    faceMaterial_ = material;
   }
 
   // Polygon corners, fan-triangulated (c0, ci, ci+1) as they arrive so no polygon is buffered.
@@ -315,6 +386,7 @@ class Batcher {
     flushVertices();
     if (triangleCount_ == 0) return;
     sink_.triangles(indices_.data(), triangleCount_);
+    if (!cornerUV_.empty()) sink_.cornerTexcoords(cornerUV_.data(), cornerMaterial_.data(), triangleCount_);
     triangleCount_ = 0;
   }
 
@@ -325,11 +397,19 @@ class Batcher {
   size_t vertexCount_ = 0, triangleCount_ = 0;
   uint64_t corners_ = 0;
   uint32_t first_ = 0, previous_ = 0;
+  std::vector<float> cornerUV_;           // 6 per triangle of the batch (enableCorners)
+  std::vector<uint32_t> cornerMaterial_;  // 1 per triangle of the batch
+  float firstUV_[2] = {0, 0}, previousUV_[2] = {0, 0};
+  uint32_t faceMaterial_ = kNoMaterial;
 };
 
 // Per-format openers, called by openMesh once the format is known. The header is parsed here.
-std::unique_ptr<MeshReader> openPly(std::unique_ptr<InputFile> in);
-std::unique_ptr<MeshReader> openObj(std::unique_ptr<InputFile> in);
+std::unique_ptr<MeshReader> openPly(std::unique_ptr<InputFile> in, const MeshOpenOptions& options);
+std::unique_ptr<MeshReader> openObj(std::unique_ptr<InputFile> in, const MeshOpenOptions& options);
+// The wedge split (wedge_split.cpp): a reader with per-corner texture coordinates turned into
+// one with per-vertex ones.
+std::unique_ptr<MeshReader> splitWedges(std::unique_ptr<MeshReader> source, const std::string& path,
+                                        const MeshOpenOptions& options);
 std::unique_ptr<MeshReader> openOff(std::unique_ptr<InputFile> in);
 std::unique_ptr<MeshReader> openStl(std::unique_ptr<InputFile> in, bool binary);
 // glTF reads its buffers with positional reads (base/env.h), not through InputFile.
