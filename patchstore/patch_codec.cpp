@@ -68,7 +68,13 @@ void decodeGeometry(const std::string& payload, const VertexLayout& layout, Patc
   if (h.flags != layoutFlags(layout) && !vertexUV) fail(source, "geometry block has the wrong vertex layout");
   const size_t nv = h.vertexCount, nt = h.triangleCount;
   // Every array is found in the block before anything is allocated: a damaged count must not ask
-  // for gigabytes the block does not hold.
+  // for gigabytes the block does not hold (checked in one statement first, for a message with the counts).
+  const uint64_t perVertex = (layout.doublePrecision ? 24 : 12) + (layout.normals ? 12 : 0) + (layout.colors ? 4 : 0) +
+                             (vertexUV ? 12 : 0);
+  const uint64_t perTriangle = 12 + (layout.texcoords && !vertexUV ? 28 : 0);
+  if (uint64_t(nv) * perVertex + uint64_t(nt) * perTriangle > payload.size() - sizeof h)
+    fail(source, "geometry block of " + std::to_string(payload.size()) + " bytes is too short for its " + std::to_string(nv) +
+                     " vertices and " + std::to_string(nt) + " triangles");
   const size_t positionBytes = nv * 3 * (layout.doublePrecision ? sizeof(double) : sizeof(float));
   const char* positions = r.getRaw(positionBytes);
   const char* normals = layout.normals ? r.getRaw(nv * 3 * sizeof(float)) : nullptr;
