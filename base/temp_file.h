@@ -3,6 +3,10 @@
 // they use stdio directly rather than the store's Env.
 #pragma once
 
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <algorithm>
 #include <cerrno>
 #include <cstdint>
 #include <cstdio>
@@ -93,9 +97,20 @@ class TempReader {
   }
   ~TempReader() {
     if (file_) std::fclose(file_);
+    if (punchFd_ >= 0) ::close(punchFd_);
   }
   TempReader(const TempReader&) = delete;
   TempReader& operator=(const TempReader&) = delete;
+
+  // A file read once, start to end: what has been read is given back to the file system as the
+  // reading goes on (holes punched behind the reader, in steps of kPunchStep), so a pass that
+  // consumes scratch files while it writes others holds about the unread part of its input on
+  // disk, not all of it. No rewind() afterwards. Where the file system cannot punch holes the
+  // file simply keeps its blocks until it is removed.
+  void consumeAsRead() {
+    if (punchFd_ < 0) punchFd_ = ::open(path_.c_str(), O_WRONLY | O_CLOEXEC);
+    punch_ = punchFd_ >= 0;
+  }
 
   // Reads up to `size` bytes; returns the count (0 at end of file).
   size_t read(void* out, size_t size) {
@@ -103,6 +118,7 @@ class TempReader {
     size_t done = 0;
     while (done < size) {
       if (pos_ == end_) {
+        if (punch_) punchConsumed();
         end_ = left_ == 0 ? 0 : std::fread(buffer_.data(), 1, size_t(std::min<uint64_t>(buffer_.size(), left_)), file_);
         left_ -= end_;
         pos_ = 0;
@@ -126,8 +142,7 @@ class TempReader {
     if (n != sizeof(T)) fail(path_, "scratch file ends inside a record");
     return true;
   }
-  // Back to the first byte (a second pass over the same file).
-  // Back to the start of the slice.
+  // Back to the start of the slice (a second pass over the same bytes; not after consumeAsRead).
   void rewind() {
     if (fseeko(file_, off_t(offset_), SEEK_SET) != 0) fail(path_, "cannot rewind scratch file");
     pos_ = end_ = 0;
@@ -144,11 +159,27 @@ class TempReader {
   }
 
  private:
+  static constexpr uint64_t kPunchStep = 64 << 10;
+  // Every byte before the next read is consumed: punch whole steps of it (and the tail once the
+  // slice is read to its end).
+  void punchConsumed() {
+    const uint64_t consumed = offset_ + (length_ - left_);
+    uint64_t to = consumed / kPunchStep * kPunchStep;
+    if (left_ == 0 || std::feof(file_)) to = consumed;
+    if (to <= punched_) return;
+    const uint64_t from = std::max(punched_, offset_ / kPunchStep * kPunchStep + (offset_ % kPunchStep ? kPunchStep : 0));
+    if (to > from && fallocate(punchFd_, FALLOC_FL_PUNCH_HOLE | FALLOC_FL_KEEP_SIZE, off_t(from), off_t(to - from)) != 0)
+      punch_ = false;  // not supported here: the blocks go when the file is removed
+    punched_ = to;
+  }
   std::string path_;
   FILE* file_ = nullptr;
   std::vector<char> buffer_;
   size_t pos_ = 0, end_ = 0;
   uint64_t offset_, length_, left_;  // the slice, and what of it is not read yet
+  bool punch_ = false;
+  int punchFd_ = -1;  // the file opened for writing, to punch holes in
+  uint64_t punched_ = 0;  // bytes before this offset are punched (or were not ours to punch)
 };
 
 }  // namespace mt
