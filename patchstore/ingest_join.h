@@ -32,16 +32,18 @@
 #include <unistd.h>
 
 #include "base/progress.h"
+#include "base/temp_file.h"
 #include "patchstore/ingest_internal.h"
 
 namespace mt {
 namespace ingest {
 
-// Reads vertex records [first, first + n) of a VertexFile as float positions (3 per vertex).
+// Reads vertex records [first, first + n) of a VertexFile as float positions (3 per vertex), in
+// aligned blocks past the page cache (base/temp_file.h says why).
 class VertexLoader {
  public:
-  VertexLoader(const VertexFile& file, const VertexRecordLayout& layout) : file_(file), layout_(layout) {
-    fd_ = ::open(file.path.c_str(), O_RDONLY | O_CLOEXEC);
+  VertexLoader(const VertexFile& file, const VertexRecordLayout& layout) : file_(file), layout_(layout), staging_(kStaging) {
+    fd_ = openScratch(file.path, O_RDONLY, direct_);
     if (fd_ < 0) fail(file.path, std::string("cannot open the vertex records: ") + std::strerror(errno));
   }
   ~VertexLoader() {
@@ -54,43 +56,72 @@ class VertexLoader {
     assert(first + n <= file_.count);
     const size_t size = layout_.size();
     const bool plain = !layout_.doublePrecision && size == 12;  // the records are the positions
-    while (n > 0) {
-      const uint64_t take = plain ? n : std::min<uint64_t>(n, kStaging / size);
-      char* dst = plain ? reinterpret_cast<char*>(out) : staging(take * size);
-      readAt(file_.offset + first * size, dst, take * size);
-      if (!plain)
-        for (uint64_t i = 0; i < take; ++i) {
-          double p[3];
-          layout_.position(dst + i * size, p);
-          for (int a = 0; a < 3; ++a) out[3 * i + a] = float(p[a]);
+    uint64_t at = file_.offset + first * size;                   // next byte wanted
+    const uint64_t end = at + n * size;
+    char* dst = reinterpret_cast<char*>(out);
+    std::vector<char> partial;  // a record split between two blocks
+    while (at < end) {
+      const uint64_t block = at / kDirectAlign * kDirectAlign;
+      const size_t want = size_t(std::min<uint64_t>(staging_.capacity(), (end - block + kDirectAlign - 1) / kDirectAlign * kDirectAlign));
+      const size_t got = readAt(block, want);
+      const size_t skip = size_t(at - block);
+      if (got <= skip) fail(file_.path, "the vertex records end at byte offset " + std::to_string(at) + " (the file changed during the ingest?)");
+      const size_t bytes = size_t(std::min<uint64_t>(got - skip, end - at));
+      const char* src = staging_.data() + skip;
+      if (plain) {
+        std::memcpy(dst, src, bytes);
+        dst += bytes;
+      } else {
+        // Whole records are converted; a record cut by the block end waits in `partial`.
+        size_t used = 0;
+        if (!partial.empty()) {
+          const size_t take = std::min(bytes, size - partial.size());
+          partial.insert(partial.end(), src, src + take);
+          used = take;
+          if (partial.size() == size) {
+            convert(partial.data(), 1, reinterpret_cast<float*>(dst));
+            dst += 12;
+            partial.clear();
+          }
         }
-      first += take;
-      n -= take;
-      out += 3 * take;
+        const size_t whole = (bytes - used) / size;
+        convert(src + used, whole, reinterpret_cast<float*>(dst));
+        dst += 12 * whole;
+        used += whole * size;
+        partial.insert(partial.end(), src + used, src + bytes);
+      }
+      at += bytes;
     }
+    assert(partial.empty());
   }
 
  private:
   static constexpr size_t kStaging = 1 << 20;
-  char* staging(size_t bytes) {
-    if (staging_.size() < bytes) staging_.resize(bytes);
-    return staging_.data();
-  }
-  void readAt(uint64_t at, char* dst, size_t bytes) {
-    while (bytes > 0) {
-      const ssize_t got = ::pread(fd_, dst, bytes, off_t(at));
-      if (got < 0 && errno == EINTR) continue;
-      if (got < 0) fail(file_.path, "cannot read the vertex records at byte offset " + std::to_string(at) + ": " + std::strerror(errno));
-      if (got == 0) fail(file_.path, "the vertex records end at byte offset " + std::to_string(at) + " (the file changed during the ingest?)");
-      dst += got;
-      at += uint64_t(got);
-      bytes -= size_t(got);
+  void convert(const char* rec, size_t count, float* out) const {
+    for (size_t i = 0; i < count; ++i) {
+      double p[3];
+      layout_.position(rec + i * layout_.size(), p);
+      for (int a = 0; a < 3; ++a) out[3 * i + a] = float(p[a]);
     }
+  }
+  // Up to `want` bytes at the aligned offset `at` into the staging buffer; the count read.
+  size_t readAt(uint64_t at, size_t want) {
+    size_t done = 0;
+    while (done < want) {
+      const ssize_t got = ::pread(fd_, staging_.data() + done, want - done, off_t(at + done));
+      if (got < 0 && errno == EINTR) continue;
+      if (got < 0) fail(file_.path, "cannot read the vertex records at byte offset " + std::to_string(at + done) + ": " + std::strerror(errno));
+      if (got == 0) break;
+      done += size_t(got);
+      if (direct_ && done % kDirectAlign != 0) break;  // a short direct read: the end of the file
+    }
+    return done;
   }
   VertexFile file_;
   VertexRecordLayout layout_;
   int fd_ = -1;
-  std::vector<char> staging_;
+  bool direct_ = false;
+  AlignedBuffer staging_;
 };
 
 class FaceJoin {
@@ -133,7 +164,8 @@ class FaceJoin {
     only_ = only;
     expected_ = only ? only->size() : faceCount_;
     pos_.assign(size_t(6 * window_), 0.0f);
-    buckets_.assign(size_t(2 * chunks_), Bucket{});
+    buckets_.clear();
+    buckets_.resize(size_t(2 * chunks_));
     for (uint64_t k = 0; k < chunks_; ++k) {
       buckets_[2 * k].path = prefix_ + ".b" + std::to_string(k);
       buckets_[2 * k + 1].path = prefix_ + ".c" + std::to_string(k);
@@ -171,27 +203,39 @@ class FaceJoin {
   };
   struct Bucket {
     std::string path;
-    std::vector<char> buffer;
-    uint64_t bytes = 0;  // appended to the file so far
+    std::unique_ptr<AlignedBuffer> buffer;  // allocated on first use
+    size_t used = 0;
+    uint64_t bytes = 0;  // in the file so far
   };
 
   void put(uint64_t bucket, const void* rec, size_t size) {
     Bucket& b = buckets_[bucket];
-    if (b.buffer.capacity() < bufferBytes_) b.buffer.reserve(bufferBytes_);
-    if (b.buffer.size() + size > bufferBytes_) flush(b);
-    const char* p = static_cast<const char*>(rec);
-    b.buffer.insert(b.buffer.end(), p, p + size);
+    if (!b.buffer) b.buffer = std::make_unique<AlignedBuffer>(bufferBytes_);
+    if (b.used + size > b.buffer->capacity()) flush(b, false);
+    std::memcpy(b.buffer->data() + b.used, rec, size);
+    b.used += size;
   }
-  // Appends the buffer to the bucket's file (opened for the append only: hundreds of buckets
-  // hold no file descriptor between appends).
-  void flush(Bucket& b) {
-    if (b.buffer.empty()) return;
-    FILE* f = std::fopen(b.path.c_str(), "ab");
-    if (!f) fail(b.path, std::string("cannot create scratch file: ") + std::strerror(errno));
-    const bool ok = std::fwrite(b.buffer.data(), 1, b.buffer.size(), f) == b.buffer.size();
-    if ((std::fclose(f) != 0) || !ok) fail(b.path, std::string("cannot write scratch file (disk full?): ") + std::strerror(errno));
-    b.bytes += b.buffer.size();
-    b.buffer.clear();
+  // Appends the buffer's whole blocks to the bucket's file (all of it when `last`), the file
+  // opened for the append only (hundreds of buckets hold no descriptor between appends) and
+  // written past the page cache (base/temp_file.h).
+  void flush(Bucket& b, bool last) {
+    const size_t whole = last ? b.used : b.used / kDirectAlign * kDirectAlign;
+    if (whole == 0) return;
+    bool direct = false;
+    const int fd = openScratch(b.path, O_WRONLY | O_CREAT, direct);
+    if (fd < 0) fail(b.path, std::string("cannot create scratch file: ") + std::strerror(errno));
+    if (direct && whole % kDirectAlign != 0) ::fcntl(fd, F_SETFL, ::fcntl(fd, F_GETFL) & ~O_DIRECT);
+    try {
+      writeAllAt(fd, b.buffer->data(), whole, b.bytes, b.path);
+    } catch (...) {
+      ::close(fd);
+      throw;
+    }
+    if (::close(fd) != 0) fail(b.path, std::string("cannot write scratch file: ") + std::strerror(errno));
+    b.bytes += whole;
+    std::memmove(b.buffer->data(), b.buffer->data() + whole, b.used - whole);
+    b.used -= whole;
+    if (last) b.buffer.reset();
   }
   uint64_t chunkOf(uint32_t v) const { return v / chunk_; }
 
@@ -235,6 +279,7 @@ class FaceJoin {
       // Window A ends a little past the 99th percentile of the faces' highest corners, window B
       // past the 99th percentile of the corners below A: a few corners far from the rest (a
       // vertex written out of order) move no window, their faces go to the buckets.
+      // (Percentiles of every 4th face: a batch is thousands of faces.)
       const uint64_t slack = window_ / 16;
       auto quantileEnd = [&](std::vector<uint32_t>& x) -> uint64_t {
         if (x.empty()) return 0;
@@ -242,16 +287,14 @@ class FaceJoin {
         std::nth_element(x.begin(), at, x.end());
         return uint64_t(*at) + 1 + slack;
       };
-      high.resize(m);
-      tbb::parallel_for(tbb::blocked_range<size_t>(0, m, 4096), [&](const tbb::blocked_range<size_t>& r) {
-        for (size_t j = r.begin(); j < r.end(); ++j) {
-          const uint32_t* f = v + 3 * size_t(sel[j]);
-          high[j] = std::max({f[0], f[1], f[2]});
-        }
-      });
+      high.clear();
+      for (size_t j = 0; j < m; j += 4) {
+        const uint32_t* f = v + 3 * size_t(sel[j]);
+        high.push_back(std::max({f[0], f[1], f[2]}));
+      }
       a.moveTo(std::min(vertices_.count, quantileEnd(high)), loaderA);
       low.clear();
-      for (size_t j = 0; j < m; ++j)
+      for (size_t j = 0; j < m; j += 4)
         for (int k = 0; k < 3; ++k)
           if (v[3 * size_t(sel[j]) + k] < a.lo) low.push_back(v[3 * size_t(sel[j]) + k]);
       b.moveTo(std::min(a.lo, quantileEnd(low)), loaderB);
@@ -293,7 +336,7 @@ class FaceJoin {
       have = haveNext;
     }
     if (first != faceCount_) fail(faces_.path, "internal: the sweep read " + std::to_string(first) + " faces");
-    for (uint64_t k = 0; k < chunks_; ++k) flush(buckets_[2 * k]);
+    for (uint64_t k = 0; k < chunks_; ++k) flush(buckets_[2 * k], true);
   }
 
   // Phase 2, chunk k: its bucket (faces whose lowest corner is in it), then the faces carried to it.
@@ -301,7 +344,7 @@ class FaceJoin {
   void drain(uint64_t k, const PerFace& perFace, const PerBatch& perBatch, Progress& progress) {
     Bucket& own = buckets_[2 * k];
     Bucket& carried = buckets_[2 * k + 1];
-    flush(carried);
+    flush(carried, true);
     if (own.bytes == 0 && carried.bytes == 0) return;
     const uint64_t lo = k * chunk_, hi = std::min(vertices_.count, lo + chunk_);
     {
