@@ -246,14 +246,26 @@ ScopedDefaultEnv::ScopedDefaultEnv(Env* env) : previous_(gDefaultOverride.exchan
 ScopedDefaultEnv::~ScopedDefaultEnv() { gDefaultOverride.store(previous_); }
 
 std::unique_ptr<WritableFile> FaultInjectionEnv::newWritableFile(const std::string& path) {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    written.insert(path);
+  }
   return std::make_unique<FaultyWritableFile>(this, path, base_->newWritableFile(path));
 }
 
 std::unique_ptr<WritableFile> FaultInjectionEnv::newAppendableFile(const std::string& path) {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    written.insert(path);
+  }
   return std::make_unique<FaultyWritableFile>(this, path, base_->newAppendableFile(path));
 }
 
 std::unique_ptr<WritableFile> FaultInjectionEnv::newWritableFileAt(const std::string& path, uint64_t length) {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    written.insert(path);
+  }
   return std::make_unique<FaultyWritableFile>(this, path, base_->newWritableFileAt(path, length));
 }
 
@@ -264,6 +276,8 @@ std::unique_ptr<RandomAccessFile> FaultInjectionEnv::newRandomAccessFile(const s
 void FaultInjectionEnv::renameFile(const std::string& from, const std::string& to) {
   hit(Op::Rename, to);
   base_->renameFile(from, to);
+  std::lock_guard<std::mutex> lock(mutex_);
+  written.insert(to);
 }
 
 void FaultInjectionEnv::hit(Op op, const std::string& path, const std::string& where) {

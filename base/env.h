@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <memory>
 #include <mutex>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -93,6 +94,9 @@ class FaultInjectionEnv : public Env {
   // Counts of each operation so far (to enumerate every failure point in a test). Reads may come
   // from several threads at once (the MT reader's): hit() counts under a lock.
   int64_t writes = 0, syncs = 0, renames = 0, reads = 0;
+  // Every path opened for writing or renamed to through this Env (to check that a process wrote
+  // nothing behind its back).
+  std::set<std::string> written;
 
   std::unique_ptr<WritableFile> newWritableFile(const std::string& path) override;
   std::unique_ptr<WritableFile> newAppendableFile(const std::string& path) override;

@@ -12,7 +12,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$PWD
 BUILD=$ROOT/build-fuzz
-ALL=(reader_ply reader_obj reader_off reader_stl mt_file patch_meshopt patch_draco store_manifest store_segment camera_path)
+ALL=(reader_ply reader_obj reader_off reader_stl reader_gltf mt_file patch_meshopt patch_draco store_manifest store_segment camera_path)
 
 configure_and_build() {
   [[ ${MT_FUZZ_NO_BUILD:-0} == 1 ]] && return 0
@@ -41,8 +41,14 @@ if [[ ${1:-} == --seeds ]]; then
   "$B/mtbuild" "$T/small.ply" -o "$T/small_draco_n.mt" --codec draco --normals --patch-triangles 200 --threads 1 -q
   "$B/mtbuild" "$T/mid.ply" -o "$T/mid_meshopt.mt" --patch-triangles 100 --threads 1 -q
   "$B/mtbuild" "$T/mid.ply" -o "$T/mid_draco.mt" --codec draco --patch-triangles 100 --threads 1 -q
+  "$B/mtbuild" "$T/tiny.ply" -o "$T/tiny.mt" --normals --patch-triangles 100 --threads 1 -q
   rm -rf fuzz/corpus/mt_file fuzz/corpus/patch_meshopt fuzz/corpus/patch_draco fuzz/corpus/store_* fuzz/store
   mkdir -p fuzz/corpus/mt_file fuzz/corpus/patch_meshopt fuzz/corpus/patch_draco fuzz/corpus/store_manifest fuzz/corpus/store_segment
+  # glTF: our writer's meshopt and quantized outputs (a cut of the tiny MT), Draco primitives.
+  mkdir -p fuzz/corpus/reader_gltf
+  "$B/mtextract" "$T/tiny.mt" -o fuzz/corpus/reader_gltf/extract_meshopt.glb --meshopt --triangles 120 >/dev/null
+  "$B/mtextract" "$T/tiny.mt" -o fuzz/corpus/reader_gltf/extract_quantized.glb --quantize --triangles 120 >/dev/null
+  "$BUILD/bin/fuzz_seed_gltf" fuzz/corpus/reader_gltf
   cp "$T/small_strip.mt" "$T/small_draco_n.mt" "$T/mid_meshopt.mt" fuzz/corpus/mt_file/
   for f in small_strip mid_meshopt; do "$BUILD/bin/fuzz_seed_payloads" "$T/$f.mt" fuzz/corpus/patch_meshopt 12; done
   for f in small_draco_n mid_draco; do "$BUILD/bin/fuzz_seed_payloads" "$T/$f.mt" fuzz/corpus/patch_draco 12; done
@@ -67,9 +73,12 @@ run_one() {
   [[ -f $root/fuzz/dict/$name.dict ]] && dict=(-dict="$root/fuzz/dict/$name.dict")
   mkdir -p "$build/corpus/$t"
   # -rss_limit_mb: a reader must stay within its memory bound on any input; -timeout: and finish.
+  local start=$(date +%s)
   nice -n 10 "$build/bin/fuzz_$t" "$build/corpus/$t" "$root/fuzz/corpus/$t" "${dict[@]}" \
     -max_total_time="$s" -rss_limit_mb=2048 -timeout=20 -print_final_stats=1 \
     -artifact_prefix="$build/findings/$t-" >"$build/logs/$t.log" 2>&1 || true
+  # How long it ran (less than SECONDS when it stopped at a finding).
+  echo "fuzz.sh: ran $(($(date +%s) - start)) s" >>"$build/logs/$t.log"
 }
 export -f run_one
 printf '%s\n' "${TARGETS[@]}" | xargs -P 2 -I{} bash -c 'run_one "$@"' _ {} "$SECONDS_EACH" "$ROOT" "$BUILD"
@@ -83,7 +92,7 @@ for t in "${TARGETS[@]}"; do
   ft=$(sed -nE 's/.* ft: ([0-9]+).*/\1/p' <<<"$last")
   corp=$(sed -nE 's/.* corp: ([0-9]+)\/.*/\1/p' <<<"$last")
   execs=$(sed -nE 's/^stat::average_exec_per_sec: *([0-9]+)/\1/p' "$log" | tail -1)
-  secs=$(sed -nE 's/^stat::.*run_time.*: *([0-9]+)/\1/p' "$log" | tail -1)
+  secs=$(sed -nE 's/^fuzz.sh: ran ([0-9]+) s$/\1/p' "$log" | tail -1)
   found=$(ls "$BUILD/findings" 2>/dev/null | grep -c "^$t-" || true)
   if grep -qE '^==[0-9]+==ERROR|^SUMMARY: |runtime error|deadly signal' "$log"; then found=$((found > 0 ? found : 1)); fi
   ((found)) && status=1

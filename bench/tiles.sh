@@ -1,12 +1,13 @@
 #!/usr/bin/env bash
 # bench/tiles.sh [MT_FILE]: the 3D Tiles export's figures (mtexport tiles, docs/interop.md).
 #
-# For the MT file (default: a 53M mtgen scan built here first, which takes a while), once with the
-# default GLB contents (KHR_mesh_quantization) and once with --meshopt: wall time, CPU time
+# For the MT file (default: a 53M mtgen scan built here first, which takes a while), once per codec of
+# the GLB contents (--codec none: KHR_mesh_quantization only; meshopt; draco, the default): wall time, CPU time
 # (user+sys) and peak RSS (GNU time), tiles, leaf copies, GLB contents, tree depth, triangles, and
 # the tileset's size against the MT file's. With GEO=1 the default MT is a scan at UTM-like
-# coordinates (mtgen --offset 500000,4000000,100, mtbuild --crs EPSG:32633) and CESIUM=1 then also
-# draws it in CesiumJS (tests/interop_checks.sh's check, interop/checks/cesium_check.mjs).
+# coordinates (mtgen --offset 500000,4000000,100, mtbuild --crs EPSG:32633), exported placed on the
+# globe, and CESIUM=1 then also draws it in CesiumJS with the camera flown to where PROJ puts it
+# (tests/interop_checks.sh cesium-show, interop/checks/cesium_check.mjs).
 #
 # Environment: OUT (a fresh directory under /tmp), BIN (build/bin), TRIANGLES (53M), MEMORY (4G).
 set -euo pipefail
@@ -28,11 +29,11 @@ fi
 mtBytes=$(stat -c %s "$mt")
 echo "MT file: $mt, $mtBytes bytes"
 printf '%-10s %8s %8s %8s %6s %9s %9s %8s %12s %14s %8s\n' variant wall_s cpu_s rss_MiB tiles copies contents depth triangles tileset_bytes x_MT
-for variant in default meshopt; do
+for variant in none meshopt draco; do
   dir="$OUT/tiles-$variant"
   rm -rf "$dir"
   flags=()
-  [[ $variant == meshopt ]] && flags=(--meshopt)
+  flags=(--codec "$variant")
   /usr/bin/time -f "%e %U %S %M" -o "$OUT/time-$variant" "$BIN/mtexport" tiles "$mt" "$dir" "${flags[@]}" 2>"$OUT/log-$variant"
   read -r wall user sys rss < "$OUT/time-$variant"
   line=$(grep "tiles (" "$OUT/log-$variant")
@@ -47,10 +48,9 @@ for variant in default meshopt; do
     'BEGIN { printf "%-10s %8.1f %8.1f %8.0f %6d %9d %9d %8d %12d %14d %8.2f\n", v, w, u + s, r / 1024, t, c, n, d, tr, b, b / m }' 
 done
 if [[ "${CESIUM:-0}" == 1 ]]; then
-  read -r center radius < <("$BIN/mtinfo" "$mt" --json | node -e '
-    const j = JSON.parse(require("fs").readFileSync(0, "utf8"));
-    const c = j.boundsMin.map((v, i) => (v + j.boundsMax[i]) / 2);
-    console.log(c.join(","), Math.hypot(...j.boundsMin.map((v, i) => j.boundsMax[i] - v)) / 2);')
-  node "$root/interop/checks/cesium_check.mjs" "$OUT/tiles-default" "$center" "$radius" "$OUT/cesium.png"
+  # The default tileset in CesiumJS, the camera flown to where PROJ puts the model (the MT file's CRS).
+  crs=$("$BIN/mtinfo" "$mt" --json | node -e 'console.log(JSON.parse(require("fs").readFileSync(0, "utf8")).crs || "")')
+  [[ -n "$crs" ]] || { echo "tiles: CESIUM=1 needs an MT file with a CRS (mtbuild --crs; GEO=1)" >&2; exit 1; }
+  bash "$root/tests/interop_checks.sh" cesium-show "$BIN" "$mt" "$crs" "$OUT/tiles-draco" "$OUT/cesium.png"
 fi
 echo "tiles: outputs in $OUT (remove when done)" >&2

@@ -58,6 +58,7 @@ std::string encodeContext(const RegionContext& c, const std::string& sequenceByt
   w.put(c.partitionLevels);
   w.put(c.rootTriangles);
   w.put(c.simplifier);
+  w.put(c.colorWeight);
   w.putString(sequenceBytes);
   return seal(w);
 }
@@ -69,6 +70,7 @@ void decodeContext(const std::string& bytes, WorkerContext& out) {
   out.context.partitionLevels = r.get<uint32_t>();
   out.context.rootTriangles = r.get<uint64_t>();
   out.context.simplifier = r.get<RegionSimplifier>();
+  out.context.colorWeight = r.get<double>();
   out.sequence = PartitionSequence::deserialize(r.getString());
   out.context.sequence = &out.sequence;
 }
@@ -80,6 +82,7 @@ std::string encodeTask(uint64_t index, const RegionTask& t) {
   w.put(t.level);
   w.put(t.region);
   w.put<uint8_t>(t.root ? 1 : 0);
+  w.put(t.rootDeviationLimit);
   w.put(t.loadSeconds);
   const LoadedMesh& m = t.mesh;
   putVector(w, m.patches);
@@ -102,6 +105,7 @@ RegionTask decodeTask(const std::string& bytes, uint64_t& index) {
   t.level = r.get<uint32_t>();
   t.region = r.get<uint32_t>();
   t.root = r.get<uint8_t>() != 0;
+  t.rootDeviationLimit = r.get<double>();
   t.loadSeconds = r.get<double>();
   LoadedMesh& m = t.mesh;
   const size_t n = bytes.size();
@@ -140,6 +144,7 @@ std::string encodeResult(uint64_t index, const RegionResult& res) {
   putVector(w, m.triangleCell);
   w.put(m.level);
   w.put(res.deviation);
+  w.put(res.colorDeviation);
   w.put(res.sphere);
   w.put(res.coneAxis);
   w.put(res.coneCutoff);
@@ -170,6 +175,7 @@ RegionResult decodeResult(const std::string& bytes, uint64_t& index) {
   getVector(r, m.triangleCell, n);
   m.level = r.get<uint32_t>();
   res.deviation = r.get<double>();
+  res.colorDeviation = r.get<double>();
   std::memcpy(res.sphere, r.getRaw(sizeof res.sphere), sizeof res.sphere);
   std::memcpy(res.coneAxis, r.getRaw(sizeof res.coneAxis), sizeof res.coneAxis);
   res.coneCutoff = r.get<float>();

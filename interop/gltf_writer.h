@@ -10,8 +10,9 @@
 // scale(step), so the file holds exactly the MT's grid points.
 //
 // Options: EXT_meshopt_compression (meshoptimizer's vertex and index codecs on every buffer view,
-// with a fallback buffer that has no data, so the extension is required) and
-// KHR_mesh_quantization (uint16 positions, int8 normals). Colours (RGBA8, COLOR_0) and normals
+// with a fallback buffer that has no data, so the extension is required), KHR_draco_mesh_compression
+// (Draco's mesh coding of the grid coordinates, lossless) and KHR_mesh_quantization (uint16
+// positions, int16 normals). Colours (RGBA8, COLOR_0) and normals
 // when the mesh has them.
 #pragma once
 
@@ -57,6 +58,10 @@ inline GltfMeshView gltfMeshViewOf(const WeldedMesh& mesh, const double gridOrig
 struct GltfOptions {
   bool meshopt = false;   // EXT_meshopt_compression on every buffer view
   bool quantize = false;  // KHR_mesh_quantization: needs the grid and a q range below 2^16 per axis
+  // KHR_draco_mesh_compression (needs `quantize`: Draco codes the grid coordinates losslessly;
+  // where quantization falls back to float, so does Draco, to the plain layout). Overrides meshopt.
+  bool draco = false;
+  int dracoSpeed = 3;     // Draco's encoder/decoder speed (0 smallest .. 10 fastest)
   // The frame the node's transform is expressed in: the node translation is (translation - frame),
   // so a 3D Tiles content can be placed relative to its tileset's root transform.
   double frame[3] = {0, 0, 0};

@@ -108,6 +108,19 @@ TilesReport exportTiles(const MtFileReader& r, const std::string& dir, const Til
   // The frame: the grid's origin (a double the tileset's root transform carries).
   const auto& h = r.header();
   const double* origin = h.gridOrigin;
+  // The root transform: tile frame -> the model's coordinates -> (with a CRS) ECEF.
+  const std::string crs = options.modelFrame ? std::string() : options.crs.empty() ? r.crs() : options.crs;
+  double rootTransform[16] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, origin[0], origin[1], origin[2], 1};
+  if (!crs.empty()) {
+    try {
+      report.placement = placeOnGlobe(crs, h.boundsMin, h.boundsMax);
+    } catch (const Error& e) {
+      fail(r.path(), e.what());
+    }
+    report.placed = true;
+    std::copy(report.placement.toEcef, report.placement.toEcef + 12, rootTransform);
+    applyPlacement(report.placement, origin, rootTransform + 12);
+  }
   const std::string tmp = uniqueTempName(dir);
   Env* env = Env::Default();
   try {
@@ -125,6 +138,7 @@ TilesReport exportTiles(const MtFileReader& r, const std::string& dir, const Til
       const GltfMeshView view = gltfMeshViewOf(mesh, origin, h.gridStep);
       GltfOptions go;
       go.meshopt = options.meshopt;
+      go.draco = options.draco;
       go.quantize = options.quantize;
       go.zUpToYUp = true;
       for (int a = 0; a < 3; ++a) go.frame[a] = origin[a];
@@ -190,7 +204,7 @@ TilesReport exportTiles(const MtFileReader& r, const std::string& dir, const Til
       if (n == sink) {
         t["geometricError"] = 2.0 * s[3];
         t["refine"] = "REPLACE";
-        t["transform"] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, origin[0], origin[1], origin[2], 1};
+        t["transform"] = json(std::vector<double>(rootTransform, rootTransform + 16));
       } else {
         t["geometricError"] = double(nodes[n].error);
         const Content& c = contents[size_t(tree.content[n])];
@@ -202,8 +216,15 @@ TilesReport exportTiles(const MtFileReader& r, const std::string& dir, const Til
     json root = tile(sink, 0);
     json ts;
     ts["asset"] = {{"version", "1.1"}, {"generator", "batched-mt mtexport"}};
-    const std::string crs = r.crs();
-    if (!crs.empty()) ts["asset"]["extras"] = {{"crs", crs}};
+    if (!crs.empty()) {
+      const GeoPlacement& g = report.placement;
+      ts["asset"]["extras"] = {{"crs", crs},
+                               {"placement", {{"method", "local affine map fitted to PROJ over the model's box (EPSG:4978)"},
+                                              {"longitude", g.longitude}, {"latitude", g.latitude}, {"height", g.height},
+                                              {"maxErrorMetres", g.maxError}}}};
+    } else if (!r.crs().empty()) {
+      ts["asset"]["extras"] = {{"crs", r.crs()}, {"placement", "model frame (not placed on the globe)"}};
+    }
     ts["geometricError"] = root["geometricError"];
     ts["root"] = root;
     const std::string text = ts.dump();

@@ -11,21 +11,32 @@
 //    geometricError 0, exactly the floor of m;
 //  - the root has no content, its children are the sink's predecessors; its geometricError is the
 //    model's diameter (the whole model missing is an error of its size);
-//  - the root transform translates the tiles' frame to the model's offset (the MT grid's origin,
-//    a double), so georeferenced coordinates are carried exactly and every GLB stays small.
+//  - the tiles' frame is the model's, relative to the MT grid's origin (a double), so every GLB
+//    stays small; the root transform places that frame: with a CRS (the MT file's, or the
+//    options'), on the WGS84 globe in ECEF by PROJ's local affine fit over the model's box
+//    (georeference.h); without one, a translation to the grid's origin (the model's coordinates
+//    are then taken as Cesium's world frame).
 #pragma once
 
 #include <cstdint>
 #include <string>
 
+#include "interop/georeference.h"
 #include "mtfile/mt_file.h"
 
 namespace mt::interop {
 
 struct TilesOptions {
-  bool meshopt = false;   // EXT_meshopt_compression in every GLB
+  // The contents' compression (docs/interop.md, sizes measured): KHR_draco_mesh_compression (the
+  // default, needs quantize), else EXT_meshopt_compression when meshopt, else plain buffers.
+  bool draco = true;
+  bool meshopt = false;
   bool quantize = true;   // KHR_mesh_quantization (grid coordinates as uint16; float where a tile is wider)
   bool progress = false;  // a line on stderr every few seconds
+  // The CRS of the model's coordinates; empty: the MT file's (mtbuild --crs), if any.
+  std::string crs;
+  // Ignore any CRS: the root transform is the translation to the grid's origin (model frame).
+  bool modelFrame = false;
 };
 
 struct TilesReport {
@@ -38,6 +49,8 @@ struct TilesReport {
   uint64_t triangles = 0;     // sum over the contents (every stored triangle once)
   uint64_t floatTiles = 0;    // contents written with float positions though quantize was asked
   double seconds = 0;
+  bool placed = false;        // the root transform puts the model on the globe (a CRS was given)
+  GeoPlacement placement;     // when placed: where, and the affine map's error over the box
 };
 
 // Writes DIR (which must not exist): everything is made in a temporary directory beside it and

@@ -64,7 +64,7 @@ class ThreadedLevel {
       : builder_(builder), options_(options), window_(window), regions_(builder.regionCount()),
         jobs_(regions_), ready_(regions_, 0) {
     for (size_t i = 0; i < regions_; ++i)
-      bytes_.push_back(estimateRegionBytes(builder.regionTriangles(i), builder.regionVertices(i)));
+      bytes_.push_back(estimateRegionBytes(builder.regionTriangles(i), builder.regionVertices(i), builder.hasColors()));
   }
 
   void run(unsigned threads) {

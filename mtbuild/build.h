@@ -36,6 +36,8 @@ constexpr uint32_t kMinPatchTriangles = 100, kMaxPatchTriangles = 100000;
 // The least --memory the build honours: the ingest's and the V-partition's fixed buffers (a 200k
 // scan needs 6 MiB for the partition alone); below it a build either fails late or exceeds the cap.
 constexpr uint64_t kMinBuildMemory = 16ull << 20;
+// The default --color-weight (docs/appearance.md, "Per-vertex colour").
+constexpr double kDefaultColorWeight = 1.0;
 // The work directory marker: a directory holding it was made by mtbuild/mtcluster, and is the
 // only kind they ever empty or remove.
 constexpr char kWorkMarker[] = ".mtbuild-work";
@@ -54,6 +56,14 @@ struct BuildOptions {
   bool strips = false;                // meshopt patches as tri-strips (--index-order strip)
   bool normals = false;               // store normals (else the renderer computes them)
   RegionSimplifier simplifier = RegionSimplifier::Meshopt;  // --simplifier
+  // --simplifier auto (the tools' default): the quadric simplifier when the input has per-vertex
+  // colours (only it keeps colour edges: mtbuild/attribute_quadric.h), meshopt otherwise; decided
+  // once the level-0 store exists. `simplifier` is then ignored.
+  bool simplifierByInput = false;
+  // --color-weight: with colours and the quadric simplifier, a full-range colour difference costs
+  // as much as a distance of colorWeight x the region's mean edge length (0: colours are carried
+  // but do not steer the collapses). docs/appearance.md has the measurements behind the default.
+  double colorWeight = kDefaultColorWeight;
   // Continue a killed build from the checkpoint in its work directory (the last finished level).
   bool resume = false;
   bool progress = true;
@@ -132,7 +142,10 @@ BuildReport buildMt(const std::string& input, const std::string& output, const B
 struct RegionBytes {
   uint64_t working = 0, held = 0;
 };
-RegionBytes estimateRegionBytes(uint64_t triangles, uint64_t vertices);
+// With per-vertex colours (`colors`) a region holds more: the colours (4 bytes a vertex in each
+// copy) and, while simplified, the attribute quadrics (216 bytes a vertex, attribute_quadric.h)
+// and the colour error's face index (color_error.cpp).
+RegionBytes estimateRegionBytes(uint64_t triangles, uint64_t vertices, bool colors = false);
 
 // ---- The per-region work, as one pure function (BMT section 4, "the i-th simplification step") --
 // mtbuild runs it on threads, mtcluster on MPI ranks; both commit the results in region order with
@@ -146,6 +159,7 @@ struct RegionContext {
   uint32_t partitionLevels = 0;       // sequence->levels()
   uint64_t rootTriangles = 0;
   RegionSimplifier simplifier = RegionSimplifier::Meshopt;
+  double colorWeight = 0;             // SimplifyRegionOptions::colorWeight (0 without colours)
 };
 
 // One region of V(level): its floor (the V*(level-1) patches inside it) assembled into one mesh,
@@ -154,6 +168,9 @@ struct RegionTask {
   uint32_t level = 0;                 // the level being built (1 = first simplification)
   uint32_t region = 0;                // the V(level) cell
   bool root = false;                  // the last partition level: one region, everything
+  // Root levels only: the largest deviation a root simplification that had to fall back to a
+  // halving may add (twice the previous level's largest node error); 0: none. See processRegion.
+  double rootDeviationLimit = 0;
   LoadedMesh mesh;
   double loadSeconds = 0;             // measured by whoever loaded it
 };
@@ -169,6 +186,7 @@ struct RegionResult {
   std::vector<EncodedPatch> encoded;  // the floor patches, in task.mesh.patches order
   ReplacementMesh replacement;        // the simplified region, split by V*(level)
   double deviation = 0;               // measured distance simplified <-> floor
+  double colorDeviation = 0;          // measured colour deviation simplified <-> floor (color_error.h)
   double sphere[4] = {0, 0, 0, 0};    // centre, radius of the simplified region
   float coneAxis[3] = {0, 0, 1};
   float coneCutoff = -1;
@@ -208,6 +226,7 @@ class LevelBuilder {
   size_t regionCount() const;
   uint64_t regionTriangles(size_t i) const;  // floor triangles of region i (from the manifest)
   uint64_t regionVertices(size_t i) const;   // floor vertices of region i (shared ones once per patch)
+  bool hasColors() const;                    // the input has per-vertex colours
   // Reads region i's floor patches and assembles them. Thread-safe between commits.
   RegionTask loadRegion(size_t i) const;
   // Commits region i; must be called for i = 0, 1, ... in order. `moveBytes`: what a cluster

@@ -121,7 +121,8 @@ std::string fingerprint(const std::string& input, const BuildOptions& o, bool st
   s << "codec=" << (o.codec == format::Codec::Draco ? "draco" : "meshopt") << "\n";
   s << "index_order=" << (o.strips ? "strip" : "list") << "\n";
   s << "normals=" << (o.normals ? 1 : 0) << "\n";
-  s << "simplifier=" << (o.simplifier == RegionSimplifier::Meshopt ? "meshopt" : "quadric") << "\n";
+  s << "simplifier=" << (o.simplifierByInput ? "auto" : o.simplifier == RegionSimplifier::Meshopt ? "meshopt" : "quadric") << "\n";
+  if (o.colorWeight != kDefaultColorWeight) s << "color_weight=" << o.colorWeight << "\n";
   s << "root_triangles=" << o.rootTriangles << "\n";
   return s.str();
 }

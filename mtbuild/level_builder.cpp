@@ -270,7 +270,13 @@ LevelBuilder::LevelBuilder(const std::string& input, const std::string& output, 
   s.ctx.codec.strips = options.strips;
   s.ctx.sequence = &s.sequence;
   s.ctx.partitionLevels = s.sequence.levels();
-  s.ctx.simplifier = options.simplifier;
+  const bool colors = s.header.vertexFlags & format::kHasColors;
+  s.ctx.simplifier = options.simplifierByInput ? (colors ? RegionSimplifier::Quadric : RegionSimplifier::Meshopt)
+                                               : options.simplifier;
+  s.ctx.colorWeight = colors ? options.colorWeight : 0;
+  if (options.simplifierByInput && colors)
+    s.say("the input has per-vertex colours: simplifying with the quadric simplifier, colour-aware (--simplifier meshopt "
+          "ignores colours)");
   s.ctx.rootTriangles = options.rootTriangles ? options.rootTriangles : 2ull * patchTriangles;
   if (!options.taskTimesPath.empty()) {
     s.taskTimes = std::fopen(options.taskTimesPath.c_str(), resumed ? "a" : "w");
@@ -311,6 +317,7 @@ uint32_t LevelBuilder::level() const { return s_->builtLevels + 1; }
 size_t LevelBuilder::regionCount() const { return s_->regionIds.size(); }
 uint64_t LevelBuilder::regionTriangles(size_t i) const { return s_->floorTriangles.at(i); }
 uint64_t LevelBuilder::regionVertices(size_t i) const { return s_->floorVertices.at(i); }
+bool LevelBuilder::hasColors() const { return s_->header.vertexFlags & format::kHasColors; }
 
 bool LevelBuilder::beginLevel() {
   State& s = *s_;
@@ -360,6 +367,7 @@ RegionTask LevelBuilder::loadRegion(size_t i) const {
   task.level = s.builtLevels + 1;
   task.region = s.regionIds.at(i);
   task.root = s.root;
+  if (s.root && !s.report.levels.empty()) task.rootDeviationLimit = 2 * s.report.levels.back().maxError;
   std::vector<Patch> floor;
   for (PatchId id : s.floors[i]) floor.push_back(s.store->patch(id));
   task.mesh = s.store->assemble(floor);
@@ -374,7 +382,7 @@ uint32_t LevelBuilder::State::addNode(const RegionTask& task, const RegionResult
   const uint32_t node = uint32_t(nodes.size());
   const size_t patchesBefore = writer->patchCount();
   format::NodeRecord rec{};
-  float predecessorError = 0;
+  float predecessorError = 0, predecessorColorError = 0;
   Sphere sphere;
   for (int a = 0; a < 3; ++a) sphere.c[a] = result.sphere[a];
   sphere.r = result.sphere[3];
@@ -387,6 +395,7 @@ uint32_t LevelBuilder::State::addNode(const RegionTask& task, const RegionResult
     uint32_t mtPatch = writer->appendPatch(e.payload.data(), e.payload.size(), e.triangles, e.vertices);
     arcPatches[{from, node}].push_back(mtPatch);
     predecessorError = std::max(predecessorError, nodes[from].error);
+    predecessorColorError = std::max(predecessorColorError, nodes[from].colorError);
     if (from != 0) enclose(sphere, spheres[from]);
     // The centre stays and the radius only grows from here, so containment now is containment in
     // the node's final sphere (BMT 5.1's nesting).
@@ -399,6 +408,11 @@ uint32_t LevelBuilder::State::addNode(const RegionTask& task, const RegionResult
   // the new fragment within `deviation` of the floor.
   rec.error = std::nextafter(float(predecessorError + result.deviation), std::numeric_limits<float>::infinity());
   assert(rec.error >= predecessorError && "a node's error is at least each predecessor's");
+  // The colour error accumulates the same way (0 throughout without colours).
+  rec.colorError = result.colorDeviation > 0
+                       ? std::nextafter(float(predecessorColorError + result.colorDeviation), std::numeric_limits<float>::infinity())
+                       : predecessorColorError;
+  assert(rec.colorError >= predecessorColorError && "a node's colour error is at least each predecessor's");
   for (int a = 0; a < 3; ++a) rec.center[a] = sphere.c[a];
   rec.radius = std::nextafter(float(sphere.r), std::numeric_limits<float>::infinity());
   for (int a = 0; a < 3; ++a) rec.coneAxis[a] = result.coneAxis[a];
@@ -447,7 +461,12 @@ void LevelBuilder::endLevel() {
   s.report.levels.push_back(s.lr);
   s.liveTriangles = s.outTriangles;
   ++s.builtLevels;
-  if (s.root || s.outTriangles <= s.ctx.rootTriangles || s.outTriangles * 10 > s.lr.trianglesIn * 9) s.finished = true;
+  // The root level simplifies the whole model at once; when it could only halve it
+  // (processRegion's settleRoot), another root level follows while the root is over twice its
+  // size and each level gains.
+  if ((s.root && s.outTriangles <= 2 * s.ctx.rootTriangles) || s.outTriangles <= s.ctx.rootTriangles ||
+      s.outTriangles * 10 > s.lr.trianglesIn * 9)
+    s.finished = true;
   // The level is durable: the checkpoint a resumed build restarts from.
   s.writeCheckpoint();
   if (s.taskTimes) std::fflush(s.taskTimes);
@@ -478,6 +497,7 @@ BuildReport LevelBuilder::finish() {
     for (int a = 0; a < 3; ++a) rec.center[a] = all.c[a];
     rec.radius = std::nextafter(float(all.r), std::numeric_limits<float>::infinity());
     rec.error = std::numeric_limits<float>::infinity();
+    rec.colorError = s.header.vertexFlags & format::kHasColors ? std::numeric_limits<float>::infinity() : 0.0f;
     rec.coneCutoff = -1;
     rec.coneAxis[2] = 1;
     rec.level = level + 1;

@@ -1,6 +1,8 @@
 // Quadric edge collapse with optimal placement and per-vertex locks (see quadric_simplify.h).
 #include "mtbuild/quadric_simplify.h"
 
+#include "mtbuild/attribute_quadric.h"
+
 #include <algorithm>
 #include <cassert>
 #include <cfloat>
@@ -23,6 +25,9 @@ struct Quadric {
     a01 += w * n[0] * n[1], a02 += w * n[0] * n[2], a12 += w * n[1] * n[2];
     b0 += w * d * n[0], b1 += w * d * n[1], b2 += w * d * n[2];
     c += w * d * d;
+  }
+  void add(const double* k) {  // 10 coefficients in member order (ColorQuadrics::reduced)
+    a00 += k[0], a11 += k[1], a22 += k[2], a01 += k[3], a02 += k[4], a12 += k[5], b0 += k[6], b1 += k[7], b2 += k[8], c += k[9];
   }
   void add(const Quadric& q) {
     a00 += q.a00, a11 += q.a11, a22 += q.a22, a01 += q.a01, a02 += q.a02, a12 += q.a12;
@@ -228,6 +233,7 @@ class Simplifier {
   void run(size_t targetTriangles);
   size_t write(uint32_t* destination) const;
   QuadricSimplifyStats stats;
+  const ColorQuadrics& colors() const { return colors_; }
 
  private:
   void buildLists();
@@ -259,6 +265,7 @@ class Simplifier {
   std::vector<uint8_t> dead_;
   std::vector<uint32_t> start_, count_, cap_, pool_, live_, version_;
   std::vector<Quadric> quadric_;
+  ColorQuadrics colors_;  // per-vertex colour (attribute_quadric.h); inactive without colours
   std::vector<Entry> heap_, retry_;
   void push(const Candidate& c, bool allowMove) {
     heapPush(heap_, entryOf(c, allowMove));
@@ -300,6 +307,7 @@ Simplifier::Simplifier(const uint32_t* indices, size_t indexCount, const double*
   version_.assign(nv_, 0);
   buildLists();
   buildQuadrics();
+  colors_.init(options_.colors, options_.colorScale, locked, pos_.data(), nv_, tri_.data(), tri_.size());
   if (options_.gridStep > 0 && nv_) {
     const Cell l = cellOf(lo), h = cellOf(hi);
     for (int a = 0; a < 3; ++a) cellLo_[a] = l.c[a], cellHi_[a] = h.c[a];
@@ -444,6 +452,11 @@ bool Simplifier::candidate(uint32_t a, uint32_t b, bool allowMove, Candidate& c)
   if ((frozen_[a] && !border_[a] && border_[b]) || (frozen_[b] && !border_[b] && border_[a])) return false;
   Quadric q = quadric_[a];
   q.add(quadric_[b]);
+  if (colors_.active()) {  // the colour error at the best colours, as a quadric in the position
+    double k[10];
+    colors_.reduced(a, b, k);
+    q.add(k);
+  }
   const double *pa = &pos_[a * 3], *pb = &pos_[b * 3];
   c.moves = false;
   if (frozen_[a] || frozen_[b]) {
@@ -486,6 +499,7 @@ bool Simplifier::candidate(uint32_t a, uint32_t b, bool allowMove, Candidate& c)
   }
   c.r = c.s == a ? b : a;
   c.cost = q.at(c.p);
+  if (colors_.active()) c.cost += colors_.fixedColorCost(c.s, c.r, c.p);
   c.versionS = version_[c.s], c.versionR = version_[c.r];
   return true;
 }
@@ -638,6 +652,7 @@ void Simplifier::collapse(const Candidate& c) {
   if (c.moves && moved_) moved_[s] = 1;
   if (options_.gridStep > 0) ++cells_[cellOfVertex(s)];
   quadric_[s].add(quadric_[r]);
+  if (colors_.active()) colors_.collapse(s, r, c.p);
   ++version_[s], ++version_[r];
   ++stats.collapses;
   stats.maxCost = std::max(stats.maxCost, c.cost);
@@ -730,6 +745,7 @@ size_t quadricSimplify(uint32_t* destination, double* destinationPositions, uint
                moved);
   s.run(targetIndexCount / 3);
   if (stats) *stats = s.stats;
+  if (options.destinationColors) s.colors().write(options.destinationColors);
   return s.write(destination);
 }
 

@@ -33,6 +33,14 @@ struct QuadricSimplifyOptions {
   double gridOrigin[3] = {0, 0, 0};
   // Weight of the boundary planes relative to the face planes (G&H 6.2 "a large penalty factor").
   double boundaryWeight = 10;
+  // Per-vertex colour (mtbuild/attribute_quadric.h, Hoppe 1999): colors, 4 bytes (RGBA8) per
+  // vertex, enter the collapse cost with a full-range colour difference weighing as much as a
+  // distance of colorScale (model units); survivors take the colour of least error at their new
+  // position, except locked vertices, which keep theirs. destinationColors (4 bytes per vertex)
+  // receives every vertex's colour. Null colors or colorScale 0: geometry alone.
+  const uint8_t* colors = nullptr;
+  double colorScale = 0;
+  uint8_t* destinationColors = nullptr;
 };
 
 struct QuadricSimplifyStats {

@@ -73,10 +73,15 @@ std::vector<EncodedPatch> encodePatches(const std::vector<Patch>& patches, const
 // to 0.58 vertices per triangle, no normals or colours): working 210-286 bytes per floor triangle
 // (at most 543 per vertex), held 41-72 (at most 134 per vertex). The larger of the two terms,
 // each 3-12% above the largest measured, covers a region whose patches share fewer vertices.
-RegionBytes estimateRegionBytes(uint64_t triangles, uint64_t vertices) {
+RegionBytes estimateRegionBytes(uint64_t triangles, uint64_t vertices, bool colors) {
   RegionBytes b;
   b.working = std::max(300 * triangles, 560 * vertices);
   b.held = std::max(80 * triangles, 150 * vertices);
+  // Colours, counted from the structures rather than measured: the attribute quadric (27 doubles),
+  // the current and output colours and the lock copy (9), the colours in the floor, the assembly
+  // and the result (12), the colour error's sorted input faces (12 bytes a triangle, ~2 triangles a
+  // vertex): ~260 bytes a vertex while simplified, 12 held.
+  if (colors) b.working += 280 * vertices, b.held += 12 * vertices;
   return b;
 }
 
@@ -94,6 +99,34 @@ uint64_t resultBytes(const RegionResult& r) {
          m.origin.size() * 4 + m.triangleCell.size() * 8;
 }
 
+// The root region goes from a few tens of thousands of triangles to ctx.rootTriangles / 2 in one
+// step. On a scan whose welded input keeps non-manifold edges (which both simplifiers freeze),
+// that can break the builder's rules on every run (simplifyRegion then keeps the region whole:
+// a 53 M armadillo scan's root stayed at level 10's 51,858 triangles) or, past the first root
+// level, reach the count only by folding the model (deviations of a third of its size). So when
+// the direct step kept the region whole, or, on a further root level, went over the deviation
+// limit, the root is halved instead, and a halving over the limit keeps the region whole, which
+// ends the level loop (LevelBuilder::endLevel: another root level follows while one gains). The
+// first root level's direct step is never limited, so builds it served keep their bytes.
+static SimplifiedRegion settleRoot(SimplifiedRegion sr, const LoadedMesh& lm, SimplifyRegionOptions so, const RegionTask& task,
+                            const RegionContext& ctx) {
+  const size_t n = lm.triangleCount();
+  const double limit = task.rootDeviationLimit;
+  const bool firstRoot = task.level <= ctx.partitionLevels;
+  const bool keptWhole = sr.triangleCount() == n;
+  const bool overLimit = !firstRoot && limit > 0 && sr.error > limit;
+  if ((!keptWhole && !overLimit) || so.targetTriangles >= n / 2 || n < 2) return sr;
+  const uint32_t attempts = sr.attempts;
+  so.targetTriangles = n / 2;
+  sr = simplifyRegion(lm, so);
+  if (limit > 0 && sr.error > limit) {
+    so.targetTriangles = n;  // no collapse: the region as it is
+    sr = simplifyRegion(lm, so);
+  }
+  sr.attempts += attempts;
+  return sr;
+}
+
 RegionResult processRegion(const RegionTask& task, const RegionContext& ctx) {
   auto start = Clock::now();
   RegionResult out;
@@ -106,22 +139,24 @@ RegionResult processRegion(const RegionTask& task, const RegionContext& ctx) {
   // Simplify to about half with the region's border locked (BMT 4), split by V*(level).
   SimplifyRegionOptions so;
   so.simplifier = ctx.simplifier;
+  so.colorWeight = ctx.colorWeight;
   so.gridStep = ctx.grid.step;
   for (int a = 0; a < 3; ++a) so.gridOrigin[a] = ctx.grid.origin[a];
   // At least one triangle: a region that had some must keep some, or its node would carry no
   // patch and have no arc to the sink (a one-triangle input built such a file).
-  so.targetTriangles = std::max<size_t>(
-      1, task.root ? std::min<size_t>(lm.triangleCount() / 2, ctx.rootTriangles / 2) : lm.triangleCount() / 2);
+  const size_t n = lm.triangleCount();
+  so.targetTriangles = std::max<size_t>(1, task.root ? std::min<size_t>(n / 2, ctx.rootTriangles / 2) : n / 2);
   SimplifiedRegion sr = simplifyRegion(lm, so);
+  if (task.root) sr = settleRoot(std::move(sr), lm, so, task, ctx);
   out.deviation = sr.error;
+  out.colorDeviation = sr.colorError;
   ReplacementMesh& rep = out.replacement;
   rep.level = task.level;
   rep.origin = sr.origin;
   rep.triangles = sr.triangles;
-  for (uint32_t o : sr.origin) {
+  for (uint32_t o : sr.origin)
     if (!lm.normals.empty()) rep.normals.insert(rep.normals.end(), &lm.normals[3 * o], &lm.normals[3 * o] + 3);
-    if (!lm.colors.empty()) rep.colors.insert(rep.colors.end(), &lm.colors[4 * o], &lm.colors[4 * o] + 4);
-  }
+  rep.colors = std::move(sr.colors);  // the input's, or the quadric's best colours (empty without colours)
   rep.triangleCell.resize(sr.triangleCount());
   for (uint32_t t = 0; t < sr.triangleCount(); ++t) {
     uint64_t low = 0;

@@ -10,6 +10,7 @@
 #include <string>
 
 #include "base/error.h"
+#include "mtbuild/color_error.h"
 #include "mtbuild/quadric_simplify.h"
 #include "mtbuild/surface_distance.h"
 #include "patchstore/patch_store.h"
@@ -49,6 +50,7 @@ struct Run {
   std::vector<uint32_t> out;
   std::vector<double> positions;  // Quadric only: 3 per input vertex
   std::vector<uint8_t> moved;     // Quadric only: 1 per input vertex
+  std::vector<uint8_t> colors;    // Quadric with colours only: 4 per input vertex
   float relError = 0;             // Meshopt only
   std::vector<float> pos;         // Meshopt only: centred float positions (+ lock duplicates)
 };
@@ -161,6 +163,17 @@ bool findBrokenRules(const std::vector<uint32_t>& out, const std::vector<uint8_t
   return problem;
 }
 
+// The mean length of the triangles' edges (each edge once per triangle that uses it).
+double meanEdgeLength(const double* positions, const uint32_t* triangles, size_t indexCount) {
+  double sum = 0;
+  for (size_t t = 0; t + 2 < indexCount; t += 3)
+    for (int k = 0; k < 3; ++k) {
+      const double *a = positions + size_t(triangles[t + k]) * 3, *b = positions + size_t(triangles[t + (k + 1) % 3]) * 3;
+      sum += std::sqrt((a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1]) + (a[2] - b[2]) * (a[2] - b[2]));
+    }
+  return indexCount ? sum / double(indexCount) : 0;
+}
+
 // Runs the chosen simplifier until its result keeps the builder's rules (findBrokenRules): after a
 // broken rule the input triangles around the offending vertices are locked and the run redone.
 // Deterministic; usually runs once. Fills `kept`; returns the number of runs.
@@ -180,6 +193,12 @@ int simplifyWithRules(Run& run, const double* positions, size_t vertexCount, con
   QuadricSimplifyOptions qo;
   qo.gridStep = options.gridStep;
   for (int a = 0; a < 3; ++a) qo.gridOrigin[a] = options.gridOrigin[a];
+  if (quadric && options.colors && options.colorWeight > 0) {
+    qo.colors = options.colors;
+    qo.colorScale = options.colorWeight * meanEdgeLength(positions, triangles, indexCount);
+    run.colors.resize(vertexCount * 4);
+    qo.destinationColors = run.colors.data();
+  }
   for (int attempt = 0;; ++attempt) {
     if (quadric) {
       run.out.resize(indexCount);
@@ -198,6 +217,7 @@ int simplifyWithRules(Run& run, const double* positions, size_t vertexCount, con
       run.out.assign(triangles, triangles + indexCount);
       run.moved.assign(run.moved.size(), 0);
       run.positions.assign(positions, positions + run.positions.size());
+      if (!run.colors.empty()) run.colors.assign(options.colors, options.colors + run.colors.size());
       std::fill(kept.begin(), kept.end(), 0);
       for (uint32_t v : run.out) kept[v] = 1;
       return attempt + 1;
@@ -208,8 +228,10 @@ int simplifyWithRules(Run& run, const double* positions, size_t vertexCount, con
   }
 }
 
-// Fills r.origin, r.positions and r.triangles from the run (kept vertices in input order).
-void assembleResult(SimplifiedRegion& r, const Run& run, const double* positions, const std::vector<uint8_t>& kept) {
+// Fills r.origin, r.positions and r.triangles from the run (kept vertices in input order), and
+// r.colors when the input has colours.
+void assembleResult(SimplifiedRegion& r, const Run& run, const double* positions, const std::vector<uint8_t>& kept,
+                    const uint8_t* colors) {
   const size_t vertexCount = kept.size();
   std::vector<uint32_t> remap(vertexCount, ~0u);
   size_t keptCount = 0;
@@ -224,6 +246,10 @@ void assembleResult(SimplifiedRegion& r, const Run& run, const double* positions
       r.origin.push_back(uint32_t(v));
       for (int a = 0; a < 3; ++a) r.positions[size_t(i) * 3 + a] = from[v * 3 + a];
       r.movedVertices += !run.moved.empty() && run.moved[v];
+      if (colors) {
+        const uint8_t* c = run.colors.empty() ? colors + v * 4 : &run.colors[v * 4];
+        r.colors.insert(r.colors.end(), c, c + 4);
+      }
     }
   r.triangles.resize(run.out.size());
   for (size_t i = 0; i < run.out.size(); ++i) r.triangles[i] = remap[run.out[i]];
@@ -316,17 +342,34 @@ SimplifiedRegion simplifyRegion(const double* positions, size_t vertexCount, con
   std::vector<uint8_t> kept(vertexCount);
   SimplifiedRegion r;
   r.attempts = uint32_t(simplifyWithRules(run, positions, vertexCount, triangles, indexCount, locked, used, options, kept));
-  assembleResult(r, run, positions, kept);
+  assembleResult(r, run, positions, kept, options.colors);
   if (options.simplifier == RegionSimplifier::Meshopt && vertexCount)
     r.quadricError = double(run.relError) * double(meshopt_simplifyScale(run.pos.data(), vertexCount, 12));
   if (options.measureError && (run.out.size() < indexCount || r.movedVertices))
     r.error = measureError(r, run, positions, vertexCount, triangles, indexCount, used, kept);
+  if (options.measureError && options.colors && (run.out.size() < indexCount || r.movedVertices || !run.colors.empty())) {
+    ColorErrorInput ce;
+    ce.positions = positions;
+    ce.colors = options.colors;
+    ce.vertexCount = vertexCount;
+    ce.triangles = triangles;
+    ce.triangleCount = triangleCount;
+    ce.resultPositions = r.positions.data();
+    ce.resultColors = r.colors.data();
+    ce.origin = r.origin.data();
+    ce.resultVertexCount = r.origin.size();
+    ce.resultTriangles = r.triangles.data();
+    ce.resultTriangleCount = r.triangleCount();
+    r.colorError = measureColorError(ce);
+  }
   return r;
 }
 
 SimplifiedRegion simplifyRegion(const LoadedMesh& mesh, const SimplifyRegionOptions& options) {
+  SimplifyRegionOptions o = options;
+  if (!mesh.colors.empty()) o.colors = mesh.colors.data();
   return simplifyRegion(mesh.positions.data(), mesh.vertexCount(), mesh.triangles.data(), mesh.triangleCount(),
-                        mesh.locked.empty() ? nullptr : mesh.locked.data(), options);
+                        mesh.locked.empty() ? nullptr : mesh.locked.data(), o);
 }
 
 }  // namespace mt

@@ -46,6 +46,12 @@ struct SimplifyRegionOptions {
   double gridOrigin[3] = {0, 0, 0};
   // Measure SimplifiedRegion::error (exact over its samples; ~0.6x the cost of meshopt_simplify).
   bool measureError = true;
+  // Per-vertex colours (RGBA8, 4 per input vertex) or null. Both simplifiers carry them to the
+  // result and measure SimplifiedRegion::colorError; the quadric one also weighs them in its
+  // collapse costs (attribute_quadric.h) when colorWeight > 0: a full-range colour difference
+  // weighs as much as a distance of colorWeight x the region's mean edge length.
+  const uint8_t* colors = nullptr;
+  double colorWeight = 0;
 };
 
 struct SimplifiedRegion {
@@ -64,6 +70,11 @@ struct SimplifiedRegion {
   double quadricError = 0;  // meshoptimizer's own estimate (absolute units), for reference (Meshopt)
   uint32_t attempts = 0;    // simplifier runs (retries after a rule was broken; for profiling)
   uint32_t movedVertices = 0;  // result vertices not at their input position
+  // With SimplifyRegionOptions::colors: 4 per result vertex (the quadric simplifier's best colour
+  // for a survivor of a collapse, else the input vertex's), and the measured colour deviation
+  // against the input (mtbuild/color_error.h; RGBA distance in 8-bit levels).
+  std::vector<uint8_t> colors;
+  double colorError = 0;
   uint32_t vertexCount() const { return uint32_t(origin.size()); }
   uint32_t triangleCount() const { return uint32_t(triangles.size() / 3); }
 };
@@ -75,7 +86,8 @@ SimplifiedRegion simplifyRegion(const double* positions, size_t vertexCount, con
                                 size_t triangleCount, const uint8_t* locked,
                                 const SimplifyRegionOptions& options);
 
-// The same for a region loaded from the patch store (its `locked` flags).
+// The same for a region loaded from the patch store (its `locked` flags; its colours, when it has
+// them, replace options.colors).
 SimplifiedRegion simplifyRegion(const LoadedMesh& mesh, const SimplifyRegionOptions& options);
 
 }  // namespace mt

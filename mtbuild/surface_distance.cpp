@@ -65,6 +65,40 @@ double squaredPointTriangleDistance(const double p[3], const double a[3], const 
   return pointTriangle2({p[0], p[1], p[2]}, {a[0], a[1], a[2]}, {b[0], b[1], b[2]}, {c[0], c[1], c[2]});
 }
 
+// The same regions as pointTriangle2 (Ericson 5.1.5), returning the nearest point's barycentrics.
+void nearestPointBarycentric(const double p3[3], const double a3[3], const double b3[3], const double c3[3], double bary[3]) {
+  const V3 p{p3[0], p3[1], p3[2]}, a{a3[0], a3[1], a3[2]}, b{b3[0], b3[1], b3[2]}, c{c3[0], c3[1], c3[2]};
+  auto set = [&](double u, double v, double w) { bary[0] = u, bary[1] = v, bary[2] = w; };
+  V3 ab = sub(b, a), ac = sub(c, a), ap = sub(p, a);
+  double d1 = dot(ab, ap), d2 = dot(ac, ap);
+  if (d1 <= 0 && d2 <= 0) return set(1, 0, 0);
+  V3 bp = sub(p, b);
+  double d3 = dot(ab, bp), d4 = dot(ac, bp);
+  if (d3 >= 0 && d4 <= d3) return set(0, 1, 0);
+  double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0 && d1 >= 0 && d3 <= 0) {
+    double v = d1 / (d1 - d3);
+    return set(1 - v, v, 0);
+  }
+  V3 cp = sub(p, c);
+  double d5 = dot(ab, cp), d6 = dot(ac, cp);
+  if (d6 >= 0 && d5 <= d6) return set(0, 0, 1);
+  double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0 && d2 >= 0 && d6 <= 0) {
+    double w = d2 / (d2 - d6);
+    return set(1 - w, 0, w);
+  }
+  double va = d3 * d6 - d5 * d4;
+  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) {
+    double w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+    return set(0, 1 - w, w);
+  }
+  const double sum = va + vb + vc;
+  if (!(sum > 0)) return set(1, 0, 0);  // degenerate (only reached through rounding)
+  double v = vb / sum, w = vc / sum;
+  set(1 - v - w, v, w);
+}
+
 // A dense grid of cubic cells (side `cell`) over the bounding box of the triangles, with the
 // triangle lists in CSR form built by counting sort (two linear passes, no sort, no hashing).
 // Each triangle is listed in every cell its bounding box touches. The cell side is a small
@@ -91,6 +125,7 @@ struct TriangleGrid::Impl {
     V3 p;
     double best2, best;
     double floor2;
+    uint32_t bestTriangle = ~0u;
   };
   // First look for an early exit: among the triangles of cell `c` whose bounding sphere reaches
   // within `floor` of p, test the one with the nearest center first (usually the triangle p
@@ -127,6 +162,7 @@ struct TriangleGrid::Impl {
     if (d2 < q.best2) {
       q.best2 = d2;
       q.best = std::sqrt(d2);
+      q.bestTriangle = t;
       return d2 <= q.floor2;
     }
     return false;
@@ -146,6 +182,7 @@ struct TriangleGrid::Impl {
       if (d2 < q.best2) {
         q.best2 = d2;
         q.best = std::sqrt(d2);
+        q.bestTriangle = t;
         if (d2 <= q.floor2) return true;
       }
     }
@@ -237,7 +274,27 @@ TriangleGrid::~TriangleGrid() { delete impl_; }
 
 double TriangleGrid::distance(const double p[3]) const { return std::sqrt(distance2Above(p, -1.0)); }
 
+namespace {
+// A query's result: its squared distance, and the triangle it was measured to.
+double found(const TriangleGrid::Impl::Q& q, uint32_t& triangle) {
+  triangle = q.bestTriangle;
+  return q.best2;
+}
+}  // namespace
+
 double TriangleGrid::distance2Above(const double p[3], double floor2) const {
+  uint32_t triangle = ~0u;
+  return search(p, floor2, triangle);
+}
+
+uint32_t TriangleGrid::nearest(const double p[3], double* distance2) const {
+  uint32_t triangle = ~0u;
+  const double d2 = search(p, -1.0, triangle);
+  if (distance2) *distance2 = d2;
+  return triangle;
+}
+
+double TriangleGrid::search(const double p[3], double floor2, uint32_t& triangle) const {
   const Impl& g = *impl_;
   constexpr double inf = std::numeric_limits<double>::infinity();
   if (g.items.empty()) return inf;
@@ -255,8 +312,8 @@ double TriangleGrid::distance2Above(const double p[3], double floor2) const {
     c[a] = int32_t(std::min(std::max(u[a], 0.0), double(g.n[a] - 1)));
   }
   const size_t home = g.cellIndex(c[0], c[1], c[2]);
-  if (floor2 > 0 && g.scanNear(home, q, std::sqrt(floor2))) return q.best2;
-  if (g.scan(home, q)) return q.best2;
+  if (floor2 > 0 && g.scanNear(home, q, std::sqrt(floor2))) return found(q, triangle);
+  if (g.scan(home, q)) return found(q, triangle);
   if (q.best2 == inf) {
     // Empty home cell: visit growing shells of cells (clamped to the grid) until a triangle is
     // found; the ball pass below then settles the exact nearest one.
@@ -270,10 +327,10 @@ double TriangleGrid::distance2Above(const double p[3], double floor2) const {
         for (int32_t y = y0; y <= y1; ++y) {
           if (std::abs(z - c[2]) == r || std::abs(y - c[1]) == r) {  // a whole row of the shell
             for (int32_t x = x0; x <= x1; ++x)
-              if (g.scan(g.cellIndex(x, y, z), q)) return q.best2;
+              if (g.scan(g.cellIndex(x, y, z), q)) return found(q, triangle);
           } else {  // only the row's two ends belong to the shell
-            if (c[0] - r >= 0 && g.scan(g.cellIndex(c[0] - r, y, z), q)) return q.best2;
-            if (c[0] + r < g.n[0] && g.scan(g.cellIndex(c[0] + r, y, z), q)) return q.best2;
+            if (c[0] - r >= 0 && g.scan(g.cellIndex(c[0] - r, y, z), q)) return found(q, triangle);
+            if (c[0] + r < g.n[0] && g.scan(g.cellIndex(c[0] + r, y, z), q)) return found(q, triangle);
           }
         }
     }
@@ -303,12 +360,12 @@ double TriangleGrid::distance2Above(const double p[3], double floor2) const {
         size_t cell = g.cellIndex(x, y, z);
         if (cell == home) continue;
         double before = q.best2;
-        if (g.scan(cell, q)) return q.best2;
+        if (g.scan(cell, q)) return found(q, triangle);
         if (q.best2 != before) b = radius();
       }
     }
   }
-  return q.best2;
+  return found(q, triangle);
 }
 
 double sampledDistance(const double* positions, const uint32_t* triangles, size_t triangleCount,

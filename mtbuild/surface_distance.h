@@ -32,15 +32,23 @@ class TriangleGrid {
   // the first triangle found within sqrt(floor2) and returns its squared distance, some value in
   // [d2, floor2]. Either way max(floor2, result) == max(floor2, d2) exactly.
   double distance2Above(const double p[3], double floor2) const;
+  // The nearest triangle to p (its index; the first found among equally near ones, the same for
+  // the same grid and point) and, when distance2 is given, its exact squared distance. ~0u when
+  // the mesh is empty.
+  uint32_t nearest(const double p[3], double* distance2 = nullptr) const;
 
   struct Impl;
  private:
+  double search(const double p[3], double floor2, uint32_t& triangle) const;
   Impl* impl_;
 };
 
 // The point-triangle routine every query uses (Ericson, Real-Time Collision Detection 5.1.5):
 // squared distance from p to triangle abc. Exposed for brute-force references in tests.
 double squaredPointTriangleDistance(const double p[3], const double a[3], const double b[3], const double c[3]);
+// The barycentric coordinates (of a, b, c) of the point of triangle abc nearest to p (the same
+// point squaredPointTriangleDistance measures to); a degenerate triangle gets its nearest corner's.
+void nearestPointBarycentric(const double p[3], const double a[3], const double b[3], const double c[3], double bary[3]);
 
 // Max over samples of the mesh (positions, triangles) -- every vertex that a triangle uses, except
 // those with skipVertex[v] != 0 (known to lie on `to`, e.g. kept vertices), and every triangle

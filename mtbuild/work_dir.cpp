@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <fstream>
 
+#include "base/env.h"
 #include "base/error.h"
 #include "mtbuild/build.h"
 
@@ -16,6 +17,14 @@ namespace mt {
 namespace fs = std::filesystem;
 
 namespace {
+
+// Writes `text` as the whole of `path` and syncs it, through the Env.
+void writeSmallFile(const std::string& path, const std::string& text) {
+  std::unique_ptr<WritableFile> f = Env::Default()->newWritableFile(path);
+  f->append(text.data(), text.size());
+  f->sync();
+  f->close();
+}
 
 bool hasWorkMarker(const std::string& dir) {
   std::error_code ec;
@@ -31,10 +40,18 @@ bool createWorkDir(const std::string& dir, const std::string& output) {
     if (errno == EEXIST) return false;
     fail(dir, std::string("cannot create the work directory: ") + std::strerror(errno));
   }
-  std::ofstream marker(fs::path(dir) / kWorkMarker);
-  marker << "work directory of an MT build of " << fs::weakly_canonical(output, ec).string()
-         << "; removed by the build when it completes\n";
-  if (!marker) fail(dir, std::string("cannot write the marker ") + kWorkMarker);
+  // Through the Env like every file of a build (a full disk is an I/O error naming the file). A
+  // directory whose marker could not be written is removed again: without its marker it would not
+  // be recognised as ours, and --resume would refuse it.
+  const std::string marker = (fs::path(dir) / kWorkMarker).string();
+  try {
+    writeSmallFile(marker, "work directory of an MT build of " + fs::weakly_canonical(output, ec).string() +
+                               "; removed by the build when it completes\n");
+  } catch (...) {
+    fs::remove(marker, ec);
+    fs::remove(dir, ec);
+    throw;
+  }
   return true;
 }
 
@@ -71,11 +88,7 @@ std::string recordedTempPath(const std::string& work, const std::string& output)
 }
 
 void recordTempPath(const std::string& work, const std::string& tempPath) {
-  const std::string path = (fs::path(work) / kTempNameFile).string();
-  std::ofstream f(path);
-  f << fs::path(tempPath).filename().string() << "\n";
-  f.flush();
-  if (!f) fail(path, "cannot write");
+  writeSmallFile((fs::path(work) / kTempNameFile).string(), fs::path(tempPath).filename().string() + "\n");
 }
 
 void clearWorkDir(const std::string& work) {

@@ -462,7 +462,7 @@ std::vector<uint8_t> MtFileReader::readPayload(uint32_t patch) const {
 DecodedPatch MtFileReader::readPatch(uint32_t patch) const {
   std::vector<uint8_t> data = readPayload(patch);
   try {
-    DecodedPatch d = decodePatch(data.data(), data.size(), codec(), grid());
+    DecodedPatch d = decodePatch(data.data(), data.size(), codec(), grid(), patches_[patch].triangles);
     const PatchRecord& p = patches_[patch];
     if (d.triangleCount() != p.triangles)
       throw Error("triangle count " + std::to_string(d.triangleCount()) + " differs from the index (" +

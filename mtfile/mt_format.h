@@ -54,10 +54,13 @@ constexpr char kFooterMagic[8] = {'B', 'M', 'T', '-', 'E', 'N', 'D', '\n'};
 // kPayloadPositionContexts (another residual model) and kPayloadRangeIndices (the index code
 // range-coded ahead of the positions). Version 4: meshopt payloads may also set
 // kPayloadConnectivity (the triangles by the connectivity code instead of the meshopt index code);
-// version-4 writers no longer set kPayloadRangeIndices. Readers accept
-// kMinReadableVersion..kVersion; the payload flags say how each payload is coded, so one decoder
-// reads all four.
-constexpr uint32_t kVersion = 4;
+// version-4 writers no longer set kPayloadRangeIndices. Version 5: NodeRecord::colorError (the
+// word was reserved and zero before, so an older file reads as "colour error not measured", 0).
+// Readers accept kMinReadableVersion..kVersion; the payload flags say how each payload is coded,
+// so one decoder reads all five.
+constexpr uint32_t kVersion = 5;
+// The first version whose nodes carry NodeRecord::colorError.
+constexpr uint32_t kFirstColorErrorVersion = 5;
 constexpr uint32_t kMinReadableVersion = 1;
 constexpr uint32_t kHeaderSize = 256;
 constexpr uint32_t kFooterSize = 32;
@@ -131,7 +134,13 @@ struct NodeRecord {
   uint32_t firstBackArc; // backward star: backArcs[firstBackArc, firstBackArc + backArcCount)
   uint32_t backArcCount;
   uint32_t triangles;    // triangles of the node's fragment (sum over its out-arcs' patches)
-  uint32_t reserved;
+  // Version 5 (was reserved, zero): the fragment's colour error bound, like `error` a measured,
+  // accumulated bound (the max of the predecessors' plus the colour deviation measured against
+  // them, mtbuild/color_error.h): the RGBA distance (Euclidean, in 8-bit levels, 0..510) between a
+  // point's colour and the colour of the nearest point of the full-resolution surface. 0 for the
+  // source and in files without kHasColors; +inf for the sink of a file with kHasColors; monotone
+  // towards the sink like `error`. 0 everywhere in files before version 5 (not measured).
+  float colorError;
 };
 static_assert(sizeof(NodeRecord) == 80, "NodeRecord layout");
 
@@ -187,6 +196,13 @@ constexpr char kMetadataCrs[] = "crs";
 // ---- Patch payloads (the bytes a PatchRecord points at) ----
 //
 // Every payload starts with this header; the rest depends on the file's codec.
+// Its counts agree with the patch's record (triangleCount == PatchRecord::triangles), every vertex
+// is used by a triangle (vertexCount <= 3 * triangleCount), and a payload holds at most
+// kMaxPayloadTriangles triangles (2^22, 42x the builder's largest patch target): readers refuse
+// more before allocating, so a damaged count cannot ask for gigabytes. The payload's size bounds
+// nothing: a flat, regular patch codes at hundreds of triangles per byte (Draco: 355 on a
+// 256 x 256 grid).
+constexpr uint32_t kMaxPayloadTriangles = 1u << 22;
 struct PayloadHeader {
   uint32_t vertexCount;
   uint32_t triangleCount;

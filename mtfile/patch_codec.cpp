@@ -221,15 +221,19 @@ std::vector<uint8_t> encodePatch(const PatchInput& patch, const QuantizationGrid
   throw Error("encodePatch: unknown codec " + std::to_string(uint32_t(options.codec)));
 }
 
-DecodedPatch decodePatch(const uint8_t* data, size_t size, Codec codec, const QuantizationGrid& grid) {
-  if (size < sizeof(PayloadHeader)) bad("shorter than its header (" + std::to_string(size) + " bytes)");
-  PayloadHeader h;
-  std::memcpy(&h, data, sizeof h);
+namespace {
+
+DecodedPatch decodeWithHeader(const uint8_t* data, size_t size, Codec codec, const QuantizationGrid& grid,
+                              const PayloadHeader& h) {
   // Every bit of h.flags is defined (mt_format.h); the codec checks the combinations.
-  // A payload cannot describe more than ~8 triangles per byte in any codec; this bounds every
-  // allocation below by the payload size even when the header is damaged.
-  if (uint64_t(h.triangleCount) > uint64_t(size) * 64 + 64 || uint64_t(h.vertexCount) > uint64_t(size) * 64 + 64)
-    bad("counts too large for the payload size");
+  // The counts bound every allocation below (mt_format.h): not the payload's size, which a flat,
+  // regular patch makes tiny (hundreds of triangles per byte).
+  if (h.triangleCount > format::kMaxPayloadTriangles)
+    bad(std::to_string(h.triangleCount) + " triangles, more than a payload may hold (" +
+        std::to_string(format::kMaxPayloadTriangles) + ")");
+  if (uint64_t(h.vertexCount) > uint64_t(h.triangleCount) * 3)
+    bad(std::to_string(h.vertexCount) + " vertices for " + std::to_string(h.triangleCount) +
+        " triangles (every vertex belongs to a triangle)");
   DecodedPatch out;
   std::vector<uint32_t> qRel;
   switch (codec) {
@@ -249,6 +253,27 @@ DecodedPatch decodePatch(const uint8_t* data, size_t size, Codec codec, const Qu
     out.positions[i] = float(grid.dequantize(int(i % 3), uint32_t(q)));
   }
   return out;
+}
+
+PayloadHeader headerOf(const uint8_t* data, size_t size) {
+  if (size < sizeof(PayloadHeader)) bad("shorter than its header (" + std::to_string(size) + " bytes)");
+  PayloadHeader h;
+  std::memcpy(&h, data, sizeof h);
+  return h;
+}
+
+}  // namespace
+
+DecodedPatch decodePatch(const uint8_t* data, size_t size, Codec codec, const QuantizationGrid& grid) {
+  return decodeWithHeader(data, size, codec, grid, headerOf(data, size));
+}
+
+DecodedPatch decodePatch(const uint8_t* data, size_t size, Codec codec, const QuantizationGrid& grid,
+                         uint32_t indexTriangles) {
+  const PayloadHeader h = headerOf(data, size);
+  if (h.triangleCount != indexTriangles)
+    bad("its header says " + std::to_string(h.triangleCount) + " triangles, the index " + std::to_string(indexTriangles));
+  return decodeWithHeader(data, size, codec, grid, h);
 }
 
 }  // namespace mt

@@ -90,9 +90,14 @@ struct DecodedPatch {
 };
 
 // Throws mt::Error("...") describing what is wrong with the payload; callers prefix the file and
-// patch (MtFileReader::readPatch does).
+// patch (MtFileReader::readPatch does). The header's counts bound every allocation (mt_format.h:
+// at most kMaxPayloadTriangles triangles, 3 vertices per triangle).
 DecodedPatch decodePatch(const uint8_t* data, size_t size, format::Codec codec,
                          const QuantizationGrid& grid);
+// The same for a payload of an MT file, whose index states its triangle count
+// (PatchRecord::triangles): a header that says otherwise is refused before anything is decoded.
+DecodedPatch decodePatch(const uint8_t* data, size_t size, format::Codec codec,
+                         const QuantizationGrid& grid, uint32_t indexTriangles);
 
 // Where a payload's bytes go (bench_mt_payload): the payload and frame headers, the index code
 // (the zstd frame when it holds the index code; with kPayloadRangeIndices the range-coded index

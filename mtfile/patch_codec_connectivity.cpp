@@ -227,6 +227,9 @@ void decodeConnectivity(RangeDecoder& rc, uint32_t triangleCount, uint32_t verte
       }
     }
     if (next > vertexCount) bad("connectivity code has more vertices than the header");
+    // A valid stream is never read past its end: stop at once rather than decode the rest of a
+    // damaged count from zeros.
+    if (rc.overrun() > 0) bad("connectivity stream truncated");
     triangles[t] = v[0], triangles[t + 1] = v[1], triangles[t + 2] = v[2];
     open.add(v[0], v[1]), open.add(v[1], v[2]), open.add(v[2], v[0]);
     if (slot == kNoEdge) fifo.push(v[1], v[0]);

@@ -619,7 +619,7 @@ PayloadBytes meshoptPayloadBytes(const uint8_t* data, size_t size) {
   }
   b.attributes = frame;
   if (connectivity) {
-    if (uint64_t(h.triangleCount) > uint64_t(size) * 64 + 64 || uint64_t(h.vertexCount) > uint64_t(size) * 64 + 64)
+    if (h.triangleCount > format::kMaxPayloadTriangles || uint64_t(h.vertexCount) > uint64_t(h.triangleCount) * 3)
       return b.other = rest, b;
     RangeDecoder rc(rs, rs + rest);
     std::vector<uint32_t> triangles;

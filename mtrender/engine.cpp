@@ -79,7 +79,7 @@ PatchView Engine::baselineFetch(uint32_t id) {
   const MtFileReader& reader = scene_->reader(sp.file);
   const format::PatchRecord& rec = reader.patches()[sp.local];
   try {
-    DecodedPatch d = decodePatch(maps_[sp.file] + rec.offset, rec.size, reader.codec(), reader.grid());
+    DecodedPatch d = decodePatch(maps_[sp.file] + rec.offset, rec.size, reader.codec(), reader.grid(), rec.triangles);
     auto counts = decodeInto(*scene_, id, d, scratch_.data(), scratch_.size(), &v.bound);
     v.vertices = reinterpret_cast<const RenderVertex*>(scratch_.data());
     v.vertexCount = counts.first;
@@ -167,65 +167,174 @@ void Engine::drawArcs(size_t from, size_t to, GlRenderer& gl, FrameRecord& rec, 
   }
 }
 
-void Engine::markOccluded() {
-  for (uint32_t n : occludedList_) occluded_[n] = 0;
-  occludedList_.clear();
-  if (pyramid_.empty()) return;
+void Engine::collectFront(std::vector<uint32_t>& out) {
+  out.clear();
   const auto& nodes = scene_->nodes();
-  auto mark = [&](uint32_t n) {
-    if (occluded_[n] || nodes[n].sink) return;
-    if (pyramid_.occluded(nodes[n].center, nodes[n].radius)) {
-      occluded_[n] = 1;
-      occludedList_.push_back(n);
-    }
+  if (frontStamp_.size() != nodes.size()) frontStamp_.assign(nodes.size(), 0);
+  if (++frontVisit_ == 0) {
+    std::fill(frontStamp_.begin(), frontStamp_.end(), 0);
+    frontVisit_ = 1;
+  }
+  auto add = [&](uint32_t n) {
+    if (nodes[n].sink || nodes[n].source || frontStamp_[n] == frontVisit_) return;
+    frontStamp_[n] = frontVisit_;
+    out.push_back(n);
   };
-  for (uint32_t n : extract_->coarsenCandidates()) mark(n);
-  for (uint32_t a : extract_->cutArcs()) mark(scene_->arcs()[a].cullNode);
-  // The refinements, and two levels of what follows them (what prefetching and the requests
-  // ahead of a still image look at): spheres nest, so what an occluded node replaces is hidden
-  // too and needs no test.
+  for (uint32_t n : extract_->coarsenCandidates()) add(n);
   const auto& arcs = scene_->arcs();
   const auto& inArcs = scene_->inArcs();
   for (uint32_t n : extract_->refineCandidates()) {
-    mark(n);
-    if (occluded_[n]) continue;
+    add(n);
     const SceneNode& s = nodes[n];
     for (uint32_t k = 0; k < s.inArcCount; ++k) {
       const uint32_t m = arcs[inArcs[s.firstInArc + k]].from;
       if (nodes[m].source) continue;
-      mark(m);
-      if (occluded_[m]) continue;
+      add(m);
       const SceneNode& sm = nodes[m];
-      for (uint32_t j = 0; j < sm.inArcCount; ++j) {
-        const uint32_t g = arcs[inArcs[sm.firstInArc + j]].from;
-        if (!nodes[g].source) mark(g);
-      }
+      for (uint32_t j = 0; j < sm.inArcCount; ++j) add(arcs[inArcs[sm.firstInArc + j]].from);
     }
   }
 }
 
+bool Engine::patchSphere(uint32_t id, double grow, std::vector<GlRenderer::QuerySphere>& out) const {
+  if (!cache_) return false;
+  const PatchView v = cache_->view(id);
+  if (!v.vertexCount || v.bound.radius <= 0) return false;
+  const double* o = scene_->patchOrigin(id);
+  out.push_back({{o[0] + v.bound.center[0], o[1] + v.bound.center[1], o[2] + v.bound.center[2]}, double(v.bound.radius) + grow});
+  return true;
+}
+
+void Engine::moveSpheres(uint32_t n, std::vector<GlRenderer::QuerySphere>& out) const {
+  const SceneNode& s = scene_->nodes()[n];
+  const auto& arcs = scene_->arcs();
+  const auto& inArcs = scene_->inArcs();
+  const auto& inS = extract_->inSet();
+  const size_t start = out.size();
+  bool tight = false;
+  // A refinement of n replaces the patches of its out-arcs (its fragment, on screen); a coarsening
+  // replaces those of its in-arcs. Either way the other side lies within n's error of them.
+  auto patchesOf = [&](const SceneArc& a) {
+    for (uint32_t k = 0; k < a.patchCount; ++k)
+      if (!patchSphere(scene_->arcPatches()[a.firstPatch + k], double(s.error), out)) return false;
+    return true;
+  };
+  if (inS[n]) {
+    tight = s.arcCount > 0;
+    for (uint32_t k = 0; k < s.arcCount && tight; ++k) tight = patchesOf(arcs[s.firstArc + k]);
+  } else {
+    tight = s.inArcCount > 0;
+    for (uint32_t k = 0; k < s.inArcCount && tight; ++k) tight = patchesOf(arcs[inArcs[s.firstInArc + k]]);
+  }
+  if (tight) return;
+  out.resize(start);
+  out.push_back({{s.center[0], s.center[1], s.center[2]}, double(s.radius)});
+}
+
+void Engine::testHidden(const std::vector<GlRenderer::QuerySphere>& spheres, std::vector<uint8_t>& hidden, GlRenderer* gl,
+                        FrameRecord& rec, bool presented) {
+  const auto t0 = std::chrono::steady_clock::now();
+  hidden.assign(spheres.size(), 0);
+  if (options_.occlusionTest == OcclusionTest::Queries && gl) {
+    gl->queryHidden(spheres, hidden, presented);
+  } else if (!pyramid_.empty()) {
+    for (size_t i = 0; i < spheres.size(); ++i) hidden[i] = pyramid_.occluded(spheres[i].center, spheres[i].radius);
+  }
+  rec.occlusionTests += uint32_t(spheres.size());
+  rec.occlusionMs += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+
+void Engine::markOccluded(GlRenderer* gl, FrameRecord& rec, bool presented) {
+  for (uint32_t n : occludedList_) occluded_[n] = 0;
+  occludedList_.clear();
+  if (arcHidden_.size() != scene_->arcs().size()) arcHidden_.assign(scene_->arcs().size(), 0);
+  for (uint32_t a : hiddenArcs_) arcHidden_[a] = 0;
+  hiddenArcs_.clear();
+  // One batch (the queries are issued together and their results read once): each front node's
+  // move spheres, then each cut arc's patches; a node or an arc is hidden when all of its are.
+  collectFront(testNodes_);
+  spheres_.clear();
+  sphereOwner_.clear();
+  for (uint32_t i = 0; i < testNodes_.size(); ++i) {
+    moveSpheres(testNodes_[i], spheres_);
+    sphereOwner_.resize(spheres_.size(), i);
+  }
+  const auto& cut = extract_->cutArcs();
+  const uint32_t arcBase = uint32_t(testNodes_.size());
+  for (uint32_t i = 0; i < cut.size(); ++i) {
+    const SceneArc& a = scene_->arcs()[cut[i]];
+    const size_t start = spheres_.size();
+    bool tight = true;
+    for (uint32_t k = 0; k < a.patchCount && tight; ++k) tight = patchSphere(scene_->arcPatches()[a.firstPatch + k], 0, spheres_);
+    if (!tight) {
+      spheres_.resize(start);
+      const SceneNode& s = scene_->nodes()[a.cullNode];
+      spheres_.push_back({{s.center[0], s.center[1], s.center[2]}, double(s.radius)});
+    }
+    sphereOwner_.resize(spheres_.size(), arcBase + i);
+  }
+  testHidden(spheres_, hiddenScratch_, gl, rec, presented);
+  std::vector<uint8_t> all(testNodes_.size() + cut.size(), 1);
+  for (size_t i = 0; i < spheres_.size(); ++i) all[sphereOwner_[i]] &= hiddenScratch_[i];
+  for (uint32_t i = 0; i < testNodes_.size(); ++i)
+    if (all[i]) {
+      occluded_[testNodes_[i]] = 1;
+      occludedList_.push_back(testNodes_[i]);
+    }
+  for (uint32_t i = 0; i < cut.size(); ++i)
+    if (all[arcBase + i]) {
+      arcHidden_[cut[i]] = 1;
+      hiddenArcs_.push_back(cut[i]);
+    }
+}
+
 void Engine::drawWithOcclusion(const View& view, GlRenderer& gl, FrameRecord& rec) {
   const auto& arcs = scene_->arcs();
-  const auto& nodes = scene_->nodes();
-  // Phase 1: what was not hidden last frame, front to back.
+  if (arcHidden_.size() != arcs.size()) arcHidden_.assign(arcs.size(), 0);
+  // Phase 1: what was not hidden at the last test, front to back.
   std::vector<std::pair<double, uint32_t>> all;
   all.swap(drawOrder_);
   deferred_.clear();
-  for (const auto& e : all) (occluded_[arcs[e.second].cullNode] ? deferred_ : drawOrder_).push_back(e);
+  for (const auto& e : all) (arcHidden_[e.second] ? deferred_ : drawOrder_).push_back(e);
   drawArcs(0, drawOrder_.size(), gl, rec, view);
   // This frame's depth so far: phase 2 draws what it does not hide (so nothing visible is ever
   // skipped), and it marks the front hidden for the next update (the LOD lags one frame, as in
-  // Derzapf et al. 4.2).
-  gl.readDepth(depth_);
-  pyramid_.build(depth_, view.width, view.height, view);
+  // Derzapf et al. 4.2). The drawing so far is finished first, so the time measured is the tests'
+  // own (the read-back or the queries' results wait for the rasterizer either way).
+  gl.finish();
+  rec.occlusionFrame = true;
+  if (options_.occlusionTest == OcclusionTest::Pyramid) {
+    const auto t0 = std::chrono::steady_clock::now();
+    gl.readDepth(depth_);
+    pyramid_.build(depth_, view.width, view.height, view);
+    rec.occlusionMs += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  }
+  // Each deferred arc is tested by its patches' own spheres (its node's sphere nests every finer
+  // one and hides far less often).
+  spheres_.clear();
+  sphereOwner_.clear();
+  for (uint32_t i = 0; i < deferred_.size(); ++i) {
+    const SceneArc& a = arcs[deferred_[i].second];
+    const size_t start = spheres_.size();
+    bool tight = true;
+    for (uint32_t k = 0; k < a.patchCount && tight; ++k) tight = patchSphere(scene_->arcPatches()[a.firstPatch + k], 0, spheres_);
+    if (!tight) {
+      spheres_.resize(start);
+      const SceneNode& s = scene_->nodes()[a.cullNode];
+      spheres_.push_back({{s.center[0], s.center[1], s.center[2]}, double(s.radius)});
+    }
+    sphereOwner_.resize(spheres_.size(), i);
+  }
+  testHidden(spheres_, hiddenScratch_, &gl, rec, false);
+  std::vector<uint8_t> hiddenArc(deferred_.size(), 1);
+  for (size_t i = 0; i < spheres_.size(); ++i) hiddenArc[sphereOwner_[i]] &= hiddenScratch_[i];
   drawOrder_.clear();
-  for (const auto& e : deferred_) {
-    const SceneNode& s = nodes[arcs[e.second].cullNode];
-    if (pyramid_.occluded(s.center, s.radius)) ++rec.occludedArcs;
-    else drawOrder_.push_back(e);
+  for (size_t i = 0; i < deferred_.size(); ++i) {
+    if (hiddenArc[i]) ++rec.occludedArcs;
+    else drawOrder_.push_back(deferred_[i]);
   }
   drawArcs(0, drawOrder_.size(), gl, rec, view);
-  markOccluded();
+  markOccluded(&gl, rec);
   // drawOrder_ back to every visible arc (the still path reuses it).
   drawOrder_.swap(all);
 }
@@ -253,24 +362,27 @@ FrameRecord Engine::frame(const CameraPose& pose, const CameraPose& prev, GlRend
     // Moving (or refinement off): the whole cut, within one frame's budget, straight to the output.
     still_ = Still();
     extract_->setBudgetScale(1);
+    // The occlusion tests cost several ms on llvmpipe (docs/mtrender.md): they run on every k-th
+    // frame, k keeping their measured cost near 5% of the budget; the other frames draw every
+    // visible arc and keep the last flags. A frame that runs them draws that much less.
+    const bool testFrame = occlusionOn() && frame_ >= nextOcclusionFrame_;
+    extract_->setFrameOverheadMs(testFrame ? occlusionMs_ : 0);
     static_cast<FrameStats&>(rec) = extract_->update(frame_, view, ahead);
+    extract_->setFrameOverheadMs(0);
     gl.beginFrame(view, settings);
     orderVisibleArcs(view);
-    // The depth read-back costs several ms on llvmpipe (a full-frame sync and copy; 27 vs 6 ms a
-    // frame at 1280x720 on a busy machine): it runs on every k-th frame, k keeping its measured
-    // cost near 5% of the budget; the other frames draw every visible arc and keep the last flags.
-    if (occlusionOn() && frame_ >= nextOcclusionFrame_) {
-      const auto o0 = std::chrono::steady_clock::now();
+    if (testFrame) {
       drawWithOcclusion(view, gl, rec);
-      const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - o0).count();
+      const double ms = rec.occlusionMs;
       occlusionMs_ = occlusionMs_ == 0 ? ms : 0.8 * occlusionMs_ + 0.2 * ms;
       const double share = 0.05 * options_.extract.budgetMs;
       nextOcclusionFrame_ = frame_ + std::clamp<uint64_t>(uint64_t(occlusionMs_ / share) + 1, 1, 16);
     } else {
       drawArcs(0, drawOrder_.size(), gl, rec, view);
       // The cut's new front is marked against the last depth read (its own view: a few frames old
-      // while moving, exact while still), so no frame refines and loads blindly.
-      if (occlusionOn()) markOccluded();
+      // while moving, exact while still), so no frame refines and loads blindly. (Queries have no
+      // depth of their own to keep: the flags of their last frame stay.)
+      if (occlusionOn() && options_.occlusionTest == OcclusionTest::Pyramid) markOccluded(nullptr, rec);
     }
     lastScreenError_ = rec.maxScreenError;
   } else {
@@ -318,9 +430,14 @@ FrameRecord Engine::frame(const CameraPose& pose, const CameraPose& prev, GlRend
         gl.presentAccumulation();
         if (occlusionOn()) {
           // The finished image's depth marks the front hidden for the next image's cut (same view).
-          gl.readDepth(depth_, true);
-          pyramid_.build(depth_, view.width, view.height, view);
-          markOccluded();
+          rec.occlusionFrame = true;
+          if (options_.occlusionTest == OcclusionTest::Pyramid) {
+            const auto o0 = std::chrono::steady_clock::now();
+            gl.readDepth(depth_, true);
+            pyramid_.build(depth_, view.width, view.height, view);
+            rec.occlusionMs += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - o0).count();
+          }
+          markOccluded(&gl, rec, true);
         }
         still_.presentedError = still_.imageError;
         still_.presentedIsCut = true;
@@ -344,8 +461,9 @@ FrameRecord Engine::frame(const CameraPose& pose, const CameraPose& prev, GlRend
     if (left > 1) server_->waitIdle(left);
   }
   rec.frameMs = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-  // The first frame pays for shader compilation: not a sample of the draw cost.
-  if (frame_ > 1) extract_->frameDone(rec.drawnTriangles, rec.frameMs);
+  // The first frame pays for shader compilation: not a sample of the draw cost. Nor are the
+  // occlusion tests (the time model is of drawing; a test frame's budget gives up their time).
+  if (frame_ > 1) extract_->frameDone(rec.drawnTriangles, std::max(0.0, rec.frameMs - rec.occlusionMs));
   if (server_) {
     uint64_t l = server_->loads();
     rec.loads = uint32_t(l - lastLoads_);
@@ -356,7 +474,7 @@ FrameRecord Engine::frame(const CameraPose& pose, const CameraPose& prev, GlRend
     rec.cacheBytes = cache_->stats().usedBytes;
   } else {
     rec.loads = baselineLoads_;
-    rec.misses = baselineLoads_;  // every patch not on the GPU is a synchronous read
+    rec.misses = rec.newMisses = baselineLoads_;  // every patch not on the GPU is a synchronous read
   }
   rec.gpuBytes = gl.gpuBytes();
   return rec;

@@ -34,6 +34,11 @@
 
 namespace mt::render {
 
+// How occlusion culling finds what is hidden (Derzapf et al. 4.2): a max-depth pyramid of the
+// frame's depth read back and tested on the CPU, or hardware occlusion queries of the spheres'
+// boxes. docs/mtrender.md has the measurement that chose the default.
+enum class OcclusionTest { Pyramid, Queries };
+
 struct EngineOptions {
   std::vector<std::string> files;
   uint64_t cacheBytes = 256ull << 20;  // RAM patch cache cap
@@ -45,12 +50,16 @@ struct EngineOptions {
   // Progressive refinement of a still view (above): a still image may take up to this many
   // frames; 1 turns it off (every frame draws the whole cut).
   uint32_t stillFrames = 16;
+  OcclusionTest occlusionTest = OcclusionTest::Pyramid;
 };
 
 struct FrameRecord : FrameStats {
   double frameMs = 0;
   uint32_t occludedArcs = 0;  // cut arcs in the frustum not drawn: hidden in this frame's depth
   uint32_t conedPatches = 0;  // finest patches not drawn: back-facing by their own normal cones
+  double occlusionMs = 0;     // occlusion tests: depth read-back + pyramid + tests, or the queries
+  uint32_t occlusionTests = 0;  // spheres tested for occlusion
+  bool occlusionFrame = false;  // the frame tested its own depth (read back, or queried) and culled by it
   uint32_t loads = 0;        // patches loaded (server) or decoded in the frame (baseline)
   uint64_t loadedTriangles = 0;  // their triangles (server loads only)
   uint64_t cacheBytes = 0;   // RAM cache in use (place holders holding a patch)
@@ -109,8 +118,24 @@ class Engine {
   // not hidden last frame, reads the depth back, draws those of the rest that this frame's depth
   // does not hide, and marks the front nodes the depth hides for the next cut update.
   void drawWithOcclusion(const View& view, GlRenderer& gl, FrameRecord& rec);
-  // Marks the front of the cut (and the cut arcs' nodes) hidden in pyramid_.
-  void markOccluded();
+  // Marks the front of the cut hidden (occluded_, for the cut update) and the cut arcs whose
+  // patches are all hidden (arcHidden_, deferred by the next test's drawing): against pyramid_, or
+  // by queries against the depth the output holds (of the presented image when `presented`).
+  void markOccluded(GlRenderer* gl, FrameRecord& rec, bool presented = false);
+  // The nodes markOccluded tests, each once: the coarsenings, the refinements and two levels past
+  // them (what prefetching and the requests ahead of a still image look at).
+  void collectFront(std::vector<uint32_t>& out);
+  // The spheres that bound what a move on node n would change on screen, appended to `out`:
+  // for a refinement, the patches of its fragment (in the cut), each patch's own sphere grown by
+  // the node's error (the finer patches that replace them lie within it); for a coarsening, the
+  // patches it would replace, grown the same way; otherwise (or when a patch's bound is unknown)
+  // the node's sphere from the file, which nests every finer sphere and is far looser.
+  void moveSpheres(uint32_t n, std::vector<GlRenderer::QuerySphere>& out) const;
+  // Appends patch id's own sphere (world space) grown by `grow`; false when its bound is unknown.
+  bool patchSphere(uint32_t id, double grow, std::vector<GlRenderer::QuerySphere>& out) const;
+  // Which of `spheres` are hidden (by the frame's method); adds the time and tests to rec.
+  void testHidden(const std::vector<GlRenderer::QuerySphere>& spheres, std::vector<uint8_t>& hidden, GlRenderer* gl,
+                  FrameRecord& rec, bool presented);
   bool occlusionOn() const { return options_.extract.cull && options_.extract.occlusion; }
   DepthPyramid pyramid_;
   uint64_t nextOcclusionFrame_ = 0;
@@ -119,6 +144,11 @@ class Engine {
   std::vector<uint8_t> occluded_;       // per node, for ExtractRender::setOccluded
   std::vector<uint32_t> occludedList_;  // the nodes set in occluded_
   std::vector<std::pair<double, uint32_t>> deferred_;
+  std::vector<uint32_t> frontStamp_, testNodes_, sphereOwner_;
+  uint32_t frontVisit_ = 0;
+  std::vector<uint8_t> hiddenScratch_, arcHidden_;
+  std::vector<uint32_t> hiddenArcs_;  // the arcs set in arcHidden_
+  std::vector<GlRenderer::QuerySphere> spheres_;
   // Progressive refinement of a still view.
   struct Still {
     bool active = false;       // the camera has stopped; the screen shows `presented`

@@ -28,6 +28,7 @@
 #include <chrono>
 #include <cstdint>
 #include <unordered_map>
+#include <unordered_set>
 #include <vector>
 
 #include "mtrender/camera.h"
@@ -89,11 +90,13 @@ std::vector<LoadRequest> orderRequests(std::vector<RequestCandidate> candidates,
 
 struct FrameStats {
   double extractMs = 0;
+  double extractCpuMs = 0;       // the update's thread CPU time (its own cost, without waits for a core)
   uint64_t triangles = 0;        // in the cut
   uint32_t patches = 0;          // in the cut
   uint32_t drawnPatches = 0;     // after culling
   uint64_t drawnTriangles = 0;
   uint32_t misses = 0;           // patches wanted for a move but not resident
+  uint32_t newMisses = 0;        // ... of which were not a miss the frame before: each wait counted once
   uint32_t requests = 0, prefetches = 0;
   uint32_t refinements = 0, coarsenings = 0;
   double maxScreenError = 0;     // pixels, over the visible part of the cut
@@ -141,6 +144,9 @@ class ExtractRender {
   // The cut may hold `scale` frames' worth of the render budget (progressive refinement of a still
   // view draws it over that many frames, engine.h); 1 = one frame's worth, the default.
   void setBudgetScale(double scale) { budgetScale_ = scale; }
+  // Milliseconds the next frame spends besides the update and the drawing (the occlusion tests of
+  // engine.h): its render budget gives up that many milliseconds' worth of triangles.
+  void setFrameOverheadMs(double ms) { frameOverheadMs_ = ms; }
   // The render budget of one frame (triangles) at the last update, before the scale above.
   double frameBudget() const { return frameBudget_; }
   uint32_t cutPatchCount() const { return cutPatchCount_; }
@@ -204,7 +210,7 @@ class ExtractRender {
   int64_t visibleDelta(uint32_t n, bool refine, const View& view) const;
   uint32_t cutPatchCount_ = 0;
   double lodScale_ = 1;
-  double budgetScale_ = 1, frameBudget_ = 0;
+  double budgetScale_ = 1, frameBudget_ = 0, frameOverheadMs_ = 0;
   bool frozen_ = false;
   bool lastMemoryFull_ = false;
   uint64_t frame_ = 0;
@@ -220,6 +226,7 @@ class ExtractRender {
   mutable uint32_t keyed_ = 0;  // screen errors computed since the update began
   const std::vector<uint8_t>* occluded_ = nullptr;
   std::unordered_map<uint32_t, uint32_t> consecutive_;  // frames in a row a patch was requested
+  std::unordered_set<uint32_t> missed_;                 // the last frame's misses
   std::vector<uint32_t> touched_;
   double smoothBudget_ = 0;
   uint32_t slackFrames_ = 0;  // frames since the last probe

@@ -57,8 +57,11 @@ void main() {
   vec3 n = normalize(mat3(mv) * normal.xyz);
   vec3 p = (mv * vec4(position, 1.0)).xyz;
   float d = abs(dot(n, normalize(-p)));
-  vec3 base = mode == 0 ? color.rgb * vec3(0.85, 0.82, 0.75) : tint;
-  vColor = vec4(base * (0.2 + 0.8 * d), 1.0);
+  // mode 0: shaded (stone, geometry only); 1: the tint (patch or LOD colours), both lit; 2: vertex
+  // colours as they are, unlit (a scan's colours were captured under real light and carry its
+  // shading already; lighting them again darkens every hollow twice: mtrender/color_mode.h)
+  vec3 base = mode == 0 ? vec3(0.85, 0.82, 0.75) : tint;
+  vColor = mode == 2 ? vec4(color.rgb, 1.0) : vec4(base * (0.2 + 0.8 * d), 1.0);
 }
 )";
 
@@ -66,6 +69,17 @@ const char* kFragmentShader = R"(#version 450 core
 in vec4 vColor;
 out vec4 fragColor;
 void main() { fragColor = vColor; }
+)";
+
+// Occlusion query boxes: position only, no colour written.
+const char* kBoxVertexShader = R"(#version 450 core
+layout(location = 0) in vec3 position;
+uniform mat4 mvp;
+void main() { gl_Position = mvp * vec4(position, 1.0); }
+)";
+
+const char* kBoxFragmentShader = R"(#version 450 core
+void main() {}
 )";
 
 uint32_t compile(GLenum type, const char* src) {
@@ -126,6 +140,12 @@ GlRenderer::GlRenderer(uint64_t gpuCapBytes) : cap_(gpuCapBytes) {
 
 GlRenderer::~GlRenderer() {
   for (auto& [id, b] : buffers_) glDeleteBuffers(1, &b.buffer);
+  if (!queries_.empty()) glDeleteQueries(GLsizei(queries_.size()), queries_.data());
+  if (boxProgram_) {
+    glDeleteProgram(boxProgram_);
+    glDeleteVertexArrays(1, &boxVao_);
+    glDeleteBuffers(1, &boxBuffer_);
+  }
   deleteTarget(accumulation_);
   deleteTarget(presented_);
   if (fbo_) {
@@ -218,13 +238,15 @@ void GlRenderer::setFrameState(const View& view, const DrawSettings& s) {
   glDepthFunc(GL_LESS);
   glDisable(GL_CULL_FACE);
   glPolygonMode(GL_FRONT_AND_BACK, s.wireframe ? GL_LINE : GL_FILL);
+  wireframe_ = s.wireframe;
   glUseProgram(program_);
   viewD_ = view.viewD;
   projD_ = view.projD;
+  nearPlane_ = view.nearPlane;
   glm::mat4 mvp = view.projMatrix * view.viewMatrix;
   glUniformMatrix4fv(locMvp_, 1, GL_FALSE, glm::value_ptr(mvp));
   glUniformMatrix4fv(locMv_, 1, GL_FALSE, glm::value_ptr(view.viewMatrix));
-  glUniform1i(locMode_, s.mode == ColorMode::Shaded ? 0 : 1);
+  glUniform1i(locMode_, s.mode == ColorMode::Shaded ? 0 : s.mode == ColorMode::Vertex || s.mode == ColorMode::Texture ? 2 : 1);
   glUniform3f(locTint_, 1, 1, 1);
   mode_ = s.mode;
   glBindVertexArray(vao_);
@@ -335,6 +357,80 @@ void GlRenderer::readDepth(std::vector<float>& out, bool presented) const {
   glBindFramebuffer(GL_READ_FRAMEBUFFER, t ? t->fbo : fbo_);
   glPixelStorei(GL_PACK_ALIGNMENT, 4);
   glReadPixels(0, 0, w, h, GL_DEPTH_COMPONENT, GL_FLOAT, out.data());
+}
+
+void GlRenderer::queryHidden(const std::vector<QuerySphere>& spheres, std::vector<uint8_t>& hidden, bool presented) {
+  hidden.assign(spheres.size(), 0);
+  if (spheres.empty()) return;
+  if (!boxProgram_) {
+    GLuint vs = compile(GL_VERTEX_SHADER, kBoxVertexShader), fs = compile(GL_FRAGMENT_SHADER, kBoxFragmentShader);
+    boxProgram_ = glCreateProgram();
+    glAttachShader(boxProgram_, vs);
+    glAttachShader(boxProgram_, fs);
+    glLinkProgram(boxProgram_);
+    GLint ok = 0;
+    glGetProgramiv(boxProgram_, GL_LINK_STATUS, &ok);
+    if (!ok) throw Error("mtrender: box shader link error");
+    glDeleteShader(vs);
+    glDeleteShader(fs);
+    locBoxMvp_ = glGetUniformLocation(boxProgram_, "mvp");
+    // The unit cube [-1, 1]^3: 8 corners, 12 triangles.
+    const float corners[8][3] = {{-1, -1, -1}, {1, -1, -1}, {-1, 1, -1}, {1, 1, -1},
+                                 {-1, -1, 1},  {1, -1, 1},  {-1, 1, 1},  {1, 1, 1}};
+    const uint32_t idx[36] = {0, 1, 3, 0, 3, 2, 4, 6, 7, 4, 7, 5, 0, 4, 5, 0, 5, 1,
+                              2, 3, 7, 2, 7, 6, 0, 2, 6, 0, 6, 4, 1, 5, 7, 1, 7, 3};
+    glCreateBuffers(1, &boxBuffer_);
+    glNamedBufferStorage(boxBuffer_, sizeof corners + sizeof idx, nullptr, GL_DYNAMIC_STORAGE_BIT);
+    glNamedBufferSubData(boxBuffer_, 0, sizeof corners, corners);
+    glNamedBufferSubData(boxBuffer_, sizeof corners, sizeof idx, idx);
+    glCreateVertexArrays(1, &boxVao_);
+    glEnableVertexArrayAttrib(boxVao_, 0);
+    glVertexArrayAttribFormat(boxVao_, 0, 3, GL_FLOAT, GL_FALSE, 0);
+    glVertexArrayAttribBinding(boxVao_, 0, 0);
+    glVertexArrayVertexBuffer(boxVao_, 0, boxBuffer_, 0, 3 * sizeof(float));
+    glVertexArrayElementBuffer(boxVao_, boxBuffer_);
+  }
+  if (queries_.size() < spheres.size()) {
+    const size_t old = queries_.size();
+    queries_.resize(spheres.size());
+    glCreateQueries(GL_ANY_SAMPLES_PASSED_CONSERVATIVE, GLsizei(spheres.size() - old), queries_.data() + old);
+  }
+  if (presented && presented_.fbo) glBindFramebuffer(GL_FRAMEBUFFER, presented_.fbo);
+  glPolygonMode(GL_FRONT_AND_BACK, GL_FILL);
+  glColorMask(GL_FALSE, GL_FALSE, GL_FALSE, GL_FALSE);
+  glDepthMask(GL_FALSE);
+  glEnable(GL_DEPTH_TEST);
+  glDepthFunc(GL_LESS);
+  glUseProgram(boxProgram_);
+  glBindVertexArray(boxVao_);
+  std::vector<uint8_t> asked(spheres.size(), 0);
+  for (size_t i = 0; i < spheres.size(); ++i) {
+    const QuerySphere& q = spheres[i];
+    // In eye space, in double (camera-relative: a georeferenced centre is millions of units out);
+    // the box's near face is in front of the sphere's nearest point, so the test is conservative.
+    const glm::dvec4 c = viewD_ * glm::dvec4(q.center[0], q.center[1], q.center[2], 1.0);
+    if (-c.z - q.radius <= nearPlane_) continue;  // reaches the near plane: visible
+    glm::dmat4 m(q.radius);
+    m[3] = glm::dvec4(c.x, c.y, c.z, 1.0);
+    const glm::mat4 mvp(projD_ * m);
+    glUniformMatrix4fv(locBoxMvp_, 1, GL_FALSE, glm::value_ptr(mvp));
+    glBeginQuery(GL_ANY_SAMPLES_PASSED_CONSERVATIVE, queries_[i]);
+    glDrawElements(GL_TRIANGLES, 36, GL_UNSIGNED_INT, reinterpret_cast<const void*>(8 * 3 * sizeof(float)));
+    glEndQuery(GL_ANY_SAMPLES_PASSED_CONSERVATIVE);
+    asked[i] = 1;
+  }
+  for (size_t i = 0; i < spheres.size(); ++i) {
+    if (!asked[i]) continue;
+    GLuint any = 1;
+    glGetQueryObjectuiv(queries_[i], GL_QUERY_RESULT, &any);
+    hidden[i] = any == 0;
+  }
+  glColorMask(GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
+  glDepthMask(GL_TRUE);
+  glPolygonMode(GL_FRONT_AND_BACK, wireframe_ ? GL_LINE : GL_FILL);
+  glUseProgram(program_);
+  glBindVertexArray(vao_);
+  if (presented && presented_.fbo) glBindFramebuffer(GL_FRAMEBUFFER, fbo_);
 }
 
 void GlRenderer::finish() { glFinish(); }

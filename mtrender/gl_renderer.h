@@ -29,7 +29,8 @@ class EglContext {
   void* context_ = nullptr;
 };
 
-enum class ColorMode { Shaded, Patch, Lod };
+// mtrender --color (mtrender/color_mode.h names, parses and chooses them).
+enum class ColorMode { Shaded, Patch, Lod, Vertex, Texture };
 
 struct DrawSettings {
   ColorMode mode = ColorMode::Shaded;
@@ -78,6 +79,17 @@ class GlRenderer {
   // The depth of the output (or of the presented image when `presented`) as window-space depths
   // in [0, 1], rows bottom to top (occlusion culling reads it back; engine.h).
   void readDepth(std::vector<float>& out, bool presented = false) const;
+  // Occlusion queries (Derzapf et al. 4.2): for each sphere (world centre, radius), whether no
+  // sample of its bounding box (aligned with the eye's axes) passes the depth test against the
+  // depth the output holds now (or the presented image's, when `presented`); nothing is written.
+  // A sphere that reaches the near plane is never hidden. Waits for the results (on llvmpipe a
+  // query's result is there once its box is rasterized). The alternative to DepthPyramid,
+  // measured against it: docs/mtrender.md.
+  struct QuerySphere {
+    double center[3];
+    double radius;
+  };
+  void queryHidden(const std::vector<QuerySphere>& spheres, std::vector<uint8_t>& hidden, bool presented = false);
   void finish();
   Image readPixels() const;
   uint64_t gpuBytes() const { return gpuBytes_; }
@@ -112,6 +124,12 @@ class GlRenderer {
   int locMvp_ = -1, locMv_ = -1, locTint_ = -1, locMode_ = -1;
   ColorMode mode_ = ColorMode::Shaded;
   std::unordered_map<uint32_t, Buffer> buffers_;
+  // Occlusion queries: the box program, a unit cube, a pool of query objects.
+  uint32_t boxProgram_ = 0, boxVao_ = 0, boxBuffer_ = 0;
+  int locBoxMvp_ = -1;
+  std::vector<uint32_t> queries_;
+  double nearPlane_ = 0;
+  bool wireframe_ = false;
   uint64_t gpuBytes_ = 0, frame_ = 0, uploads_ = 0;
 };
 

@@ -23,6 +23,7 @@
 #include "base/exit_code.h"
 #include "base/output_path.h"
 #include "base/size.h"
+#include "mtrender/color_mode.h"
 #include "mtrender/engine.h"
 #include "mtrender/viewer.h"
 #include "base/cli_checks.h"
@@ -50,17 +51,19 @@ void writeCsv(const std::string& path, const std::vector<FrameRecord>& frames) {
     out << "frame,frame_ms,extract_ms,triangles,patches,loads,misses,cache_bytes,max_screen_error,"
            "drawn_triangles,drawn_patches,budget_triangles,gpu_bytes,lod_scale,moving,requests,prefetches,"
            "refinements,coarsenings,model_fixed_ms,model_ms_per_mtri,accumulating,image_frames,"
-           "occluded_arcs,occluded_nodes,coned_patches,nodes_keyed,interrupted,loaded_triangles\n";
+           "occluded_arcs,occluded_nodes,coned_patches,nodes_keyed,interrupted,loaded_triangles,new_misses,"
+           "occlusion_ms,occlusion_tests,occlusion_frame,extract_cpu_ms\n";
     char buf[512];
     for (size_t i = 0; i < frames.size(); ++i) {
       const FrameRecord& f = frames[i];
-      std::snprintf(buf, sizeof buf, "%zu,%.3f,%.4f,%llu,%u,%u,%u,%llu,%.4f,%llu,%u,%llu,%llu,%.3f,%d,%u,%u,%u,%u,%.3f,%.1f,%d,%u,%u,%u,%u,%u,%d,%llu\n", i,
+      std::snprintf(buf, sizeof buf, "%zu,%.3f,%.4f,%llu,%u,%u,%u,%llu,%.4f,%llu,%u,%llu,%llu,%.3f,%d,%u,%u,%u,%u,%.3f,%.1f,%d,%u,%u,%u,%u,%u,%d,%llu,%u,%.3f,%u,%d,%.4f\n", i,
                     f.frameMs, f.extractMs, (unsigned long long)f.triangles, f.patches, f.loads, f.misses,
                     (unsigned long long)f.cacheBytes, f.maxScreenError, (unsigned long long)f.drawnTriangles,
                     f.drawnPatches, (unsigned long long)f.budgetTriangles, (unsigned long long)f.gpuBytes, f.lodScale,
                     f.moving ? 1 : 0, f.requests, f.prefetches, f.refinements, f.coarsenings, f.modelA, f.modelB,
                     f.accumulating ? 1 : 0, f.imageFrames, f.occludedArcs, f.occludedNodes, f.conedPatches, f.nodesKeyed,
-                    f.interrupted ? 1 : 0, (unsigned long long)f.loadedTriangles);
+                    f.interrupted ? 1 : 0, (unsigned long long)f.loadedTriangles, f.newMisses,
+                    f.occlusionMs, f.occlusionTests, f.occlusionFrame ? 1 : 0, f.extractCpuMs);
       out << buf;
     }
     if (!out) mt::fail(path, "write failed");
@@ -142,8 +145,9 @@ struct CliOptions {
   std::vector<std::string> files;
   bool headless = false, baseline = false, noPrefetch = false, noCull = false, quiet = false, wireframe = false;
   bool noOcclusion = false;
+  std::string occlusionTest = "pyramid";
   bool cold = false;
-  std::string cameraPath, statsPath, screenshotDir, plotDir, cacheText = "256M", gpuCacheText, colorMode = "shaded";
+  std::string cameraPath, statsPath, screenshotDir, plotDir, cacheText = "256M", gpuCacheText, colorMode = "auto";
   std::string screenshotPath, recordPath = "mtrender-path.txt";
   bool recordGiven = false;
   int frames = 0, width = 1280, height = 720, screenshotEvery = 1, maxFrames = 0;
@@ -206,13 +210,22 @@ void addRenderOptions(CLI::App& app, CliOptions& o) {
   app.add_flag("--no-occlusion", o.noOcclusion,
                "no occlusion culling (by default patches hidden behind nearer geometry in the frame's depth are "
                "neither refined, loaded nor drawn)");
+  app.add_option("--occlusion-test", o.occlusionTest,
+                 "how occlusion culling finds what is hidden: pyramid (the frame's depth read back into a max-depth "
+                 "pyramid, spheres tested on the CPU) or queries (GL occlusion queries of the spheres' boxes); "
+                 "docs/mtrender.md compares them")
+      ->check(CLI::IsMember({"pyramid", "queries"}))
+      ->capture_default_str();
 }
 
 // Drawing, pacing, test hooks and the viewer's options.
 void addDisplayOptions(CLI::App& app, CliOptions& o, CLI::Option*& recordOption) {
   const mt::cli::Interval kDelayMs{0, 60000, false, false, "ms"};
-  app.add_option("--color", o.colorMode, "shaded, patch or lod colours")
-      ->check(CLI::IsMember({"shaded", "patch", "lod"}))
+  app.add_option("--color", o.colorMode,
+                 "auto (vertex when the files have per-vertex colours, else shaded), shaded (geometry only), vertex "
+                 "(the per-vertex colours as captured, unlit), texture (node textures; a file without them falls "
+                 "back to vertex colours, saying so), patch or lod colours")
+      ->check(CLI::IsMember(mt::render::colorModeNames()))
       ->capture_default_str();
   app.add_flag("--wireframe", o.wireframe, "draw edges only");
   app.add_option("--background", o.background, "background colour R G B, each 0-255 (default 20 23 28)")
@@ -275,15 +288,16 @@ EngineOptions engineOptions(const CliOptions& o) {
   eo.extract.prefetch = !o.noPrefetch && !o.baseline;
   eo.extract.cull = !o.noCull;
   eo.extract.occlusion = !o.noOcclusion;
+  eo.occlusionTest = o.occlusionTest == "queries" ? OcclusionTest::Queries : OcclusionTest::Pyramid;
   return eo;
 }
 
 DrawSettings drawSettings(const CliOptions& o) {
   DrawSettings ds;
   ds.wireframe = o.wireframe;
-  if (o.colorMode == "shaded") ds.mode = ColorMode::Shaded;
-  else if (o.colorMode == "patch") ds.mode = ColorMode::Patch;
-  else ds.mode = ColorMode::Lod;  // CLI11 checked the name
+  std::string note;
+  ds.mode = resolveColorMode(o.colorMode, colorSupportOf(o.files), &note);
+  if (!note.empty() && !o.quiet) std::fprintf(stderr, "mtrender: %s\n", note.c_str());
   if (o.background.size() == 3)
     ds.background = glm::vec3(float(o.background[0]), float(o.background[1]), float(o.background[2])) / 255.0f;
   return ds;
@@ -300,6 +314,7 @@ int runViewerFor(const CliOptions& o, const EngineOptions& eo, const DrawSetting
   vo.recordPath = o.recordPath;
   vo.statsPath = o.statsPath;
   vo.draw = ds;
+  vo.colors = colorSupportOf(o.files);
   return runViewer(vo);
 }
 
@@ -370,13 +385,16 @@ void printSummary(const CliOptions& o, const EngineOptions& eo, const std::vecto
   const int frames = int(recs.size());
   size_t within = 0;
   uint64_t maxCache = 0, maxGpu = 0, drawnSum = 0, loadedSum = 0;
-  double wantedSum = 0, missSum = 0;
-  size_t extractWithin = 0;
+  double wantedSum = 0, missSum = 0, newMissSum = 0;
+  size_t extractWithin = 0, extractCpuWithin = 0;
+  double extractCpuMax = 0;
   const double deadline = eo.extract.extractMs > 0 ? eo.extract.extractMs : std::min(2.0, o.budgetMs / 20);
   std::vector<double> extract, frameMs;
   for (const auto& r : recs) {
     within += r.frameMs <= o.budgetMs;
     extractWithin += r.extractMs <= deadline;
+    extractCpuWithin += r.extractCpuMs <= deadline;
+    extractCpuMax = std::max(extractCpuMax, r.extractCpuMs);
     drawnSum += r.drawnTriangles;
     loadedSum += r.loadedTriangles;
     maxCache = std::max(maxCache, r.cacheBytes);
@@ -384,6 +402,7 @@ void printSummary(const CliOptions& o, const EngineOptions& eo, const std::vecto
     extract.push_back(r.extractMs);
     frameMs.push_back(r.frameMs);
     missSum += r.misses;
+    newMissSum += r.newMisses;
     wantedSum += r.misses + r.drawnPatches;
   }
   const double missRate = wantedSum > 0 ? missSum / wantedSum : 0;
@@ -409,6 +428,9 @@ void printSummary(const CliOptions& o, const EngineOptions& eo, const std::vecto
   std::printf("extract_ms_max %.4f\n", extract.empty() ? 0 : *std::max_element(extract.begin(), extract.end()));
   std::printf("extract_within_deadline_pct %.2f (deadline %.3f ms, heaps and prefetch included)\n",
               100.0 * double(extractWithin) / double(std::max(1, frames)), deadline);
+  std::printf("extract_cpu_within_deadline_pct %.2f (its thread's CPU time: the update's own cost, without waits for a core)\n",
+              100.0 * double(extractCpuWithin) / double(std::max(1, frames)));
+  std::printf("extract_cpu_ms_max %.4f\n", extractCpuMax);
   std::printf("drawn_triangles_total %llu\n", (unsigned long long)drawnSum);
   std::printf("loaded_triangles_total %llu\n", (unsigned long long)loadedSum);
   std::printf("first_frame_ms %.1f\n", firstFrameMs);
@@ -423,6 +445,7 @@ void printSummary(const CliOptions& o, const EngineOptions& eo, const std::vecto
   std::printf("gpu_cap_bytes %llu\n", (unsigned long long)(eo.gpuCacheBytes ? eo.gpuCacheBytes : eo.cacheBytes));
   std::printf("miss_rate %.4f\n", missRate);
   std::printf("misses_total %.0f\n", missSum);
+  std::printf("new_misses_total %.0f\n", newMissSum);
   std::printf("second_chance %llu evictions %llu urgent_evictions %llu given_up %llu\n",
               (unsigned long long)cs.secondChance, (unsigned long long)cs.evictions,
               (unsigned long long)cs.urgentEvictions, (unsigned long long)cs.givenUp);

@@ -56,18 +56,46 @@ bool DepthPyramid::occluded(const double center[3], double radius) const {
   // The sphere's nearest depth in window space (the projection of the point on the view axis).
   const glm::dvec4 nq = view_.projD * glm::dvec4(0, 0, -nearest, 1.0);
   const double sphereDepth = (nq.z / nq.w) * 0.5 + 0.5;
-  // The level where the rectangle spans at most ~2 texels each way: at most 3 x 3 reads.
+  // Start at the level where the rectangle spans at most ~2 texels each way (at most 3 x 3 reads),
+  // and descend into a texel only where its farthest depth does not hide the sphere: the answer is
+  // that of every pixel of the rectangle (a coarse texel that also covers a window in the occluder
+  // would otherwise make every sphere near the window visible), at a cost that grows with the
+  // occluder's edges inside the rectangle, not with its area. Past kMaxVisits texels the sphere is
+  // taken as visible (conservative).
   const double extent = std::max(px1 - px0, py1 - py0);
   int level = extent <= 1 ? 0 : int(std::ceil(std::log2(extent / 2)));
   level = std::clamp(level, 0, int(levels_.size()) - 1);
-  const Level& l = levels_[size_t(level)];
-  const int tx0 = int(px0) >> level, tx1 = std::min(int(px1) >> level, l.width - 1);
-  const int ty0 = int(py0) >> level, ty1 = std::min(int(py1) >> level, l.height - 1);
-  float farthest = 0;
-  for (int y = ty0; y <= ty1; ++y)
-    for (int x = tx0; x <= tx1; ++x) farthest = std::max(farthest, l.depth[size_t(y) * l.width + x]);
+  const int rx0 = int(px0), rx1 = int(px1), ry0 = int(py0), ry1 = int(py1);
   // Behind everything drawn there (a margin for the 24-bit depth buffer's rounding).
-  return sphereDepth > double(farthest) + 1e-6;
+  const float limit = float(sphereDepth - 1e-6);
+  constexpr int kMaxVisits = 4096;
+  int visits = 0;
+  struct Texel {
+    int level, x, y;
+  };
+  std::vector<Texel> stack;
+  const Level& top = levels_[size_t(level)];
+  for (int y = ry0 >> level; y <= std::min(ry1 >> level, top.height - 1); ++y)
+    for (int x = rx0 >> level; x <= std::min(rx1 >> level, top.width - 1); ++x) stack.push_back({level, x, y});
+  while (!stack.empty()) {
+    const Texel t = stack.back();
+    stack.pop_back();
+    if (++visits > kMaxVisits) return false;
+    const Level& l = levels_[size_t(t.level)];
+    if (l.depth[size_t(t.y) * l.width + t.x] < limit) continue;  // this texel hides the sphere
+    if (t.level == 0) return false;                              // a pixel where the sphere may show
+    // The children of the texel that overlap the rectangle.
+    const int cl = t.level - 1;
+    const Level& c = levels_[size_t(cl)];
+    for (int dy = 0; dy < 2; ++dy)
+      for (int dx = 0; dx < 2; ++dx) {
+        const int cx = 2 * t.x + dx, cy = 2 * t.y + dy;
+        if (cx >= c.width || cy >= c.height) continue;
+        if (((cx + 1) << cl) - 1 < rx0 || (cx << cl) > rx1 || ((cy + 1) << cl) - 1 < ry0 || (cy << cl) > ry1) continue;
+        stack.push_back({cl, cx, cy});
+      }
+  }
+  return true;
 }
 
 }  // namespace mt::render

@@ -115,7 +115,7 @@ bool pressed(GLFWwindow* window, ViewerState& st, int key) {
 void handleKeys(GLFWwindow* window, ViewerState& st, Engine& engine, const ViewerOptions& options) {
   if (pressed(window, st, GLFW_KEY_ESCAPE)) glfwSetWindowShouldClose(window, 1);
   if (pressed(window, st, GLFW_KEY_X)) st.draw.wireframe = !st.draw.wireframe;
-  if (pressed(window, st, GLFW_KEY_C)) st.draw.mode = ColorMode((int(st.draw.mode) + 1) % 3);
+  if (pressed(window, st, GLFW_KEY_C)) st.draw.mode = nextColorMode(st.draw.mode, options.colors);
   if (pressed(window, st, GLFW_KEY_F)) engine.extract().setFrozen(st.frozen = !st.frozen);
   if (pressed(window, st, GLFW_KEY_H)) st.hud = !st.hud;
   if (pressed(window, st, GLFW_KEY_P)) st.wantScreenshot = true;
@@ -218,8 +218,7 @@ void drawHud(GLFWwindow* window, const ViewerState& st, const FrameRecord& last,
     ImGui::Text("screen error %.2f px   LOD scale %.2f", last.maxScreenError, last.lodScale);
     if (last.accumulating) ImGui::Text("still view: refining, images of %u frame(s)", st.lastImageFrames);
     ImGui::Separator();
-    static const char* modes[] = {"shaded", "patch colours", "LOD colours"};
-    ImGui::Text("[C] %s  [X] wireframe %s  [F] cut %s", modes[int(st.draw.mode)], st.draw.wireframe ? "on" : "off",
+    ImGui::Text("[C] %s  [X] wireframe %s  [F] cut %s", colorModeName(st.draw.mode), st.draw.wireframe ? "on" : "off",
                 st.frozen ? "FROZEN" : "live");
     ImGui::Text("[R] record %s  [L] replay %s  [P] screenshot  [H] HUD", st.recording ? "ON" : "off",
                 st.replaying ? "ON" : "off");

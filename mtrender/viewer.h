@@ -5,6 +5,7 @@
 
 #include <string>
 
+#include "mtrender/color_mode.h"
 #include "mtrender/engine.h"
 #include "mtrender/gl_renderer.h"
 
@@ -19,6 +20,7 @@ struct ViewerOptions {
   std::string recordPath = "mtrender-path.txt";
   std::string statsPath;       // CSV as in headless mode
   DrawSettings draw;
+  ColorSupport colors;         // what the C key cycles through (color_mode.h)
 };
 
 // Returns the process exit code. Throws mt::Error (no display, no GL 4.5, bad file).

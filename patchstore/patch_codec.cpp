@@ -48,31 +48,37 @@ void decodeGeometry(const std::string& payload, const VertexLayout& layout, Patc
   ByteReader r(payload, source);
   auto h = r.get<GeometryHeader>();
   if (h.flags != layoutFlags(layout)) fail(source, "geometry block has the wrong vertex layout");
-  size_t nv = h.vertexCount, nt = h.triangleCount;
+  const size_t nv = h.vertexCount, nt = h.triangleCount;
+  // Every array is found in the block before anything is allocated: a damaged count must not ask
+  // for gigabytes the block does not hold.
+  const size_t positionBytes = nv * 3 * (layout.doublePrecision ? sizeof(double) : sizeof(float));
+  const char* positions = r.getRaw(positionBytes);
+  const char* normals = layout.normals ? r.getRaw(nv * 3 * sizeof(float)) : nullptr;
+  const char* colors = layout.colors ? r.getRaw(nv * 4) : nullptr;
+  const char* triangles = r.getRaw(nt * 3 * sizeof(uint32_t));
+  if (!r.atEnd()) fail(source, "geometry block has trailing bytes");
   out.positions.resize(nv * 3);
   if (layout.doublePrecision) {
-    std::memcpy(out.positions.data(), r.getRaw(nv * 3 * sizeof(double)), nv * 3 * sizeof(double));
+    if (nv) std::memcpy(out.positions.data(), positions, positionBytes);  // memcpy(null, ..., 0) is UB
   } else {
-    const char* raw = r.getRaw(nv * 3 * sizeof(float));
     for (size_t i = 0; i < nv * 3; ++i) {
       float f;
-      std::memcpy(&f, raw + i * sizeof(float), sizeof f);
+      std::memcpy(&f, positions + i * sizeof(float), sizeof f);
       out.positions[i] = f;
     }
   }
   out.normals.clear();
   out.colors.clear();
-  if (layout.normals) {
+  if (normals) {
     out.normals.resize(nv * 3);
-    std::memcpy(out.normals.data(), r.getRaw(nv * 3 * sizeof(float)), nv * 3 * sizeof(float));
+    if (nv) std::memcpy(out.normals.data(), normals, nv * 3 * sizeof(float));
   }
-  if (layout.colors) {
+  if (colors) {
     out.colors.resize(nv * 4);
-    std::memcpy(out.colors.data(), r.getRaw(nv * 4), nv * 4);
+    if (nv) std::memcpy(out.colors.data(), colors, nv * 4);
   }
   out.triangles.resize(nt * 3);
-  std::memcpy(out.triangles.data(), r.getRaw(nt * 3 * sizeof(uint32_t)), nt * 3 * sizeof(uint32_t));
-  if (!r.atEnd()) fail(source, "geometry block has trailing bytes");
+  if (nt) std::memcpy(out.triangles.data(), triangles, nt * 3 * sizeof(uint32_t));
   for (size_t i = 0; i < out.triangles.size(); ++i)
     if (out.triangles[i] >= nv)
       fail(source, "triangle " + std::to_string(i / 3) + " references vertex " +
@@ -89,10 +95,10 @@ std::string encodeBoundary(const std::vector<BoundaryEntry>& entries) {
 std::vector<BoundaryEntry> decodeBoundary(const std::string& payload, const std::string& source) {
   ByteReader r(payload, source);
   uint32_t n = r.get<uint32_t>();
-  std::vector<BoundaryEntry> entries(n);
-  const void* raw = r.getRaw(size_t(n) * sizeof(BoundaryEntry));
-  if (n) std::memcpy(entries.data(), raw, size_t(n) * sizeof(BoundaryEntry));  // memcpy(null, ..., 0) is UB
+  const void* raw = r.getRaw(size_t(n) * sizeof(BoundaryEntry));  // there before it is allocated
   if (!r.atEnd()) fail(source, "boundary block has trailing bytes");
+  std::vector<BoundaryEntry> entries(n);
+  if (n) std::memcpy(entries.data(), raw, size_t(n) * sizeof(BoundaryEntry));  // memcpy(null, ..., 0) is UB
   return entries;
 }
 

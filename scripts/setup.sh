@@ -13,7 +13,7 @@ PACKAGES=(
   libcli11-dev libgtest-dev libgmock-dev libbenchmark-dev libnanoflann-dev
   xvfb xauth gnuplot-nox time
   libimgui-dev libpng-dev libopengl-dev
-  nlohmann-json3-dev nodejs chromium
+  nlohmann-json3-dev nodejs chromium libproj-dev proj-bin
 )
 
 missing=()

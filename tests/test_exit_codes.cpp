@@ -95,7 +95,7 @@ TEST_F(ExitCodes, CorruptFileIsThreeInEveryReader) {
   const std::string index = tmp.file("index.mt");
   fs::copy_file(mt(), index);
   flipByte(index, reader->header().metaOffset + 5, 0x01);
-  for (const std::string& tool : {"mtinfo", "mtverify"}) {
+  for (const std::string tool : {"mtinfo", "mtverify"}) {
     CommandResult r = runTool(tool, index);
     EXPECT_EQ(r.exitCode, mt::kExitCorruption) << tool << ": " << r.output;
     EXPECT_TRUE(has(r.output, tool + ": " + index + ": ")) << r.output;
@@ -164,12 +164,16 @@ TEST_F(ExitCodes, RandomByteFlipsAreReportedWithThePatchOrSection) {
       // stderr only (the reports), in a subshell so runShell's own 2>&1 does not undo it.
       CommandResult r = runShell("(" + binDir() + "/" + command + " " + path + " 2>&1 >/dev/null)");
       EXPECT_NE(r.exitCode, 0) << command << " missed it:\n" << r.output;
-      if (offset >= 16) EXPECT_EQ(r.exitCode, mt::kExitCorruption) << command << ":\n" << r.output;
+      if (offset >= 16) {
+        EXPECT_EQ(r.exitCode, mt::kExitCorruption) << command << ":\n" << r.output;
+      }
       const bool named = has(r.output, "patch ") || has(r.output, "header") || has(r.output, "footer") ||
                          has(r.output, "index") || has(r.output, "magic") || has(r.output, "version") ||
                          has(r.output, "padding");
       EXPECT_TRUE(named) << command << " names no patch or section:\n" << r.output;
-      if (payload) EXPECT_TRUE(has(r.output, "patch ")) << command << ":\n" << r.output;
+      if (payload) {
+        EXPECT_TRUE(has(r.output, "patch ")) << command << ":\n" << r.output;
+      }
     }
   }
   EXPECT_GT(inPayloads, flips / 2) << "most of a file is payloads";

@@ -16,6 +16,7 @@
 #include "base/error.h"
 #include "base/exit_code.h"
 #include "mtbuild/build.h"
+#include "mtbuild/work_dir.h"
 #include "patchstore/cell_assigner.h"
 #include "patchstore/heal/heal.h"
 #include "patchstore/io/ply_writer.h"
@@ -106,7 +107,7 @@ TEST(Faults, EveryWriteFsyncAndRenameOfABuildLeavesNothingOrTheWholeFileAndResum
   ASSERT_GT(counts[2], 0);
 
   const std::string out = tmp.file("out.mt");
-  int injected = 0, resumedFromCheckpoint = 0;
+  int injected = 0, resumedFromCheckpoint = 0, checkedFiles = 0;
   for (auto op : {mt::FaultInjectionEnv::Op::Write, mt::FaultInjectionEnv::Op::Sync, mt::FaultInjectionEnv::Op::Rename}) {
     const int64_t count = counts[int(op)];
     for (int64_t k = 1; k <= count; ++k) {
@@ -129,7 +130,31 @@ TEST(Faults, EveryWriteFsyncAndRenameOfABuildLeavesNothingOrTheWholeFileAndResum
       ASSERT_TRUE(failed);
       ++injected;
       // Nothing, or the whole file, under the final name.
-      if (fs::exists(out)) EXPECT_EQ(readFile(out), reference);
+      if (fs::exists(out)) {
+        EXPECT_EQ(readFile(out), reference);
+      }
+      // Every file the failed build left for --resume (its work directory, its temporary output)
+      // was written through the Env: no write of the build escapes this test.
+      // (A file counts as written through the Env when it, or a directory above it, was opened or
+      // renamed to through it: the ingest renames its finished store directory into place.)
+      auto throughEnv = [&](fs::path p) {
+        for (; p.has_relative_path(); p = p.parent_path())
+          if (env.written.count(p.string())) return true;
+        return false;
+      };
+      for (const std::string& name : filesOf(out)) {
+        const fs::path p = fs::path(out).parent_path() / name;
+        if (name == "out.mt.lock") continue;  // a lock: no data
+        if (fs::is_regular_file(p)) {
+          EXPECT_TRUE(throughEnv(p)) << p << " was not written through the Env";
+        }
+        if (fs::is_directory(p))
+          for (const auto& e : fs::recursive_directory_iterator(p))
+            if (e.is_regular_file() && e.path().filename() != mt::kWorkLock) {
+              EXPECT_TRUE(throughEnv(e.path())) << e.path() << " was not written through the Env";
+              ++checkedFiles;
+            }
+      }
       // --resume (from the checkpoint, or from the input when there is none) gives the same bytes
       // and leaves nothing else behind.
       mt::BuildOptions resume = options;
@@ -144,6 +169,7 @@ TEST(Faults, EveryWriteFsyncAndRenameOfABuildLeavesNothingOrTheWholeFileAndResum
               "checkpoint\n",
               injected, (long long)counts[0], (long long)counts[1], (long long)counts[2], resumedFromCheckpoint);
   EXPECT_GT(resumedFromCheckpoint, 0);
+  EXPECT_GT(checkedFiles, 0);
 }
 
 TEST(Faults, DiskFullAnywhereNamesTheFileAndLeavesNoPartialOutput) {

@@ -1,18 +1,33 @@
 // What the fuzzers of fuzz/ found, each kept as a regression test of the normal suite (the
 // sanitizer stage of scripts/test.sh runs these under ASan+UBSan, where the undefined behaviour
-// itself is caught, not only a wrong answer). docs/hardening.md lists the findings.
+// itself is caught, not only a wrong answer), and the bounds the readers put on damaged counts.
+// docs/hardening.md lists the findings.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstdint>
+#include <cstring>
+#include <filesystem>
+#include <set>
 #include <string>
 #include <vector>
 
+#include <xxhash.h>
+
+#include <fstream>
+
 #include "base/error.h"
+#include "base/exit_code.h"
+#include "mtfile/mt_file.h"
 #include "mtfile/patch_codec.h"
 #include "mtrender/camera.h"
+#include "patchstore/store_impl.h"
 #include "test_support.h"
 
 using mt::test::TempDir;
+using mt::test::readFile;
+using mt::test::runShell;
+using mt::test::runTool;
 using mt::test::writeFile;
 
 // fuzz_patch_meshopt: a stored (not zstd-compressed) stream with raw size 0 reached memcpy with
@@ -56,4 +71,164 @@ TEST(FuzzRegressions, CameraPathWithNonFiniteOrTrailingWordsIsRefused) {
   // The seed paths still load.
   writeFile(tmp.file("good"), "space unit\nfov 30\n0 -3 1 0 0 0\n1 -2 1 0 0 0 0 0 1\n");
   EXPECT_EQ(mt::render::loadCameraPath(tmp.file("good"), centre, 4.0).poses.size(), 2u);
+}
+
+// The patch decoders' bound on a payload's counts. It was 64 triangles per payload byte, which a
+// large, perfectly flat, regular patch exceeds (Draco codes a 128 x 128 grid at 135 triangles per
+// byte): such a patch of a valid file was refused as damaged. The bound is now the count the
+// file's index states (PatchRecord::triangles, which the header must equal) and the format's
+// limit (kMaxPayloadTriangles, 3 vertices per triangle), checked before anything is allocated.
+TEST(PayloadBounds, ALargeFlatRegularPatchDecodesAndDamagedCountsAreRefused) {
+  const int n = 128;
+  std::vector<double> p;
+  std::vector<uint32_t> t;
+  for (int j = 0; j < n; ++j)
+    for (int i = 0; i < n; ++i) p.insert(p.end(), {double(i), double(j), 0.0});
+  for (int j = 0; j + 1 < n; ++j)
+    for (int i = 0; i + 1 < n; ++i) {
+      const uint32_t a = uint32_t(j * n + i), b = a + 1, c = a + uint32_t(n), d = c + 1;
+      t.insert(t.end(), {a, b, d, a, d, c});
+    }
+  const double lo[3] = {0, 0, 0}, hi[3] = {n, n, 1};
+  const mt::QuantizationGrid grid = mt::QuantizationGrid::fromBounds(lo, hi, 1.0);
+  mt::PatchInput in;
+  in.positions = p.data();
+  in.vertexCount = p.size() / 3;
+  in.triangles = t.data();
+  in.triangleCount = t.size() / 3;
+  auto corners = [](const mt::DecodedPatch& d) {
+    std::multiset<std::vector<uint32_t>> out;
+    for (size_t k = 0; k < d.triangles.size(); k += 3) {
+      std::vector<uint32_t> tri;
+      for (int c = 0; c < 3; ++c) tri.insert(tri.end(), &d.q[3 * d.triangles[k + c]], &d.q[3 * d.triangles[k + c]] + 3);
+      out.insert(tri);
+    }
+    return out;
+  };
+  std::multiset<std::vector<uint32_t>> expected;
+  for (size_t k = 0; k < t.size(); k += 3) {
+    std::vector<uint32_t> tri;
+    for (int c = 0; c < 3; ++c)
+      for (int a = 0; a < 3; ++a) tri.push_back(uint32_t(p[3 * t[k + c] + a]));
+    expected.insert(tri);
+  }
+  const uint32_t triangles = uint32_t(in.triangleCount);
+  for (auto codec : {mt::format::Codec::Meshopt, mt::format::Codec::Draco}) {
+    SCOPED_TRACE(codec == mt::format::Codec::Draco ? "draco" : "meshopt");
+    mt::PatchCodecOptions o;
+    o.codec = codec;
+    const std::vector<uint8_t> payload = mt::encodePatch(in, grid, o);
+    if (codec == mt::format::Codec::Draco) {
+      EXPECT_GT(double(triangles) / double(payload.size()), 64.0) << payload.size();
+    }
+    mt::DecodedPatch d = mt::decodePatch(payload.data(), payload.size(), codec, grid, triangles);
+    ASSERT_EQ(d.triangleCount(), triangles);
+    // Rotation of each triangle's corners may differ from the input's: compare as rotated sets.
+    auto canon = [](std::multiset<std::vector<uint32_t>> s) {
+      std::multiset<std::vector<uint32_t>> out;
+      for (auto tri : s) {
+        std::vector<uint32_t> best = tri;
+        for (int r = 1; r < 3; ++r) {
+          std::rotate(tri.begin(), tri.begin() + 3, tri.end());
+          best = std::min(best, tri);
+        }
+        out.insert(best);
+      }
+      return out;
+    };
+    EXPECT_EQ(canon(corners(d)), canon(expected));
+    EXPECT_EQ(mt::decodePatch(payload.data(), payload.size(), codec, grid).triangleCount(), triangles);
+
+    // The index says otherwise: refused before decoding, naming both counts.
+    try {
+      mt::decodePatch(payload.data(), payload.size(), codec, grid, triangles - 1);
+      ADD_FAILURE() << "a header that differs from the index was accepted";
+    } catch (const mt::Error& e) {
+      EXPECT_NE(std::string(e.what()).find("its header says " + std::to_string(triangles) + " triangles, the index " +
+                                           std::to_string(triangles - 1)),
+                std::string::npos)
+          << e.what();
+    }
+    // Counts beyond the format's limits: refused, whatever the index says.
+    std::vector<uint8_t> damaged = payload;
+    mt::format::PayloadHeader h;
+    std::memcpy(&h, damaged.data(), sizeof h);
+    h.triangleCount = mt::format::kMaxPayloadTriangles + 1;
+    std::memcpy(damaged.data(), &h, sizeof h);
+    EXPECT_THROW(mt::decodePatch(damaged.data(), damaged.size(), codec, grid, h.triangleCount), mt::Error);
+    EXPECT_THROW(mt::decodePatch(damaged.data(), damaged.size(), codec, grid), mt::Error);
+    h.triangleCount = triangles;
+    h.vertexCount = 3 * triangles + 1;
+    std::memcpy(damaged.data(), &h, sizeof h);
+    EXPECT_THROW(mt::decodePatch(damaged.data(), damaged.size(), codec, grid, triangles), mt::Error);
+  }
+}
+
+// A file whose index and payload disagree on a patch's triangle count, with every checksum right (a
+// writer's bug, not damage on disk): mtinfo --check, mtverify and mtextract each refuse it as a
+// corrupt file, naming the patch and both counts.
+TEST(PayloadBounds, AnIndexCountThePayloadDisagreesWithIsNamedByEveryTool) {
+  TempDir tmp;
+  ASSERT_EQ(runTool("mtgen", "-o " + tmp.file("in.ply") + " -t 2k -s 5").exitCode, 0);
+  ASSERT_EQ(runTool("mtbuild", tmp.file("in.ply") + " -o " + tmp.file("a.mt") + " --patch-triangles 100 --threads 1 -q").exitCode, 0);
+  std::string bytes = readFile(tmp.file("a.mt"));
+  uint32_t patch = 0, triangles = 0;
+  {
+    auto r = mt::MtFileReader::open(tmp.file("a.mt"));
+    patch = uint32_t(r->patches().size() - 1);  // on the top level's arc: in every cut
+    triangles = r->patches()[patch].triangles;
+    const uint64_t record = r->header().patchesOffset + uint64_t(patch) * sizeof(mt::format::PatchRecord);
+    const uint32_t claimed = triangles + 1;
+    std::memcpy(&bytes[record + offsetof(mt::format::PatchRecord, triangles)], &claimed, 4);
+    // The footer's checksum over the header and the index, made right again.
+    mt::format::FileHeader h;
+    std::memcpy(&h, bytes.data(), sizeof h);
+    const size_t footer = bytes.size() - mt::format::kFooterSize;
+    XXH64_state_t* st = XXH64_createState();
+    XXH64_reset(st, 0);
+    XXH64_update(st, &h, sizeof h);
+    XXH64_update(st, bytes.data() + h.metaOffset, footer - h.metaOffset);
+    const uint64_t sum = XXH64_digest(st);
+    XXH64_freeState(st);
+    std::memcpy(&bytes[footer + offsetof(mt::format::Footer, checksum)], &sum, 8);
+  }
+  mt::test::writeFile(tmp.file("b.mt"), bytes);
+  const std::string said = "its header says " + std::to_string(triangles) + " triangles, the index " + std::to_string(triangles + 1);
+  for (const std::string& command :
+       {std::string("mtinfo --check"), std::string("mtverify"), "mtextract --error 1e30 -o " + tmp.file("out.ply")}) {
+    auto r = runShell(mt::test::binDir() + "/" + command + " " + tmp.file("b.mt"));
+    EXPECT_EQ(r.exitCode, mt::kExitCorruption) << command << ": " << r.output;
+    EXPECT_NE(r.output.find("patch " + std::to_string(patch)), std::string::npos) << command << ": " << r.output;
+    EXPECT_NE(r.output.find(said), std::string::npos) << command << ": " << r.output;
+  }
+  EXPECT_FALSE(std::filesystem::exists(tmp.file("out.ply")));
+}
+
+// fuzz_store_segment: a geometry block whose header claims 2^29 vertices (checksums are off in the
+// fuzzing build; a block made on purpose has a right one) had its arrays allocated from the counts
+// (6 GB) before the block was found to hold far fewer bytes. Now every array is found in the block
+// first; the same for a boundary block's count.
+TEST(FuzzRegressions, StoreBlockWithHugeCountsIsRefusedBeforeAllocating) {
+  for (const bool doublePrecision : {false, true}) {
+    mt::VertexLayout layout;
+    layout.doublePrecision = doublePrecision;
+    layout.colors = true;
+    for (const uint32_t vertices : {0x20000000u, 0xFFFFFFFFu}) {
+      const mt::store_format::GeometryHeader h{vertices, 1, mt::layoutFlags(layout), 0};
+      std::string block(reinterpret_cast<const char*>(&h), sizeof h);
+      block.append(64, '\0');
+      mt::Patch p;
+      try {
+        mt::decodeGeometry(block, layout, p, "SEG-000001.dat: patch 3");
+        ADD_FAILURE() << "accepted";
+      } catch (const mt::Error& e) {
+        EXPECT_NE(std::string(e.what()).find("SEG-000001.dat: patch 3: record truncated"), std::string::npos) << e.what();
+      }
+      EXPECT_EQ(p.positions.capacity(), 0u);
+    }
+  }
+  const uint32_t entries = 0xFFFFFFFFu;
+  std::string block(reinterpret_cast<const char*>(&entries), 4);
+  block.append(24, '\0');
+  EXPECT_THROW(mt::decodeBoundary(block, "SEG-000001.dat: patch 3"), mt::Error);
 }

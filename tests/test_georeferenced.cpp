@@ -1,8 +1,13 @@
 // Georeferenced scans: coordinates far from the origin (UTM-like metres) with centimetre detail.
 // Whatever the input format, the finest cut of the build must hold every input triangle, each
 // vertex within the grid step of its input position: no precision is lost on the way (text is
-// parsed and stored as double; the MT grid is relative to the model's box).
+// parsed and stored as double; the MT grid is relative to the model's box). And the placement of a
+// model in a CRS on the WGS84 globe (interop/georeference.h) against PROJ's exact answers and the
+// ellipsoid's closed-form geodetic -> ECEF formula.
 #include <gtest/gtest.h>
+#include <proj.h>
+
+#include <nlohmann/json.hpp>
 
 #include <cmath>
 #include <cstdio>
@@ -11,6 +16,8 @@
 #include <string>
 #include <vector>
 
+#include "base/error.h"
+#include "interop/georeference.h"
 #include "mtfile/mt_file.h"
 #include "patchstore/io/ply_writer.h"
 #include "patchstore/io/mesh_reader.h"
@@ -132,6 +139,171 @@ TEST(Georeferenced, FloatPlyAtUtmCoordinatesKeepsWhatFloatCanHold) {
   const Grid g{150, 500000.0, 4000000.0, 80.0, 0.5};
   writeBinary(g, tmp.file("utm-float.ply"), false);
   expectFinestCutKeepsEverything(g, tmp.file("utm-float.ply"), true);
+}
+
+TEST(Georeferenced, MtinfoPrintsTheHeaderDoublesExactly) {
+  // At 4e6 m, 9 significant digits are centimetres: the origin, step and box must read back to
+  // the header's doubles bit for bit, in the text and in --json.
+  TempDir tmp;
+  const Grid g{40, 500000.123456, 4000000.987654, 100.001, 0.003};
+  writeBinary(g, tmp.file("utm.ply"), true);
+  ASSERT_EQ(runTool("mtbuild", tmp.file("utm.ply") + " -o " + tmp.file("utm.mt") + " -q").exitCode, 0);
+  const auto reader = MtFileReader::open(tmp.file("utm.mt"));
+  const auto& h = reader->header();
+  const auto info = runTool("mtinfo", tmp.file("utm.mt") + " --json");
+  ASSERT_EQ(info.exitCode, 0) << info.output;
+  const nlohmann::json j = nlohmann::json::parse(info.output);
+  for (int a = 0; a < 3; ++a) {
+    EXPECT_EQ(j["boundsMin"][a].get<double>(), h.boundsMin[a]) << a;
+    EXPECT_EQ(j["boundsMax"][a].get<double>(), h.boundsMax[a]) << a;
+    EXPECT_EQ(j["gridOrigin"][a].get<double>(), h.gridOrigin[a]) << a;
+  }
+  EXPECT_EQ(j["gridStep"].get<double>(), h.gridStep);
+  const auto text = runTool("mtinfo", tmp.file("utm.mt"));
+  const std::string line = text.output.substr(text.output.find("bounding box"));
+  double b[6];
+  ASSERT_EQ(std::sscanf(line.c_str(), "bounding box (%lf, %lf, %lf) - (%lf, %lf, %lf)", b, b + 1, b + 2, b + 3, b + 4, b + 5), 6) << line;
+  for (int a = 0; a < 3; ++a) {
+    EXPECT_EQ(b[a], h.boundsMin[a]);
+    EXPECT_EQ(b[3 + a], h.boundsMax[a]);
+  }
+}
+
+// ---- placement on the globe ----------------------------------------------------------------------
+
+// WGS84 geodetic (degrees, degrees, metres above the ellipsoid) -> ECEF metres: the closed form.
+void geodeticToEcef(double lonDeg, double latDeg, double h, double out[3]) {
+  const double a = 6378137.0, f = 1 / 298.257223563, e2 = f * (2 - f);
+  const double lon = lonDeg * M_PI / 180, lat = latDeg * M_PI / 180;
+  const double n = a / std::sqrt(1 - e2 * std::sin(lat) * std::sin(lat));
+  out[0] = (n + h) * std::cos(lat) * std::cos(lon);
+  out[1] = (n + h) * std::cos(lat) * std::sin(lon);
+  out[2] = (n * (1 - e2) + h) * std::sin(lat);
+}
+
+// PROJ's own answers for UTM zone 33N (WGS84): the point's geodetic position, and the projection's
+// scale factor and meridian convergence there (proj_factors).
+struct Utm33 {
+  PJ_CONTEXT* ctx = proj_context_create();
+  PJ* toGeodetic = nullptr;
+  PJ* crs = nullptr;
+  Utm33() {
+    proj_context_set_enable_network(ctx, 0);
+    PJ* t = proj_create_crs_to_crs(ctx, "EPSG:32633", "EPSG:4979", nullptr);
+    toGeodetic = proj_normalize_for_visualization(ctx, t);
+    proj_destroy(t);
+    crs = proj_create(ctx, "EPSG:32633");
+  }
+  ~Utm33() {
+    proj_destroy(crs);
+    proj_destroy(toGeodetic);
+    proj_context_destroy(ctx);
+  }
+  // -> lon, lat (degrees), h
+  void geodetic(const double p[3], double out[3]) const {
+    PJ_COORD c = proj_trans(toGeodetic, PJ_FWD, proj_coord(p[0], p[1], p[2], 0));
+    out[0] = c.xyz.x, out[1] = c.xyz.y, out[2] = c.xyz.z;
+  }
+  void ecef(const double p[3], double out[3]) const {
+    double g[3];
+    geodetic(p, g);
+    geodeticToEcef(g[0], g[1], g[2], out);
+  }
+  PJ_FACTORS factors(double lonDeg, double latDeg) const {
+    return proj_factors(crs, proj_coord(proj_torad(lonDeg), proj_torad(latDeg), 0, 0));
+  }
+};
+
+double distance(const double a[3], const double b[3]) { return std::hypot(a[0] - b[0], a[1] - b[1], a[2] - b[2]); }
+
+TEST(Georeference, AUtmModelLandsWhereProjAndTheEllipsoidPutIt) {
+  const Utm33 utm;
+  // A 3 m scan on zone 33's central meridian (15 E) at 100 m above the ellipsoid.
+  const double lo[3] = {499998.5, 3999998.5, 99.5}, hi[3] = {500001.5, 4000001.5, 100.5};
+  const interop::GeoPlacement g = interop::placeOnGlobe("EPSG:32633", lo, hi);
+  EXPECT_NE(g.crsName.find("UTM zone 33N"), std::string::npos) << g.crsName;
+  double geo[3];
+  utm.geodetic(g.center, geo);
+  EXPECT_NEAR(g.longitude, 15.0, 1e-9);  // on the central meridian
+  EXPECT_NEAR(g.latitude, geo[1], 1e-12);
+  EXPECT_NEAR(g.latitude, 36.1447, 1e-4);
+  EXPECT_NEAR(g.height, 100.0, 1e-6);  // z is the height above the ellipsoid
+  // Every corner and the centre where the closed form puts PROJ's geodetic position, to 1 um.
+  for (int c = 0; c < 9; ++c) {
+    double p[3], fit[3], exact[3];
+    for (int a = 0; a < 3; ++a) p[a] = c == 8 ? g.center[a] : ((c >> a) & 1 ? hi[a] : lo[a]);
+    interop::applyPlacement(g, p, fit);
+    utm.ecef(p, exact);
+    EXPECT_LT(distance(fit, exact), 1e-6) << "corner " << c;
+  }
+  EXPECT_LT(g.maxError, 1e-6);
+  // On the central meridian: grid north is true north, the scale factor is k0 = 0.9996 (so a
+  // grid metre is 1/0.9996 true metres, 1.6e-5 more at 100 m up), z is the ellipsoid's normal.
+  EXPECT_NEAR(g.convergenceDegrees, 0.0, 1e-6);
+  const double k = utm.factors(15.0, g.latitude).meridional_scale;
+  EXPECT_NEAR(k, 0.9996, 1e-9);
+  EXPECT_NEAR(g.unitScale[0], (1 / k) * (1 + 100 / 6.37e6), 1e-6);
+  EXPECT_NEAR(g.unitScale[1], g.unitScale[0], 1e-6);
+  EXPECT_NEAR(g.unitScale[2], 1.0, 1e-9);
+  const double lat = g.latitude * M_PI / 180, lon = g.longitude * M_PI / 180;
+  const double up[3] = {std::cos(lat) * std::cos(lon), std::cos(lat) * std::sin(lon), std::sin(lat)};
+  EXPECT_GT(g.toEcef[8] * up[0] + g.toEcef[9] * up[1] + g.toEcef[10] * up[2], 1 - 1e-12);
+}
+
+TEST(Georeference, OffTheCentralMeridianTheGridTurnsAndScalesAsProjSays) {
+  const Utm33 utm;
+  // 150 km east of the central meridian: convergence about 1 degree, scale factor 1.00022.
+  const double lo[3] = {649990, 3999990, 0}, hi[3] = {650010, 4000010, 20};
+  const interop::GeoPlacement g = interop::placeOnGlobe("EPSG:32633", lo, hi);
+  const PJ_FACTORS f = utm.factors(g.longitude, g.latitude);
+  EXPECT_GT(std::abs(g.convergenceDegrees), 0.5);
+  EXPECT_NEAR(g.convergenceDegrees, proj_todeg(f.meridian_convergence), 1e-6);
+  EXPECT_NEAR(g.unitScale[0], (1 / f.meridional_scale) * (1 + g.height / 6.37e6), 2e-6);
+  EXPECT_NEAR(g.unitScale[1], g.unitScale[0], 1e-6);  // conformal
+}
+
+TEST(Georeference, TheStatedErrorBoundsTheAffineMapAndGrowsWithTheBox) {
+  const Utm33 utm;
+  double previous = 0;
+  for (double halfWidth : {1.5, 50.0, 500.0, 5000.0}) {
+    const double lo[3] = {520000 - halfWidth, 4000000 - halfWidth, 0}, hi[3] = {520000 + halfWidth, 4000000 + halfWidth, 50};
+    const interop::GeoPlacement g = interop::placeOnGlobe("EPSG:32633", lo, hi);
+    // What an affine map misses is the Earth's curvature: a corner sqrt(2) * halfWidth away lies
+    // (2 halfWidth^2)/(2R) below the tangent plane (a least-squares fit splits that), and a
+    // horizontal metre at height z is (R + z)/R metres (the bilinear x z / R over the 50 m).
+    const double R = 6.37e6, sag = halfWidth * halfWidth / R, shear = halfWidth * 25 / R;
+    EXPECT_GT(g.maxError, 0.1 * (sag + shear)) << halfWidth;
+    EXPECT_LT(g.maxError, 2 * (sag + shear) + 1e-7) << halfWidth;
+    EXPECT_GT(g.maxError, previous);
+    previous = g.maxError;
+    // Random points of the box: the affine map is within the stated error of PROJ (+ 10%: the
+    // error is sampled on a 9x9x9 lattice).
+    uint64_t s = 12345;
+    auto uniform = [&] { return double((s = s * 6364136223846793005ull + 1442695040888963407ull) >> 11) / 9007199254740992.0; };
+    for (int i = 0; i < 200; ++i) {
+      double p[3], fit[3], exact[3];
+      for (int a = 0; a < 3; ++a) p[a] = lo[a] + (hi[a] - lo[a]) * uniform();
+      interop::applyPlacement(g, p, fit);
+      utm.ecef(p, exact);
+      EXPECT_LE(distance(fit, exact), 1.1 * g.maxError + 1e-9) << halfWidth;
+    }
+  }
+}
+
+TEST(Georeference, AnUnknownCrsIsRefusedWithPROJsReason) {
+  const double lo[3] = {0, 0, 0}, hi[3] = {1, 1, 1};
+  try {
+    interop::placeOnGlobe("EPSG:999999", lo, hi);
+    FAIL() << "no error";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("EPSG:999999"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(interop::placeOnGlobe("not a crs", lo, hi), Error);
+  // A geographic CRS is a CRS too: x, y are longitude and latitude in degrees.
+  const double geoLo[3] = {15.0, 36.0, 0}, geoHi[3] = {15.0001, 36.0001, 10};
+  const interop::GeoPlacement g = interop::placeOnGlobe("EPSG:4326", geoLo, geoHi);
+  EXPECT_NEAR(g.longitude, 15.00005, 1e-9);
+  EXPECT_NEAR(g.latitude, 36.00005, 1e-9);
 }
 
 }  // namespace

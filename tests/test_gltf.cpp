@@ -12,6 +12,8 @@
 #include <array>
 #include <cmath>
 #include <cstring>
+#include <filesystem>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -48,6 +50,15 @@ Soup readMesh(const std::string& path) {
   Soup s;
   openMesh(path)->read(s);
   return s;
+}
+
+// The JSON of a GLB or a .gltf.
+json gltfJson(const std::string& path) {
+  const std::string bytes = test::readFile(path);
+  if (bytes.compare(0, 4, "glTF") != 0) return json::parse(bytes);
+  uint32_t length = 0;
+  std::memcpy(&length, bytes.data() + 12, 4);
+  return json::parse(bytes.substr(20, length));
 }
 
 // Triangles as grid points, each rotated to start at its smallest corner (orientation kept), sorted.
@@ -284,9 +295,18 @@ TEST(GltfRoundTrip, FullResolutionCutEqualsTheInputOnTheGrid) {
     EXPECT_EQ(ex.output.find("warning"), std::string::npos) << ex.output;
     const std::string out = dir.file(variant.substr(0, variant.find(' ')));
     EXPECT_EQ(onGrid(readMesh(out), origin, step), input);
-    // The CRS travels with the cut.
-    std::string bytes = test::readFile(out);
-    EXPECT_NE(bytes.find("\"crs\":\"EPSG:32633\""), std::string::npos);
+    // The CRS travels with the cut, and so does the offset: as the mesh node's translation (a
+    // JSON double at UTM coordinates), the stored positions being small differences from it.
+    const json doc = gltfJson(out);
+    EXPECT_EQ(doc["asset"]["extras"]["crs"], "EPSG:32633");
+    const json& node = doc["nodes"][0];
+    ASSERT_TRUE(node.contains("translation")) << node.dump();
+    EXPECT_NEAR(node["translation"][0].get<double>(), 500000, 100);
+    EXPECT_NEAR(node["translation"][1].get<double>(), 4000000, 100);
+    EXPECT_NEAR(node["translation"][2].get<double>(), 100, 100);
+    const json& pos = doc["accessors"][doc["meshes"][0]["primitives"][0]["attributes"]["POSITION"].get<int>()];
+    const double scale = node.contains("scale") ? node["scale"][0].get<double>() : 1.0;
+    for (int a = 0; a < 3; ++a) EXPECT_LT(std::max(std::abs(pos["min"][a].get<double>()), std::abs(pos["max"][a].get<double>())) * scale, 100.0);
   }
   // The glTF options are refused for PLY, and unknown extensions still are.
   auto ply = runTool("mtextract", dir.file("scene.mt") + " --error 0 --meshopt -o " + dir.file("cut.ply"));
@@ -300,6 +320,71 @@ TEST(GltfRoundTrip, FullResolutionCutEqualsTheInputOnTheGrid) {
   auto coarse = runTool("mtextract", dir.file("scene.mt") + " --triangles 2000 -o " + dir.file("coarse.glb"));
   ASSERT_EQ(coarse.exitCode, 0) << coarse.output;
   EXPECT_LT(readMesh(dir.file("coarse.glb")).t.size(), input.size() * 3);
+}
+
+// The colour of every vertex, keyed by its grid point.
+std::map<std::array<int64_t, 3>, std::array<uint8_t, 4>> coloursOnGrid(const Soup& s, const double origin[3], double step) {
+  std::map<std::array<int64_t, 3>, std::array<uint8_t, 4>> out;
+  for (const InputVertex& v : s.v) {
+    std::array<int64_t, 3> q;
+    for (int a = 0; a < 3; ++a) q[a] = int64_t(std::floor((v.p[a] - origin[a]) / step + 0.5));
+    out[q] = {v.c[0], v.c[1], v.c[2], v.c[3]};
+  }
+  return out;
+}
+
+TEST(GltfWriter, EveryGltfWeWriteCarriesTheMtsColours) {
+  // A scan with per-vertex colours: every cut variant and every tile content has COLOR_0, and the
+  // colours read back are the MT's (the PLY cut's) at the same grid points.
+  TempDir dir;
+  ASSERT_EQ(runTool("mtgen", "-o " + dir.file("scan.ply") + " --triangles 6k --colors").exitCode, 0);
+  // meshopt's simplifier keeps every vertex's input colour, so a grid point has one colour at every
+  // level (the colour-aware quadric, the default for coloured input, blends kept vertices' colours).
+  auto built = runTool("mtbuild", dir.file("scan.ply") + " -o " + dir.file("scan.mt") + " -q --patch-triangles 500 --simplifier meshopt");
+  ASSERT_EQ(built.exitCode, 0) << built.output;
+  auto reader = MtFileReader::open(dir.file("scan.mt"));
+  const double* origin = reader->header().gridOrigin;
+  const double step = reader->header().gridStep;
+  ASSERT_EQ(runTool("mtextract", dir.file("scan.mt") + " --error 0 -o " + dir.file("cut.ply")).exitCode, 0);
+  const Soup ply = readMesh(dir.file("cut.ply"));
+  ASSERT_TRUE(ply.header.hasColors);
+  const auto reference = coloursOnGrid(ply, origin, step);
+  size_t distinct = 0;
+  for (const auto& [q, c] : reference) distinct += c != reference.begin()->second;
+  ASSERT_GT(distinct, reference.size() / 4) << "the scan's colours are not varied enough to test";
+
+  std::vector<std::string> files;
+  for (const std::string variant : {"cut.glb", "cut.gltf", "cut-m.glb --meshopt", "cut-q.glb --quantize", "cut-qm.gltf --quantize --meshopt"}) {
+    auto ex = runTool("mtextract", dir.file("scan.mt") + " --error 0 -o " + dir.path() + "/" + variant);
+    ASSERT_EQ(ex.exitCode, 0) << ex.output;
+    files.push_back(dir.file(variant.substr(0, variant.find(' '))));
+  }
+  for (const std::string variant : {"tiles", "tiles-m --codec meshopt", "tiles-n --codec none", "tiles-f --no-quantize"}) {
+    auto ex = runTool("mtexport", "tiles " + dir.file("scan.mt") + " " + dir.path() + "/" + variant);
+    ASSERT_EQ(ex.exitCode, 0) << ex.output;
+    for (auto& e : std::filesystem::directory_iterator(dir.file(variant.substr(0, variant.find(' ')) + "/tiles")))
+      files.push_back(e.path().string());
+  }
+  ASSERT_GT(files.size(), 10u);
+  for (const std::string& f : files) {
+    SCOPED_TRACE(f);
+    const json doc = gltfJson(f);
+    EXPECT_TRUE(doc["meshes"][0]["primitives"][0]["attributes"].contains("COLOR_0"));
+    Soup s = readMesh(f);
+    ASSERT_TRUE(s.header.hasColors);
+    // A tile content is in the tileset's frame: relative to the grid origin, +Z up turned to glTF's +Y up.
+    if (f.find("/tiles/") != std::string::npos)
+      for (InputVertex& v : s.v) {
+        const double r[3] = {v.p[0], v.p[1], v.p[2]};
+        v.p[0] = origin[0] + r[0], v.p[1] = origin[1] - r[2], v.p[2] = origin[2] + r[1];
+      }
+    size_t wrong = 0;
+    for (const auto& [q, c] : coloursOnGrid(s, origin, step)) {
+      auto it = reference.find(q);
+      wrong += it == reference.end() || it->second != c;
+    }
+    EXPECT_EQ(wrong, 0u);
+  }
 }
 
 TEST(MtMetadata, NoCrsMeansNoBlockAndADamagedBlockIsRefused) {

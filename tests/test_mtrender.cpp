@@ -24,80 +24,34 @@
 #include "mtrender/patch_server.h"
 #include "mtrender/scene.h"
 #include "tests/test_support.h"
+#include "tests/test_support_render.h"
 
 using namespace mt::render;
+using mt::test::Csv;
+using mt::test::readCsv;
+using mt::test::RenderRig;
 using mt::test::runTool;
 using mt::test::TempDir;
 
 namespace {
 
-// One small MT for the whole suite (a torus scan with holes; ~60 patches over 6 levels).
+// One small MT for the whole suite (a torus scan with holes; ~250 patches over 5 levels).
 class MtRender : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
     dir_ = new TempDir();
-    auto g = runTool("mtgen", "-o " + dir_->file("s.ply") + " --triangles 40k --holes 4 --seed 7");
-    ASSERT_EQ(g.exitCode, 0) << g.output;
-    auto b = runTool("mtbuild", dir_->file("s.ply") + " -o " + mt() + " --patch-triangles 300 --threads 2 -q");
-    ASSERT_EQ(b.exitCode, 0) << b.output;
+    mt_ = mt::test::buildScanMt(*dir_, "s");
   }
   static void TearDownTestSuite() {
     delete dir_;
     dir_ = nullptr;
   }
-  static std::string mt() { return dir_->file("s.mt"); }
+  static std::string mt() { return mt_; }
   static TempDir* dir_;
+  static std::string mt_;
 };
 TempDir* MtRender::dir_ = nullptr;
-
-struct Csv {
-  std::vector<std::string> header;
-  std::vector<std::vector<double>> rows;
-  size_t col(const std::string& name) const {
-    auto it = std::find(header.begin(), header.end(), name);
-    if (it == header.end()) throw std::runtime_error("no column " + name);
-    return size_t(it - header.begin());
-  }
-  std::vector<double> column(const std::string& name) const {
-    std::vector<double> v;
-    size_t c = col(name);
-    for (const auto& r : rows) v.push_back(r[c]);
-    return v;
-  }
-};
-
-Csv readCsv(const std::string& path) {
-  Csv csv;
-  std::ifstream in(path);
-  std::string line;
-  bool first = true;
-  while (std::getline(in, line)) {
-    std::vector<std::string> cells;
-    std::stringstream ss(line);
-    std::string cell;
-    while (std::getline(ss, cell, ',')) cells.push_back(cell);
-    if (first) {
-      csv.header = cells;
-      first = false;
-    } else {
-      std::vector<double> r;
-      for (const auto& c : cells) r.push_back(std::stod(c));
-      csv.rows.push_back(r);
-    }
-  }
-  return csv;
-}
-
-std::map<std::string, std::string> summary(const std::string& out) {
-  std::map<std::string, std::string> m;
-  std::stringstream ss(out);
-  std::string line;
-  while (std::getline(ss, line)) {
-    auto sp = line.find(' ');
-    if (sp != std::string::npos) m[line.substr(0, sp)] = line.substr(sp + 1);
-  }
-  return m;
-}
+std::string MtRender::mt_;
 
 bool isBackground(const uint8_t* p) { return p[0] == 255 && p[1] == 0 && p[2] == 255; }
 
@@ -183,20 +137,18 @@ TEST(PatchCache, RefusesACapTooSmall) {
 // ---- ExtractRender without GL ---------------------------------------------------------------
 
 TEST_F(MtRender, EveryCutIsValidPinnedAndWithinBudget) {
-  Scene scene({mt()});
+  RenderRig rig({mt()}, 8ull << 20);
+  const Scene& scene = rig.scene;
+  PatchCache& cache = *rig.cache;
+  PatchServer& server = *rig.server;
   auto reader = mt::MtFileReader::open(mt());
-  std::vector<uint64_t> bounds(scene.patches().size());
-  for (uint32_t p = 0; p < bounds.size(); ++p) bounds[p] = scene.decodedBytesBound(p);
-  PatchCache cache(8ull << 20, bounds);
-  PatchServer server(scene, cache, {});
   ExtractOptions eo;
   eo.fixedTriangles = 12000;
   eo.extractMs = 50;
   ExtractRender ex(scene, &cache, &server, eo);
   ex.start(10000);
-  double c[3], r;
-  scene.boundingSphere(c, r);
-  const glm::dvec3 center(c[0], c[1], c[2]);
+  const double r = rig.radius;
+  const glm::dvec3 center = rig.center;
   std::mt19937_64 rng(5);
   std::uniform_real_distribution<double> u(-1, 1);
   uint64_t frame = 0;
@@ -236,25 +188,19 @@ TEST_F(MtRender, SeveralFilesShareOneCacheAndOneBudget) {
   // The same file twice: one flattened DAG with two sources and two sinks. Each file's part of
   // the node set must be a valid cut of that file, the budget holds for the sum, and both files
   // get refined (neither starves the other).
-  Scene scene({mt(), mt()});
+  RenderRig rig({mt(), mt()}, 8ull << 20);
+  const Scene& scene = rig.scene;
+  PatchServer& server = *rig.server;
   auto reader = mt::MtFileReader::open(mt());
   const size_t n = reader->nodes().size();
   ASSERT_EQ(scene.nodes().size(), 2 * n);
   ASSERT_EQ(scene.sources().size(), 2u);
-  std::vector<uint64_t> bounds(scene.patches().size());
-  for (uint32_t p = 0; p < bounds.size(); ++p) bounds[p] = scene.decodedBytesBound(p);
-  PatchCache cache(8ull << 20, bounds);
-  PatchServer server(scene, cache, {});
   ExtractOptions eo;
   eo.fixedTriangles = 30000;
   eo.extractMs = 50;
-  ExtractRender ex(scene, &cache, &server, eo);
+  ExtractRender ex(scene, rig.cache.get(), &server, eo);
   ex.start(10000);
-  double c[3], r;
-  scene.boundingSphere(c, r);
-  const glm::dvec3 center(c[0], c[1], c[2]);
-  CameraPose pose = defaultPose(center, r);
-  View v = makeView(pose, 256, 256, center, r);
+  View v = rig.view(defaultPose(rig.center, rig.radius));
   for (uint64_t f = 1; f <= 30; ++f) {
     ex.update(f, v, v);
     server.waitIdle(2000);
@@ -313,7 +259,7 @@ TEST_F(MtRender, CsvColumnsAreSane) {
   }
   EXPECT_GT(loads, 0);
   // The summary agrees with the CSV.
-  auto s = summary(r.output);
+  auto s = mt::test::parseSummary(r.output);
   EXPECT_EQ(s["frames"], "40");
   EXPECT_LE(std::stoull(s["cache_max_bytes"]), 8ull << 20);
 }
@@ -542,10 +488,13 @@ TEST_F(MtRender, CorruptedPatchIsSkippedWithOneWarning) {
     mentions += !std::isdigit(static_cast<unsigned char>(r.output[at + needle.size()]));
   EXPECT_EQ(mentions, 1u) << "one warning naming the patch:\n" << r.output;
   EXPECT_NE(r.output.find("warning: " + bad), std::string::npos) << r.output;
-  EXPECT_EQ(summary(r.output)["bad_patches"], "1");
+  EXPECT_EQ(mt::test::parseSummary(r.output)["bad_patches"], "1");
   Csv c = readCsv(csv);
   ASSERT_EQ(c.rows.size(), 60u);  // rendering went on
   EXPECT_GT(c.rows.back()[c.col("triangles")], c.rows.front()[c.col("triangles")]);
+  // Within its budget every frame (bad_patches 1 above: the damaged patch is read once, never again).
+  for (size_t i = 0; i < c.rows.size(); ++i)
+    EXPECT_LE(c.rows[i][c.col("drawn_triangles")], c.rows[i][c.col("budget_triangles")]) << "frame " << i;
 }
 
 TEST_F(MtRender, BaselineRendersTheSameImage) {

@@ -250,7 +250,7 @@ TEST(PlyReader, FloatColorsScaledAndAlphaOptional) {
                                "element vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
                                "property float red\nproperty float green\nproperty float blue\n"
                                "element face 1\nproperty list uchar int vertex_indices\n") +
-                     "0 0 0 1 0.5 0\n1 0 0 0 0 0\n0 1 0 2 -1 0.2\n3 0 1 2\n";
+                     "0 0 0 1 0.5 0\n1 0 0 0 0 0\n0 1 0 1.001 -0.001 0.2\n3 0 1 2\n";
   writeFile(dir.file("fc.ply"), text);
   Collect c = readMesh(dir.file("fc.ply"));
   EXPECT_TRUE(c.header.hasColors);
@@ -259,9 +259,85 @@ TEST(PlyReader, FloatColorsScaledAndAlphaOptional) {
   EXPECT_EQ(c.v[0].c[1], 128);
   EXPECT_EQ(c.v[0].c[2], 0);
   EXPECT_EQ(c.v[0].c[3], 255);
-  EXPECT_EQ(c.v[2].c[0], 255);  // clamped
+  EXPECT_EQ(c.v[2].c[0], 255);  // within half a level of 0..1: writers' rounding, clamped
   EXPECT_EQ(c.v[2].c[1], 0);
   EXPECT_EQ(c.v[2].c[2], 51);
+}
+
+// Every colour syntax of PLY: uchar and float channels, with and without alpha, in both binary
+// byte orders (the fixed-record and the fast float-xyz paths) and ascii; 16-bit channels scaled.
+TEST(PlyReader, ColourSyntaxes) {
+  TempDir dir;
+  const std::string faces = "element face 1\nproperty list uchar int vertex_indices\n";
+  for (const char* type : {"uchar", "float", "double", "ushort"})
+    for (bool alpha : {false, true})
+      for (const char* format : {"binary_little_endian", "binary_big_endian", "ascii"}) {
+        SCOPED_TRACE(std::string(type) + (alpha ? " rgba " : " rgb ") + format);
+        std::string props = "element vertex 3\nproperty float x\nproperty float y\nproperty float z\n";
+        for (const char* ch : {"red", "green", "blue", "alpha"})
+          if (alpha || std::string(ch) != "alpha") props += std::string("property ") + type + " " + ch + "\n";
+        const double scale = std::string(type) == "uchar" ? 255 : std::string(type) == "ushort" ? 65535 : 1;
+        // channel values in 8-bit levels: vertex v, channel k
+        auto level = [](int v, int k) { return (v * 97 + k * 61 + 13) % 256; };
+        const bool ascii = std::string(format) == "ascii";
+        Bytes b;
+        b.bigEndian = std::string(format) == "binary_big_endian";
+        b.s = plyHeader(format, props + faces);
+        std::string text = b.s;
+        for (int v = 0; v < 3; ++v) {
+          const float p[3] = {float(v == 1), float(v == 2), 0};
+          for (float x : p) ascii ? void(text += std::to_string(x) + " ") : void(b.put(x));
+          for (int k = 0; k < (alpha ? 4 : 3); ++k) {
+            const double x = scale == 1 ? level(v, k) / 255.0 : scale == 65535 ? level(v, k) * 257.0 : level(v, k);
+            if (ascii) {
+              char num[32];
+              std::snprintf(num, sizeof num, "%.17g ", x);
+              text += num;
+            } else {
+              b.as(type, x);
+            }
+          }
+          if (ascii) text += "\n";
+        }
+        if (ascii) text += "3 0 1 2\n";
+        else b.put(uint8_t(3)).put(int32_t(0)).put(int32_t(1)).put(int32_t(2));
+        writeFile(dir.file("c.ply"), ascii ? text : b.s);
+        Collect c = readMesh(dir.file("c.ply"));
+        ASSERT_TRUE(c.header.hasColors);
+        for (int v = 0; v < 3; ++v)
+          for (int k = 0; k < 4; ++k) EXPECT_EQ(c.v[v].c[k], k < 3 || alpha ? level(v, k) : 255) << v << " " << k;
+      }
+}
+
+// A colour value no channel type allows is refused, naming the vertex, the property and where.
+TEST(PlyReader, BadColourValuesRefused) {
+  TempDir dir;
+  const std::string head = "element vertex 3\nproperty float x\nproperty float y\nproperty float z\n";
+  const std::string faces = "element face 1\nproperty list uchar int vertex_indices\n";
+  // floats written as 0..255
+  writeFile(dir.file("a.ply"), plyHeader("ascii", head + "property float red\nproperty float green\nproperty float blue\n" + faces) +
+                                   "0 0 0 0 0 0\n1 0 0 0.5 0.5 0.5\n0 1 0 200 30 40\n3 0 1 2\n");
+  std::string m = errorOf(dir.file("a.ply"));
+  EXPECT_THAT(m, HasSubstr("vertex 2 property red: colour value 200 out of range (float channels are 0..1)"));
+  EXPECT_THAT(m, HasSubstr("(line 16)"));
+  // NaN in a binary float channel (the fast path): the byte offset of the record
+  Bytes b;
+  b.s = plyHeader("binary_little_endian", head + "property float red\nproperty float green\nproperty float blue\n" + faces);
+  const size_t data = b.s.size();
+  for (int v = 0; v < 3; ++v) b.put(float(v)).put(0.f).put(0.f).put(0.5f).put(v == 1 ? std::nanf("") : 0.5f).put(0.5f);
+  b.put(uint8_t(3)).put(int32_t(0)).put(int32_t(1)).put(int32_t(2));
+  writeFile(dir.file("n.ply"), b.s);
+  m = errorOf(dir.file("n.ply"));
+  EXPECT_THAT(m, HasSubstr("vertex 1 property green: colour value nan out of range"));
+  EXPECT_THAT(m, HasSubstr("byte offset " + std::to_string(data + 24)));
+  // a negative integer channel
+  writeFile(dir.file("s.ply"), plyHeader("ascii", head + "property short red\nproperty short green\nproperty short blue\n" + faces) +
+                                   "0 0 0 0 0 0\n1 0 0 5 -3 0\n0 1 0 0 0 0\n3 0 1 2\n");
+  EXPECT_THAT(errorOf(dir.file("s.ply")), HasSubstr("vertex 1 property green: colour value -3 out of range (16-bit channels are 0..65535)"));
+  // 8-bit values in an int channel above 255
+  writeFile(dir.file("i.ply"), plyHeader("ascii", head + "property int red\nproperty int green\nproperty int blue\n" + faces) +
+                                   "0 0 0 0 0 0\n1 0 0 5 3 0\n0 1 0 0 0 256\n3 0 1 2\n");
+  EXPECT_THAT(errorOf(dir.file("i.ply")), HasSubstr("vertex 2 property blue: colour value 256 out of range (8-bit channels are 0..255)"));
 }
 
 TEST(PlyReader, PolygonsFanTriangulatedInBothPaths) {
@@ -398,6 +474,19 @@ TEST(ObjReader, VertexColors) {
   EXPECT_EQ(c.v[0].p[0], 0);
 }
 
+TEST(ObjReader, BadVertexColoursRefused) {
+  TempDir dir;
+  // 0..255 colours: OBJ's extension is 0..1
+  writeFile(dir.file("b.obj"), "v 0 0 0 1 0 0.5\nv 1 0 0 0 255 0\nv 0 1 0 0 0 0\nf 1 2 3\n");
+  EXPECT_THAT(errorOf(dir.file("b.obj")),
+              HasSubstr("vertex 1 green: colour value 255 out of range (float channels are 0..1) (line 2)"));
+  // a colour after a first vertex without one would be dropped silently
+  writeFile(dir.file("l.obj"), "v 0 0 0\nv 1 0 0 0 1 0\nv 0 1 0\nf 1 2 3\n");
+  EXPECT_THAT(errorOf(dir.file("l.obj")), HasSubstr("vertex 1 has a colour but the file's first vertex has none"));
+  writeFile(dir.file("n.obj"), "v 0 0 0 0.5 nan 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+  EXPECT_THAT(errorOf(dir.file("n.obj")), HasSubstr("vertex 0 green: colour value nan out of range"));
+}
+
 // ---------------------------------------------------------------- OFF
 
 TEST(OffReader, PlainWithCommentsAndPolygons) {
@@ -437,6 +526,16 @@ TEST(OffReader, ColorAndNormalVariants) {
   EXPECT_EQ(cn.v[0].c[1], 128);
   EXPECT_EQ(cn.v[1].c[2], 1);  // integers are 0..255
   EXPECT_EQ(cn.v[0].n[2], 1.f);
+}
+
+TEST(OffReader, BadColoursRefused) {
+  TempDir dir;
+  writeFile(dir.file("i.off"), "COFF 3 1 0\n0 0 0 255 0 0\n1 0 0 0 300 0\n0 1 0 0 0 255\n3 0 1 2\n");
+  EXPECT_THAT(errorOf(dir.file("i.off")),
+              HasSubstr("vertex 1 colour channel 1: colour value 300 out of range (8-bit channels are 0..255) (line 3)"));
+  writeFile(dir.file("f.off"), "COFF 3 1 0\n0 0 0 1.0 0 0\n1 0 0 0 0.5 0\n0 1 0 0 0 -2.5\n3 0 1 2\n");
+  EXPECT_THAT(errorOf(dir.file("f.off")),
+              HasSubstr("vertex 2 colour channel 2: colour value -2.5 out of range (float channels are 0..1) (line 4)"));
 }
 
 // ---------------------------------------------------------------- STL

@@ -95,4 +95,91 @@ std::string writeNonManifoldPly(const TempDir& dir) {
   return path;
 }
 
+void writePly(const std::string& path, const TestMesh& m) {
+  std::ofstream out(path, std::ios::binary);
+  out << "ply\nformat binary_little_endian 1.0\nelement vertex " << m.vertexCount()
+      << "\nproperty double x\nproperty double y\nproperty double z\nelement face " << m.triangleCount()
+      << "\nproperty list uchar int vertex_indices\nend_header\n";
+  out.write(reinterpret_cast<const char*>(m.positions.data()), std::streamsize(m.positions.size() * sizeof(double)));
+  for (size_t t = 0; t < m.triangleCount(); ++t) {
+    const uint8_t three = 3;
+    out.write(reinterpret_cast<const char*>(&three), 1);
+    const int32_t idx[3] = {int32_t(m.triangles[3 * t]), int32_t(m.triangles[3 * t + 1]), int32_t(m.triangles[3 * t + 2])};
+    out.write(reinterpret_cast<const char*>(idx), sizeof idx);
+  }
+}
+
+namespace {
+std::string buildFromPly(const TempDir& dir, const std::string& name) {
+  const std::string mt = dir.file(name + ".mt");
+  const CommandResult b = runTool("mtbuild", dir.file(name + ".ply") + " -o " + mt + " --patch-triangles 300 --threads 2 -q");
+  if (b.exitCode != 0) throw std::runtime_error("mtbuild " + name + ": " + b.output);
+  return mt;
+}
+}  // namespace
+
+std::string buildScanMt(const TempDir& dir, const std::string& name, const std::string& triangles) {
+  const CommandResult g = runTool("mtgen", "-o " + dir.file(name + ".ply") + " --triangles " + triangles + " --holes 4 --seed 7");
+  if (g.exitCode != 0) throw std::runtime_error("mtgen " + name + ": " + g.output);
+  return buildFromPly(dir, name);
+}
+
+std::string buildMeshMt(const TempDir& dir, const std::string& name, const TestMesh& mesh) {
+  writePly(dir.file(name + ".ply"), mesh);
+  return buildFromPly(dir, name);
+}
+
+size_t Csv::col(const std::string& name) const {
+  for (size_t i = 0; i < header.size(); ++i)
+    if (header[i] == name) return i;
+  throw std::runtime_error("no column " + name);
+}
+
+double Csv::sum(const std::string& name) const {
+  const size_t c = col(name);
+  double s = 0;
+  for (const auto& r : rows) s += r[c];
+  return s;
+}
+
+std::vector<double> Csv::column(const std::string& name) const {
+  const size_t c = col(name);
+  std::vector<double> v;
+  for (const auto& r : rows) v.push_back(r[c]);
+  return v;
+}
+
+Csv readCsv(const std::string& path) {
+  Csv csv;
+  std::ifstream in(path);
+  std::string line;
+  bool first = true;
+  while (std::getline(in, line)) {
+    std::vector<std::string> cells;
+    std::stringstream ss(line);
+    std::string cell;
+    while (std::getline(ss, cell, ',')) cells.push_back(cell);
+    if (first) {
+      csv.header = cells;
+      first = false;
+    } else {
+      std::vector<double> r;
+      for (const auto& c : cells) r.push_back(std::stod(c));
+      csv.rows.push_back(r);
+    }
+  }
+  return csv;
+}
+
+std::map<std::string, std::string> parseSummary(const std::string& output) {
+  std::map<std::string, std::string> m;
+  std::stringstream ss(output);
+  std::string line;
+  while (std::getline(ss, line)) {
+    const auto sp = line.find(' ');
+    if (sp != std::string::npos) m[line.substr(0, sp)] = line.substr(sp + 1);
+  }
+  return m;
+}
+
 }  // namespace mt::test

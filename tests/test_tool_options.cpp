@@ -245,7 +245,7 @@ TEST(ToolHelp, EveryOptionStatesItsRange) {
       {"mtverify", {"an integer in [0, 1000000]", "from 64K to 1024T", "=8", "=1G"}},
       {"mtrender",
        {"(0, 60000] ms", "an integer in [1, 10000000]", "an integer in [16, 16384]", "(0, 10000] pixels",
-        "from 1M to 1024T", "an integer in [0, 255]", "an integer in [1, 64]", "{shaded,patch,lod}"}},
+        "from 1M to 1024T", "an integer in [0, 255]", "an integer in [1, 64]", "{auto,shaded,vertex,texture,patch,lod}"}},
       {"mtgen", {"an integer in [0, 20000]", "an integer in [1, 1000000]", "to 4G", ".ply, .obj, .off, .stl"}},
   };
   for (const Help& h : helps) {
@@ -282,7 +282,7 @@ TEST_F(ToolOptions, MtrenderRefusesNonsenseOptions) {
       {"--load-budget 0", {"--load-budget: must be an integer in [1, 1000000]"}},
       {"--frame-interval-ms -1", {"--frame-interval-ms: must be a number in [0, 60000] ms"}},
       {"--test-read-delay-ms inf", {"--test-read-delay-ms: must be a number in [0, 60000] ms"}},
-      {"--color red", {"--color: red not in {shaded,patch,lod}"}},
+      {"--color red", {"--color: red not in {auto,shaded,vertex,texture,patch,lod}"}},
       {"--cache 0", {"--cache: ", "'0'", "from 1M to 1024T"}},
       {"--cache 1K", {"--cache: size '1K' out of range (from 1M to 1024T"}},
       {"--cache 99999T", {"--cache: size '99999T' out of range (from 1M to 1024T"}},

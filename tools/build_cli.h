@@ -59,8 +59,15 @@ inline uint64_t parseBuildMemory(const std::string& text) {
   return uint64_t(bytes);
 }
 
+inline std::string weightText(double w) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%g", w);
+  return b;
+}
+
 struct BuildCli {
-  std::string input, output, crs, memory = "1G", partition = "irregular", codec = "meshopt", indexOrder = "list", simplifier = "meshopt", statsJson, workDir, taskTimes;
+  std::string input, output, crs, memory = "1G", partition = "irregular", codec = "meshopt", indexOrder = "list", simplifier = "auto", statsJson, workDir, taskTimes;
+  double colorWeight = kDefaultColorWeight;
   int64_t threads = 0, patchTriangles = 0;  // signed, so that -1 is refused with the range, not wrapped
   bool normals = false, noNormals = false, resume = false, quiet = false;
   CLI::Option *threadsOption = nullptr, *patchTrianglesOption = nullptr;  // given explicitly: 0 is refused
@@ -96,9 +103,15 @@ struct BuildCli {
                    "Meshopt triangle coding: list (default: the triangle list, in its own order when coherent, else in\n"
                    "fans) or strip (tri-strips, BMT 6; larger files, see docs/mt-format.md)");
     app.add_option("--simplifier", simplifier,
-                   "Region simplifier: meshopt (default: half-edge collapse, every vertex an input vertex) or quadric\n"
-                   "(edge collapse with optimal placement: closer to the input at equal size, ~1.7x the build CPU;\n"
-                   "see docs/mtbuild.md)");
+                   "Region simplifier: auto (default: quadric when the input has per-vertex colours, else meshopt),\n"
+                   "meshopt (half-edge collapse, every vertex an input vertex; ignores colours: they are carried, not\n"
+                   "kept) or quadric (edge collapse with optimal placement: closer to the input at equal size, ~1.7x the\n"
+                   "build CPU, docs/mtbuild.md; with colours, colour enters the collapse cost so colour edges survive,\n"
+                   "docs/appearance.md)");
+    app.add_option("--color-weight", colorWeight,
+                   "With colours and the quadric simplifier: a full-range colour difference costs as much as moving the\n"
+                   "surface by this many mean edge lengths of the region (default " + weightText(kDefaultColorWeight) +
+                       "; 0: colours are carried but do not\nsteer the simplification; accepted 0 to 100)");
     app.add_flag("--normals", normals, "Store per-vertex normals (2x8 bit) instead of letting the renderer compute them");
     app.add_flag("--no-normals", noNormals, "Store no normals (the default; kept for scripts that say so explicitly)");
     app.add_flag("--resume", resume,
@@ -157,7 +170,12 @@ struct BuildCli {
     o.strips = indexOrder == "strip";
     if (simplifier == "quadric") o.simplifier = RegionSimplifier::Quadric;
     else if (simplifier == "meshopt") o.simplifier = RegionSimplifier::Meshopt;
-    else throw Error("unknown --simplifier '" + simplifier + "' (expected quadric or meshopt)");
+    else if (simplifier == "auto") o.simplifierByInput = true;
+    else throw Error("unknown --simplifier '" + simplifier + "' (expected auto, quadric or meshopt)");
+    if (!(colorWeight >= 0 && colorWeight <= 100))
+      throw Error("--color-weight " + weightText(colorWeight) + ": out of range (accepted 0 to 100; default " +
+                  weightText(kDefaultColorWeight) + ")");
+    o.colorWeight = colorWeight;
     // The output may not be the input (by inode, whatever the spelling): said first, as it matters
     // most. The MT tools know a file by its contents, but a build's output named .ply or .glb
     // would be taken for one by everything else.

@@ -37,6 +37,7 @@
 #include "base/output_path.h"
 #include "patchstore/io/ply_writer.h"
 #include "base/cli_checks.h"
+#include "testing/color_field.h"
 #include "testing/scan_generator.h"
 
 namespace {
@@ -59,6 +60,8 @@ struct OutputSettings {
   bool doublePrecision = false;
   // --offset: added (in double) to every position, e.g. UTM-like metres for a georeferenced scan.
   double offset[3] = {0, 0, 0};
+  // --colors: the sharp procedural field over the surface's box (testing/color_field.h).
+  std::shared_ptr<const mt::testing::ColorField> colorField;
 };
 
 // The temporary file of the current run, removed if the process is interrupted.
@@ -258,19 +261,24 @@ class Progress {
 constexpr size_t kChunkVertices = 1 << 15;  // work unit of the pipeline; bounds its memory
 constexpr size_t kChunkFaces = 1 << 16;
 
-// Smooth stone-like colouring from the displacement (hollows dark, bumps light), tinted per
-// component so components are told apart.
-void colorFor(double displacement, double amplitudeSum, uint32_t component, uint8_t out[4]) {
+// The colour of a vertex at p (before --offset): the sharp procedural field (checker, stripes,
+// spots: testing/color_field.h), shaded like stone by the displacement (hollows darker), so a
+// simplifier that smears colour edges or drops spots shows it.
+void colorFor(const mt::testing::ColorField& field, const double p[3], double displacement, double amplitudeSum,
+              uint8_t out[4]) {
   double t = 0.5 + displacement / (1.2 * std::max(amplitudeSum, 1e-12));
   t = std::clamp(t, 0.0, 1.0);
-  t = t * t * (3 - 2 * t);
-  static const double kLow[3] = {70, 58, 50}, kHigh[3] = {232, 220, 200};
-  uint64_t h = mtgen::mix64(component);
-  for (int k = 0; k < 3; ++k) {
-    double tint = component == 0 ? 1.0 : 0.85 + 0.15 * double((h >> (8 * k)) & 0xFF) / 255.0;
-    out[k] = uint8_t(std::lround(std::clamp((kLow[k] + t * (kHigh[k] - kLow[k])) * tint, 0.0, 255.0)));
+  field.colorAt(p, out, t * t * (3 - 2 * t));
+}
+
+// The box the colour field is laid out in: every component's centre +- its scaled outer radius.
+std::shared_ptr<const mt::testing::ColorField> colorFieldOf(const ScanGenerator& generator) {
+  double lo[3] = {1e300, 1e300, 1e300}, hi[3] = {-1e300, -1e300, -1e300};
+  for (const Component& c : generator.components()) {
+    const double r = c.scale * (c.major + c.minor + c.amplitudeSum);
+    for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], c.center[a] - r), hi[a] = std::max(hi[a], c.center[a] + r);
   }
-  out[3] = 255;
+  return std::make_shared<mt::testing::ColorField>(lo, hi);
 }
 
 struct VertexChunk {
@@ -355,7 +363,7 @@ void computeVertexChunk(const ScanGenerator& gen, const std::vector<mtgen::ColPa
       }
       if (out.colors) {
         uint8_t rgba[4];
-        colorFor(disp[size_t(k) * V + g], c.amplitudeSum, chunk.component, rgba);
+        colorFor(*out.colorField, p, disp[size_t(k) * V + g], c.amplitudeSum, rgba);
         chunk.colors.insert(chunk.colors.end(), rgba, rgba + 4);
       }
       ++chunk.count;
@@ -537,6 +545,7 @@ struct Cli {
   mtgen::GeneratorOptions gen;
   bool shuffle = false;
   unsigned threads = 0;
+  std::string paintInput;  // --paint IN
   CLI::Option* formatOption = nullptr;
 };
 
@@ -581,7 +590,8 @@ void addOutputOptions(CLI::App& app, Cli& c) {
   app.add_flag("--normals", c.settings.normals,
                "Write unit per-vertex normals (central differences of the grid) [ply, ply-ascii, obj]");
   app.add_flag("--colors", c.settings.colors,
-               "Write per-vertex RGBA colours (stone-like shading by displacement) [ply, ply-ascii]");
+               "Write per-vertex RGBA colours with sharp features: a coarse checker of four hues, dark stripes and\n"
+               "small vivid spots (testing/color_field.h), shaded by the displacement [ply, ply-ascii]");
   c.formatOption =
       app.add_option("--format", c.formatText,
                      "ply (binary little-endian), ply-ascii, obj, off, stl (ASCII triangle soup); it must agree with "
@@ -697,6 +707,45 @@ void writeMesh(const OutputSettings& settings, const ScanGenerator& generator, b
                (long long)st.st_size, seconds, double(triangles) / std::max(seconds, 1e-9) / 1e6);
 }
 
+// --paint: IN with the colour field on its vertices, as binary PLY (two reads of IN: its box,
+// then the copy; triangles are held until the vertices are written, since OBJ interleaves them).
+int paintMesh(const std::string& input, const std::string& output) {
+  struct Box : mt::MeshSink {
+    double lo[3] = {1e300, 1e300, 1e300}, hi[3] = {-1e300, -1e300, -1e300};
+    mt::MeshHeader header;
+    void begin(const mt::MeshHeader& h) override { header = h; }
+    void vertices(const mt::InputVertex* v, size_t n, uint64_t) override {
+      for (size_t i = 0; i < n; ++i)
+        for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], v[i].p[a]), hi[a] = std::max(hi[a], v[i].p[a]);
+    }
+    void triangles(const uint32_t*, size_t) override {}
+  } box;
+  mt::openMesh(input)->read(box);
+  mt::checkOutputPath(output, {input});
+  const mt::testing::ColorField field(box.lo, box.hi);
+  struct Copy : mt::MeshSink {
+    mt::PlyWriter writer;
+    const mt::testing::ColorField& field;
+    std::vector<uint32_t> tris;
+    Copy(const std::string& out, bool dbl, const mt::testing::ColorField& f)
+        : writer(out, mt::PlyWriteOptions{dbl, false, true}), field(f) {}
+    void vertices(const mt::InputVertex* v, size_t n, uint64_t) override {
+      for (size_t i = 0; i < n; ++i) {
+        uint8_t rgba[4];
+        field.colorAt(v[i].p, rgba);
+        writer.addVertex(v[i].p, nullptr, rgba);
+      }
+    }
+    void triangles(const uint32_t* t, size_t n) override { tris.insert(tris.end(), t, t + 3 * n); }
+  } copy(output, box.header.doublePrecision, field);
+  mt::openMesh(input)->read(copy);
+  for (size_t t = 0; t < copy.tris.size(); t += 3) copy.writer.addTriangle(copy.tris[t], copy.tris[t + 1], copy.tris[t + 2]);
+  copy.writer.finish();
+  std::fprintf(stderr, "mtgen: painted %s -> %s: %llu vertices, %llu triangles\n", input.c_str(), output.c_str(),
+               (unsigned long long)copy.writer.vertexCount(), (unsigned long long)copy.writer.triangleCount());
+  return 0;
+}
+
 int run(int argc, char** argv) {
   CLI::App app{
       "mtgen: streams a procedurally generated, scan-like closed mesh of any size to a mesh file.\n"
@@ -711,14 +760,22 @@ int run(int argc, char** argv) {
       ->required();
   addSurfaceOptions(app, c);
   addOutputOptions(app, c);
+  app.add_option("--paint", c.paintInput,
+                 "Instead of generating: copy the mesh IN (PLY, OBJ, OFF, STL, glTF) to the output (binary PLY) with\n"
+                 "the --colors field painted on its vertices (over IN's bounding box), e.g. to colour a scangen scan.\n"
+                 "Holds IN's triangles in RAM (12 bytes each); IN's own colours are replaced");
   if (int code = mt::cli::parse(app, argc, argv, "mtgen: error"); code >= 0) return code;
   if (!checkSurface(c) || !chooseFormat(c)) return 1;
+  if (!c.paintInput.empty() && c.settings.format != Format::PlyBinary)
+    return refuse("--paint writes binary PLY: the output name must end in .ply (got %s)", c.settings.path.c_str()), 1;
 
   std::unique_ptr<tbb::global_control> threadLimit;
   if (c.threads > 0)
     threadLimit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, c.threads);
   try {
+    if (!c.paintInput.empty()) return paintMesh(c.paintInput, c.settings.path);
     const ScanGenerator generator(c.gen);
+    if (c.settings.colors) c.settings.colorField = colorFieldOf(generator);
     mt::checkOutputPath(c.settings.path, {});  // not a directory, and its folder exists
     c.settings.tmpPath = mt::uniqueTempName(c.settings.path);
     if (c.settings.tmpPath.size() < sizeof gTemporaryPath)

@@ -5,6 +5,7 @@
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
+#include <charconv>
 #include <cinttypes>
 #include <cmath>
 #include <cstdio>
@@ -26,6 +27,7 @@ using mt::format::NodeRecord;
 struct LevelInfo {
   uint64_t nodes = 0, patches = 0, triangles = 0;
   double errorMin = std::numeric_limits<double>::infinity(), errorMax = -std::numeric_limits<double>::infinity();
+  double colorErrorMax = 0;  // NodeRecord::colorError (file version 5 on; 8-bit RGBA levels)
 };
 
 struct StarInfo {
@@ -41,6 +43,15 @@ std::string jsonEscape(const std::string& s) {
     out += c;
   }
   return out;
+}
+
+// A double the header stores (origin, step, bounds) in the fewest digits that read back to the same
+// double: at UTM coordinates (4e6 m) "%.9g" would drop the centimetres.
+std::string exact(double v) {
+  if (!std::isfinite(v)) return "null";
+  char buf[64];
+  const auto r = std::to_chars(buf, buf + sizeof buf, v);
+  return std::string(buf, r.ptr);
 }
 
 // JSON has no inf/nan: print them as null.
@@ -77,7 +88,11 @@ int run(const std::string& path, bool json, bool check) {
     for (uint32_t k = 0; k < n.arcCount; ++k) L.patches += reader->arcs()[n.firstArc + k].patchCount;
     L.errorMin = std::min(L.errorMin, double(n.error));
     L.errorMax = std::max(L.errorMax, double(n.error));
+    L.colorErrorMax = std::max(L.colorErrorMax, double(n.colorError));
   }
+  // The colour error column: files with colours; written by version 5 on (older files have none).
+  const bool colors = h.vertexFlags & mt::format::kHasColors;
+  const bool colorErrors = colors && h.version >= mt::format::kFirstColorErrorVersion;
 
   // DAG shape (BMT 3.2: paths logarithmic, small backward stars). Depth = arcs on the longest
   // source -> sink path. Stars are over the inner nodes: the source's forward star and the
@@ -120,14 +135,14 @@ int run(const std::string& path, bool json, bool check) {
     std::printf("  \"bytesPerInputTriangle\": %s,\n  \"bytesPerStoredTriangle\": %s,\n",
                 num(per(reader->fileSize(), h.inputTriangles)).c_str(), num(per(reader->fileSize(), h.storedTriangles)).c_str());
     // The CRS (mtbuild --crs) and the grid's origin at full double precision (georeferenced scans).
-    std::printf("  \"crs\": %s,\n  \"gridOrigin\": [%.17g, %.17g, %.17g],\n",
-                reader->crs().empty() ? "null" : ("\"" + jsonEscape(reader->crs()) + "\"").c_str(), h.gridOrigin[0],
-                h.gridOrigin[1], h.gridOrigin[2]);
-    std::printf("  \"gridStep\": %s,\n  \"quantizationError\": %s,\n  \"gridBits\": %u,\n", num(h.gridStep).c_str(),
-                num(h.quantizationError).c_str(), h.gridBits);
-    std::printf("  \"boundsMin\": [%s, %s, %s],\n  \"boundsMax\": [%s, %s, %s],\n", num(h.boundsMin[0]).c_str(),
-                num(h.boundsMin[1]).c_str(), num(h.boundsMin[2]).c_str(), num(h.boundsMax[0]).c_str(),
-                num(h.boundsMax[1]).c_str(), num(h.boundsMax[2]).c_str());
+    std::printf("  \"crs\": %s,\n  \"gridOrigin\": [%s, %s, %s],\n",
+                reader->crs().empty() ? "null" : ("\"" + jsonEscape(reader->crs()) + "\"").c_str(), exact(h.gridOrigin[0]).c_str(),
+                exact(h.gridOrigin[1]).c_str(), exact(h.gridOrigin[2]).c_str());
+    std::printf("  \"gridStep\": %s,\n  \"quantizationError\": %s,\n  \"gridBits\": %u,\n", exact(h.gridStep).c_str(),
+                exact(h.quantizationError).c_str(), h.gridBits);
+    std::printf("  \"boundsMin\": [%s, %s, %s],\n  \"boundsMax\": [%s, %s, %s],\n", exact(h.boundsMin[0]).c_str(),
+                exact(h.boundsMin[1]).c_str(), exact(h.boundsMin[2]).c_str(), exact(h.boundsMax[0]).c_str(),
+                exact(h.boundsMax[1]).c_str(), exact(h.boundsMax[2]).c_str());
     std::printf("  \"dag\": {\"depth\": %u, \"backwardStarMean\": %s, \"backwardStarMax\": %u, \"forwardStarMean\": %s, "
                 "\"forwardStarMax\": %u},\n",
                 longest[sink], num(back.mean).c_str(), back.max, num(forward.mean).c_str(), forward.max);
@@ -135,9 +150,9 @@ int run(const std::string& path, bool json, bool check) {
     for (size_t l = 0; l < levels.size(); ++l) {
       const LevelInfo& L = levels[l];
       std::printf("%s\n    {\"level\": %zu, \"nodes\": %" PRIu64 ", \"patches\": %" PRIu64 ", \"triangles\": %" PRIu64
-                  ", \"errorMin\": %s, \"errorMax\": %s}",
+                  ", \"errorMin\": %s, \"errorMax\": %s, \"colorErrorMax\": %s}",
                   l ? "," : "", l, L.nodes, L.patches, L.triangles, num(L.nodes ? L.errorMin : NAN).c_str(),
-                  num(L.nodes ? L.errorMax : NAN).c_str());
+                  num(L.nodes ? L.errorMax : NAN).c_str(), num(colorErrors && L.nodes ? L.colorErrorMax : NAN).c_str());
     }
     std::printf("\n  ]\n}\n");
   } else {
@@ -149,19 +164,28 @@ int run(const std::string& path, bool json, bool check) {
     std::printf("bytes/triangle    %.3f per input triangle, %.3f per stored triangle\n", per(reader->fileSize(), h.inputTriangles),
                 per(reader->fileSize(), h.storedTriangles));
     std::printf("crs               %s\n", reader->crs().empty() ? "(none)" : reader->crs().c_str());
-    std::printf("grid origin       (%.17g, %.17g, %.17g)\n", h.gridOrigin[0], h.gridOrigin[1], h.gridOrigin[2]);
-    std::printf("grid              step %.9g, quantization error %.9g, %u bits\n", h.gridStep, h.quantizationError, h.gridBits);
-    std::printf("bounding box      (%.9g, %.9g, %.9g) - (%.9g, %.9g, %.9g)\n", h.boundsMin[0], h.boundsMin[1], h.boundsMin[2],
-                h.boundsMax[0], h.boundsMax[1], h.boundsMax[2]);
+    std::printf("grid origin       (%s, %s, %s)\n", exact(h.gridOrigin[0]).c_str(), exact(h.gridOrigin[1]).c_str(),
+                exact(h.gridOrigin[2]).c_str());
+    std::printf("grid              step %s, quantization error %s, %u bits\n", exact(h.gridStep).c_str(),
+                exact(h.quantizationError).c_str(), h.gridBits);
+    std::printf("bounding box      (%s, %s, %s) - (%s, %s, %s)\n", exact(h.boundsMin[0]).c_str(), exact(h.boundsMin[1]).c_str(),
+                exact(h.boundsMin[2]).c_str(), exact(h.boundsMax[0]).c_str(), exact(h.boundsMax[1]).c_str(),
+                exact(h.boundsMax[2]).c_str());
     std::printf("DAG               %u levels, %zu nodes, %zu arcs, depth %u\n", h.levelCount, nodes.size(),
                 reader->arcs().size(), longest[sink]);
     std::printf("stars (inner)     backward mean %.2f max %u, forward mean %.2f max %u\n", back.mean, back.max, forward.mean,
                 forward.max);
-    std::printf("level     nodes    patches      triangles    error min    error max\n");
+    if (colors && !colorErrors)
+      std::printf("colour error      not stored (file version %u; version %u on stores it)\n", h.version,
+                  mt::format::kFirstColorErrorVersion);
+    std::printf("level     nodes    patches      triangles    error min    error max%s\n",
+                colorErrors ? "  colour err max" : "");
     for (size_t l = 0; l < levels.size(); ++l) {
       const LevelInfo& L = levels[l];
-      std::printf("%5zu %9" PRIu64 " %10" PRIu64 " %14" PRIu64 " %12.6g %12.6g\n", l, L.nodes, L.patches, L.triangles,
+      std::printf("%5zu %9" PRIu64 " %10" PRIu64 " %14" PRIu64 " %12.6g %12.6g", l, L.nodes, L.patches, L.triangles,
                   L.nodes ? L.errorMin : 0.0, L.nodes ? L.errorMax : 0.0);
+      if (colorErrors) std::printf(" %15.6g", L.nodes ? L.colorErrorMax : 0.0);
+      std::printf("\n");
     }
   }
 

@@ -100,7 +100,8 @@ void checkDagShape(const mt::MtFileReader& r, const std::string& path, Problems&
   mt::topologicalOrder(r);
 }
 
-// 3. Monotone errors: a node's error >= each predecessor's, the sink's +inf.
+// 3. Monotone errors: a node's error >= each predecessor's, the sink's +inf; the same for the
+// colour error (mt_format.h NodeRecord::colorError).
 void checkMonotoneErrors(const mt::MtFileReader& r, const std::string& path, Problems& problems) {
   const auto& nodes = r.nodes();
   const uint32_t sink = uint32_t(nodes.size() - 1);
@@ -109,6 +110,8 @@ void checkMonotoneErrors(const mt::MtFileReader& r, const std::string& path, Pro
   for (uint32_t v = 0; v < nodes.size(); ++v) {
     if (std::isnan(nodes[v].error) || nodes[v].error < 0)
       problems.add("error", path + ": " + nodeName(r, v) + " has error " + std::to_string(nodes[v].error));
+    if (std::isnan(nodes[v].colorError) || nodes[v].colorError < 0)
+      problems.add("error", path + ": " + nodeName(r, v) + " has colour error " + std::to_string(nodes[v].colorError));
     const NodeRecord& n = nodes[v];
     for (uint32_t k = 0; k < n.backArcCount; ++k) {
       uint32_t u = r.arcs()[r.backArcs()[n.firstBackArc + k]].from;
@@ -118,7 +121,27 @@ void checkMonotoneErrors(const mt::MtFileReader& r, const std::string& path, Pro
                       path.c_str(), nodeName(r, v).c_str(), double(n.error), u, double(nodes[u].error));
         problems.add("error", buf);
       }
+      if (!(n.colorError >= nodes[u].colorError)) {
+        char buf[256];
+        std::snprintf(buf, sizeof buf, "%s: colour error not monotone: %s has colour error %.9g < its predecessor node %u's %.9g",
+                      path.c_str(), nodeName(r, v).c_str(), double(n.colorError), u, double(nodes[u].colorError));
+        problems.add("error", buf);
+      }
     }
+  }
+  // The colour error (file version 5 on): 0 at the source; with colours, +inf at the sink; without, 0 everywhere.
+  if (r.header().version >= mt::format::kFirstColorErrorVersion) {
+    const bool colors = r.header().vertexFlags & mt::format::kHasColors;
+    if (nodes[0].colorError != 0) problems.add("error", path + ": the source's colour error is " + std::to_string(nodes[0].colorError) + ", not 0");
+    if (colors && !std::isinf(nodes[sink].colorError))
+      problems.add("error", path + ": the sink's colour error is " + std::to_string(nodes[sink].colorError) + ", not +inf");
+    if (!colors)
+      for (uint32_t v = 0; v < nodes.size(); ++v)
+        if (nodes[v].colorError != 0) {
+          problems.add("error", path + ": " + nodeName(r, v) + " has colour error " + std::to_string(nodes[v].colorError) +
+                                    " in a file without colours");
+          break;
+        }
   }
 }
 

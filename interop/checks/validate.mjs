@@ -4,13 +4,15 @@
 //    3d-tiles-validator package): asset.version "1.1", geometricError >= 0 and never above the
 //    parent's, refine REPLACE/ADD, a bounding volume per tile, every child's sphere inside its
 //    parent's (same frame), every content uri an existing file.
-// The validator cannot look inside EXT_meshopt_compression (it says so as an info): such a file is
-// also decoded (meshoptimizer's JS decoder) into a plain GLB, which must validate clean too.
+// The validator cannot look inside EXT_meshopt_compression nor KHR_draco_mesh_compression (it says
+// so as an info): such a file is also decoded (meshoptimizer's and Draco's own JS decoders) into a
+// plain GLB, which must validate clean too.
 // Prints one line per file; exit 1 on any problem.
 import fs from 'node:fs';
 import path from 'node:path';
 import validator from 'gltf-validator';
 import { MeshoptDecoder } from 'meshoptimizer';
+import draco3d from 'draco3d';
 
 let problems = 0;
 const complain = (msg) => { console.error(msg); problems++; };
@@ -70,11 +72,98 @@ async function decodeMeshopt(file) {
   return new Uint8Array(Buffer.concat([header, text, binHeader, out]));
 }
 
+// A GLB of a document and its buffer 0.
+function glbOf(json, out) {
+  let text = Buffer.from(JSON.stringify(json));
+  text = Buffer.concat([text, Buffer.alloc((4 - (text.length % 4)) % 4, 0x20)]);
+  const header = Buffer.alloc(20);
+  header.writeUInt32LE(0x46546c67, 0); header.writeUInt32LE(2, 4);
+  header.writeUInt32LE(12 + 8 + text.length + 8 + out.length, 8);
+  header.writeUInt32LE(text.length, 12); header.writeUInt32LE(0x4e4f534a, 16);
+  const binHeader = Buffer.alloc(8);
+  binHeader.writeUInt32LE(out.length, 0); binHeader.writeUInt32LE(0x004e4942, 4);
+  return new Uint8Array(Buffer.concat([header, text, binHeader, out]));
+}
+
+// The same document with every Draco primitive decoded into plain buffer views (vertex strides
+// padded to 4 bytes), as a GLB. The decoded counts must be the accessors' counts.
+let dracoModule = null;
+async function decodeDraco(file) {
+  dracoModule ||= await draco3d.createDecoderModule({});
+  const D = dracoModule;
+  const { json, bin } = load(file);
+  const parts = [];
+  let size = 0;
+  const views = [];
+  const push = (bytes, stride, target) => {
+    while (size % 4) { parts.push(Buffer.alloc(1)); size++; }
+    const v = { buffer: 0, byteOffset: size, byteLength: bytes.byteLength, target };
+    if (stride) v.byteStride = stride;
+    parts.push(Buffer.from(bytes.buffer, bytes.byteOffset, bytes.byteLength)); size += bytes.byteLength;
+    views.push(v);
+    return views.length - 1;
+  };
+  for (const mesh of json.meshes) for (const prim of mesh.primitives) {
+    const ext = prim.extensions && prim.extensions.KHR_draco_mesh_compression;
+    if (!ext) continue;
+    const v = json.bufferViews[ext.bufferView];
+    const src = new Uint8Array(bin.buffer, bin.byteOffset + (v.byteOffset || 0), v.byteLength);
+    const decoder = new D.Decoder();
+    const buffer = new D.DecoderBuffer();
+    buffer.Init(new Int8Array(src.buffer, src.byteOffset, src.byteLength), src.byteLength);
+    const dm = new D.Mesh();
+    const status = decoder.DecodeBufferToMesh(buffer, dm);
+    if (!status.ok()) throw new Error(`${file}: Draco cannot decode: ${status.error_msg()}`);
+    const points = dm.num_points(), faces = dm.num_faces();
+    for (const [name, id] of Object.entries(ext.attributes)) {
+      const acc = json.accessors[prim.attributes[name]];
+      if (acc.count !== points) complain(`${file}: ${name} accessor count ${acc.count}, Draco decodes ${points} points`);
+      const att = decoder.GetAttributeByUniqueId(dm, id);
+      const comps = att.num_components();
+      const kinds = { 5126: [Float32Array, D.DT_FLOAT32, 4], 5123: [Uint16Array, D.DT_UINT16, 2], 5121: [Uint8Array, D.DT_UINT8, 1],
+        5122: [Int16Array, D.DT_INT16, 2], 5120: [Int8Array, D.DT_INT8, 1] };
+      const [Type, dt, bytesPer] = kinds[acc.componentType];
+      const n = points * comps, ptr = D._malloc(n * bytesPer);
+      decoder.GetAttributeDataArrayForAllPoints(dm, att, dt, n * bytesPer, ptr);
+      const values = new Type(D.HEAPU8.buffer.slice(ptr, ptr + n * bytesPer));
+      D._free(ptr);
+      const stride = Math.ceil((comps * bytesPer) / 4) * 4;
+      const out = new Uint8Array(points * stride);
+      const raw = new Uint8Array(values.buffer);
+      for (let i = 0; i < points; ++i) out.set(raw.subarray(i * comps * bytesPer, (i + 1) * comps * bytesPer), i * stride);
+      acc.bufferView = push(out, stride, 34962);
+    }
+    const ia = json.accessors[prim.indices];
+    if (ia.count !== 3 * faces) complain(`${file}: indices accessor count ${ia.count}, Draco decodes ${faces} faces`);
+    const idx = new Uint32Array(3 * faces);
+    const ptr = D._malloc(idx.byteLength);
+    decoder.GetTrianglesUInt32Array(dm, idx.byteLength, ptr);
+    idx.set(new Uint32Array(D.HEAPU8.buffer.slice(ptr, ptr + idx.byteLength)));
+    D._free(ptr);
+    ia.bufferView = push(ia.componentType === 5123 ? Uint16Array.from(idx) : idx, 0, 34963);
+    delete prim.extensions.KHR_draco_mesh_compression;
+    if (!Object.keys(prim.extensions).length) delete prim.extensions;
+    D.destroy(dm); D.destroy(buffer); D.destroy(decoder);
+  }
+  json.bufferViews = views;
+  while (size % 4) { parts.push(Buffer.alloc(1)); size++; }
+  const out = Buffer.concat(parts);
+  json.buffers = [{ byteLength: out.length }];
+  const drop = (list) => (list || []).filter((x) => x !== 'KHR_draco_mesh_compression');
+  json.extensionsUsed = drop(json.extensionsUsed);
+  json.extensionsRequired = drop(json.extensionsRequired);
+  if (!json.extensionsUsed.length) delete json.extensionsUsed;
+  if (!json.extensionsRequired.length) delete json.extensionsRequired;
+  return glbOf(json, out);
+}
+
 async function validateGltf(file) {
   await validateBytes(file, new Uint8Array(fs.readFileSync(file)));
   const { json } = load(file);
   if ((json.extensionsUsed || []).includes('EXT_meshopt_compression'))
     await validateBytes(`${file} (meshopt decoded)`, await decodeMeshopt(file));
+  if ((json.extensionsUsed || []).includes('KHR_draco_mesh_compression'))
+    await validateBytes(`${file} (Draco decoded)`, await decodeDraco(file));
 }
 
 async function validateBytes(file, data) {

@@ -1,7 +1,8 @@
 // Wavefront OBJ reader, streamed line by line.
 //
 // Kept: "v x y z [w]" positions (w is ignored: it only matters for rational curves), the
-// "v x y z r g b" colour extension when the file's first vertex has it (floats 0..1), and "f"
+// "v x y z r g b" colour extension when the file's first vertex has it (floats 0..1; a value
+// outside, or a colour on a later vertex when the first has none, is refused), and "f"
 // faces in every corner form (v, v/vt, v//vn, v/vt/vn), with negative indices counted back from
 // the last vertex seen so far. Every other statement (vt, vn, vp, g, o, s, usemtl, mtllib, l, p,
 // curves...) is skipped.
@@ -89,8 +90,15 @@ class ObjReader final : public MeshReader {
     v.p[2] = values[2];
     if (!isFinite(v))
       fail(path_, "vertex " + std::to_string(index) + " has a non-finite coordinate" + atLine(in_->line()));
-    if (header_.hasColors && n == 6)
-      for (int k = 0; k < 3; ++k) v.c[k] = unitToByte(values[3 + k]);
+    if (n == 6 && !header_.hasColors)
+      fail(path_, "vertex " + std::to_string(index) +
+                      " has a colour but the file's first vertex has none (OBJ vertex colours go on every vertex or none)" +
+                      atLine(in_->line()));
+    if (n == 6)
+      for (int k = 0; k < 3; ++k)
+        if (!unitColorByte(values[3 + k], v.c[k]))
+          fail(path_, "vertex " + std::to_string(index) + " " + (k == 0 ? "red" : k == 1 ? "green" : "blue") + ": " + badColorMessage(values[3 + k], true, 255) +
+                          atLine(in_->line()));
   }
 
   void readFace(std::string_view rest, uint64_t index, uint64_t vertexCount, Batcher& batch) {

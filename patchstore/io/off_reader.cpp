@@ -3,7 +3,8 @@
 // Header keyword [ST][C][N]OFF: N adds a per-vertex normal, C a per-vertex colour, ST texture
 // coordinates (skipped). The counts "vertices faces [edges]" follow, on the keyword's line or the
 // next one. Each vertex is one line "x y z [nx ny nz] [r g b [a]] [s t]"; colours are integers
-// 0..255, or floats 0..1 when written with a decimal point or exponent. Each face is one line
+// 0..255, or floats 0..1 when written with a decimal point or exponent (a value outside is
+// refused). Each face is one line
 // "n i0 ... i(n-1) [face colour]"; face colours are skipped. '#' starts a comment anywhere.
 #include <string>
 
@@ -120,7 +121,9 @@ class OffReader final : public MeshReader {
         double c;
         if (!parseNumber(channel[k], c))
           fail(path_, "invalid number " + quoted(channel[k]) + " at vertex " + std::to_string(index) + atLine(in_->line()));
-        v.c[k] = unit ? unitToByte(c) : uint8_t(std::clamp(c, 0.0, 255.0));
+        if (!(unit ? unitColorByte(c, v.c[k]) : integerColorByte(c, 255, v.c[k])))
+          fail(path_, "vertex " + std::to_string(index) + " colour channel " + std::to_string(k) + ": " +
+                          badColorMessage(c, unit, 255) + atLine(in_->line()));
       }
     }
   }

@@ -108,18 +108,22 @@ int64_t loadInteger(const char* p, Type t, bool swap) {
   }
 }
 
-// Colour channels: 8-bit as is, 16-bit scaled down, floats taken as 0..1.
-uint8_t colorByte(double value, Type t) {
+// Colour channels: 8-bit as is, 16-bit scaled down, floats taken as 0..1 (reader_util.h says
+// which values are refused). False for a refused value.
+bool colorByte(double value, Type t, uint8_t& out) {
   switch (t) {
     case Type::Float32:
-    case Type::Float64: return unitToByte(value);
+    case Type::Float64: return unitColorByte(value, out);
     case Type::Int16:
-    case Type::UInt16: return uint8_t(std::clamp(value / 257.0, 0.0, 255.0));
-    default: return uint8_t(std::clamp(value, 0.0, 255.0));
+    case Type::UInt16:
+    case Type::Int32:
+    case Type::UInt32: return integerColorByte(value, t == Type::Int16 || t == Type::UInt16 ? 65535 : 255, out);
+    default: return integerColorByte(value, 255, out);
   }
 }
 
-void store(InputVertex& v, Slot slot, double value, Type t) {
+// False when a colour value is refused (the caller names the vertex and where it is).
+bool store(InputVertex& v, Slot slot, double value, Type t) {
   switch (slot) {
     case kX:
     case kY:
@@ -130,8 +134,19 @@ void store(InputVertex& v, Slot slot, double value, Type t) {
     case kRed:
     case kGreen:
     case kBlue:
-    case kAlpha: v.c[slot - kRed] = colorByte(value, t); break;
+    case kAlpha: return colorByte(value, t, v.c[slot - kRed]);
     default: break;
+  }
+  return true;
+}
+
+const char* slotName(Slot slot) {
+  switch (slot) {
+    case kRed: return "red";
+    case kGreen: return "green";
+    case kBlue: return "blue";
+    case kAlpha: return "alpha";
+    default: return "?";
   }
 }
 
@@ -333,9 +348,18 @@ class PlyReader final : public MeshReader {
       readRecord(e, "vertex", i, values, nullptr);
       InputVertex& v = batch.addVertex();
       v = blankVertex();
-      for (const Field& f : fields_) store(v, f.slot, values[f.slot], f.type);
+      for (const Field& f : fields_)
+        if (!store(v, f.slot, values[f.slot], f.type)) badColor(i, f, values[f.slot], start);
       if (!isFinite(v)) nonFinite(i, start);
     }
+  }
+
+  template <class F>
+  [[noreturn]] void badColor(uint64_t index, const F& f, double value, uint64_t start) {
+    const bool unit = f.type == Type::Float32 || f.type == Type::Float64;
+    const double max = f.type == Type::Int16 || f.type == Type::UInt16 ? 65535 : 255;
+    fail(path_, "vertex " + std::to_string(index) + " property " + slotName(f.slot) + ": " + badColorMessage(value, unit, max) +
+                    where(start));
   }
 
   [[noreturn]] void nonFinite(uint64_t index, uint64_t start) {
@@ -366,13 +390,19 @@ class PlyReader final : public MeshReader {
           v.p[0] = f[0];
           v.p[1] = f[1];
           v.p[2] = f[2];
-          for (const Field& fd : extraFields_) store(v, fd.slot, loadScalar(p + fd.offset, fd.type, false), fd.type);
+          for (const Field& fd : extraFields_) {
+            const double x = loadScalar(p + fd.offset, fd.type, false);
+            if (!store(v, fd.slot, x, fd.type)) badColor(i + k, fd, x, in_->offset() + uint64_t(p - in_->data()));
+          }
           out[k] = v;
         }
       } else {
         for (size_t k = 0; k < n; ++k, p += rs) {
           InputVertex v = blank;
-          for (const Field& fd : fields_) store(v, fd.slot, loadScalar(p + fd.offset, fd.type, swap_), fd.type);
+          for (const Field& fd : fields_) {
+            const double x = loadScalar(p + fd.offset, fd.type, swap_);
+            if (!store(v, fd.slot, x, fd.type)) badColor(i + k, fd, x, in_->offset() + uint64_t(p - in_->data()));
+          }
           if (!isFinite(v)) nonFinite(i + k, in_->offset() + uint64_t(p - in_->data()));
           out[k] = v;
         }

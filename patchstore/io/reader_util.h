@@ -11,6 +11,7 @@
 #include <cerrno>
 #include <charconv>
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <memory>
@@ -214,6 +215,30 @@ inline bool isFinite(const InputVertex& v) {
 inline uint8_t unitToByte(double x) {
   if (!(x > 0)) return 0;  // also NaN
   return x >= 1 ? 255 : uint8_t(x * 255.0 + 0.5);
+}
+
+// Colour channels as the readers check them: a float channel must lie in 0..1 and an integer one
+// in 0..`max` (255 for 8-bit, 65535 for 16-bit channels). A float slightly outside 0..1 (by less
+// than half an 8-bit level, as writers' rounding leaves it) is clamped; anything farther, or NaN,
+// is refused: a float channel written as 0..255, or a negative integer, is a wrong file, and
+// clamping it would silently paint the model white or black.
+inline bool unitColorByte(double x, uint8_t& out) {
+  constexpr double kSlack = 0.5 / 255.0;
+  if (!(x >= -kSlack && x <= 1 + kSlack)) return false;  // also NaN
+  out = unitToByte(x);
+  return true;
+}
+inline bool integerColorByte(double x, double max, uint8_t& out) {
+  if (!(x >= 0 && x <= max) || x != std::floor(x)) return false;
+  out = uint8_t(max > 255 ? std::lround(x * 255.0 / max) : long(x));
+  return true;
+}
+// The message for a refused channel value: "colour value 300 out of range (8-bit channels are 0..255)".
+inline std::string badColorMessage(double x, bool unit, double max) {
+  char value[40];
+  std::snprintf(value, sizeof value, "%.9g", x);
+  return std::string("colour value ") + value + " out of range (" +
+         (unit ? std::string("float channels are 0..1") : max > 255 ? "16-bit channels are 0..65535" : "8-bit channels are 0..255") + ")";
 }
 
 // Collects vertices and triangles into fixed-size batches and hands them to the sink, keeping

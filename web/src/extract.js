@@ -265,6 +265,16 @@ export class ExtractRender {
       if (w === undefined || u > w) this.wanted.set(id, u);
     }
   }
+  /**
+   * A frame whose time says nothing about drawing (it drew nothing; the browser kept the image):
+   * it does not feed the model, and the last drawn frame's time no longer caps the budget (one slow
+   * frame before a run of such frames, e.g. the one that made the still image's target, would
+   * otherwise pin the budget at its floor for as long as the run lasts).
+   */
+  frameSkipped() {
+    this.lastDrawn = 0;
+    this.lastFrameMs = 0;
+  }
   frameDone(drawnTriangles, frameMs) {
     this.time.add(drawnTriangles, frameMs);
     this.frameMsAvg = this.frameMsAvg === 0 ? frameMs : 0.9 * this.frameMsAvg + 0.1 * frameMs;
@@ -360,6 +370,8 @@ export class ExtractRender {
     }
     this.submitRequests(frame, st);
     st.budgetTriangles = budget;
+    st.modelA = this.time.a;
+    st.modelB = this.time.b * 1e6;
     st.triangles = this.triangles;
     st.patches = this.cutPatchCount;
     st.lodScale = this.lodScale;
@@ -375,7 +387,10 @@ export class ExtractRender {
     };
   }
 
-  /** One frame's cut update for `view`; `predicted` is the view extrapolated 10 frames ahead. */
+  /**
+   * One frame's cut update for `view`; `predicted`: the views of the next frames, extrapolated (an
+   * array, or one view), whose frusta prefetching enlarges the current one to.
+   */
   update(frame, view, predicted) {
     const st = this.newStats();
     const t0 = now();
@@ -400,7 +415,9 @@ export class ExtractRender {
     p.pinLimit = this.cache ? this.options.memoryFraction * this.cache.capBytes : Number.POSITIVE_INFINITY;
     this.fillHeaps(p);
     if (!this.frozen) {
-      this.coarsenOverBudget(p);
+      // A still view only gets finer: its image is drawn over as many frames as it takes, each
+      // within one frame's budget, so its cut need not shrink when the budget does (extract.cpp).
+      if (this.budgetScale === 1) this.coarsenOverBudget(p);
       this.refineWithinBudget(p);
       this.coarsenFarBelow(p);
     }
@@ -543,15 +560,42 @@ export class ExtractRender {
       this.want(this.collectOut(node, this.scratch), Urgency.Prefetch);
       ++k;
     }
-    if (!predicted) return;
-    const ahead = [];
+    // The frustum enlarged to contain the frusta of the next 10 frames (Derzapf et al. 4.3): the
+    // refinements the extrapolated views want (a node's error is its largest over them), the
+    // largest first, two levels deep (as if applied), within twice the render budget's triangles.
+    const ahead = !predicted ? [] : Array.isArray(predicted) ? predicted : [predicted];
+    if (!ahead.length || now() >= p.deadline + (p.deadline - p.t0)) return;
+    const errAhead = (n) => {
+      let e = 0;
+      for (const v of ahead) e = Math.max(e, this.screenError(n, v));
+      return e;
+    };
+    const heap = new Heap(true);
+    const depth = new Map();
     for (let n = 0; n < nodes.count; ++n)
       if (this.isRefineCandidate(n) && !this.badNode[n]) {
-        const e = this.screenError(n, predicted);
-        if (e > p.tau) ahead.push([e, n]);
+        const e = errAhead(n);
+        if (e > p.tau) heap.push(e, n), depth.set(n, 0);
       }
-    ahead.sort((a, b) => b[0] - a[0]);
-    for (let i = 0; i < ahead.length && i < 32; ++i) this.want(this.collectIn(ahead[i][1], this.scratch), Urgency.Prefetch);
+    const seen = new Uint8Array(nodes.count);
+    let triangles = 0;
+    while (!heap.empty()) {
+      const node = heap.topNode();
+      heap.pop();
+      if (seen[node]) continue;
+      seen[node] = 1;
+      triangles += nodes.inTriangles[node];
+      if (triangles > 2 * p.budget) break;
+      this.want(this.collectIn(node, this.scratch), Urgency.Prefetch);
+      const d = depth.get(node) || 0;
+      if (d >= 1) continue;
+      for (let k = 0; k < nodes.inArcCount[node]; ++k) {
+        const m = arcs.from[inArcs[nodes.firstInArc[node] + k]];
+        if (nodes.source[m] || this.badNode[m] || seen[m]) continue;
+        const e = errAhead(m);
+        if (e > p.tau) heap.push(e, m), depth.set(m, d + 1);
+      }
+    }
   }
 
   /** Nodes of the cut's set S (sorted): what the cut comparison prints. */

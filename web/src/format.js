@@ -7,8 +7,10 @@ export const kMagic = 'BMT-MT\r\n';
 export const kFooterMagic = 'BMT-END\n';
 // Readers accept kMinReadableVersion..kVersion (mt_format.h); a later file version is refused with
 // a message naming it, never guessed at.
-export const kVersion = 4;
+export const kVersion = 5;
 export const kMinReadableVersion = 1;
+// Version 5: NodeRecord.colorError (was reserved and zero: older files read as 0, not measured).
+export const kFirstColorErrorVersion = 5;
 export const kHeaderSize = 256;
 export const kFooterSize = 32;
 
@@ -202,6 +204,7 @@ export function readIndex(h, meta) {
     firstBackArc: new Uint32Array(nc),
     backArcCount: new Uint32Array(nc),
     triangles: new Uint32Array(nc),
+    colorError: new Float32Array(nc),  // mt_format.h NodeRecord::colorError (0 before version 5)
   };
   for (let i = 0; i < nc; ++i) {
     const o = h.nodesOffset - base + i * kNodeRecordSize;
@@ -217,6 +220,7 @@ export function readIndex(h, meta) {
     nodes.firstBackArc[i] = dv.getUint32(o + 64, true);
     nodes.backArcCount[i] = dv.getUint32(o + 68, true);
     nodes.triangles[i] = dv.getUint32(o + 72, true);
+    nodes.colorError[i] = dv.getFloat32(o + 76, true);
   }
   const arcs = {
     count: ac,

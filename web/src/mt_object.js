@@ -76,10 +76,11 @@ export class MTObject extends THREE.Group {
     // grow to stillFrames frames' worth of the render budget and is drawn over that many frames into
     // an accumulation target, at most one frame's budget a frame; the screen keeps the last
     // complete image meanwhile. render() does this; update() + renderer.render() draws plainly.
-    this.stillFrames = options.stillFrames ?? 16;
+    this.stillFrames = options.stillFrames ?? 128;
     this.stillCount = 0;
     this.accum = null;  // {list: Mesh[], next, err}
     this.shownErr = 0;
+    this.blitted = false;  // the last render() made the still image's target or showed an image
   }
 
   async _start() {
@@ -134,8 +135,14 @@ export class MTObject extends THREE.Group {
     const t = performance.now();
     // The time model learns from frames that drew. A still frame that drew nothing touched no
     // pixel (the browser kept the image): its time says nothing about the cost of drawing.
-    if (this.lastTime && this.frame > 1 && (this.drawnTriangles > 0 || !this.progressiveNow))
+    // Nor does a frame that made the still image's target or showed a finished image: the blit of
+    // a full-screen sRGB texture costs SwiftShader 100-180 ms whatever the cut (docs/web.md), and
+    // taken as the cost of the triangles drawn with it, it cut the budget so that the next image
+    // was coarser than the one shown (the still view swung between two cuts for ever).
+    if (this.lastTime && this.frame > 1 && !this.blitted && (this.drawnTriangles > 0 || !this.progressiveNow))
       this.extract.frameDone(this.drawnTriangles, t - this.lastTime);
+    else if (this.frame > 1) this.extract.frameSkipped();
+    this.blitted = false;
     this.lastTime = t;
     ++this.frame;
     const pose = this._pose(camera);
@@ -144,7 +151,10 @@ export class MTObject extends THREE.Group {
     const still = this.frame > 1 && ['eye', 'target', 'up'].every((k) => pose[k].every((x, i) => Math.abs(x - prev[k][i]) <= 1e-9 * this.mt.radius));
     this.stillCount = still ? this.stillCount + 1 : 0;
     const view = makeView(pose, width, height, this.mt.center, this.mt.radius);
-    const ahead = makeView(extrapolate(prev, pose, 10), width, height, this.mt.center, this.mt.radius);
+    // Prefetching's enlarged frustum (Derzapf et al. 4.3): the views 2, 4, ..., 10 frames ahead.
+    const ahead = [];
+    if (this.stillCount === 0 && this.frame > 1)
+      for (let k = 2; k <= 10; k += 2) ahead.push(makeView(extrapolate(prev, pose, k), width, height, this.mt.center, this.mt.radius));
     this.progressiveNow = this.progressive && this.stillCount >= 2 && this.stillFrames > 1;
     let st;
     if (!this.progressiveNow) {
@@ -226,6 +236,7 @@ export class MTObject extends THREE.Group {
       // not touched, so the browser keeps showing the last image presented.
       const size = renderer.getDrawingBufferSize(new THREE.Vector2());
       if (!this.target || this.target.width !== size.x || this.target.height !== size.y) {
+        this.blitted = true;
         if (this.target) this.target.dispose();
         this.target = new THREE.WebGLRenderTarget(size.x, size.y, { depthBuffer: true, colorSpace: THREE.SRGBColorSpace });
         this.blit = new THREE.Mesh(new THREE.PlaneGeometry(2, 2), new THREE.MeshBasicMaterial({ map: this.target.texture, depthTest: false, depthWrite: false, transparent: true }));
@@ -261,10 +272,21 @@ export class MTObject extends THREE.Group {
       renderer.setRenderTarget(null);
       if (a.next >= a.list.length) {
         renderer.render(this.blitScene, this.blitCamera);  // the complete image, shown once
+        this.blitted = true;
         this.shownErr = a.err;
       }
     }
     // Still and complete: nothing to draw; the screen keeps the image.
+    // A still image's frames wait for their drawing: WebGL runs it later in the GPU process, so a
+    // frame's measured time is that of an earlier frame's drawing, and the still state's chunks
+    // (a 300 k-triangle chunk measured 10 ms, the frame after it 300 ms) let the fitted budget run
+    // away. Moving frames draw a cut that changes slowly: the lag costs little there, and waiting
+    // would cost the overlap of the page's work with the browser's.
+    if (this.progressiveNow && (drawn > 0 || this.blitted)) {
+      // gl.finish() does not wait in Chromium; reading one pixel back does.
+      const gl = renderer.getContext();
+      gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, this.syncPixel || (this.syncPixel = new Uint8Array(4)));
+    }
     this.drawnTriangles = drawn;
     if (this.stats) {
       this.stats.drawnTriangles = drawn;

@@ -1,4 +1,6 @@
 // node test/bench.mjs BIN_DIR FILE.mt [--frames 600] [--budget 33] [--tol 1] [--cache 256] [--shots DIR]
+//                    [--dump FRAMES.json] (the per-frame records of window.mtViewer.frames)
+//                    [--fixed N] (a fixed render budget of N triangles instead of the time model: raw draw cost)
 // The web viewer's figures on one MT file served by mtserve, in headless Chromium at 1280x720
 // (bench/web.sh runs it): time to the first image after page load, the share of frames within the
 // page's budget over a 600-frame orbit path, the cache against its cap, bytes fetched per frame and
@@ -19,7 +21,8 @@ const opt = (name, def) => {
 };
 const [binDir, file] = args;
 const frames = Number(opt('--frames', 600)), budget = Number(opt('--budget', 50)), tol = Number(opt('--tol', 1));
-const cacheMiB = Number(opt('--cache', 256)), shots = opt('--shots', '');
+const cacheMiB = Number(opt('--cache', 256)), shots = opt('--shots', ''), dump = opt('--dump', '');
+const fixed = Number(opt('--fixed', 0));
 const root = fs.mkdtempSync(path.join(os.tmpdir(), 'mtbench-'));
 fs.symlinkSync(path.resolve(here, '..'), path.join(root, 'web'));
 fs.symlinkSync(path.resolve(file), path.join(root, 'model.mt'));
@@ -36,9 +39,35 @@ const browser = await chromium.launch({
   args: ['--no-sandbox', '--disable-gpu', '--disable-background-networking', '--disable-component-update', '--disable-sync',
     '--no-first-run', '--use-angle=swiftshader', '--enable-unsafe-swiftshader'],
 });
+// CPU time (user + system, ms) of this process's descendants but mtserve: the browser's processes
+// (renderer, GPU process with SwiftShader, ...). Over the path, against its wall time, it tells the
+// browser's own cost of a frame from time spent waiting for a core on a loaded machine.
+const tick = 1000 / 100;  // USER_HZ
+function browserCpuMs() {
+  const kids = new Map();
+  for (const d of fs.readdirSync('/proc')) {
+    if (!/^\d+$/.test(d)) continue;
+    try {
+      const st = fs.readFileSync(`/proc/${d}/stat`, 'utf8');
+      const f = st.slice(st.lastIndexOf(')') + 2).split(' ');
+      kids.set(Number(d), { ppid: Number(f[1]), cpu: (Number(f[11]) + Number(f[12])) * tick });
+    } catch { /* gone */ }
+  }
+  let sum = 0;
+  for (const [pid, k] of kids) {
+    if (pid === srv.proc.pid) continue;
+    for (let p = k.ppid, n = 0; p > 1 && n < 64; p = kids.get(p)?.ppid ?? 0, ++n)
+      if (p === process.pid) {
+        sum += k.cpu;
+        break;
+      }
+  }
+  return sum;
+}
+const loadavg = () => fs.readFileSync('/proc/loadavg', 'utf8').split(' ').slice(0, 3).join(' ');
 const page = await browser.newPage({ viewport: { width: 1280, height: 720 } });
 page.on('pageerror', (e) => console.error('pageerror:', e.message));
-const q = `file=/model.mt&tol=${tol}&budget=${budget}&cache=${cacheMiB}&path=orbit&frames=${frames}`;
+const q = `file=/model.mt&tol=${tol}&budget=${budget}&cache=${cacheMiB}&path=orbit&frames=${frames}` + (fixed ? `&fixed=${fixed}` : '');
 await page.goto(`${srv.base}/web/viewer.html?${q}`);
 const loadMs = await page.evaluate(() => performance.timing.loadEventEnd - performance.timing.navigationStart);
 await page.waitForFunction(() => window.mtViewer.firstImageMs !== null || window.mtViewer.error, null, { timeout: 60000 });
@@ -46,7 +75,11 @@ if (shots) {
   await page.waitForTimeout(1500);
   await page.screenshot({ path: path.join(shots, 'web-viewer-moving.png') });
 }
+const cpu0 = browserCpuMs(), wall0 = performance.now(), frame0 = await page.evaluate(() => window.mtViewer.frames.length);
+const load0 = loadavg();
 await page.waitForFunction(() => window.mtViewer.done || window.mtViewer.error, null, { timeout: 600000, polling: 250 });
+const cpu1 = browserCpuMs(), wall1 = performance.now(), frame1 = await page.evaluate(() => window.mtViewer.frames.length);
+const load1 = loadavg();
 // Hold still until the screen error reaches the tolerance and nothing loads (or 20 s).
 const stillFrom = await page.evaluate(() => window.mtViewer.frames.find((f) => f.still).t);
 await page.waitForFunction((tol) => {
@@ -64,6 +97,7 @@ if (s.error) {
   process.exit(1);
 }
 const f = s.frames;
+if (dump) fs.writeFileSync(dump, JSON.stringify(f));
 const pathFrames = f.slice(1, frames);
 const ms = pathFrames.map((x) => x.frameMs).sort((a, b) => a - b);
 const within = ms.filter((x) => x <= budget).length / ms.length;
@@ -76,6 +110,7 @@ console.log(`page load                 ${loadMs} ms (load event)`);
 console.log(`first image               ${s.first.toFixed(0)} ms after navigation start (header+DAG+index ${mib(s.openBytes)} MiB, coarsest cut loaded)`);
 console.log(`frames within ${budget} ms     ${(100 * within).toFixed(1)}% of ${ms.length} path frames (median ${ms[ms.length >> 1].toFixed(1)} ms, p95 ${ms[Math.floor(0.95 * ms.length)].toFixed(1)} ms, max ${ms.at(-1).toFixed(1)} ms)`);
 const med = (k) => pathFrames.map((x) => x[k]).sort((a, b) => a - b)[pathFrames.length >> 1];
+console.log(`browser CPU               ${((cpu1 - cpu0) / (frame1 - frame0)).toFixed(1)} ms a frame (all its processes, user + system) against ${((wall1 - wall0) / (frame1 - frame0)).toFixed(1)} ms of wall time a frame, over ${frame1 - frame0} frames; load average ${load0} before, ${load1} after (${os.cpus().length} cores)`);
 console.log(`page's own work         median cut update ${med('updateMs').toFixed(1)} ms, render calls ${med('renderMs').toFixed(1)} ms a frame (the rest of a frame is the browser's: SwiftShader, compositing)`);
 console.log(`triangles drawn           median ${pathFrames.map((x) => x.drawn).sort((a, b) => a - b)[pathFrames.length >> 1]}, max ${Math.max(...f.map((x) => x.drawn))}`);
 console.log(`cache                     max ${mib(maxCache)} MiB of a ${mib(cap)} MiB cap (${maxCache <= cap ? 'never above' : 'ABOVE'} the cap)`);
