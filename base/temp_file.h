@@ -2,16 +2,19 @@
 // plain-old-data records. Scratch files need no crash safety (a failed ingest deletes them), so
 // they use the system calls directly rather than the store's Env.
 //
-// Scratch I/O bypasses the page cache (O_DIRECT) where the file system allows it. Scratch data is
-// written once and read once, sequentially, in large blocks, so the page cache buys nothing, and
-// on the virtual machines this project is measured on it costs a great deal: a page the guest has
-// not touched lately costs a host fault, so a first buffered write of 1 GiB took 2.9-3.0 s of
-// system time and a cold buffered read 1.75 s, against 0.09 s and 0.03 s with O_DIRECT (dd, 4 MiB
-// blocks; the device does 1.2-1.6 GB/s either way). Buffers are aligned to kDirectAlign and the
-// file is read and written in whole aligned blocks; the last partial block of a file is written
-// through the page cache (O_DIRECT cleared), which a later direct read sees (the kernel writes a
-// range back before reading it directly). Where O_DIRECT is refused (tmpfs, some network file
-// systems) the same code runs buffered.
+// Scratch I/O goes through the page cache by default; MT_SCRATCH_DIRECT=1 bypasses it (O_DIRECT)
+// where the file system allows it. On the virtual machines this project is measured on, a page the
+// guest has not touched lately costs a host fault, so a first buffered write of 1 GiB took 2.9-3.0 s
+// of system time and a cold buffered read 1.75 s, against 0.09 s and 0.03 s with O_DIRECT (dd,
+// 4 MiB blocks; the device does 1.2-1.6 GB/s either way), and arm13M at --memory 48M took 2.8 s of
+// system time direct against 4.5 s buffered (44.4 / 45.5 s CPU, same bytes). But a direct read is
+// synchronous and has no readahead: the billion-triangle build's Morton merge (269 runs, a
+// 164 KiB buffer each) read 55 MB/s direct at a third of a core, so the page cache stays the
+// default until the merges read ahead themselves. Direct buffers are aligned to kDirectAlign and
+// the file is read and written in whole aligned blocks; the last partial block of a file is
+// written through the page cache (O_DIRECT cleared), which a later direct read sees (the kernel
+// writes a range back before reading it directly). Where O_DIRECT is refused (tmpfs, some network
+// file systems) the same code runs buffered.
 #pragma once
 
 #include <fcntl.h>
@@ -54,14 +57,14 @@ class AlignedBuffer {
   size_t capacity_ = 0;
 };
 
-// Opens `path` with `flags` and O_DIRECT, or without it where the file system refuses it (or
-// MT_SCRATCH_BUFFERED=1 asks for the page cache: measurements).
+// Opens `path` with `flags`, and O_DIRECT when MT_SCRATCH_DIRECT=1 asks for it and the file system
+// allows it.
 inline int openScratch(const std::string& path, int flags, bool& direct) {
-  static const bool buffered = [] {
-    const char* e = std::getenv("MT_SCRATCH_BUFFERED");
+  static const bool wantDirect = [] {
+    const char* e = std::getenv("MT_SCRATCH_DIRECT");
     return e && *e == '1';
   }();
-  if (buffered) {
+  if (!wantDirect) {
     direct = false;
     return ::open(path.c_str(), flags | O_CLOEXEC, 0644);
   }
