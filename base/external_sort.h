@@ -200,6 +200,7 @@ class RunMerger {
       else
         readers_.push_back(std::make_unique<TempReader>(runs[i], bufferBytes, begin[i] * sizeof(Record),
                                                         (end[i] - begin[i]) * sizeof(Record)));
+      readers_[i]->consumeAsRead();  // one pass: the disk is given back as the merge goes
       done_[i] = !readers_[i]->get(heads_[i]);
     }
     tree_.init(runs.size(), Better{this});
@@ -628,8 +629,9 @@ class KeyGroupSorter {
     rewind();
   }
 
-  // Starts a pass over the groups (finish() starts the first).
-  void rewind() {
+  // Starts a pass over the groups (finish() starts the first). lastPass: no pass follows, so the
+  // runs' disk space is given back as they are read (TempReader::consumeAsRead).
+  void rewind(bool lastPass = false) {
     nextGroup_ = 0;
     if (runs_.empty()) return;
     if (readers_.empty()) {
@@ -640,6 +642,8 @@ class KeyGroupSorter {
     } else {
       for (auto& r : readers_) r->rewind();
     }
+    if (lastPass)
+      for (auto& r : readers_) r->consumeAsRead();
     heads_.assign(runs_.size(), Header{});
     heap_ = {};
     for (size_t i = 0; i < runs_.size(); ++i)
@@ -669,7 +673,7 @@ class KeyGroupSorter {
       if (readers_[run]->get(heads_[run])) heap_.push({heads_[run].key, run});
       ++sources;
     }
-    if (sources > 1 && !std::is_sorted(out.begin(), out.end(), less_)) std::sort(out.begin(), out.end(), less_);
+    if (sources > 1) sortTail(out.begin(), out.end());
     return true;
   }
 
@@ -742,8 +746,17 @@ class KeyGroupSorter {
     for (size_t i = 0; i < n; ++i) grouped_[start[rank[slot_[i]]]++] = recs[i];
     tbb::parallel_for(size_t(0), groups_.size(), [&](size_t g) {
       auto b = grouped_.begin() + groups_[g].begin, e = b + groups_[g].count;
-      if (!std::is_sorted(b, e, less_)) std::sort(b, e, less_);
+      sortTail(b, e);
     });
+  }
+  // Sorts [b, e) in Less order, which is cheap when it is sorted up to a small unsorted tail (a
+  // group added mostly in order, its stragglers last): the tail is sorted and merged in.
+  template <class It>
+  void sortTail(It b, It e) const {
+    It mid = std::is_sorted_until(b, e, less_);
+    if (mid == e) return;
+    std::sort(mid, e, less_);
+    std::inplace_merge(b, mid, e, less_);
   }
 
   void spill() {

@@ -39,6 +39,7 @@ MemoryPlan planMemory(uint64_t totalBytes, unsigned threads) {
   p.boundarySorter = share(totalBytes, 1, 8);
   p.chunkedPositions = share(totalBytes, 2, 5);
   p.chunkedSorter = share(totalBytes, 1, 4);
+  p.chunkedBuckets = share(totalBytes, 1, 16);
   p.chunkedSharedSorter = share(totalBytes, 1, 8);
   p.chunkedEdgeSorter = share(totalBytes, 1, 16);
   p.residentReserve = std::max(kReserveFloor, totalBytes / 4);
@@ -68,8 +69,8 @@ std::vector<std::pair<std::string, uint64_t>> MemoryPlan::phases() const {
   return {
       {"ingest_partition", assigner},
       {"ingest_soup_weld", 2 * soupWeldSorter},
-      {"ingest_chunked_centroids", chunkedPositions + chunkedSorter},
-      {"ingest_chunked_patches", chunkedSorter + chunkedSharedSorter + chunkedEdgeSorter},
+      {"ingest_chunked_join", chunkedPositions + chunkedSorter + chunkedBuckets},
+      {"ingest_chunked_patches", 2 * chunkedSorter + chunkedSharedSorter + chunkedEdgeSorter},
       {"ingest_resident_pass", residentSet + residentSorter(residentSet, 48 * kMiB)},
       {"ingest_resident_patches", residentSet + residentSharedSorter(residentSet) + residentEdgeSorter(residentSet)},
       {"ingest_boundary", std::max(chunkedSharedSorter, residentSharedSorter(0)) + boundarySorter},
@@ -89,7 +90,7 @@ std::string describe(const MemoryPlan& p) {
     << "  ingest: assigner " << mib(p.assigner) << " MiB, soup weld sorters 2 x " << mib(p.soupWeldSorter)
     << " MiB, boundary sorter " << mib(p.boundarySorter) << " MiB\n"
     << "  ingest, chunked: positions " << mib(p.chunkedPositions) << " MiB, sorters " << mib(p.chunkedSorter)
-    << " MiB, shared " << mib(p.chunkedSharedSorter) << " MiB, edges " << mib(p.chunkedEdgeSorter) << " MiB\n"
+    << " MiB, buckets " << mib(p.chunkedBuckets) << " MiB, shared " << mib(p.chunkedSharedSorter) << " MiB, edges " << mib(p.chunkedEdgeSorter) << " MiB\n"
     << "  ingest, resident: reserve " << mib(p.residentReserve) << " MiB, records up to "
     << mib(p.residentRecordLimit(12)) << " MiB (12-byte records)\n";
   return s.str();
@@ -101,7 +102,7 @@ std::string toJson(const MemoryPlan& p) {
     << ", \"heal_sorter\": " << p.healSorter << ", \"grid_weld\": " << p.gridWeld << ", \"assigner\": " << p.assigner
     << ", \"soup_weld_sorter\": " << p.soupWeldSorter << ", \"boundary_sorter\": " << p.boundarySorter
     << ", \"chunked_positions\": " << p.chunkedPositions << ", \"chunked_sorter\": " << p.chunkedSorter
-    << ", \"chunked_shared_sorter\": " << p.chunkedSharedSorter << ", \"chunked_edge_sorter\": " << p.chunkedEdgeSorter
+    << ", \"chunked_buckets\": " << p.chunkedBuckets << ", \"chunked_shared_sorter\": " << p.chunkedSharedSorter << ", \"chunked_edge_sorter\": " << p.chunkedEdgeSorter
     << ", \"resident_reserve\": " << p.residentReserve << ", \"resident_record_limit\": " << p.residentRecordLimit(12)
     << ", \"phases\": {";
   bool first = true;

@@ -11,10 +11,11 @@
 //   ingest, both paths  the assigner (the V-partition's sample and seed tables) total/2; an STL
 //                       soup's weld two sorters of total*3/10 (alive together: one merges while
 //                       the other fills); the boundary entries' sorter total/8
-//   ingest, chunked     the centroid pass: a chunk of float positions total*2/5 and the Morton
-//                       sorter total/4; then one sorter of total/4 at a time (cells, pairs,
-//                       patches), the last one merging while the shared-vertex (total/8) and edge
-//                       (total/16) sorters fill
+//   ingest, chunked     the two joins (centroids, then cell keys): float positions total*2/5,
+//                       the Morton or the group sorter total/4 and the bucket files' buffers
+//                       total/16; then one sorter of total/4 at a time (pairs, patches) besides
+//                       the groups' readers, the last one merging while the shared-vertex
+//                       (total/8) and edge (total/16) sorters fill
 //   ingest, resident    the vertex records stay in RAM when they, a state byte a vertex and a bit
 //                       a vertex and thread fit below the cap less a reserve of
 //                       max(128 MiB, total/4) (residentRecordLimit); each pass's sorter then gets
@@ -56,7 +57,8 @@ struct MemoryPlan {
 
   // ---- ingest, chunked path
   uint64_t chunkedPositions = 0;    // the centroid pass's chunk of float vertex positions
-  uint64_t chunkedSorter = 0;       // each of the Morton, cell, pair and patch sorters
+  uint64_t chunkedSorter = 0;       // each of the Morton, group, pair and patch sorters
+  uint64_t chunkedBuckets = 0;      // the joins' bucket files' write buffers, all together
   uint64_t chunkedSharedSorter = 0; // (vertex, patch) of shared vertices
   uint64_t chunkedEdgeSorter = 0;   // uses of edges between shared vertices
 

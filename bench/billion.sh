@@ -4,6 +4,8 @@
 #   2. mtbuild --memory 512M --threads 2: input M tri/s end to end, CPU (user + sys, sys share),
 #      peak RSS, temporary disk high-water mark (mtbuild's own peak_temp_bytes, and the free space
 #      of WORK's file system sampled every second), bytes per input triangle, bytes written (/proc io)
+#   2b. with --same-bytes-at MEM: the build again at --memory MEM, its wall, CPU, peak RSS and
+#      whether its file is byte for byte the first one (sha256 of both)
 #   3. mtverify --cuts 4 --memory 1G: verdict, wall, peak RSS
 #   4. mtinfo
 #   5. mtextract of the finest cut --memory 1G: wall, peak RSS against the cap, the PLY's size
@@ -12,13 +14,13 @@
 #      first frame (cold)
 #
 #   bench/billion.sh [--triangles 1000M] [--work DIR] [--memory 512M] [--threads 2] [--frames 600]
-#                    [--keep-input] [--keep] [--skip-render]
+#                    [--keep-input] [--keep] [--skip-render] [--same-bytes-at 256M]
 # BIN=dir/bin picks the build dir (default build/bin). Disk needed is checked first and printed:
 # about 19 bytes per triangle for the PLY, at most 2x that of build scratch, ~2.4 for the MT file.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 triangles=1000M; work=out/billion; memory=512M; threads=2; frames=600
-keepInput=0; keep=0; render=1
+keepInput=0; keep=0; render=1; again=""
 while [[ $# -gt 0 ]]; do
   case "$1" in
     --triangles) triangles="$2"; shift 2 ;;
@@ -29,6 +31,7 @@ while [[ $# -gt 0 ]]; do
     --keep-input) keepInput=1; shift ;;
     --keep) keep=1; shift ;;
     --skip-render) render=0; shift ;;
+    --same-bytes-at) again="$2"; shift 2 ;;
     -h|--help) sed -n '2,19p' "$0"; exit 0 ;;
     *) echo "billion.sh: unknown option $1 (see --help)" >&2; exit 2 ;;
   esac
@@ -73,6 +76,8 @@ peakio() {  # peakio PID FILE: write_bytes of the process, sampled until it exit
   done
 }
 
+loadavg() { echo "load (1/5/15 min) $(cut -d' ' -f1-3 /proc/loadavg) at $(date -u +%H:%M:%S) before: $1"; }
+
 # ---- 1. generate (streamed)
 if [[ ! -f "$ply" ]] || [[ "$(cat "$work/scan.count" 2>/dev/null)" != "$count" ]]; then
   rm -f "$ply"
@@ -85,6 +90,7 @@ fi
 plyBytes=$(stat -c %s "$ply")
 
 # ---- 2. build
+loadavg "build"
 rm -f "$mt"
 start=$(df -B1 --output=avail "$work" | tail -1)
 watchDisk "$work/disk.low" & watcher=$!
@@ -120,7 +126,24 @@ print(f"  file              {mt} bytes = {mt / tris:.3f} bytes/input triangle, {
       f"{len(d['levels'])} levels")
 EOF
 
+# ---- 2b. the same build at another memory cap: the same bytes?
+if [[ -n "$again" ]]; then
+  loadavg "build at --memory $again"
+  mt2="$work/scan.$again.mt"; rm -f "$mt2"
+  if /usr/bin/time -f "%e %U %S %M" -o "$work/build2.time" "$bin/mtbuild" "$ply" -o "$mt2" --memory "$again" --threads "$threads" \
+       --stats-json "$work/stats2.json" -q > "$work/build2.log" 2>&1; then
+    read -r aw au as ar < "$work/build2.time"
+    h1=$(sha256sum "$mt" | cut -c1-16); h2=$(sha256sum "$mt2" | cut -c1-16)
+    [[ "$h1" == "$h2" ]] && same="the same bytes" || same="DIFFERENT bytes"
+    echo "build at --memory $again: $aw s wall ($(awk -v n="$count" -v w="$aw" 'BEGIN{printf "%.3f", n/w/1e6}') M input tri/s), $(awk -v u="$au" -v s="$as" 'BEGIN{printf "%.1f s cpu (sys %.1f%%)", u+s, 100*s/(u+s)}'), peak RSS $(( ar / 1024 )) MiB, temp disk peak $(python3 -c "import json,sys; print('%.2f GiB' % (json.load(open(sys.argv[1]))['peak_temp_bytes'] / 2**30))" "$work/stats2.json"); sha256 $h1... ($memory) vs $h2... ($again): $same"
+  else
+    echo "build at --memory $again: FAILED ($(tail -1 "$work/build2.log"))"
+  fi
+  rm -f "$mt2"
+fi
+
 # ---- 3. verify
+loadavg "verify"
 /usr/bin/time -f "%e %U %S %M" -o "$work/verify.time" "$bin/mtverify" "$mt" --cuts 4 --memory 1G -q > "$work/verify.log" 2>&1 \
   && verdict=OK || verdict="FAILED ($(tail -1 "$work/verify.log"))"
 read -r vw vu vs vr < "$work/verify.time"
@@ -130,6 +153,7 @@ echo "verify: $verdict, $vw s wall, $(awk -v u="$vu" -v s="$vs" 'BEGIN{print u+s
 "$bin/mtinfo" "$mt" | sed 's/^/info: /'
 
 # ---- 5. the finest cut
+loadavg "extract"
 (( keepInput )) || rm -f "$ply" "$work/scan.count"
 /usr/bin/time -f "%e %U %S %M" -o "$work/extract.time" "$bin/mtextract" "$mt" --error 0 --memory 1G -o "$cut" > "$work/extract.log" 2>&1 \
   || { cat "$work/extract.log" >&2; exit 1; }
@@ -139,6 +163,7 @@ rm -f "$cut"
 
 # ---- 6. headless flythrough
 if (( render )); then
+  loadavg "render"
   if [[ -x "$bin/mtrender" ]]; then
     /usr/bin/time -f "%M" -o "$work/render.rss" "$bin/mtrender" "$mt" --headless --quiet --camera-path flythrough --frames "$frames" \
       --budget-ms 50 --cache 256M --cold --stats "$work/frames.csv" > "$work/render.out" 2> "$work/render.err" \

@@ -103,11 +103,17 @@ void clearWorkDir(const std::string& work) {
 }
 
 uint64_t treeBytes(const std::string& path) {
+  // Blocks allocated, not file sizes: scratch files read once have their read part given back
+  // (TempReader::consumeAsRead), which their sizes do not show.
+  auto allocated = [](const std::string& file) -> uint64_t {
+    struct stat st;
+    return ::stat(file.c_str(), &st) == 0 ? uint64_t(st.st_blocks) * 512 : 0;
+  };
   std::error_code ec;
   uint64_t n = 0;
-  if (fs::is_regular_file(path, ec)) return fs::file_size(path, ec);
+  if (fs::is_regular_file(path, ec)) return allocated(path);
   for (auto it = fs::recursive_directory_iterator(path, ec); !ec && it != fs::recursive_directory_iterator(); it.increment(ec))
-    if (it->is_regular_file(ec)) n += it->file_size(ec);
+    if (it->is_regular_file(ec)) n += allocated(it->path().string());
   return n;
 }
 

@@ -31,7 +31,7 @@ void recordTempPath(const std::string& work, const std::string& tempPath);
 // Empties a work directory of ours for a fresh start, keeping its marker and lock.
 void clearWorkDir(const std::string& work);
 
-// Bytes of a file, or of every regular file under a directory.
+// Bytes on disk (allocated blocks) of a file, or of every regular file under a directory.
 uint64_t treeBytes(const std::string& path);
 
 // A patch store directory (it has a CURRENT file).

@@ -22,25 +22,32 @@
 //   5 patches    a second pass builds every patch (local order = ascending input index) with
 //                positions read from RAM, in parallel, appended in order; shared vertices ->
 //                (vertex, patch, local); edge use counts
-// Chunked path, otherwise (bounded by the cap whatever the input size):
-//   1 parse      input -> vert.bin (fixed records) + face.bin (3 x u32); bounding box
-//   2 centroids  face.bin + vert.bin -> centroid xyz + area per face, straight into an external
-//                sort by Morton code (ties: face); vertex positions are loaded in chunks that fit
-//                the cap, faces that need a later chunk are carried forward. The merged stream is
-//                written once: morton.bin = (face, corners, centroid) in Morton order
-//   3 assign     the CellAssigner streams morton.bin as often as it likes (the irregular
-//                V-partition once: a sample), then every face is keyed in Morton order (coherent
-//                lookups); faces are externally sorted by (cell key, face)
-//   4 group      consecutive keys become patches 0..P-1 -> pface.bin; unique (vertex, patch)
-//                pairs are externally sorted by vertex
-//   5 join       pairs merge-joined with vert.bin -> (patch, vertex, data) sorted by patch
-//   6 patches    one geometry block per patch (local order = ascending input index); shared
-//                vertices -> (vertex, patch, local) sorted by vertex; edge use counts
+// Chunked path, otherwise (bounded by the cap whatever the input size): the positions do not fit,
+// so every pass that needs them joins each face with its corners' positions (FaceJoin,
+// ingest_join.h: a sweep in face order with two windows of positions, then buckets of vertex
+// chunks for the faces the windows missed). A binary PLY's vertex and face records are read in
+// place (no vert.bin, no face.bin) when their layout allows.
+//   1 parse      input -> bounding box, counts (and vert.bin, face.bin unless read in place)
+//   2 morton     join: (Morton code, face) of every face into a stable radix sort (12 bytes a face)
+//   3 sample     the sort merged in key ranges on parallel threads picks every stride-th face in
+//                (code, face) order; a join of the picked faces alone gives their centroids
+//                (an assigner that streams every centroid gets the stream materialized)
+//   4 assign     join: every face's cell key; faces grouped by key (KeyGroupSorter, put back in
+//                face order within a group)
+//   5 group      first pass over the groups: patches 0..P-1; unique (vertex, patch) pairs sorted
+//                by vertex; merge-joined with the vertex records -> (patch, vertex, data) sorted
+//                by patch
+//   6 patches    second pass over the groups: one geometry block per patch (local order =
+//                ascending input index); shared vertices -> (vertex, patch, local) sorted by
+//                vertex; edge use counts
+// Scratch files read once are given back to the file system as they are read (hole punching),
+// so the peak is about the unread part of the data in flight, not all of it.
 // Both paths end with
 //   7 boundary   grouped by vertex -> (p, vp, q, vq) sorted by p -> one boundary block per patch
 //
 // The rooms: this file is the driver (build) and the common stages (7 boundary, the commit);
-// ingest_parse.cpp stage 1; ingest_resident.cpp and ingest_chunked.cpp the two paths;
+// ingest_parse.cpp stage 1; ingest_resident.cpp and ingest_chunked.cpp the two paths (ingest_join.h
+// the chunked path's join);
 // ingest_internal.h what they share.
 #include <malloc.h>
 #include <signal.h>
@@ -169,7 +176,7 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
   auto impl = std::make_unique<PatchStore::Impl>();
   // Every buffer's share of the cap (base/memory_plan.h).
   const MemoryPlan plan = planMemory(opt.memoryBytes, unsigned(std::max(1, tbb::this_task_arena::max_concurrency())));
-  IngestContext ctx{scratch, plan, opt.progress, assigner, report, *impl, clock};
+  IngestContext ctx{scratch, opt, plan, opt.progress, assigner, report, *impl, clock};
   ParsedInput in = parseInput(input, ctx);
   impl->env = env;
   impl->dir = dir;

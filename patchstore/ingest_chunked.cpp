@@ -1,5 +1,9 @@
 // Ingest, the chunked path (stages 2-6, see ingest.cpp): bounded by the cap whatever the input
-// size; every pass streams scratch files through external sorts.
+// size. The vertex positions do not fit in RAM at once, so every face is joined with its
+// corners' positions by FaceJoin (ingest_join.h: a sweep in face order with two windows of
+// positions, then buckets of vertex chunks for the faces the windows missed). Twice: once for
+// the centroids and Morton codes the V-partition samples, once, with the V-partition built, for
+// the cell keys. The vertex records and the faces are read in place from a binary PLY.
 #include <malloc.h>
 #include <tbb/parallel_for.h>
 
@@ -8,245 +12,335 @@
 
 #include "base/progress.h"
 #include "patchstore/ingest_internal.h"
+#include "patchstore/ingest_join.h"
 
 namespace mt {
 namespace ingest {
 namespace {
 
-// A face with its centroid, keyed by Morton code (ties: face index, so the order is total).
-struct MortonFace {
-  uint64_t code;
-  uint32_t face;
-  uint32_t v[3];
-  Centroid c;
-};
-// The chunked path sorts these by code with a stable radix sort (StableKeySorter: a comparison
-// sort of the 40-byte records was ~1/4 of the centroid stage on a 200M-triangle scan); faces
-// arrive pass by pass, so equal codes come out in pass order and are put back in face order
-// as they are read (forEachInMortonOrder), which gives (code, face) order.
-struct MortonFaceCode {
-  uint64_t operator()(const MortonFace& m) const { return m.code; }
-};
-using MortonFaceSorter = StableKeySorter<MortonFace, MortonFaceCode>;
-// Calls fn(face) for every face of a finished sorter in (code, face) order.
-template <class Fn>
-void forEachInMortonOrder(MortonFaceSorter& sorter, const Fn& fn) {
-  std::vector<MortonFace> ties;  // a run of equal codes
-  auto flush = [&] {
-    if (ties.size() > 1)
-      std::sort(ties.begin(), ties.end(), [](const MortonFace& a, const MortonFace& b) { return a.face < b.face; });
-    for (const MortonFace& m : ties) fn(m);
-    ties.clear();
-  };
-  MortonFace m;
-  while (sorter.next(m)) {
-    if (!ties.empty() && ties.back().code != m.code) flush();
-    ties.push_back(m);
-  }
-  flush();
-}
-// The record of morton.bin: what the assign stage needs per face, in Morton order.
-struct FaceCentroid {
-  uint32_t face;
-  uint32_t v[3];
-  Centroid c;
-};
+constexpr size_t kBatch = FaceJoin::kBatch;
 
-// Stage 2. Chunk c holds the float positions of vertices [c*chunk, (c+1)*chunk). Pass c reads
-// the faces again (12 bytes each) and computes every face whose corners all lie in chunk c; a face
-// spanning chunks (rare: scans list vertices in scan order) is carried from pass to pass with the
-// corners resolved so far, until its last chunk. Every completed face goes straight into the
-// Morton sorter (its order is total, so the chunking does not show).
-class CentroidPass {
+// Stage 2's sort: (Morton code, face), 12 bytes a face, as the resident path's (MortonKey), by a
+// stable radix sort on the code. Faces arrive in join order (which depends on the cap), so a run
+// of equal codes is put back in face order as it is read (InMortonOrder): (code, face) order.
+using MortonKeySorter = StableKeySorter<MortonKey, MortonKeyOf>;
+// The same with the centroid and area, for an assigner that streams every centroid.
+struct MortonCentroid {
+  MortonKey key;
+  Centroid c;
+};
+struct MortonCentroidOf {
+  uint64_t operator()(const MortonCentroid& m) const { return m.key.code(); }
+};
+using MortonCentroidSorter = StableKeySorter<MortonCentroid, MortonCentroidOf>;
+
+inline const MortonKey& keyOf(const MortonKey& k) { return k; }
+inline const MortonKey& keyOf(const MortonCentroid& m) { return m.key; }
+
+// The records of a code-sorted stream `source` (bool(Record&)) in (code, face) order.
+template <class Record, class Source>
+class InMortonOrder {
  public:
-  struct Pending {
-    uint32_t face;
-    uint32_t v[3];
-    float p[9];
-    uint32_t resolved;  // bit mask of corners with positions
-  };
-  CentroidPass(const std::string& dir, const MortonBox& morton, MortonFaceSorter& sorter, uint64_t lo, uint64_t hi,
-               const std::vector<float>& pos)
-      : dir_(dir), morton_(morton), sorter_(sorter), lo_(lo), hi_(hi), pos_(pos) {}
-  // Carried faces come from `in` (the previous pass's carry file, or none) and go to `out` (none
-  // on the last pass, where every face must resolve).
-  void carry(TempReader* in, TempWriter* out) {
-    carryIn_ = in;
-    carryOut_ = out;
-  }
-  // One scan of the faces, in face order: faces wholly in this chunk are computed in parallel
-  // (centroid and Morton code); faces spanning chunks that touch this one are resolved as far as
-  // this chunk allows (new ones start here, earlier ones come from the carry file, which is in
-  // face order too). Returns the faces completed.
-  uint64_t run(Progress& progress, uint64_t done) {
-    TempReader fr(dir_ + "/face.bin", 4 << 20);
-    std::vector<uint32_t> batch;
-    uint32_t face = 0;
-    while (fr.getBatch(batch, 3 * 65536)) {
-      const size_t n = batch.size() / 3;
-      computeWhole(batch, face);
-      for (size_t i = 0; i < n; ++i, ++face) {
-        if (kind_[i] == 1) {
-          sorter_.add(recs_[i]);
-          ++done;
-        } else if (kind_[i] == 2) {
-          Pending f;
-          if (std::min({batch[3 * i], batch[3 * i + 1], batch[3 * i + 2]}) >= lo_) {
-            f = Pending{face, {batch[3 * i], batch[3 * i + 1], batch[3 * i + 2]}, {}, 0};
-          } else if (!carryIn_ || !carryIn_->get(f) || f.face != face) {
-            fail(dir_, "internal: carried face " + std::to_string(face) + " out of order");
-          }
-          done += resolve(f);
-        }
-      }
-      progress.update(done);
+  explicit InMortonOrder(Source source) : source_(std::move(source)) { have_ = source_(head_); }
+  bool next(Record& out) {
+    if (at_ == ties_.size()) {
+      if (!have_) return false;
+      ties_.clear();
+      at_ = 0;
+      const uint64_t code = keyOf(head_).code();
+      do {
+        ties_.push_back(head_);
+        have_ = source_(head_);
+      } while (have_ && keyOf(head_).code() == code);
+      if (ties_.size() > 1)
+        std::sort(ties_.begin(), ties_.end(), [](const Record& a, const Record& b) { return keyOf(a).face < keyOf(b).face; });
     }
-    return done;
+    out = ties_[at_++];
+    return true;
   }
 
  private:
-  // kind_[i] for the batch: 0 not this pass, 1 wholly in this chunk (recs_[i] computed), 2 spanning.
-  void computeWhole(const std::vector<uint32_t>& batch, uint32_t first) {
-    const size_t n = batch.size() / 3;
-    recs_.resize(n);
-    kind_.resize(n);
-    const uint64_t lo = lo_, hi = hi_;
-    const std::vector<float>& pos = pos_;
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096), [&](const tbb::blocked_range<size_t>& r) {
-      for (size_t i = r.begin(); i < r.end(); ++i) {
-        // Shuffled faces read the positions at random: ask for a later face's corners now so
-        // that several cache misses are in flight at once.
-        if (i + 16 < r.end())
-          for (int k = 0; k < 3; ++k) {
-            uint32_t u = batch[3 * (i + 16) + k];
-            if (u >= lo && u < hi) __builtin_prefetch(&pos[size_t(u - lo) * 3]);
-          }
-        const uint32_t* v = &batch[3 * i];
-        uint32_t vmin = std::min({v[0], v[1], v[2]}), vmax = std::max({v[0], v[1], v[2]});
-        if (vmin >= lo && vmax < hi) {
-          kind_[i] = 1;
-          const float* p[3] = {&pos[size_t(v[0] - lo) * 3], &pos[size_t(v[1] - lo) * 3], &pos[size_t(v[2] - lo) * 3]};
-          MortonFace& m = recs_[i];
-          m.face = first + uint32_t(i);
-          std::memcpy(m.v, v, 12);
-          m.c = centroidOf(v, p);
-          m.code = morton_.code(&m.c.x);
-        } else {
-          kind_[i] = (vmin < hi && vmax >= lo) ? 2 : 0;
-        }
-      }
-    });
-  }
-  // A spanning face: its corners in this chunk filled in; complete, it goes to the sorter (1),
-  // else to the carry file (0).
-  uint64_t resolve(Pending& f) {
-    for (int k = 0; k < 3; ++k)
-      if (!(f.resolved & (1u << k)) && f.v[k] >= lo_ && f.v[k] < hi_) {
-        std::memcpy(&f.p[3 * k], &pos_[(f.v[k] - lo_) * 3], 12);
-        f.resolved |= 1u << k;
-      }
-    if (f.resolved != 7) {
-      if (!carryOut_) fail(dir_, "internal: unresolved face corner");
-      carryOut_->put(f);
-      return 0;
-    }
-    const float* p[3] = {&f.p[0], &f.p[3], &f.p[6]};
-    MortonFace m{0, f.face, {f.v[0], f.v[1], f.v[2]}, centroidOf(f.v, p)};
-    m.code = morton_.code(&m.c.x);
-    sorter_.add(m);
-    return 1;
-  }
-
-  const std::string& dir_;
-  const MortonBox& morton_;
-  MortonFaceSorter& sorter_;
-  uint64_t lo_, hi_;
-  const std::vector<float>& pos_;
-  TempReader* carryIn_ = nullptr;
-  TempWriter* carryOut_ = nullptr;
-  std::vector<MortonFace> recs_;
-  std::vector<uint8_t> kind_;
+  Source source_;
+  Record head_{};
+  bool have_ = false;
+  std::vector<Record> ties_;
+  size_t at_ = 0;
 };
-
-// The float positions of vertices [lo, hi), read on from vr (chunks are read in order: one
-// sequential pass over vert.bin).
-void loadPositions(TempReader& vr, const std::string& dir, const VertexRecordLayout& layout, uint64_t lo, uint64_t hi,
-                   std::vector<float>& pos) {
-  pos.resize((hi - lo) * 3);
-  std::vector<char> rec(layout.size() * 4096);
-  for (uint64_t v = lo; v < hi;) {
-    uint64_t n = std::min<uint64_t>(hi - v, 4096);
-    if (vr.read(rec.data(), n * layout.size()) != n * layout.size()) fail(dir, "vertex scratch file is short");
-    for (uint64_t i = 0; i < n; ++i) {
-      double p[3];
-      layout.position(rec.data() + i * layout.size(), p);
-      for (int a = 0; a < 3; ++a) pos[(v + i - lo) * 3 + a] = float(p[a]);
-    }
-    v += n;
-  }
+template <class Record, class Source>
+InMortonOrder<Record, Source> inMortonOrder(Source source) {
+  return InMortonOrder<Record, Source>(std::move(source));
 }
 
-void computeCentroids(const std::string& dir, const ParsedInput& in, uint64_t budget, MortonFaceSorter& sorter, bool showProgress) {
-  const MortonBox morton(in.bounds);
-  const uint64_t chunk = std::max<uint64_t>(1 << 16, budget / 12);
-  const uint64_t chunks = (in.vertices + chunk - 1) / chunk;
-  Progress progress(showProgress, "ingest: centroids", in.faces);
-  std::vector<float> pos;
-  uint64_t done = 0;
-  TempReader vr(dir + "/vert.bin", 4 << 20);
-  for (uint64_t c = 0; c < chunks; ++c) {
-    const uint64_t lo = c * chunk, hi = std::min(in.vertices, lo + chunk);
-    loadPositions(vr, dir, in.layout, lo, hi, pos);
-    std::unique_ptr<TempReader> carryIn;
-    std::unique_ptr<TempWriter> carryOut;
-    std::string carryInPath = dir + "/carry" + std::to_string(c - 1);
-    if (c > 0) carryIn = std::make_unique<TempReader>(carryInPath, 1 << 20);
-    if (c + 1 < chunks) carryOut = std::make_unique<TempWriter>(dir + "/carry" + std::to_string(c), 1 << 20);
-    CentroidPass pass(dir, morton, sorter, lo, hi, pos);
-    pass.carry(carryIn.get(), carryOut.get());
-    done = pass.run(progress, done);
-    if (carryOut) carryOut->close();
-    carryIn.reset();
-    if (c > 0) std::remove(carryInPath.c_str());
-  }
-  if (done != in.faces) fail(dir, "internal: " + std::to_string(in.faces - done) + " centroids missing");
+// The join's share of the cap for positions (tests set a smaller one: IngestOptions::positionBytes).
+uint64_t positionBytes(const IngestContext& ctx) {
+  return ctx.options.positionBytes ? ctx.options.positionBytes : ctx.plan.chunkedPositions;
+}
+
+void endOfPass(IngestContext& ctx, const char* stage) {
+  malloc_trim(0);
+  ctx.clock.mark(stage);
+}
+
+void reportJoin(IngestContext& ctx, const FaceJoin& join, const char* what) {
+  ctx.report.sweptFaces += join.swept();
+  ctx.report.bucketedFaces += join.bucketed();
+  if (ctx.progress)
+    std::fprintf(stderr, "ingest: %s: %llu faces joined in the sweep's windows, %llu through the buckets of %llu vertex chunks\n", what,
+                 (unsigned long long)join.swept(), (unsigned long long)join.bucketed(), (unsigned long long)join.chunks());
+}
+
+FaceJoin makeJoin(IngestContext& ctx, const ParsedInput& in, const char* name) {
+  return FaceJoin(in.faceFile, in.vertexFile, in.layout, in.faces, positionBytes(ctx), ctx.plan.chunkedBuckets, ctx.scratch + "/" + name);
+}
+
+// Stage 2: every face joined with its corners; its Morton code goes to the sort. Returns whether
+// the input's face order is spatially coherent (MortonSort::coherent's measure, over the faces
+// the sweep joined, which come in face order; an input the sweep mostly missed is not).
+bool chunkedMorton(IngestContext& ctx, const ParsedInput& in, MortonKeySorter& sorter) {
+  FaceJoin join = makeJoin(ctx, in, "j1");
+  const MortonBox box(in.bounds);
+  std::vector<MortonKey> keys(kBatch), packed;
+  uint64_t jumps = 0, swept = 0, lastTop = ~uint64_t(0);
+  Progress progress(ctx.progress, "ingest: morton", in.faces);
+  join.run(
+      [&](size_t slot, uint32_t face, const uint32_t* v, const float* const* p) {
+        float c[3];
+        centroidPoint(v, p, c);
+        const uint64_t code = box.code(c);
+        keys[slot] = {uint32_t(code), uint32_t(code >> 32), face};
+      },
+      [&](const uint8_t* valid, size_t n, bool sweep) {
+        packed.clear();
+        for (size_t i = 0; i < n; ++i) {
+          if (!valid[i]) continue;
+          packed.push_back(keys[i]);
+          if (sweep) {
+            const uint64_t top = keys[i].code() >> 39;
+            jumps += top != lastTop;
+            lastTop = top;
+            ++swept;
+          }
+        }
+        sorter.addBatch(packed.data(), packed.size());
+      },
+      progress);
   progress.finish(in.faces);
+  reportJoin(ctx, join, "morton");
+  if (sorter.count() != in.faces) fail(ctx.scratch, "internal: the Morton sort holds " + std::to_string(sorter.count()) + " faces");
+  return swept * 2 >= in.faces && jumps * 4 <= swept;
 }
 
-// morton.bin as the assigner's centroid stream (Morton order: consecutive centroids are close).
-class CentroidFile : public CentroidSource {
+// The Morton-ordered centroids for the assigner. sample() merges the sort (in key ranges, on
+// parallel threads), picks every stride-th face, and joins the picked faces alone with their
+// corners for their centroids and areas (carrying them through the sort instead, 28 bytes a face,
+// cost more than this extra read of the faces). forEach() (the grid and regular assigners stream
+// every centroid) materializes the stream once as morton.bin, from a join and sort of its own.
+class ChunkedCentroids : public CentroidSource {
  public:
-  CentroidFile(std::string path, uint64_t count, Box3 bounds) : path_(std::move(path)), count_(count), bounds_(bounds) {}
-  uint64_t count() const override { return count_; }
-  Box3 bounds() const override { return bounds_; }
-  void forEach(const std::function<void(const float*, size_t)>& fn) const override {
-    TempReader r(path_, 4 << 20);
-    std::vector<FaceCentroid> batch;
-    std::vector<Centroid> cents;
-    while (r.getBatch(batch, 65536)) {
-      cents.resize(batch.size());
-      for (size_t i = 0; i < batch.size(); ++i) cents[i] = batch[i].c;
-      fn(&cents[0].x, cents.size());
+  ChunkedCentroids(IngestContext& ctx, const ParsedInput& in, MortonKeySorter& sorter)
+      : ctx_(ctx), in_(in), sorter_(sorter) {}
+  uint64_t count() const override { return in_.faces; }
+  Box3 bounds() const override { return in_.bounds; }
+
+  std::vector<float> sample(uint64_t stride) const override {
+    if (consumed_) return CentroidSource::sample(stride);
+    stride = std::max<uint64_t>(1, stride);
+    checkInterrupt("ingest: sort");
+    sorter_.finish();
+    ctx_.clock.mark("morton merge");
+    const size_t parts = size_t(std::max(1, tbb::this_task_arena::max_concurrency()));
+    std::vector<std::vector<uint64_t>> partPicks(parts);  // face << 32 | rank / stride
+    std::vector<uint64_t> partCount(parts, 0);
+    sorter_.mergeInParts(parts, [&](size_t part, uint64_t rank, const auto& next) {
+      auto ordered = inMortonOrder<MortonKey>([&](MortonKey& k) { return next(k); });
+      MortonKey k;
+      uint64_t n = 0;
+      for (; ordered.next(k); ++rank, ++n)
+        if (rank % stride == 0) partPicks[part].push_back(uint64_t(k.face) << 32 | uint32_t(rank / stride));
+      partCount[part] = n;
+    });
+    consumed_ = true;
+    uint64_t total = 0;
+    std::vector<uint64_t> picks;
+    for (size_t p = 0; p < parts; ++p) {
+      total += partCount[p];
+      picks.insert(picks.end(), partPicks[p].begin(), partPicks[p].end());
+      std::vector<uint64_t>().swap(partPicks[p]);
     }
+    if (total != in_.faces) fail(ctx_.scratch, "internal: Morton sort holds " + std::to_string(total) + " faces");
+    if (picks.size() >= (uint64_t(1) << 32)) fail(ctx_.scratch, "internal: too many sampled faces");
+    {
+      std::vector<uint64_t> tmp(picks.size());
+      const uint64_t* sorted = radixSort(picks.data(), tmp.data(), picks.size(), [](uint64_t x) { return x; }, 64);
+      if (sorted != picks.data()) picks.swap(tmp);
+    }
+    std::vector<uint32_t> faces(picks.size()), slotOf(picks.size());
+    for (size_t i = 0; i < picks.size(); ++i) {
+      faces[i] = uint32_t(picks[i] >> 32);
+      slotOf[i] = uint32_t(picks[i]);
+    }
+    std::vector<uint64_t>().swap(picks);
+    // The picked faces' centroids and areas. perFace gets a batch slot; the batch's filled slots
+    // are mapped back to their rank through the face index.
+    std::vector<float> out(4 * faces.size());
+    std::vector<Centroid> cents(kBatch);
+    std::vector<uint32_t> faceAt(kBatch);
+    FaceJoin join = makeJoin(ctx_, in_, "j0");
+    Progress progress(ctx_.progress, "ingest: sample", faces.size());
+    join.run(
+        [&](size_t slot, uint32_t face, const uint32_t* v, const float* const* p) {
+          cents[slot] = centroidOf(v, p);
+          faceAt[slot] = face;
+        },
+        [&](const uint8_t* valid, size_t n, bool) {
+          for (size_t i = 0; i < n; ++i) {
+            if (!valid[i]) continue;
+            const size_t at = size_t(std::lower_bound(faces.begin(), faces.end(), faceAt[i]) - faces.begin());
+            assert(at < faces.size() && faces[at] == faceAt[i]);
+            std::memcpy(&out[4 * size_t(slotOf[at])], &cents[i], 16);
+          }
+        },
+        progress, &faces);
+    progress.finish(faces.size());
+    reportJoin(ctx_, join, "sample");
+    ctx_.clock.mark("sample");
+    return out;
+  }
+
+  void forEach(const std::function<void(const float*, size_t)>& fn) const override {
+    if (!materialized_) materialize();
+    TempReader r(ctx_.scratch + "/morton.bin", 4 << 20);
+    std::vector<Centroid> batch;
+    while (r.getBatch(batch, kBatch)) fn(&batch[0].x, batch.size());
   }
 
  private:
-  std::string path_;
-  uint64_t count_;
-  Box3 bounds_;
+  void materialize() const {
+    consumed_ = true;
+    MortonCentroidSorter sorter(ctx_.scratch + "/s1", ctx_.plan.chunkedSorter, MortonCentroidOf{}, 63, true);
+    {
+      FaceJoin join = makeJoin(ctx_, in_, "j3");
+      const MortonBox box(in_.bounds);
+      std::vector<MortonCentroid> recs(kBatch), packed;
+      Progress progress(ctx_.progress, "ingest: centroids", in_.faces);
+      join.run(
+          [&](size_t slot, uint32_t face, const uint32_t* v, const float* const* p) {
+            const Centroid c = centroidOf(v, p);
+            const uint64_t code = box.code(&c.x);
+            recs[slot] = {{uint32_t(code), uint32_t(code >> 32), face}, c};
+          },
+          [&](const uint8_t* valid, size_t n, bool) {
+            packed.clear();
+            for (size_t i = 0; i < n; ++i)
+              if (valid[i]) packed.push_back(recs[i]);
+            sorter.addBatch(packed.data(), packed.size());
+          },
+          progress);
+      progress.finish(in_.faces);
+    }
+    checkInterrupt("ingest: sort");
+    sorter.finish();
+    TempWriter out(ctx_.scratch + "/morton.bin", 4 << 20);
+    auto ordered = inMortonOrder<MortonCentroid>([&](MortonCentroid& m) { return sorter.next(m); });
+    MortonCentroid m;
+    uint64_t n = 0;
+    for (; ordered.next(m); ++n) out.put(m.c);
+    out.close();
+    if (n != in_.faces) fail(ctx_.scratch, "internal: Morton sort holds " + std::to_string(n) + " faces");
+    materialized_ = true;
+  }
+
+  IngestContext& ctx_;
+  const ParsedInput& in_;
+  MortonKeySorter& sorter_;
+  mutable bool materialized_ = false, consumed_ = false;
 };
 
+// Stages 2 and 3: the Morton codes, then the assigner prepared from the Morton-ordered centroids
+// (the irregular V-partition samples them; its time is reported apart from the sort's). Returns
+// whether the face order is coherent.
+bool chunkedPartition(IngestContext& ctx, const ParsedInput& in) {
+  auto sorter = std::make_unique<MortonKeySorter>(ctx.scratch + "/s0", ctx.plan.chunkedSorter, MortonKeyOf{}, 63, true);
+  const bool coherent = chunkedMorton(ctx, in, *sorter);
+  endOfPass(ctx, "morton");
+  {
+    ChunkedCentroids centroids(ctx, in, *sorter);
+    Progress progress(ctx.progress, "ingest: partition", in.faces);
+    ctx.assigner.prepare(centroids, ctx.plan.assigner);
+    progress.finish(in.faces);
+  }
+  sorter.reset();
+  std::remove((ctx.scratch + "/morton.bin").c_str());
+  ctx.report.assigner = ctx.assigner.describe();
+  endOfPass(ctx, "partition");
+  return coherent;
+}
+
+// What the group sort keeps of a face: its index (faces arrive in join order; a group is put
+// back in face order) and its corners.
 struct FaceRec {
-  uint64_t key;
-  uint32_t face;
-  uint32_t v[3];
+  uint32_t face, v[3];
 };
-struct FaceLess {
-  bool operator()(const FaceRec& a, const FaceRec& b) const { return a.key != b.key ? a.key < b.key : a.face < b.face; }
+struct ByFace {
+  bool operator()(const FaceRec& a, const FaceRec& b) const { return a.face < b.face; }
 };
-struct U64Less {
-  bool operator()(uint64_t a, uint64_t b) const { return a < b; }
-};
+using FaceGroups = KeyGroupSorter<FaceRec, ByFace>;
+
+// Stage 4: every face joined again, keyed by its cell, grouped by key. A coherent face order looks
+// the keys up as the faces come (consecutive faces hit the same seeds); otherwise a batch's
+// lookups go in Morton order (as the resident path's shuffled inputs), in parallel pieces.
+std::unique_ptr<FaceGroups> chunkedAssign(IngestContext& ctx, const ParsedInput& in, bool coherent) {
+  auto groups = std::make_unique<FaceGroups>(ctx.scratch + "/g", ctx.plan.chunkedSorter, ByFace{}, true);
+  FaceJoin join = makeJoin(ctx, in, "j2");
+  const MortonBox box(in.bounds);
+  const CellAssigner& assigner = ctx.assigner;
+  std::vector<uint64_t> keys(kBatch), packedKeys, order, tmp;
+  std::vector<FaceRec> recs(kBatch), packed;
+  std::vector<float> cents(coherent ? 0 : 3 * kBatch);
+  Progress progress(ctx.progress, "ingest: assign", in.faces);
+  join.run(
+      [&](size_t slot, uint32_t face, const uint32_t* v, const float* const* p) {
+        float c[3];
+        centroidPoint(v, p, c);
+        recs[slot] = {face, {v[0], v[1], v[2]}};
+        if (coherent)
+          keys[slot] = assigner.cellKey(c);
+        else
+          std::memcpy(&cents[3 * slot], c, 12);
+      },
+      [&](const uint8_t* valid, size_t n, bool) {
+        if (!coherent) {
+          order.clear();
+          for (size_t i = 0; i < n; ++i)
+            if (valid[i]) order.push_back((box.code(&cents[3 * i]) >> 20) << 20 | i);  // batch index below bit 20
+          tmp.resize(order.size());
+          const uint64_t* sorted = radixSort(order.data(), tmp.data(), order.size(), [](uint64_t x) { return x; }, 63);
+          tbb::parallel_for(tbb::blocked_range<size_t>(0, order.size(), 4096), [&](const tbb::blocked_range<size_t>& r) {
+            for (size_t j = r.begin(); j < r.end(); ++j) {
+              const size_t i = size_t(sorted[j] & ((1u << 20) - 1));
+              keys[i] = assigner.cellKey(&cents[3 * i]);
+            }
+          });
+        }
+        packedKeys.clear();
+        packed.clear();
+        for (size_t i = 0; i < n; ++i)
+          if (valid[i]) {
+            packedKeys.push_back(keys[i]);
+            packed.push_back(recs[i]);
+          }
+        groups->addBatch(packedKeys.data(), packed.data(), packed.size());
+      },
+      progress);
+  progress.finish(in.faces);
+  reportJoin(ctx, join, "assign");
+  if (groups->count() != in.faces) fail(ctx.scratch, "internal: the groups hold " + std::to_string(groups->count()) + " faces");
+  checkInterrupt("ingest: sort");
+  groups->finish();
+  endOfPass(ctx, "assign");
+  return groups;
+}
+
 // (patch << 32 | vertex) with the vertex's data.
 template <bool Full>
 struct VertexData;
@@ -266,77 +360,6 @@ struct VertexData<true> {
   uint8_t c[4];
   float uv[2];
 };
-template <class T>
-struct KeyLess {
-  bool operator()(const T& a, const T& b) const { return a.key < b.key; }
-};
-
-void endOfPass(IngestContext& ctx, const char* stage) {
-  malloc_trim(0);
-  ctx.clock.mark(stage);
-}
-
-// Stage 2: centroids, straight into an external sort by Morton code, merged once into morton.bin.
-// The assigner streams the centroids in Morton order rather than face order: its passes (the
-// irregular seeding) rely on consecutive triangles being close, which a scan with shuffled faces
-// does not give, and the assign stage then looks cells up in spatially coherent order (cache hits
-// instead of random reads of the seed tables). Deterministic: ties by face.
-void chunkedCentroids(IngestContext& ctx, const ParsedInput& in) {
-  MortonFaceSorter byCode(ctx.scratch + "/s0", ctx.plan.chunkedSorter, MortonFaceCode{}, 63, true);
-  computeCentroids(ctx.scratch, in, ctx.plan.chunkedPositions, byCode, ctx.progress);
-  std::remove((ctx.scratch + "/face.bin").c_str());
-  endOfPass(ctx, "centroids");
-  checkInterrupt("ingest: sort");
-  byCode.finish();
-  TempWriter out(ctx.scratch + "/morton.bin", 4 << 20);
-  uint64_t written = 0;
-  forEachInMortonOrder(byCode, [&](const MortonFace& m) {
-    out.put(FaceCentroid{m.face, {m.v[0], m.v[1], m.v[2]}, m.c});
-    ++written;
-  });
-  out.close();
-  assert(written == in.faces);  // the sort kept every face
-}
-
-using CellSorter = ExternalSorter<FaceRec, FaceLess>;
-
-// Stage 3: the assigner prepared (the irregular V-partition reads the stream once, a sample:
-// vpartition/irregular.cpp; its time is reported apart from the sorts'), then every face keyed in
-// Morton order; faces externally sorted by (cell key, face).
-std::unique_ptr<CellSorter> chunkedAssign(IngestContext& ctx, const ParsedInput& in) {
-  const uint64_t nf = in.faces;
-  CentroidFile centroids(ctx.scratch + "/morton.bin", nf, in.bounds);
-  {
-    Progress progress(ctx.progress, "ingest: partition", nf);
-    ctx.assigner.prepare(centroids, ctx.plan.assigner);
-    progress.finish(nf);
-  }
-  ctx.report.assigner = ctx.assigner.describe();
-  endOfPass(ctx, "partition");
-  auto byCell = std::make_unique<CellSorter>(ctx.scratch + "/s1", ctx.plan.chunkedSorter, FaceLess{}, true);
-  Progress progress(ctx.progress, "ingest: assign", nf);
-  TempReader cr(ctx.scratch + "/morton.bin", 4 << 20);
-  std::vector<FaceCentroid> batch;
-  std::vector<FaceRec> recs;
-  uint64_t done = 0;
-  while (cr.getBatch(batch, 65536)) {
-    recs.resize(batch.size());
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, batch.size(), 4096), [&](const tbb::blocked_range<size_t>& r) {
-      for (size_t i = r.begin(); i < r.end(); ++i) {
-        const FaceCentroid& f = batch[i];
-        recs[i] = FaceRec{ctx.assigner.cellKey(&f.c.x), f.face, {f.v[0], f.v[1], f.v[2]}};
-      }
-    });
-    for (const FaceRec& r : recs) byCell->add(r);
-    done += batch.size();
-    progress.update(done);
-  }
-  if (done != nf) fail(ctx.scratch, "internal: Morton file holds " + std::to_string(done) + " faces");
-  progress.finish(done);
-  std::remove((ctx.scratch + "/morton.bin").c_str());
-  endOfPass(ctx, "assign");
-  return byCell;
-}
 
 // Per-thread scratch of buildPatch and chunkedGroup (reused from patch to patch).
 struct ChunkedScratch {
@@ -350,7 +373,9 @@ inline unsigned bitWidth(uint64_t x) { return x == 0 ? 1 : unsigned(64 - __built
 
 // The distinct values of `values`, ascending, into `out`. A patch's corners span a narrow range
 // of input indices in a scan: a bit set over the range, marked and read back in order, costs no
-// sort of the three corners per triangle; a wide range (a shuffled input) is sorted.
+// sort of the three corners per triangle; a wide range (a subdivided mesh's coarse vertices, a
+// shuffled input) is radix sorted on the range's bits (std::sort was 8% of the chunked path on
+// arm3.3M).
 void distinctSorted(const std::vector<uint32_t>& values, std::vector<uint32_t>& out) {
   out.clear();
   if (values.empty()) return;
@@ -358,9 +383,13 @@ void distinctSorted(const std::vector<uint32_t>& values, std::vector<uint32_t>& 
   const uint32_t base = *lo;
   const uint64_t range = uint64_t(*hi) - base + 1;
   if (range > 16 * uint64_t(values.size())) {
-    out = values;
-    std::sort(out.begin(), out.end());
-    out.erase(std::unique(out.begin(), out.end()), out.end());
+    thread_local std::vector<uint32_t> a, b;
+    a.resize(values.size());
+    b.resize(values.size());
+    for (size_t i = 0; i < values.size(); ++i) a[i] = values[i] - base;
+    const uint32_t* sorted = lsdRadixSort(a.data(), b.data(), a.size(), [](uint32_t x) { return x; }, bitWidth(range - 1));
+    for (size_t i = 0; i < a.size(); ++i)
+      if (i == 0 || sorted[i] != sorted[i - 1]) out.push_back(sorted[i] + base);
     return;
   }
   std::vector<uint64_t>& bits = chunkedScratch().keys;
@@ -370,52 +399,9 @@ void distinctSorted(const std::vector<uint32_t>& values, std::vector<uint32_t>& 
     for (uint64_t x = bits[w]; x; x &= x - 1) out.push_back(base + uint32_t(w * 64 + unsigned(__builtin_ctzll(x))));
 }
 
-using PairSorter = ExternalSorter<uint64_t, U64Less>;
-
-// Stage 4: consecutive keys become patches 0..P-1 -> pface.bin (their corners), patchTris (their
-// triangle counts); unique (vertex, patch) pairs externally sorted by vertex. Patches are gathered
-// in batches; their distinct vertices are found in parallel and written in patch order (the
-// result does not depend on the thread count).
-std::unique_ptr<PairSorter> chunkedGroup(IngestContext& ctx, CellSorter& byCell, std::vector<uint32_t>& patchTris,
-                                         PatchStageOutput& out) {
-  checkInterrupt("ingest: sort");
-  byCell.finish();
-  std::vector<uint64_t>& patchKey = out.patchKey;
-  auto pairs = std::make_unique<PairSorter>(ctx.scratch + "/s2", ctx.plan.chunkedSorter, U64Less{}, true);
-  TempWriter pface(ctx.scratch + "/pface.bin", 4 << 20);
-  constexpr size_t kBatch = 64;
-  std::vector<std::vector<uint32_t>> tris(kBatch), verts(kBatch);
-  size_t filled = 0;
-  auto flush = [&]() {
-    tbb::parallel_for(size_t(0), filled, [&](size_t i) { distinctSorted(tris[i], verts[i]); });
-    for (size_t i = 0; i < filled; ++i) {
-      const uint32_t k = uint32_t(patchKey.size() - filled + i);
-      pface.write(tris[i].data(), tris[i].size() * 4);
-      patchTris.push_back(uint32_t(tris[i].size() / 3));
-      for (uint32_t v : verts[i]) pairs->add(uint64_t(v) << 32 | k);
-      tris[i].clear();
-    }
-    filled = 0;
-  };
-  FaceRec f;
-  while (byCell.next(f)) {
-    if (patchKey.empty() || patchKey.back() != f.key) {
-      assert(patchKey.empty() || patchKey.back() < f.key);  // the sort gives ascending keys
-      if (filled == kBatch) flush();
-      patchKey.push_back(f.key);
-      ++filled;
-    }
-    tris[filled - 1].insert(tris[filled - 1].end(), f.v, f.v + 3);
-  }
-  flush();
-  pface.close();
-  assert(patchTris.size() == patchKey.size());
-  ctx.clock.mark("group");
-  return pairs;
-}
-
+// (patch << 32 | vertex): unique keys, radix sorted.
 template <bool Full>
-using PatchSorter = ExternalSorter<VertexData<Full>, KeyLess<VertexData<Full>>>;
+using PatchSorter = StableKeySorter<VertexData<Full>, KeyOf<VertexData<Full>>>;
 
 // The data of vertex record `rec` for every patch that holds it.
 template <bool Full>
@@ -438,45 +424,6 @@ VertexData<Full> vertexData(const VertexRecordLayout& layout, const char* rec, u
     std::memcpy(d.p, rec, 12);
   }
   return d;
-}
-
-// Stage 5: the (vertex, patch) pairs merge-joined with vert.bin -> (patch, vertex, data) sorted
-// by patch. Counts the vertices some face uses.
-template <bool Full>
-std::unique_ptr<PatchSorter<Full>> chunkedJoin(IngestContext& ctx, const ParsedInput& in, PairSorter& pairs,
-                                               PatchStageOutput& out) {
-  checkInterrupt("ingest: sort");
-  pairs.finish();
-  auto byPatch = std::make_unique<PatchSorter<Full>>(ctx.scratch + "/s3", ctx.plan.chunkedSorter, KeyLess<VertexData<Full>>{}, true);
-  Progress progress(ctx.progress, "ingest: vertices", in.vertices, "vert");
-  TempReader vr(ctx.scratch + "/vert.bin", 4 << 20);
-  std::vector<char> rec(in.layout.size());
-  uint64_t nextVertex = 0;
-  uint64_t pair;
-  bool have = pairs.next(pair);
-  std::vector<uint32_t> holders;
-  while (have) {
-    uint32_t v = uint32_t(pair >> 32);
-    holders.clear();
-    while (have && uint32_t(pair >> 32) == v) {
-      holders.push_back(uint32_t(pair));
-      have = pairs.next(pair);
-    }
-    ++out.distinctReferenced;
-    assert(v >= nextVertex || nextVertex == 0);  // pairs come by ascending vertex
-    for (; nextVertex <= v; ++nextVertex)
-      if (vr.read(rec.data(), rec.size()) != rec.size()) fail(ctx.scratch, "vertex scratch file is short");
-    VertexData<Full> d = vertexData<Full>(in.layout, rec.data(), uint32_t(holders.size()));
-    for (uint32_t k : holders) {
-      d.key = uint64_t(k) << 32 | v;
-      byPatch->add(d);
-    }
-    progress.update(nextVertex);
-  }
-  progress.finish(in.vertices);
-  std::remove((ctx.scratch + "/vert.bin").c_str());
-  endOfPass(ctx, "vertices");
-  return byPatch;
 }
 
 // One patch of the chunked path, built on a worker thread; written in patch order.
@@ -566,11 +513,91 @@ void buildPatch(PatchWork& w, const VertexLayout& layout, const std::string& scr
   w.payload = encodeGeometry(p, layout);
 }
 
+// (vertex << 32 | patch): unique keys, radix sorted.
+struct Identity {
+  uint64_t operator()(uint64_t x) const { return x; }
+};
+using PairSorter = StableKeySorter<uint64_t, Identity>;
+
+// Stage 5, first pass over the groups: consecutive keys become patches 0..P-1 (out.patchKey);
+// each patch's distinct vertices give (vertex, patch) pairs, externally sorted by vertex. Patches
+// are gathered in batches; their distinct vertices are found in parallel and added in patch order
+// (the result does not depend on the thread count).
+std::unique_ptr<PairSorter> chunkedGroup(IngestContext& ctx, FaceGroups& groups, PatchStageOutput& out) {
+  std::vector<uint64_t>& patchKey = out.patchKey;
+  auto pairs = std::make_unique<PairSorter>(ctx.scratch + "/s2", ctx.plan.chunkedSorter, Identity{}, 64, true);
+  constexpr size_t kPatches = 64;
+  std::vector<std::vector<uint32_t>> tris(kPatches), verts(kPatches);
+  std::vector<FaceRec> faces;
+  size_t filled = 0;
+  auto flush = [&]() {
+    tbb::parallel_for(size_t(0), filled, [&](size_t i) { distinctSorted(tris[i], verts[i]); });
+    for (size_t i = 0; i < filled; ++i) {
+      const uint32_t k = uint32_t(patchKey.size() - filled + i);
+      for (uint32_t v : verts[i]) pairs->add(uint64_t(v) << 32 | k);
+    }
+    filled = 0;
+  };
+  uint64_t key;
+  while (groups.nextGroup(key, faces)) {
+    assert(patchKey.empty() || patchKey.back() < key);  // groups come in ascending key order
+    if (filled == kPatches) flush();
+    patchKey.push_back(key);
+    std::vector<uint32_t>& t = tris[filled++];
+    t.resize(3 * faces.size());
+    for (size_t i = 0; i < faces.size(); ++i) std::memcpy(&t[3 * i], faces[i].v, 12);
+  }
+  flush();
+  if (patchKey.size() >= (uint64_t(1) << 32)) fail(ctx.scratch, "more than 2^32 patches");
+  ctx.clock.mark("group");
+  return pairs;
+}
+
+// Stage 5: the (vertex, patch) pairs merge-joined with the vertex records -> (patch, vertex, data)
+// sorted by patch. Counts the vertices some face uses.
+template <bool Full>
+std::unique_ptr<PatchSorter<Full>> chunkedJoin(IngestContext& ctx, const ParsedInput& in, PairSorter& pairs,
+                                               PatchStageOutput& out) {
+  checkInterrupt("ingest: sort");
+  pairs.finish();
+  auto byPatch = std::make_unique<PatchSorter<Full>>(ctx.scratch + "/s3", ctx.plan.chunkedSorter, KeyOf<VertexData<Full>>{}, 64, true);
+  Progress progress(ctx.progress, "ingest: vertices", in.vertices, "vert");
+  const size_t size = in.layout.size();
+  TempReader vr(in.vertexFile.path, 4 << 20, in.vertexFile.offset, in.vertices * size);
+  std::vector<char> rec(size);
+  uint64_t nextVertex = 0;
+  uint64_t pair;
+  bool have = pairs.next(pair);
+  std::vector<uint32_t> holders;
+  while (have) {
+    uint32_t v = uint32_t(pair >> 32);
+    holders.clear();
+    while (have && uint32_t(pair >> 32) == v) {
+      holders.push_back(uint32_t(pair));
+      have = pairs.next(pair);
+    }
+    ++out.distinctReferenced;
+    assert(v >= nextVertex || nextVertex == 0);  // pairs come by ascending vertex
+    for (; nextVertex <= v; ++nextVertex)
+      if (vr.read(rec.data(), size) != size) fail(in.vertexFile.path, "the vertex records end early (the file changed during the ingest?)");
+    VertexData<Full> d = vertexData<Full>(in.layout, rec.data(), uint32_t(holders.size()));
+    for (uint32_t k : holders) {
+      d.key = uint64_t(k) << 32 | v;
+      byPatch->add(d);
+    }
+    progress.update(nextVertex);
+  }
+  progress.finish(in.vertices);
+  if (!in.vertexFile.ply) std::remove(in.vertexFile.path.c_str());
+  endOfPass(ctx, "vertices");
+  return byPatch;
+}
+
 // Stage 6, gathering: patch k's vertices (from the patch-sorted stream, read on from d/have) and
-// its corners (from pface.bin).
+// its faces (the second pass over the groups).
 template <bool Full>
 void gatherPatch(PatchWork& w, uint32_t k, const ParsedInput& in, PatchSorter<Full>& byPatch, VertexData<Full>& d, bool& have,
-                 TempReader& pface, uint32_t triangles, const std::string& scratch) {
+                 FaceGroups& groups, std::vector<FaceRec>& faces, const std::string& scratch) {
   while (have && uint32_t(d.key >> 32) == k) {
     assert(w.globalIds.empty() || w.globalIds.back() < uint32_t(d.key));  // ascending input index
     w.globalIds.push_back(uint32_t(d.key));
@@ -586,37 +613,39 @@ void gatherPatch(PatchWork& w, uint32_t k, const ParsedInput& in, PatchSorter<Fu
     }
     have = byPatch.next(d);
   }
-  w.p.triangles.resize(size_t(triangles) * 3);
-  if (pface.read(w.p.triangles.data(), w.p.triangles.size() * 4) != w.p.triangles.size() * 4)
-    fail(scratch, "patch face scratch file is short");
+  uint64_t key;
+  if (!groups.nextGroup(key, faces) || key != w.p.cell) fail(scratch, "internal: patch groups changed between passes");
+  w.p.triangles.resize(3 * faces.size());
+  for (size_t i = 0; i < faces.size(); ++i) std::memcpy(&w.p.triangles[3 * i], faces[i].v, 12);
 }
 
 // Stage 6: one geometry block per patch; shared vertices -> (vertex, patch, local) and cross
 // edges to the boundary stage's sorters. Patches are gathered from the sorted streams in batches,
 // built in parallel, and written in patch order, so the store does not depend on the thread count.
 template <bool Full>
-void chunkedPatches(IngestContext& ctx, const ParsedInput& in, PatchSorter<Full>& byPatch, const std::vector<uint32_t>& patchTris,
+void chunkedPatches(IngestContext& ctx, const ParsedInput& in, FaceGroups& groups, PatchSorter<Full>& byPatch,
                     PatchStageOutput& out) {
   checkInterrupt("ingest: sort");
   byPatch.finish();
+  groups.rewind(true);
   out.shared = std::make_unique<SharedSorter>(ctx.scratch + "/s4", ctx.plan.chunkedSharedSorter);
   out.edges = std::make_unique<EdgeSorter>(ctx.scratch + "/s5", ctx.plan.chunkedEdgeSorter);
   const uint32_t P = uint32_t(out.patchKey.size());
   Progress progress(ctx.progress, "ingest: patches", in.faces);
-  TempReader pface(ctx.scratch + "/pface.bin", 4 << 20);
   VertexData<Full> d;
   bool have = byPatch.next(d);
   uint64_t facesDone = 0;
-  constexpr uint32_t kBatch = 64;
+  constexpr uint32_t kPatches = 64;
   std::vector<PatchWork> work;
-  for (uint32_t k0 = 0; k0 < P; k0 += kBatch) {
-    const uint32_t k1 = std::min(P, k0 + kBatch);
+  std::vector<FaceRec> faces;
+  for (uint32_t k0 = 0; k0 < P; k0 += kPatches) {
+    const uint32_t k1 = std::min(P, k0 + kPatches);
     work.assign(k1 - k0, PatchWork());
     for (uint32_t k = k0; k < k1; ++k) {
       PatchWork& w = work[k - k0];
       w.p.id = k;
       w.p.cell = out.patchKey[k];
-      gatherPatch<Full>(w, k, in, byPatch, d, have, pface, patchTris[k], ctx.scratch);
+      gatherPatch<Full>(w, k, in, byPatch, d, have, groups, faces, ctx.scratch);
     }
     tbb::parallel_for(size_t(0), work.size(), [&](size_t i) { buildPatch(work[i], ctx.impl.layout, ctx.scratch); });
     for (PatchWork& w : work) {
@@ -634,9 +663,10 @@ void chunkedPatches(IngestContext& ctx, const ParsedInput& in, PatchSorter<Full>
     }
     progress.update(facesDone);
   }
-  assert(!have && facesDone == in.faces);  // every vertex datum and every face went to a patch
+  uint64_t key;
+  if (have || groups.nextGroup(key, faces) || facesDone != in.faces)
+    fail(ctx.scratch, "internal: a vertex or a face of the sorted streams is in no patch");
   progress.finish(facesDone);
-  std::remove((ctx.scratch + "/pface.bin").c_str());
   endOfPass(ctx, "patches");
 }
 
@@ -645,15 +675,14 @@ void chunkedPatches(IngestContext& ctx, const ParsedInput& in, PatchSorter<Full>
 template <bool Full>
 void chunkedStages(IngestContext& ctx, const ParsedInput& in, PatchStageOutput& out) {
   assert(!in.resident);
-  chunkedCentroids(ctx, in);
-  endOfPass(ctx, "morton merge");
-  std::unique_ptr<CellSorter> byCell = chunkedAssign(ctx, in);
-  std::vector<uint32_t> patchTris;
-  std::unique_ptr<PairSorter> pairs = chunkedGroup(ctx, *byCell, patchTris, out);
-  byCell.reset();
+  const bool coherent = chunkedPartition(ctx, in);
+  std::unique_ptr<FaceGroups> groups = chunkedAssign(ctx, in, coherent);
+  if (!in.faceFile.ply) std::remove(in.faceFile.path.c_str());
+  std::unique_ptr<PairSorter> pairs = chunkedGroup(ctx, *groups, out);
   std::unique_ptr<PatchSorter<Full>> byPatch = chunkedJoin<Full>(ctx, in, *pairs, out);
   pairs.reset();
-  chunkedPatches<Full>(ctx, in, *byPatch, patchTris, out);
+  chunkedPatches<Full>(ctx, in, *groups, *byPatch, out);
+  groups.reset();
 }
 
 template void chunkedStages<false>(IngestContext&, const ParsedInput&, PatchStageOutput&);

@@ -66,6 +66,15 @@ struct VertexRecordLayout {
   }
 };
 
+// Where the chunked path reads the vertex records from: scratch/vert.bin, or, for a binary PLY
+// whose vertex records are byte for byte what vert.bin would hold (VertexRecordLayout), the input
+// itself (no copy of the vertices into fresh page cache).
+struct VertexFile {
+  std::string path;
+  uint64_t offset = 0;  // byte offset of vertex 0
+  uint64_t count = 0;
+  bool ply = false;  // the input, in place
+};
 
 struct Centroid {
   float x, y, z, area;
@@ -346,6 +355,7 @@ class MortonSort {
 // the assigner, and what it fills (the report and the new store's state).
 struct IngestContext {
   const std::string& scratch;
+  const IngestOptions& options;
   const MemoryPlan& plan;
   bool progress;         // progress lines on stderr
   CellAssigner& assigner;
@@ -359,7 +369,8 @@ struct ParsedInput {
   VertexRecordLayout layout{};
   Box3 bounds;
   uint64_t vertices = 0, faces = 0;
-  FaceFile faceFile;           // where the resident passes read the faces
+  FaceFile faceFile;           // where the passes after the parse read the faces
+  VertexFile vertexFile;       // chunked: where the vertex records are
   bool resident = false;       // the vertex records are in `records` (else in scratch/vert.bin)
   std::vector<char> records;   // resident: every vertex record, in vertex order
   std::unique_ptr<MortonSort> morton;  // resident: the Morton sort, filled if the parse could

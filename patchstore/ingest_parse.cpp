@@ -101,6 +101,7 @@ class ScratchSink : public MeshSink {
     header = h;
     layout = {h.doublePrecision, h.hasNormals, h.hasColors, h.hasTexcoords};
     record_.resize(layout.size());
+    lastVertices_.resize(kCheckedFaces * layout.size());
     for (int a = 0; a < 3; ++a) {
       bounds.lo[a] = std::numeric_limits<double>::infinity();
       bounds.hi[a] = -std::numeric_limits<double>::infinity();
@@ -141,7 +142,11 @@ class ScratchSink : public MeshSink {
         out += layout.size();
       } else {
         layout.encode(v[i], record_.data());
-        vert_.write(record_.data(), record_.size());
+        if (writeVertices_) vert_.write(record_.data(), record_.size());
+        // The first and last records, to check the vertex block read in place against.
+        if (firstVertices_.size() < kCheckedFaces * record_.size())
+          firstVertices_.insert(firstVertices_.end(), record_.begin(), record_.end());
+        std::memcpy(&lastVertices_[(vertexCount + i) % kCheckedFaces * record_.size()], record_.data(), record_.size());
       }
       for (int a = 0; a < 3; ++a) {
         bounds.lo[a] = std::min(bounds.lo[a], v[i].p[a]);
@@ -203,6 +208,19 @@ class ScratchSink : public MeshSink {
   // No face.bin: the faces will be read from the input (FaceFile), if it checks out.
   void skipFaceFile() { writeFaces_ = false; }
   bool wroteFaceFile() const { return writeFaces_; }
+  // No vert.bin: the chunked path will read the vertex records from the input (VertexFile), if
+  // they check out; never for records kept in RAM.
+  void skipVertexFile() { writeVertices_ = false; }
+  bool wroteVertexFile() const { return writeVertices_; }
+  // The first and last vertex records written (not kept in RAM), oldest first.
+  const std::vector<char>& firstVertexRecords() const { return firstVertices_; }
+  std::vector<char> lastVertexRecords() const {
+    std::vector<char> out;
+    const uint64_t n = std::min<uint64_t>(vertexCount, kCheckedFaces), size = record_.size();
+    for (uint64_t i = vertexCount - n; i < vertexCount; ++i)
+      out.insert(out.end(), &lastVertices_[i % kCheckedFaces * size], &lastVertices_[i % kCheckedFaces * size] + size);
+    return out;
+  }
   const std::vector<uint32_t>& firstFaces() const { return firstFaces_; }
   // The last faces delivered, oldest first.
   std::vector<uint32_t> lastFaces() const {
@@ -235,7 +253,8 @@ class ScratchSink : public MeshSink {
   }
   static constexpr size_t kChunkFaces = 1 << 17;
   static constexpr size_t kCheckedFaces = 64;
-  bool writeFaces_ = true;
+  bool writeFaces_ = true, writeVertices_ = true;
+  std::vector<char> firstVertices_, lastVertices_;
   std::vector<uint32_t> firstFaces_, lastFaces_ = std::vector<uint32_t>(3 * kCheckedFaces);
   uint64_t lastCount_ = 0;
   TempWriter vert_, face_;
@@ -249,12 +268,19 @@ class ScratchSink : public MeshSink {
   uint64_t pushed_ = 0;
 };
 
-// The face records of a PLY whose layout allows reading them in place: binary little endian,
-// fixed-size records in every element before the faces, and the face element's only property a
-// list of uchar (or char) count and int (or uint) indices. {} otherwise.
-std::optional<FaceFile> plyTriangleBlock(const std::string& path) {
+// The vertex and face records of a binary little-endian PLY that can be read in place: every
+// element before them of fixed-size records; faces whose only property is a list of uchar (or
+// char) count and int (or uint) indices; vertices whose properties are exactly what vert.bin's
+// record holds for `layout` (x y z float, or double; then nx ny nz float; then red green blue
+// alpha uchar), in that order.
+struct PlyBlocks {
+  std::optional<FaceFile> faces;
+  std::optional<VertexFile> vertices;
+};
+PlyBlocks plyBlocks(const std::string& path, const VertexRecordLayout& layout) {
+  PlyBlocks blocks;
   FILE* f = std::fopen(path.c_str(), "rb");
-  if (!f) return std::nullopt;
+  if (!f) return blocks;
   std::string head(1 << 16, '\0');
   head.resize(std::fread(head.data(), 1, head.size(), f));
   std::fclose(f);
@@ -270,6 +296,7 @@ std::optional<FaceFile> plyTriangleBlock(const std::string& path) {
     uint64_t count = 0, size = 0;
     bool fixed = true, triangleList = false;
     int properties = 0;
+    std::vector<std::pair<std::string, std::string>> scalars;  // (name, type)
   };
   std::vector<Element> elements;
   std::istringstream in(head);
@@ -283,17 +310,17 @@ std::optional<FaceFile> plyTriangleBlock(const std::string& path) {
     std::string w;
     words >> w;
     if (lineNo++ == 0) {
-      if (w != "ply") return std::nullopt;
+      if (w != "ply") return blocks;
     } else if (w == "format") {
       std::string kind, version;
       words >> kind >> version;
       binaryLE = kind == "binary_little_endian";
     } else if (w == "element") {
       Element e;
-      if (!(words >> e.name >> e.count)) return std::nullopt;
+      if (!(words >> e.name >> e.count)) return blocks;
       elements.push_back(e);
     } else if (w == "property") {
-      if (elements.empty()) return std::nullopt;
+      if (elements.empty()) return blocks;
       Element& e = elements.back();
       std::string type, countType, itemType, name;
       words >> type;
@@ -306,27 +333,48 @@ std::optional<FaceFile> plyTriangleBlock(const std::string& path) {
                          (name == "vertex_indices" || name == "vertex_index");
       } else {
         int size = typeSize(type);
-        if (size < 0) return std::nullopt;
+        if (size < 0) return blocks;
+        words >> name;
         e.size += uint64_t(size);
+        e.scalars.push_back({name, type});
       }
     } else if (w == "end_header") {
       ended = true;
       break;
     } else if (w != "comment" && w != "obj_info" && !w.empty()) {
-      return std::nullopt;
+      return blocks;
     }
   }
-  if (!binaryLE || !ended || consumed > head.size()) return std::nullopt;
+  if (!binaryLE || !ended || consumed > head.size()) return blocks;
+  // vert.bin's record for this layout, as (name, type) in order.
+  std::vector<std::pair<std::string, std::string>> record;
+  for (const char* a : {"x", "y", "z"}) record.push_back({a, layout.doublePrecision ? "double" : "float"});
+  if (layout.normals)
+    for (const char* a : {"nx", "ny", "nz"}) record.push_back({a, "float"});
+  if (layout.colors)
+    for (const char* a : {"red", "green", "blue", "alpha"}) record.push_back({a, "uchar"});
+  auto sameType = [](const std::string& a, const std::string& b) {
+    auto canon = [](const std::string& t) {
+      return t == "float32" ? std::string("float") : t == "float64" ? std::string("double") : t == "uint8" ? std::string("uchar") : t;
+    };
+    return canon(a) == canon(b);
+  };
   uint64_t offset = consumed;
   for (const Element& e : elements) {
-    if (e.name == "face") {
-      if (e.properties != 1 || !e.triangleList) return std::nullopt;
-      return FaceFile{path, offset, e.count, true};
+    if (e.name == "vertex" && e.fixed && e.scalars.size() == record.size() && e.size == layout.size()) {
+      bool same = true;
+      for (size_t k = 0; k < record.size(); ++k)
+        same = same && e.scalars[k].first == record[k].first && sameType(e.scalars[k].second, record[k].second);
+      if (same) blocks.vertices = VertexFile{path, offset, e.count, true};
     }
-    if (!e.fixed) return std::nullopt;
+    if (e.name == "face") {
+      if (e.properties == 1 && e.triangleList) blocks.faces = FaceFile{path, offset, e.count, true};
+      return blocks;
+    }
+    if (!e.fixed) return blocks;
     offset += e.count * e.size;
   }
-  return std::nullopt;
+  return blocks;
 }
 
 // STL is a triangle soup: three new vertices per triangle. Vertices with bit-identical positions
@@ -466,7 +514,7 @@ ReadStats readFused(MeshReader& reader, ScratchSink& sink, MortonSort& morton, c
 // Whether the face block read in place is exactly the faces the reader delivered: triangles only
 // (no polygon was fanned), the declared count, the same first and last faces.
 bool sameFacesInPlace(const FaceFile& inPlace, const ScratchSink& sink, const ReadStats& stats) {
-  if (stats.polygons != 0 || stats.triangles != inPlace.count || !sink.inRam()) return false;
+  if (stats.polygons != 0 || stats.triangles != inPlace.count) return false;
   auto facesAt = [&](uint64_t first, uint64_t n) {
     FaceFile part = inPlace;
     part.offset += first * 13;
@@ -483,6 +531,44 @@ bool sameFacesInPlace(const FaceFile& inPlace, const ScratchSink& sink, const Re
   } catch (const Error&) {  // not where the header said: copy them instead
     return false;
   }
+}
+
+// Whether the vertex block read in place holds the records the reader delivered: the count, the
+// same first and last records.
+bool sameVerticesInPlace(const VertexFile& inPlace, const ScratchSink& sink) {
+  const size_t size = sink.layout.size();
+  if (inPlace.count != sink.vertexCount || sink.firstVertexRecords().empty()) return false;
+  auto recordsAt = [&](uint64_t first, size_t bytes) {
+    std::vector<char> out(bytes);
+    TempReader r(inPlace.path, 1 << 16, inPlace.offset + first * size, bytes);
+    return r.read(out.data(), bytes) == bytes ? out : std::vector<char>();
+  };
+  const std::vector<char> last = sink.lastVertexRecords();
+  try {
+    return recordsAt(0, sink.firstVertexRecords().size()) == sink.firstVertexRecords() &&
+           recordsAt(inPlace.count - last.size() / size, last.size()) == last;
+  } catch (const Error&) {
+    return false;
+  }
+}
+
+// The vertex records as the reader gives them, in a second read, to scratch/vert.bin.
+void copyVertices(const std::string& input, const std::string& scratch, const VertexRecordLayout& layout) {
+  struct VerticesOnly : MeshSink {
+    TempWriter out;
+    VertexRecordLayout layout;
+    std::vector<char> rec;
+    VerticesOnly(const std::string& path, const VertexRecordLayout& l) : out(path, 4 << 20), layout(l), rec(l.size()) {}
+    void vertices(const InputVertex* v, size_t count, uint64_t) override {
+      for (size_t i = 0; i < count; ++i) {
+        layout.encode(v[i], rec.data());
+        out.write(rec.data(), rec.size());
+      }
+    }
+    void triangles(const uint32_t*, size_t) override {}
+  } verticesOnly(scratch + "/vert.bin", layout);
+  openMesh(input)->read(verticesOnly);
+  verticesOnly.out.close();
 }
 
 // Polygons (or anything unexpected in a face block read in place): the faces as the reader gives
@@ -520,13 +606,21 @@ ParsedInput parseInput(const std::string& input, IngestContext& ctx) {
   const uint64_t residentLimit = ctx.plan.residentRecordLimit(expected.size());
   Progress parseProgress(ctx.progress, "ingest: parse", uint64_t(std::max<int64_t>(0, header.declaredFaces)));
   ScratchSink sink(ctx.scratch, parseProgress, residentLimit);
-  // A resident binary PLY of triangles: its faces are read in place later, not copied.
+  // A binary PLY of triangles: its faces are read in place later, not copied; and when its
+  // vertices take the chunked path, so are they, if their records are vert.bin's.
   std::optional<FaceFile> inPlace;
-  if (header.format == MeshFormat::PlyBinaryLE && header.declaredVertices >= 0 && !header.splitAtSeams &&
-      uint64_t(header.declaredVertices) * expected.size() <= residentLimit) {
-    inPlace = plyTriangleBlock(input);
+  std::optional<VertexFile> verticesInPlace;
+  // Texture seams split the file's vertices into wedges: its records and indices are not the store's.
+  if (header.format == MeshFormat::PlyBinaryLE && header.declaredVertices >= 0 && !header.splitAtSeams) {
+    PlyBlocks blocks = plyBlocks(input, expected);
+    inPlace = blocks.faces;
     if (inPlace && int64_t(inPlace->count) != header.declaredFaces) inPlace.reset();
     if (inPlace) sink.skipFaceFile();
+    if (uint64_t(header.declaredVertices) * expected.size() > residentLimit && blocks.vertices &&
+        int64_t(blocks.vertices->count) == header.declaredVertices) {
+      verticesInPlace = blocks.vertices;
+      sink.skipVertexFile();
+    }
   }
   // The Morton sort of the resident path, filled during the parse when the input allows it; its
   // budget is what the declared vertex records leave (with 64 MiB for the parse's buffers).
@@ -555,7 +649,14 @@ ParsedInput parseInput(const std::string& input, IngestContext& ctx) {
     ctx.report.weldedVertices = weldSoup(ctx.scratch, in.layout, in.vertices, ctx.plan.soupWeldSorter);
     progress.finish(in.vertices);
   }
-  if (!sink.inRam() && in.vertices * in.layout.size() <= residentLimit) sink.loadVertices(ctx.scratch);
+  if (!sink.wroteVertexFile() && !sameVerticesInPlace(*verticesInPlace, sink)) {
+    copyVertices(input, ctx.scratch, in.layout);
+    verticesInPlace.reset();
+  }
+  if (!sink.inRam() && in.vertices * in.layout.size() <= residentLimit) {
+    assert(!verticesInPlace);  // only records beyond the limit are left in place
+    sink.loadVertices(ctx.scratch);
+  }
   in.resident = sink.inRam();
   if (!sink.wroteFaceFile() && !sameFacesInPlace(*inPlace, sink, stats)) {
     copyFaces(input, ctx.scratch);
@@ -563,6 +664,11 @@ ParsedInput parseInput(const std::string& input, IngestContext& ctx) {
   }
   if (inPlace) inPlace->vertices = in.vertices;
   in.faceFile = inPlace ? *inPlace : FaceFile{ctx.scratch + "/face.bin", 0, in.faces, false};
+  in.vertexFile = verticesInPlace ? *verticesInPlace : VertexFile{ctx.scratch + "/vert.bin", 0, in.vertices, false};
+  if (!in.resident) {
+    ctx.report.verticesInPlace = bool(verticesInPlace);
+    ctx.report.facesInPlace = bool(inPlace);
+  }
   if (in.resident) in.records = sink.takeVertices();
   ctx.clock.mark("parse");
   return in;

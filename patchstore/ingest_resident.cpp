@@ -638,7 +638,7 @@ void residentPatches(IngestContext& ctx, const ParsedInput& in, const ResidentVe
   SharedSorter& shared = *out.shared;
   EdgeSorter& edges = *out.edges;
   Progress progress(ctx.progress, "ingest: patches", in.faces);
-  groups.rewind();
+  groups.rewind(true);
   tbb::enumerable_thread_specific<PatchScratch> scratchSpace;
   uint64_t facesDone = 0;
   IngestReport& report = ctx.report;

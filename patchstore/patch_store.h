@@ -148,6 +148,9 @@ struct IngestOptions {
   uint32_t patchTriangles = 0;          // 0: the assigner's own default
   std::string tempDir;                  // default: STORE/tmp
   bool progress = true;                 // progress lines on stderr
+  // Tests: the chunked path's vertex positions in RAM, its windows and chunks (0: the memory
+  // plan's share), to make small inputs take every branch of the join (ingest_join.h).
+  uint64_t positionBytes = 0;
 };
 
 // Figures that ingest measured, kept in the store and printed by `mtstore info`.
@@ -164,6 +167,11 @@ struct IngestReport {
   std::string assigner;
   double seconds = 0;
   uint64_t peakBytes = 0;             // RSS high-water mark at the end of ingest
+  // Not kept in the store: how the chunked path found the corners' positions (faces joined in
+  // the windows of its sweep, or through the buckets of vertex chunks; per join, summed), and
+  // whether it read the input's vertex and face records in place. Zero on the resident path.
+  uint64_t sweptFaces = 0, bucketedFaces = 0;
+  bool verticesInPlace = false, facesInPlace = false;
 };
 
 struct StoreInfo {

@@ -23,6 +23,7 @@ std::vector<std::pair<const char*, uint64_t>> shares(const MemoryPlan& p) {
           {"boundarySorter", p.boundarySorter},
           {"chunkedPositions", p.chunkedPositions},
           {"chunkedSorter", p.chunkedSorter},
+          {"chunkedBuckets", p.chunkedBuckets},
           {"chunkedSharedSorter", p.chunkedSharedSorter},
           {"chunkedEdgeSorter", p.chunkedEdgeSorter},
           {"residentReserve", p.residentReserve},

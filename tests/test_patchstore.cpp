@@ -324,6 +324,92 @@ TEST(PatchStore, FacesReadInPlaceFromBinaryPlyOrNot) {
   EXPECT_TRUE(bytes == segmentBytes(tmp.file("chunked"))) << "chunked path";
 }
 
+// A binary PLY of the mesh with the given vertex layout (normals and colours made up from the
+// positions, so that every vertex's are its own).
+void writeLayoutPly(const TestMesh& m, const std::string& path, const PlyWriteOptions& o) {
+  PlyWriter w(path, o);
+  for (size_t i = 0; i < m.positions.size(); i += 3) {
+    const double* p = &m.positions[i];
+    const double len = std::sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]) + 1e-9;
+    const float n[3] = {float(p[0] / len), float(p[1] / len), float(p[2] / len)};
+    const uint8_t c[4] = {uint8_t(i % 251), uint8_t(i / 3 % 241), uint8_t(int(p[2] * 1000) & 255), 255};
+    w.addVertex(p, o.normals ? n : nullptr, o.colors ? c : nullptr);
+  }
+  for (size_t i = 0; i < m.triangles.size(); i += 3) w.addTriangle(m.triangles[i], m.triangles[i + 1], m.triangles[i + 2]);
+  w.finish();
+}
+
+TEST(PatchStore, ChunkedJoinThroughWindowsAndBucketsGivesTheResidentBytes) {
+  // The chunked path joins every face with its corners' positions in a sweep with two windows of
+  // positions, and the faces the windows miss through buckets of vertex chunks, carried from
+  // chunk to chunk (ingest_join.h). With windows of 4096 vertices (IngestOptions::positionBytes),
+  // a mesh in scan order goes mostly through the windows (its last ring refers back to its first:
+  // window B; 1% of its vertices swapped with far ones: buckets), one with shuffled vertices
+  // almost wholly through the buckets (carried over several chunks); normals, colours and double
+  // positions are the records' other layouts; a binary PLY's vertex records are read in place when
+  // they are vert.bin's, copied when not (an extra property). Every case: the resident path's
+  // segment bytes and defect counts.
+  TempDir tmp;
+  TestMesh ordered = makeTorus(300, 110, 6, false, 4);
+  {
+    std::mt19937 rng(6);
+    std::vector<uint32_t> perm(ordered.positions.size() / 3);
+    for (uint32_t i = 0; i < perm.size(); ++i) perm[i] = i;
+    for (size_t k = 0; k < perm.size() / 200; ++k) std::swap(perm[rng() % perm.size()], perm[rng() % perm.size()]);
+    TestMesh swapped;
+    swapped.positions.resize(ordered.positions.size());
+    for (uint32_t i = 0; i < perm.size(); ++i)
+      for (int a = 0; a < 3; ++a) swapped.positions[3 * size_t(perm[i]) + a] = ordered.positions[3 * size_t(i) + a];
+    for (uint32_t v : ordered.triangles) swapped.triangles.push_back(perm[v]);
+    ordered = swapped;
+  }
+  const TestMesh shuffled = shuffleVertices(ordered, 5);
+  struct Case {
+    const char* name;
+    const TestMesh* mesh;
+    PlyWriteOptions layout;
+    bool extraProperty;
+  };
+  const Case cases[] = {{"ordered", &ordered, {}, false},
+                        {"shuffled", &shuffled, {}, false},
+                        {"attributes", &ordered, {false, true, true}, false},
+                        {"double-shuffled", &shuffled, {true, false, false}, false},
+                        {"extra", &ordered, {}, true}};
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    const std::string in = tmp.file(std::string(c.name) + ".ply");
+    if (c.extraProperty)
+      writeBinaryPly(*c.mesh, in, true, false);
+    else
+      writeLayoutPly(*c.mesh, in, c.layout);
+    auto ingest = [&](const std::string& out, uint64_t memory, uint64_t positions) {
+      VPartitionOptions vo;
+      vo.patchTriangles = 300;
+      auto assigner = makeVPartitionAssigner(vo);
+      IngestOptions o;
+      o.memoryBytes = memory;
+      o.positionBytes = positions;
+      o.progress = false;
+      return PatchStore::ingest(in, tmp.file(out), *assigner, o);
+    };
+    const IngestReport ref = ingest(std::string(c.name) + "-resident", 1ull << 30, 0);
+    const IngestReport chunked = ingest(std::string(c.name) + "-chunked", 8ull << 20, 4096 * 24);
+    EXPECT_EQ(ref.sweptFaces + ref.bucketedFaces, 0u) << "the resident path joins nothing";
+    EXPECT_EQ(chunked.sweptFaces + chunked.bucketedFaces, 3 * (c.mesh->triangles.size() / 3)) << "three joins of every face (the sample picks them all below 512 K faces)";
+    if (c.mesh == &ordered)
+      EXPECT_GT(chunked.sweptFaces, 2 * chunked.bucketedFaces) << "scan order: mostly in the windows";
+    else
+      EXPECT_GT(chunked.bucketedFaces, 2 * chunked.sweptFaces) << "shuffled: mostly through the buckets";
+    EXPECT_GT(chunked.bucketedFaces, 0u);
+    EXPECT_EQ(chunked.verticesInPlace, !c.extraProperty);
+    EXPECT_TRUE(chunked.facesInPlace);
+    EXPECT_TRUE(segmentBytes(tmp.file(std::string(c.name) + "-resident")) == segmentBytes(tmp.file(std::string(c.name) + "-chunked")));
+    EXPECT_EQ(ref.duplicateTriangles, chunked.duplicateTriangles);
+    EXPECT_EQ(ref.nonManifoldEdges, chunked.nonManifoldEdges);
+    EXPECT_EQ(ref.unreferencedVertices, chunked.unreferencedVertices);
+  }
+}
+
 TEST(PatchStore, DefectsCountedAlikeOnBothPaths) {
   // Degenerate, duplicate and non-manifold faces and unreferenced vertices, counted by the
   // resident path (large cap) as by the chunked one (tiny cap), with the same patches.

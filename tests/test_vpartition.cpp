@@ -12,9 +12,11 @@
 #include <xxhash.h>
 
 #include "base/error.h"
+#include "base/memory_plan.h"
 #include "patchstore/patch_store.h"
 #include "tests/test_support.h"
 #include "testing/memory_centroids.h"
+#include "vpartition/level.h"
 #include "vpartition/vpartition.h"
 
 namespace mt {
@@ -178,6 +180,24 @@ TEST(Irregular, SampledInputKeepsShapeAndBalancedPatches) {
   std::printf("sampled: patches %zu, min %u mean %.1f max %u\n", patches.size(), minPatch, mean, maxPatch);
   EXPECT_LE(maxPatch / mean, 2.0);
   EXPECT_GE(minPatch, o.patchTriangles / 8);
+}
+
+TEST(Irregular, TheSampleOfAnyInputFitsTheSmallestBillionCap) {
+  // The sample grows with the input (a fixed number per cell) up to a ceiling that fits the
+  // V-partition's share of --memory 256M beside its seeds, whatever the input's size: a billion
+  // triangles at 512M asked for 315 MiB of centroids and the build was refused. The sample may
+  // not depend on --memory (same bytes at every cap), so the ceiling is one constant.
+  const uint64_t share = planMemory(256ull << 20, 2).assigner;
+  uint64_t last = 0;
+  for (uint64_t n = 1000; n <= (8ull << 30); n = n * 3 / 2 + 7) {
+    const uint64_t limit = vp::sampleLimit(n, 2000);
+    EXPECT_GE(limit, last) << n;
+    EXPECT_LE(limit * 16, share / 2) << n << " triangles (half the share left for the seeds and tables)";
+    last = limit;
+  }
+  // Below the ceiling the rule is unchanged (inputs up to ~203 M keep their partitions).
+  EXPECT_EQ(vp::sampleLimit(200000000, 2000), uint64_t(std::ceil(128 * 200e6 / (2000 * 3.1))));
+  EXPECT_LT(vp::sampleLimit(1000000000, 2000), uint64_t(std::ceil(128 * 1e9 / (2000 * 3.1))));
 }
 
 TEST(Irregular, TinyAndEmptyInputs) {

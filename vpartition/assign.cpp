@@ -248,8 +248,13 @@ void VPartitionAssigner::prepare(const CentroidSource& centroids, uint64_t memor
   };
   tooBig(sampleCount * 16, "the centroid sample would");
   vp::CentroidSample sample = vp::sampleCentroids(centroids, P);
-  sequence_ = options_.kind == PartitionKind::Irregular ? buildIrregularFromSample(sample, options_)
-                                                        : PartitionSequence::build(centroids, options_);
+  // The candidate tables only speed the lookups up (the same cells with or without them), so
+  // their budget may follow the cap: a quarter of this share, since the partition stays resident
+  // through the assignment pass beside that pass's own buffers (a billion triangles' tables want
+  // ~190 MiB; at 512M with 160 MiB of tables the build's resident set reached 606 MiB).
+  VPartitionOptions o = options_;
+  if (memoryBytes) o.lookupTableBytes = std::min(o.lookupTableBytes, memoryBytes / 4);
+  sequence_ = o.kind == PartitionKind::Irregular ? buildIrregularFromSample(sample, o) : PartitionSequence::build(centroids, o);
   mergeSlivers(sample);
   // The seeds must stay in core (BMT 4.2.2: "about one seed per thousand triangles"); refuse
   // rather than silently exceed the caller's share of --memory.

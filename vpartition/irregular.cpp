@@ -62,6 +62,13 @@ constexpr double kFinalSplitFactor = 1.9;  // pass 4 splits cells above this (th
 // scan, docs/vpartition.md). Its size depends on the input only, never on --memory or threads.
 constexpr uint64_t kMinSample = 512u << 10;  // inputs up to 512 K triangles are used whole
 constexpr double kSamplePerCell = 128;    // above that, at least this many per V0 cell target
+// ...but never more than this (64 MiB of centroids): the sample must fit the V-partition's share
+// of the smallest --memory a billion-triangle input is built with (128 MiB of 256M) beside the
+// seeds and some candidate tables, and the sample, unlike the tables, may not depend on --memory
+// (same bytes at every cap). Inputs up to ~203 M triangles at mtbuild's 2000 per patch stay below
+// it and keep their partitions; a billion gets ~26 per V0 cell target (each sampled centroid
+// standing for ~240 triangles).
+constexpr uint64_t kMaxSample = 4u << 20;
 constexpr double kLevelSamplePerCell = 1024;  // coarser levels thin the stream down to this
 constexpr double kCountTolerance = 0.15;   // a level's final count stays within this of target
 
@@ -623,7 +630,7 @@ namespace vp {
 
 uint64_t sampleLimit(uint64_t triangles, uint32_t patchTriangles) {
   const double cells = double(triangles) / (double(patchTriangles) * kCrossPerCell);
-  return std::max<uint64_t>(kMinSample, uint64_t(std::ceil(kSamplePerCell * cells)));
+  return std::min<uint64_t>(kMaxSample, std::max<uint64_t>(kMinSample, uint64_t(std::ceil(kSamplePerCell * cells))));
 }
 
 CentroidSample sampleCentroids(const CentroidSource& src, uint32_t patchTriangles) {
