@@ -179,10 +179,10 @@ TEST_F(ToolOptions, MtextractNumericOptionsHaveRanges) {
   EXPECT_EQ(r.exitCode, 0) << r.output;
 }
 
-TEST_F(ToolOptions, MtextractWritesPlyOnlyAndOnlyWhenComplete) {
+TEST_F(ToolOptions, MtextractWritesItsFormatsOnlyAndOnlyWhenComplete) {
   TempDir dir;
-  for (const std::string name : {"cut.xyz", "cut.obj", "cut", "cut.ply.tmp", ".ply"}) {
-    expectRefused("mtextract", mt() + " --error 0 -o " + dir.file(name), {"supported: .ply, .glb, .gltf"});
+  for (const std::string name : {"cut.xyz", "cut.stl", "cut", "cut.ply.tmp", ".ply"}) {
+    expectRefused("mtextract", mt() + " --error 0 -o " + dir.file(name), {"supported: .ply, .glb, .gltf, .obj"});
     EXPECT_FALSE(fileExists(dir.file(name))) << name;
   }
   EXPECT_TRUE(entries(dir.path()).empty());
