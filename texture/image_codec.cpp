@@ -139,13 +139,18 @@ class JpegDecoder final : public ImageDecoder {
     source_.mgr.term_source = jpegTerm;
     source_.mgr.bytes_in_buffer = 0;
     source_.mgr.next_input_byte = nullptr;
-    if (!start(shift)) fail(src_->name(), std::string("not a readable JPEG image: ") + err_.message + at());
-    if (fullWidth_ > kMaxImageSide || fullHeight_ > kMaxImageSide)
+    // A constructor that throws runs no destructor: the library's state is released here first.
+    if (!start(shift)) {
+      const std::string message = std::string("not a readable JPEG image: ") + err_.message + at();
+      release();
+      fail(src_->name(), message);
+    }
+    if (fullWidth_ > kMaxImageSide || fullHeight_ > kMaxImageSide) {
+      release();
       fail(src_->name(), "JPEG image too large (" + std::to_string(fullWidth_) + " x " + std::to_string(fullHeight_) + ")");
+    }
   }
-  ~JpegDecoder() override {
-    if (created_) jpeg_destroy_decompress(&d_);
-  }
+  ~JpegDecoder() override { release(); }
   void readRow(uint8_t* rgb) override {
     if (row_ >= height_) fail(src_->name(), "read past the last row of the JPEG image");
     if (!readOne(rgb)) fail(src_->name(), std::string("damaged JPEG image: ") + err_.message + at());
@@ -155,6 +160,10 @@ class JpegDecoder final : public ImageDecoder {
 
  private:
   std::string at() const { return " at byte offset " + std::to_string(src_->position()); }
+  void release() {
+    if (created_) jpeg_destroy_decompress(&d_);
+    created_ = false;
+  }
   bool start(int shift) {
     if (setjmp(err_.jump)) return false;
     jpeg_create_decompress(&d_);
@@ -558,7 +567,18 @@ JpegRowWriter::JpegRowWriter(const std::string& path, int width, int height, int
   s_->dest.mgr.init_destination = jdInit;
   s_->dest.mgr.empty_output_buffer = jdEmpty;
   s_->dest.mgr.term_destination = jdTerm;
-  if (!startRowWriter(*s_, width, height, std::clamp(quality, 1, 100))) fail(path, std::string("JPEG: ") + s_->err.message);
+  if (!startRowWriter(*s_, width, height, std::clamp(quality, 1, 100))) {
+    // A constructor that throws runs no destructor: release the library's state and the temporary.
+    const std::string message = std::string("JPEG: ") + s_->err.message;
+    if (s_->created) jpeg_destroy_compress(&s_->c);
+    s_->created = false;
+    try {
+      s_->file->close();
+      env->removeFile(s_->tmp);
+    } catch (...) {
+    }
+    fail(path, message);
+  }
 }
 
 JpegRowWriter::~JpegRowWriter() {
