@@ -64,11 +64,15 @@ std::string uniqueTempName(const std::string& finalPath) {
 }
 
 void writeWholeFile(const std::string& path, const std::string& bytes, Env* env) {
+  writeWholeFile(path, bytes.data(), bytes.size(), env);
+}
+
+void writeWholeFile(const std::string& path, const void* data, size_t size, Env* env) {
   if (!env) env = Env::Default();
   const std::string tmp = uniqueTempName(path);
   try {
     auto f = env->newWritableFile(tmp);
-    f->append(bytes.data(), bytes.size());
+    f->append(data, size);
     f->sync();
     f->close();
     env->renameFile(tmp, path);

@@ -32,5 +32,6 @@ std::string uniqueTempName(const std::string& finalPath);
 // (nullptr: Env::Default()), synced and renamed over `path`: on any error (mt::Error naming the
 // file, kind Io) nothing is left under either name.
 void writeWholeFile(const std::string& path, const std::string& bytes, Env* env = nullptr);
+void writeWholeFile(const std::string& path, const void* data, size_t size, Env* env = nullptr);
 
 }  // namespace mt

@@ -613,20 +613,7 @@ void JpegRowWriter::finish() {
 }
 
 void writeFileAtomically(const std::string& path, const std::vector<uint8_t>& bytes, Env* env) {
-  const std::string tmp = uniqueTempName(path);
-  try {
-    auto f = env->newWritableFile(tmp);
-    f->append(bytes.data(), bytes.size());
-    f->sync();
-    f->close();
-    env->renameFile(tmp, path);
-  } catch (...) {
-    try {
-      env->removeFile(tmp);
-    } catch (...) {
-    }
-    throw;
-  }
+  writeWholeFile(path, bytes.data(), bytes.size(), env);
 }
 
 }  // namespace mt::tex
