@@ -54,6 +54,14 @@ double chooseGridStep(const PatchStore& store, RegionSimplifier simplifier) {
   return mean > 0 ? mean / fraction : 1e-6;
 }
 
+// The simplifier a build runs: the explicit choice, or under `auto` the quadric for coloured input
+// (colour-aware) and meshopt otherwise. One rule for the grid step and the regions, so an `auto`
+// build of coloured input gets the quadric's grid, as an explicit `--simplifier quadric` does.
+RegionSimplifier resolvedSimplifier(const BuildOptions& options, bool colors) {
+  if (!options.simplifierByInput) return options.simplifier;
+  return colors ? RegionSimplifier::Quadric : RegionSimplifier::Meshopt;
+}
+
 }  // namespace
 
 void LevelBuilder::State::startFresh(bool storeInput) {
@@ -67,7 +75,7 @@ void LevelBuilder::State::startFresh(bool storeInput) {
   report.inputTriangles = info.triangles;
   liveTriangles = info.triangles;
   // 2. The global quantization grid (mt_format.h): shared vertices quantize identically.
-  QuantizationGrid grid = QuantizationGrid::fromBounds(info.bounds.lo, info.bounds.hi, chooseGridStep(*store, options.simplifier));
+  QuantizationGrid grid = QuantizationGrid::fromBounds(info.bounds.lo, info.bounds.hi, chooseGridStep(*store, resolvedSimplifier(options, info.layout.colors)));
   report.gridStep = grid.step;
   if (weldToGrid(grid)) {
     info = store->info();
@@ -278,8 +286,7 @@ LevelBuilder::LevelBuilder(const std::string& input, const std::string& output, 
   s.ctx.sequence = &s.sequence;
   s.ctx.partitionLevels = s.sequence.levels();
   const bool colors = s.header.vertexFlags & format::kHasColors;
-  s.ctx.simplifier = options.simplifierByInput ? (colors ? RegionSimplifier::Quadric : RegionSimplifier::Meshopt)
-                                               : options.simplifier;
+  s.ctx.simplifier = resolvedSimplifier(options, colors);
   s.ctx.colorWeight = colors ? options.colorWeight : 0;
   if (options.simplifierByInput && colors)
     s.say("the input has per-vertex colours: simplifying with the quadric simplifier, colour-aware (--simplifier meshopt "

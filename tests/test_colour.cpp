@@ -268,6 +268,18 @@ TEST_F(ColourBuild, TheColourErrorIsStoredMonotoneAndVerified) {
   EXPECT_THAT(verify.output, HasSubstr("monotone errors  ok"));
 }
 
+// `--simplifier auto` (the default) on coloured input is the quadric simplifier in every choice it
+// drives, the grid step included: the same bytes as the explicit choice.
+TEST_F(ColourBuild, AutoOnColouredInputIsTheQuadricBuild) {
+  auto q = runTool("mtbuild", dir_->file("c.ply") + " -o " + dir_->file("quadric.mt") +
+                                  " --patch-triangles 500 --threads 2 -q --simplifier quadric");
+  ASSERT_EQ(q.exitCode, 0) << q.output;
+  const std::string a = mt::test::readFile(mt()), b = mt::test::readFile(dir_->file("quadric.mt"));
+  auto ra = mt::MtFileReader::open(mt()), rb = mt::MtFileReader::open(dir_->file("quadric.mt"));
+  EXPECT_EQ(ra->header().gridStep, rb->header().gridStep);
+  EXPECT_TRUE(a == b) << "auto and quadric builds of the same coloured input differ";
+}
+
 // Colour in the collapse cost lowers the stored colour error of the coarse levels against the
 // same build with colours carried but not weighed (--color-weight 0).
 TEST_F(ColourBuild, ColourWeightLowersTheColourError) {
