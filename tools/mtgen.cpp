@@ -893,6 +893,11 @@ int run(int argc, char** argv) {
                  "Holds IN's triangles in RAM (12 bytes each); IN's own colours are replaced");
   if (int code = mt::cli::parse(app, argc, argv, "mtgen: error"); code >= 0) return code;
   if (!checkSurface(c) || !chooseFormat(c)) return 1;
+  // --paint copies IN with the colour field: it writes no texture coordinates nor pages, so a
+  // --texture there would be silently dropped.
+  if (!c.paintInput.empty() && !c.textureText.empty())
+    return refuse("--texture cannot be combined with --paint (--paint copies IN with per-vertex colours only; it writes no "
+                  "texture coordinates or pages)"), 1;
   if (!c.paintInput.empty() && c.settings.format != Format::PlyBinary)
     return refuse("--paint writes binary PLY: the output name must end in .ply (got %s)", c.settings.path.c_str()), 1;
 
