@@ -890,7 +890,7 @@ int run(int argc, char** argv) {
   app.add_option("--paint", c.paintInput,
                  "Instead of generating: copy the mesh IN (PLY, OBJ, OFF, STL, glTF) to the output (binary PLY) with\n"
                  "the --colors field painted on its vertices (over IN's bounding box), e.g. to colour a scangen scan.\n"
-                 "Holds IN's triangles in RAM (12 bytes each); IN's own colours are replaced");
+                 "Holds IN's triangles in RAM (12 bytes each); IN's own colours are replaced. Not with --texture");
   if (int code = mt::cli::parse(app, argc, argv, "mtgen: error"); code >= 0) return code;
   if (!checkSurface(c) || !chooseFormat(c)) return 1;
   // --paint copies IN with the colour field: it writes no texture coordinates nor pages, so a
