@@ -266,6 +266,9 @@ TEST_F(TexturedBuild, RendersTheTextureCloseToTheFullResolution) {
   EXPECT_GE(psnr1, 20.0) << "1 px cut against the full resolution";
   EXPECT_LT(coveredPsnr(white, full), 15.0) << "the texture differs from the untextured drawing";
   EXPECT_EQ(autoMode.rgba, full.rgba) << "auto draws a textured file's textures";
+  // The baseline (patches and atlases decoded inside the frame, no cache) draws the same image.
+  const Image baseline = render(mt(), dir_->file("baseline"), "--color texture --tolerance 0.01 --baseline-mmap");
+  EXPECT_GE(coveredPsnr(baseline, full), 45.0) << "the baseline's texture path against the cache's";
   std::printf("texture: covered %zu orange %zu blue %zu; 0.25 px cut %.1f dB, 1 px cut %.1f dB\n", f.covered, f.orange, f.blue,
               psnr, psnr1);
 }
