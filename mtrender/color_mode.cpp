@@ -24,7 +24,7 @@ const char* colorModeName(ColorMode mode) {
 
 ColorMode resolveColorMode(const std::string& name, const ColorSupport& support, std::string* note) {
   if (note) note->clear();
-  if (name == "auto") return support.hasColors ? ColorMode::Vertex : ColorMode::Shaded;
+  if (name == "auto") return support.hasTextures ? ColorMode::Texture : support.hasColors ? ColorMode::Vertex : ColorMode::Shaded;
   if (name == "shaded") return ColorMode::Shaded;
   if (name == "patch") return ColorMode::Patch;
   if (name == "lod") return ColorMode::Lod;
@@ -43,10 +43,11 @@ ColorMode resolveColorMode(const std::string& name, const ColorSupport& support,
 
 ColorSupport colorSupportOf(const std::vector<std::string>& files) {
   ColorSupport s;
-  s.hasColors = !files.empty();
+  s.hasColors = s.hasTextures = !files.empty();
   for (const std::string& f : files) {
     auto reader = MtFileReader::open(f);
     if (!(reader->header().vertexFlags & format::kHasColors)) s.hasColors = false;
+    if (!reader->hasTextures()) s.hasTextures = false;
   }
   if (!files.empty()) s.fileName = files.size() == 1 ? files[0] : files[0] + " (and " + std::to_string(files.size() - 1) + " more)";
   return s;

@@ -5,9 +5,12 @@
 //            were captured under real light and carry its shading (lighting them again darkens
 //            every hollow twice; photogrammetry viewers show them unlit too), and the image then
 //            measures the colours alone (docs/appearance.md); white where a file has none;
-//   texture  the node textures (not stored by this version: falls back to vertex colours, saying so);
+//   texture  the node textures (mt_format.h "Textures"), unlit like the vertex colours; patches
+//            without one show their vertex colours; files without textures fall back to vertex
+//            colours (or shaded), saying so;
 //   patch    one colour per patch; lod: one colour per level;
-//   auto     (the default) vertex when every file has colours, else shaded.
+//   auto     (the default) texture when every file has textures, else vertex when every file has
+//            colours, else shaded.
 #pragma once
 
 #include <string>

@@ -85,6 +85,16 @@ PatchView Engine::baselineFetch(uint32_t id) {
     v.vertexCount = counts.first;
     v.indices = reinterpret_cast<const uint32_t*>(scratch_.data() + uint64_t(counts.first) * sizeof(RenderVertex));
     v.indexCount = counts.second;
+    if (reader.hasTextures()) {
+      const TexturePayload t = reader.readTexture(sp.local, d);
+      const auto atlas = decodeTextureInto(t, counts.first, counts.second / 3, scratch_.data(), scratch_.size());
+      if (atlas.first) {
+        v.cornerUV = reinterpret_cast<const uint16_t*>(scratch_.data() + textureOffset(counts.first, counts.second / 3));
+        v.texels = scratch_.data() + texelOffset(counts.first, counts.second / 3);
+        v.texWidth = atlas.first;
+        v.texHeight = atlas.second;
+      }
+    }
     ++baselineLoads_;
   } catch (const std::exception& e) {
     baselineBad_.insert(id);

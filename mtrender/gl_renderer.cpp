@@ -6,6 +6,8 @@
 #include <GL/glcorearb.h>
 
 #include <algorithm>
+#include <cassert>
+#include <cmath>
 #include <cstring>
 #include <glm/gtc/matrix_transform.hpp>
 #include <glm/gtc/type_ptr.hpp>
@@ -47,12 +49,15 @@ const char* kVertexShader = R"(#version 450 core
 layout(location = 0) in vec3 position;
 layout(location = 1) in vec4 normal;
 layout(location = 2) in vec4 color;
+layout(location = 3) in vec2 uv;
 uniform mat4 mvp;
 uniform mat4 mv;
 uniform vec3 tint;
 uniform int mode;
 out vec4 vColor;
+out vec2 vUv;
 void main() {
+  vUv = uv;
   gl_Position = mvp * vec4(position, 1.0);
   vec3 n = normalize(mat3(mv) * normal.xyz);
   vec3 p = (mv * vec4(position, 1.0)).xyz;
@@ -65,10 +70,15 @@ void main() {
 }
 )";
 
+// A textured patch in texture mode: its atlas, unlit like the vertex colours (a photographic
+// texture carries the light it was captured under), trilinear from the mips.
 const char* kFragmentShader = R"(#version 450 core
 in vec4 vColor;
+in vec2 vUv;
+uniform int useTexture;
+uniform sampler2D atlas;
 out vec4 fragColor;
-void main() { fragColor = vColor; }
+void main() { fragColor = useTexture != 0 ? vec4(texture(atlas, vUv).rgb, 1.0) : vColor; }
 )";
 
 // Occlusion query boxes: position only, no colour written.
@@ -113,6 +123,38 @@ glm::vec3 levelColor(uint32_t level) {
 
 }  // namespace
 
+void splitTexturedVertices(const PatchView& v, std::vector<TexturedVertex>& vertices, std::vector<uint32_t>& indices) {
+  vertices.clear();
+  indices.resize(v.indexCount);
+  std::vector<uint32_t> first(v.vertexCount, UINT32_MAX), next;
+  next.reserve(v.vertexCount + v.vertexCount / 4);
+  vertices.reserve(v.vertexCount + v.vertexCount / 4);
+  for (uint32_t i = 0; i < v.indexCount; ++i) {
+    const uint32_t p = v.indices[i];
+    assert(p < v.vertexCount);
+    const uint16_t u = v.cornerUV[2 * i], w = v.cornerUV[2 * i + 1];
+    uint32_t k = first[p];
+    while (k != UINT32_MAX && (vertices[k].uv[0] != u || vertices[k].uv[1] != w)) k = next[k];
+    if (k == UINT32_MAX) {
+      k = uint32_t(vertices.size());
+      vertices.push_back({v.vertices[p], {u, w}});
+      next.push_back(first[p]);
+      first[p] = k;
+    }
+    indices[i] = k;
+  }
+}
+
+uint64_t mippedTextureBytes(uint32_t width, uint32_t height) {
+  uint64_t bytes = 0;
+  for (;;) {
+    bytes += uint64_t(width) * height * 4;
+    if (width == 1 && height == 1) return bytes;
+    width = std::max(1u, width / 2);
+    height = std::max(1u, height / 2);
+  }
+}
+
 GlRenderer::GlRenderer(uint64_t gpuCapBytes) : cap_(gpuCapBytes) {
   GLuint vs = compile(GL_VERTEX_SHADER, kVertexShader), fs = compile(GL_FRAGMENT_SHADER, kFragmentShader);
   program_ = glCreateProgram();
@@ -128,6 +170,10 @@ GlRenderer::GlRenderer(uint64_t gpuCapBytes) : cap_(gpuCapBytes) {
   locMv_ = glGetUniformLocation(program_, "mv");
   locTint_ = glGetUniformLocation(program_, "tint");
   locMode_ = glGetUniformLocation(program_, "mode");
+  locUseTexture_ = glGetUniformLocation(program_, "useTexture");
+  locAtlas_ = glGetUniformLocation(program_, "atlas");
+  glProgramUniform1i(program_, locAtlas_, 0);
+  glProgramUniform1i(program_, locUseTexture_, 0);
   glCreateVertexArrays(1, &vao_);
   glEnableVertexArrayAttrib(vao_, 0);
   glEnableVertexArrayAttrib(vao_, 1);
@@ -136,10 +182,29 @@ GlRenderer::GlRenderer(uint64_t gpuCapBytes) : cap_(gpuCapBytes) {
   glVertexArrayAttribFormat(vao_, 1, 4, GL_INT_2_10_10_10_REV, GL_TRUE, 12);
   glVertexArrayAttribFormat(vao_, 2, 4, GL_UNSIGNED_BYTE, GL_TRUE, 16);
   for (int a = 0; a < 3; ++a) glVertexArrayAttribBinding(vao_, a, 0);
+  // Textured patches in texture mode: the same attributes plus the coordinate (TexturedVertex).
+  glCreateVertexArrays(1, &vaoTex_);
+  for (int a = 0; a < 4; ++a) glEnableVertexArrayAttrib(vaoTex_, a);
+  glVertexArrayAttribFormat(vaoTex_, 0, 3, GL_FLOAT, GL_FALSE, 0);
+  glVertexArrayAttribFormat(vaoTex_, 1, 4, GL_INT_2_10_10_10_REV, GL_TRUE, 12);
+  glVertexArrayAttribFormat(vaoTex_, 2, 4, GL_UNSIGNED_BYTE, GL_TRUE, 16);
+  glVertexArrayAttribFormat(vaoTex_, 3, 2, GL_UNSIGNED_SHORT, GL_TRUE, 20);
+  for (int a = 0; a < 4; ++a) glVertexArrayAttribBinding(vaoTex_, a, 0);
+}
+
+void GlRenderer::release(Buffer& b) {
+  glDeleteBuffers(1, &b.buffer);
+  if (b.texture) {
+    glDeleteTextures(1, &b.texture);
+    const uint64_t t = mippedTextureBytes(b.textureWidth, b.textureHeight);
+    gpuTextureBytes_ -= t;
+  }
+  gpuBytes_ -= b.bytes;
+  b = Buffer();
 }
 
 GlRenderer::~GlRenderer() {
-  for (auto& [id, b] : buffers_) glDeleteBuffers(1, &b.buffer);
+  for (auto& [id, b] : buffers_) release(b);
   if (!queries_.empty()) glDeleteQueries(GLsizei(queries_.size()), queries_.data());
   if (boxProgram_) {
     glDeleteProgram(boxProgram_);
@@ -154,6 +219,7 @@ GlRenderer::~GlRenderer() {
     glDeleteRenderbuffers(1, &depthRb_);
   }
   glDeleteVertexArrays(1, &vao_);
+  glDeleteVertexArrays(1, &vaoTex_);
   glDeleteProgram(program_);
 }
 
@@ -293,30 +359,67 @@ void GlRenderer::evictFor(uint64_t bytes) {
   for (const auto& [f, id] : old) {
     if (gpuBytes_ + bytes <= cap_) break;
     auto it = buffers_.find(id);
-    gpuBytes_ -= it->second.bytes;
-    glDeleteBuffers(1, &it->second.buffer);
+    release(it->second);
     buffers_.erase(it);
   }
 }
 
 uint32_t GlRenderer::drawPatch(uint32_t id, uint32_t level, const double origin[3], const std::function<PatchView()>& fetch) {
   auto it = buffers_.find(id);
+  // Uploaded without its atlas (another mode): uploaded again with it.
+  if (it != buffers_.end() && mode_ == ColorMode::Texture && it->second.hasTexture && !it->second.texture) {
+    release(it->second);
+    buffers_.erase(it);
+    it = buffers_.end();
+  }
   if (it == buffers_.end()) {
     PatchView v = fetch();
     if (v.vertexCount == 0 || v.indexCount == 0) return 0;
     Buffer b;
-    const uint64_t vbytes = uint64_t(v.vertexCount) * sizeof(RenderVertex);
+    b.hasTexture = v.textured();
+    const bool withTexture = mode_ == ColorMode::Texture && b.hasTexture;
+    std::vector<TexturedVertex> split;
+    std::vector<uint32_t> splitIndices;
+    const void* vdata = v.vertices;
+    const uint32_t* idata = v.indices;
+    uint64_t vbytes = uint64_t(v.vertexCount) * sizeof(RenderVertex);
+    uint64_t tbytes = 0;
+    if (withTexture) {
+      splitTexturedVertices(v, split, splitIndices);
+      vdata = split.data();
+      idata = splitIndices.data();
+      vbytes = uint64_t(split.size()) * sizeof(TexturedVertex);
+      b.stride = sizeof(TexturedVertex);
+      tbytes = mippedTextureBytes(v.texWidth, v.texHeight);
+    }
     b.indexOffset = vbytes;
     b.indexCount = v.indexCount;
-    b.bytes = vbytes + uint64_t(v.indexCount) * 4;
+    b.bytes = vbytes + uint64_t(v.indexCount) * 4 + tbytes;
     if (hardCap_) {
       evictFor(b.bytes);
       if (gpuBytes_ + b.bytes > cap_) return 0;  // one patch larger than the whole cap
     }
     glCreateBuffers(1, &b.buffer);
-    glNamedBufferStorage(b.buffer, GLsizeiptr(b.bytes), nullptr, GL_DYNAMIC_STORAGE_BIT);
-    glNamedBufferSubData(b.buffer, 0, GLsizeiptr(vbytes), v.vertices);
-    glNamedBufferSubData(b.buffer, GLintptr(vbytes), GLsizeiptr(uint64_t(v.indexCount) * 4), v.indices);
+    glNamedBufferStorage(b.buffer, GLsizeiptr(vbytes + uint64_t(v.indexCount) * 4), nullptr, GL_DYNAMIC_STORAGE_BIT);
+    glNamedBufferSubData(b.buffer, 0, GLsizeiptr(vbytes), vdata);
+    glNamedBufferSubData(b.buffer, GLintptr(vbytes), GLsizeiptr(uint64_t(v.indexCount) * 4), idata);
+    if (withTexture) {
+      // The atlas with its full mip chain: a coarse patch seen from far samples a mip, not an
+      // aliased texel of the full image.
+      const int levels = 1 + int(std::floor(std::log2(double(std::max(v.texWidth, v.texHeight)))));
+      glCreateTextures(GL_TEXTURE_2D, 1, &b.texture);
+      glTextureStorage2D(b.texture, levels, GL_RGBA8, v.texWidth, v.texHeight);
+      glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
+      glTextureSubImage2D(b.texture, 0, 0, 0, v.texWidth, v.texHeight, GL_RGB, GL_UNSIGNED_BYTE, v.texels);
+      glGenerateTextureMipmap(b.texture);
+      glTextureParameteri(b.texture, GL_TEXTURE_MIN_FILTER, GL_LINEAR_MIPMAP_LINEAR);
+      glTextureParameteri(b.texture, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
+      glTextureParameteri(b.texture, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
+      glTextureParameteri(b.texture, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
+      b.textureWidth = v.texWidth;
+      b.textureHeight = v.texHeight;
+      gpuTextureBytes_ += tbytes;
+    }
     gpuBytes_ += b.bytes;
     gpuPeak_ = std::max(gpuPeak_, gpuBytes_);
     ++uploads_;
@@ -338,8 +441,16 @@ uint32_t GlRenderer::drawPatch(uint32_t id, uint32_t level, const double origin[
   const glm::mat4 mv(mvD), mvp(projD_ * mvD);
   glUniformMatrix4fv(locMvp_, 1, GL_FALSE, glm::value_ptr(mvp));
   glUniformMatrix4fv(locMv_, 1, GL_FALSE, glm::value_ptr(mv));
-  glVertexArrayVertexBuffer(vao_, 0, b.buffer, 0, sizeof(RenderVertex));
-  glVertexArrayElementBuffer(vao_, b.buffer);
+  const bool textured = mode_ == ColorMode::Texture && b.texture != 0;
+  const GLuint vao = textured ? vaoTex_ : vao_;
+  if (textured) {
+    glBindTextureUnit(0, b.texture);
+    ++texturedDraws_;
+  }
+  glUniform1i(locUseTexture_, textured ? 1 : 0);
+  glBindVertexArray(vao);
+  glVertexArrayVertexBuffer(vao, 0, b.buffer, 0, GLsizei(b.stride));
+  glVertexArrayElementBuffer(vao, b.buffer);
   glDrawElements(GL_TRIANGLES, GLsizei(b.indexCount), GL_UNSIGNED_INT, reinterpret_cast<const void*>(b.indexOffset));
   return b.indexCount / 3;
 }

@@ -29,6 +29,23 @@ class EglContext {
   void* context_ = nullptr;
 };
 
+// A textured patch's vertex on the GPU: the vertex, then its texture coordinate (unorm16). A
+// vertex of the patch whose corners have several coordinates (a seam of its atlas) becomes one
+// such vertex per distinct coordinate.
+struct TexturedVertex {
+  RenderVertex vertex;
+  uint16_t uv[2];
+};
+static_assert(sizeof(TexturedVertex) == 24, "TexturedVertex layout");
+
+// Splits a textured patch's vertices per distinct (vertex, corner coordinate) pair, as GL needs
+// (one attribute set per vertex); the triangles keep their order. Linear time: each vertex chains
+// the copies made of it so far.
+void splitTexturedVertices(const PatchView& v, std::vector<TexturedVertex>& vertices, std::vector<uint32_t>& indices);
+
+// GPU bytes of an RGBA8 texture of this size with its full mip chain.
+uint64_t mippedTextureBytes(uint32_t width, uint32_t height);
+
 // mtrender --color (mtrender/color_mode.h names, parses and chooses them).
 enum class ColorMode { Shaded, Patch, Lod, Vertex, Texture };
 
@@ -67,7 +84,9 @@ class GlRenderer {
   // model-view matrix is the view matrix times translate(origin), composed in double, so only
   // small numbers reach the GPU (camera-relative drawing). Uploads the patch first when it is not
   // on the GPU, taking its data from fetch() (a PatchView with vertexCount 0 = unavailable:
-  // nothing drawn). The GPU cap is hard: before an upload, the least recently drawn buffers are
+  // nothing drawn). In texture mode a textured patch is uploaded with its vertices split per
+  // coordinate (splitTexturedVertices) and its atlas as a mipmapped texture, both counted in the
+  // GPU bytes; patches without a texture show their vertex colours. The GPU cap is hard: before an upload, the least recently drawn buffers are
   // deleted until it fits (this frame's too, once their draws are submitted: GL keeps them alive
   // until done), so the bytes held never pass the cap. Returns triangles drawn.
   uint32_t drawPatch(uint32_t id, uint32_t level, const double origin[3], const std::function<PatchView()>& fetch);
@@ -93,6 +112,9 @@ class GlRenderer {
   void finish();
   Image readPixels() const;
   uint64_t gpuBytes() const { return gpuBytes_; }
+  // Of which textures (atlases with their mips).
+  uint64_t gpuTextureBytes() const { return gpuTextureBytes_; }
+  uint64_t texturedDraws() const { return texturedDraws_; }
   uint64_t uploads() const { return uploads_; }
 
  private:
@@ -103,7 +125,12 @@ class GlRenderer {
     uint32_t indexCount = 0;
     uint64_t lastFrame = 0;
     uint64_t lastUse = 0;
+    uint32_t stride = sizeof(RenderVertex);
+    uint32_t texture = 0;     // the atlas (uploaded in texture mode), 0: none
+    uint16_t textureWidth = 0, textureHeight = 0;
+    bool hasTexture = false;  // the patch has one (uploaded or not)
   };
+  void release(Buffer& b);
   // A colour + depth render target.
   struct Target {
     uint32_t fbo = 0, color = 0, depth = 0;
@@ -118,10 +145,10 @@ class GlRenderer {
   uint64_t gpuPeak_ = 0;
   uint64_t uses_ = 0;             // draw counter (least recently drawn order)
   glm::dmat4 viewD_{1}, projD_{1};
-  uint32_t program_ = 0, vao_ = 0, fbo_ = 0, colorRb_ = 0, depthRb_ = 0;
+  uint32_t program_ = 0, vao_ = 0, vaoTex_ = 0, fbo_ = 0, colorRb_ = 0, depthRb_ = 0;
   Target accumulation_, presented_;
   int width_ = 0, height_ = 0;
-  int locMvp_ = -1, locMv_ = -1, locTint_ = -1, locMode_ = -1;
+  int locMvp_ = -1, locMv_ = -1, locTint_ = -1, locMode_ = -1, locUseTexture_ = -1, locAtlas_ = -1;
   ColorMode mode_ = ColorMode::Shaded;
   std::unordered_map<uint32_t, Buffer> buffers_;
   // Occlusion queries: the box program, a unit cube, a pool of query objects.
@@ -130,7 +157,7 @@ class GlRenderer {
   std::vector<uint32_t> queries_;
   double nearPlane_ = 0;
   bool wireframe_ = false;
-  uint64_t gpuBytes_ = 0, frame_ = 0, uploads_ = 0;
+  uint64_t gpuBytes_ = 0, frame_ = 0, uploads_ = 0, gpuTextureBytes_ = 0, texturedDraws_ = 0;
 };
 
 }  // namespace mt::render

@@ -232,9 +232,10 @@ void addRenderOptions(CLI::App& app, CliOptions& o) {
 void addDisplayOptions(CLI::App& app, CliOptions& o, CLI::Option*& recordOption) {
   const mt::cli::Interval kDelayMs{0, 60000, false, false, "ms"};
   app.add_option("--color", o.colorMode,
-                 "auto (vertex when the files have per-vertex colours, else shaded), shaded (geometry only), vertex "
-                 "(the per-vertex colours as captured, unlit), texture (node textures; a file without them falls "
-                 "back to vertex colours, saying so), patch or lod colours")
+                 "auto (texture when the files have node textures, else vertex when they have per-vertex colours, else "
+                 "shaded), shaded (geometry only), vertex (the per-vertex colours as captured, unlit), texture (the node "
+                 "textures, unlit, in both caches' bytes; a file without them falls back to vertex colours, saying so), "
+                 "patch or lod colours")
       ->check(CLI::IsMember(mt::render::colorModeNames()))
       ->capture_default_str();
   app.add_flag("--wireframe", o.wireframe, "draw edges only");
@@ -456,6 +457,8 @@ void printSummary(const CliOptions& o, const EngineOptions& eo, const std::vecto
               (unsigned long long)cs.slotBytes, (unsigned long long)cs.arenaBytes);
   std::printf("gpu_max_bytes %llu\n", (unsigned long long)maxGpu);
   std::printf("gpu_peak_bytes %llu\n", (unsigned long long)h.gl->gpuPeakBytes());
+  std::printf("gpu_texture_bytes %llu textured_draws %llu (atlases with mips, held at the end; draws with a texture)\n",
+              (unsigned long long)h.gl->gpuTextureBytes(), (unsigned long long)h.gl->texturedDraws());
   std::printf("gpu_cap_bytes %llu\n", (unsigned long long)(eo.gpuCacheBytes ? eo.gpuCacheBytes : eo.cacheBytes));
   std::printf("miss_rate %.4f\n", missRate);
   std::printf("misses_total %.0f\n", missSum);

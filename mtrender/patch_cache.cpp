@@ -212,6 +212,12 @@ PatchView PatchCache::view(uint32_t id) const {
   v.indices = reinterpret_cast<const uint32_t*>(base + uint64_t(s.vertexCount) * sizeof(RenderVertex));
   v.indexCount = s.indexCount;
   v.bound = s.bound;
+  if (s.texWidth && s.texHeight) {
+    v.cornerUV = reinterpret_cast<const uint16_t*>(base + textureOffset(s.vertexCount, s.indexCount / 3));
+    v.texels = base + texelOffset(s.vertexCount, s.indexCount / 3);
+    v.texWidth = s.texWidth;
+    v.texHeight = s.texHeight;
+  }
   return v;
 }
 
@@ -293,15 +299,19 @@ int PatchCache::reserve(uint32_t id, Urgency urgency, uint64_t frame) {
   s.usage = 0;
   s.touched = frame;
   s.vertexCount = s.indexCount = 0;
+  s.texWidth = s.texHeight = 0;
   hash_[id] = uint32_t(chosen);
   ++physical_;
   usedBytes_ += classBytes_[s.cls];
   return chosen;
 }
 
-void PatchCache::commit(int slot, uint32_t vertexCount, uint32_t indexCount, const PatchBound& bound) {
+void PatchCache::commit(int slot, uint32_t vertexCount, uint32_t indexCount, const PatchBound& bound, uint16_t texWidth,
+                        uint16_t texHeight) {
   std::lock_guard<std::mutex> lock(mu_);
   Slot& s = slots_[slot];
+  s.texWidth = texWidth;
+  s.texHeight = texHeight;
   s.bound = bound;
   s.vertexCount = vertexCount;
   s.indexCount = indexCount;

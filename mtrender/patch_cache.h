@@ -46,6 +46,12 @@ uint32_t packNormal(const float n[3]);
 inline uint64_t renderPatchBytes(uint64_t vertices, uint64_t triangles) {
   return vertices * sizeof(RenderVertex) + triangles * 3 * sizeof(uint32_t);
 }
+// Bytes a patch's texture adds after its geometry (textured files, mt_format.h "Textures"): the
+// corner coordinates (6 unorm16 per triangle, in the order of the indices) and the atlas's texels
+// (RGB8, bottom row first: GL's order, v = 0 at the bottom).
+inline uint64_t renderTextureBytes(uint64_t triangles, uint64_t width, uint64_t height) {
+  return width && height ? triangles * 6 * sizeof(uint16_t) + width * height * 3 : 0;
+}
 
 // A patch's own bounds, measured when it is decoded (relative to Scene::patchOrigin): its
 // bounding sphere and its normal cone (axis, cos of the half angle; cutoff <= -1: no cone). The
@@ -59,15 +65,28 @@ struct PatchBound {
 };
 
 // A patch in the cache: vertices (positions relative to Scene::patchOrigin) then 32-bit triangle
-// indices, in one place holder.
+// indices, in one place holder; a textured patch then has its corner coordinates and its atlas's
+// texels in the same place holder (renderTextureBytes), so the cache's cap counts them.
 struct PatchView {
   PatchBound bound;
   const RenderVertex* vertices = nullptr;
   uint32_t vertexCount = 0;
   const uint32_t* indices = nullptr;
   uint32_t indexCount = 0;
-  uint64_t bytes() const { return renderPatchBytes(vertexCount, indexCount / 3); }
+  // Textured patches only (texWidth 0 otherwise): (u, v) unorm16 per corner, 2 per index.
+  const uint16_t* cornerUV = nullptr;
+  const uint8_t* texels = nullptr;  // RGB8, texWidth * texHeight, bottom row first
+  uint16_t texWidth = 0, texHeight = 0;
+  bool textured() const { return texWidth != 0 && cornerUV != nullptr; }
+  uint64_t bytes() const { return renderPatchBytes(vertexCount, indexCount / 3) + renderTextureBytes(indexCount / 3, texWidth, texHeight); }
 };
+
+// Where a patch's texture starts in its place holder: after the geometry (a multiple of 4).
+inline uint64_t textureOffset(uint64_t vertices, uint64_t triangles) { return renderPatchBytes(vertices, triangles); }
+// Its texels: after the corner coordinates (a multiple of 4).
+inline uint64_t texelOffset(uint64_t vertices, uint64_t triangles) {
+  return textureOffset(vertices, triangles) + triangles * 6 * sizeof(uint16_t);
+}
 
 enum class Urgency : uint8_t { Prefetch = 0, Needed = 1, UrgentDown = 2, UrgentUp = 3 };
 
@@ -127,7 +146,9 @@ class PatchCache {
   int reserve(uint32_t id, Urgency urgency, uint64_t frame);
   uint8_t* slotData(int slot) { return arena_.get() + slots_[slot].offset; }
   uint64_t slotBytes(int slot) const { return classBytes_[slots_[slot].cls]; }
-  void commit(int slot, uint32_t vertexCount, uint32_t indexCount, const PatchBound& bound = {});
+  // texWidth, texHeight: the patch's atlas when its place holder holds one (0: untextured).
+  void commit(int slot, uint32_t vertexCount, uint32_t indexCount, const PatchBound& bound = {}, uint16_t texWidth = 0,
+              uint16_t texHeight = 0);
   // Loading failed: frees the place holder; bad = never try this patch again.
   void abort(int slot, bool bad);
 
@@ -138,6 +159,7 @@ class PatchCache {
     uint32_t usage = 0;
     uint64_t touched = 0;      // last frame referenced (+1; 0 = never)
     uint32_t vertexCount = 0, indexCount = 0;
+    uint16_t texWidth = 0, texHeight = 0;
     PatchBound bound;
     bool onFree = false;
     uint8_t cls = 0;           // size class

@@ -4,8 +4,10 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <algorithm>
 
 #include "base/error.h"
+#include "texture/image_codec.h"
 
 namespace mt::render {
 
@@ -99,6 +101,27 @@ std::pair<uint32_t, uint32_t> decodeInto(const Scene& scene, uint32_t id, const 
   return {nv, nt * 3};
 }
 
+std::pair<uint16_t, uint16_t> decodeTextureInto(const TexturePayload& t, uint32_t nv, uint32_t nt, uint8_t* out,
+                                                uint64_t capacity) {
+  if (t.image.empty() || !t.width || !t.height) return {0, 0};
+  if (textureOffset(nv, nt) + renderTextureBytes(nt, t.width, t.height) > capacity)
+    throw Error("texture: " + std::to_string(t.width) + " x " + std::to_string(t.height) +
+                " texels do not fit the patch's place holder (" + std::to_string(capacity) + " bytes)");
+  if (t.cornerUV.size() != size_t(nt) * 6) throw Error("texture: corner coordinates do not match the triangles");
+  auto* uv = reinterpret_cast<uint16_t*>(out + textureOffset(nv, nt));
+  for (size_t i = 0; i < t.cornerUV.size(); ++i)
+    uv[i] = uint16_t(std::lround(std::clamp(t.cornerUV[i], 0.0f, 1.0f) * 65535.0f));
+  auto decoder = tex::ImageDecoder::openMemory(t.image.data(), t.image.size(), "texture");
+  if (decoder->width() != t.width || decoder->height() != t.height)
+    throw Error("texture: the image is " + std::to_string(decoder->width()) + " x " + std::to_string(decoder->height()) +
+                ", the payload says " + std::to_string(t.width) + " x " + std::to_string(t.height));
+  uint8_t* texels = out + texelOffset(nv, nt);
+  const size_t row = size_t(t.width) * 3;
+  // The image's top row first; GL's texture rows bottom first (v = 0 at the bottom).
+  for (int y = 0; y < t.height; ++y) decoder->readRow(texels + size_t(t.height - 1 - y) * row);
+  return {t.width, t.height};
+}
+
 PatchServer::PatchServer(const Scene& scene, PatchCache& cache, Options options)
     : scene_(scene), cache_(cache), options_(options), thread_([this] { run(); }) {}
 
@@ -162,13 +185,23 @@ void PatchServer::run() {
         std::this_thread::sleep_for(std::chrono::duration<double, std::milli>(options_.readDelayMs));
       DecodedPatch decoded = reader.readPatch(sp.local);
       std::pair<uint32_t, uint32_t> counts;
+      std::pair<uint16_t, uint16_t> atlas{0, 0};
       PatchBound bound;
+      // The reader's errors name the file; ours are prefixed with it.
+      TexturePayload texture;
+      if (reader.hasTextures()) texture = reader.readTexture(sp.local, decoded);
       try {
         counts = decodeInto(scene_, req.id, decoded, cache_.slotData(slot), cache_.slotBytes(slot), &bound);
       } catch (const Error& e) {
         throw Error(reader.path() + ": " + e.what());
       }
-      cache_.commit(slot, counts.first, counts.second, bound);
+      try {
+        atlas = decodeTextureInto(texture, counts.first, counts.second / 3, cache_.slotData(slot), cache_.slotBytes(slot));
+      } catch (const Error& e) {
+        throw Error(reader.path() + ": patch " + std::to_string(sp.local) + ": " + e.what());
+      }
+      cache_.commit(slot, counts.first, counts.second, bound, atlas.first, atlas.second);
+      bytesRead_ += reader.hasTextures() ? reader.textures()[sp.local].size : 0;
       bytesRead_ += sp.fileBytes;
       trianglesLoaded_ += sp.triangles;
       const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();

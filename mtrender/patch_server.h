@@ -36,6 +36,14 @@ struct LoadRequest {
 std::pair<uint32_t, uint32_t> decodeInto(const Scene& scene, uint32_t id, const DecodedPatch& patch, uint8_t* out,
                                          uint64_t capacity, PatchBound* bound = nullptr);
 
+// A textured patch (mt_format.h "Textures"): writes its corner coordinates (unorm16) and its atlas
+// decoded to RGB8 (row by row, straight into the place holder, bottom row first) after the
+// geometry decodeInto wrote for `vertexCount` vertices and `triangleCount` triangles (the layout
+// of patch_cache.h). Returns the atlas size. Throws mt::Error (damaged image, or larger than
+// `capacity`).
+std::pair<uint16_t, uint16_t> decodeTextureInto(const TexturePayload& texture, uint32_t vertexCount, uint32_t triangleCount,
+                                                uint8_t* out, uint64_t capacity);
+
 class PatchServer {
  public:
   struct Options {

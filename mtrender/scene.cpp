@@ -5,6 +5,7 @@
 #include <limits>
 
 #include "base/error.h"
+#include "mtrender/patch_cache.h"
 
 namespace mt::render {
 
@@ -112,7 +113,12 @@ uint64_t Scene::decodedBytesBound(uint32_t patch) const {
   uint64_t v = p.vertices;
   // Draco may split non-manifold vertices on decode (mt_format.h); allow a quarter more.
   if (readers_[p.file]->codec() == format::Codec::Draco) v = std::min<uint64_t>(3ull * p.triangles, v + v / 4 + 64);
-  return uint64_t(v) * 20 + uint64_t(p.triangles) * 12;
+  uint64_t bytes = uint64_t(v) * 20 + uint64_t(p.triangles) * 12;
+  // A textured patch's corner coordinates and texels share its place holder (patch_cache.h).
+  const MtFileReader& r = *readers_[p.file];
+  if (r.hasTextures() && r.textures()[p.local].size != 0)
+    bytes += renderTextureBytes(p.triangles, r.textures()[p.local].width, r.textures()[p.local].height);
+  return bytes;
 }
 
 }  // namespace mt::render

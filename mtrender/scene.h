@@ -72,7 +72,7 @@ class Scene {
   void boundingSphere(double c[3], double& r) const;
 
   // Decoded size of a patch in the renderer's layout (RenderPatch in patch_cache.h), an upper
-  // bound the cache sizes its place holders with.
+  // bound the cache sizes its place holders with; a textured patch's coordinates and texels included.
   uint64_t decodedBytesBound(uint32_t patch) const;
   // The double-precision origin a patch's vertices are stored relative to (camera-relative
   // drawing: floats hold small offsets from it, so a model millions of units from the origin keeps

@@ -890,9 +890,14 @@ int run(int argc, char** argv) {
   app.add_option("--paint", c.paintInput,
                  "Instead of generating: copy the mesh IN (PLY, OBJ, OFF, STL, glTF) to the output (binary PLY) with\n"
                  "the --colors field painted on its vertices (over IN's bounding box), e.g. to colour a scangen scan.\n"
-                 "Holds IN's triangles in RAM (12 bytes each); IN's own colours are replaced");
+                 "Holds IN's triangles in RAM (12 bytes each); IN's own colours are replaced. Not with --texture");
   if (int code = mt::cli::parse(app, argc, argv, "mtgen: error"); code >= 0) return code;
   if (!checkSurface(c) || !chooseFormat(c)) return 1;
+  // --paint copies IN with the colour field: it writes no texture coordinates nor pages, so a
+  // --texture there would be silently dropped.
+  if (!c.paintInput.empty() && !c.textureText.empty())
+    return refuse("--texture cannot be combined with --paint (--paint copies IN with per-vertex colours only; it writes no "
+                  "texture coordinates or pages)"), 1;
   if (!c.paintInput.empty() && c.settings.format != Format::PlyBinary)
     return refuse("--paint writes binary PLY: the output name must end in .ply (got %s)", c.settings.path.c_str()), 1;
 
