@@ -95,7 +95,16 @@ export class ExtractRender {
   /** Whether normal cones cull for this view's eye (memoised for the last eye; held for the views ahead). */
   coneOn(view) {
     if (this.options.cones === 'always') return true;
-    if (this.options.cones === 'off' || !this.surface) return false;
+    if (this.options.cones === 'off') return false;
+    return this.outsideClosed(view);
+  }
+  /**
+   * Whether the file is a closed surface and this view's eye is outside the solid it bounds
+   * (closed_surface.js): no back face can then be seen. Memoised for the last eye; held for the
+   * views ahead.
+   */
+  outsideClosed(view) {
+    if (!this.surface) return false;
     const e = view.eye;
     if (!this.coneHeld && !(this.coneEye && this.coneEye[0] === e[0] && this.coneEye[1] === e[1] && this.coneEye[2] === e[2])) {
       this.coneFlag = this.surface.eyeOutside(e);

@@ -46,7 +46,17 @@ export class MTObject extends THREE.Group {
     this.mt = scene;
     this.options = options;
     this.position.set(scene.center[0], scene.center[1], scene.center[2]);
-    this.material = options.material || MTObject.defaultMaterial(scene.hasColors);
+    // Two passes by default: every patch's front faces (front to back), then, only when back faces
+    // can be seen (the surface is open, or the eye is inside it), its back faces. A closed surface
+    // seen from outside is drawn single-sided, as a GPU culls it; an open scan's inside shows through
+    // its holes. Two passes instead of THREE.DoubleSide: the back pass comes after every front face
+    // is in the depth buffer, so the back faces hidden behind the front (all but those seen through
+    // a hole) fail the depth test before they are shaded; drawn double-sided in one pass, the far
+    // side's back faces were shaded wherever their patch came first (SwiftShader: 1.8x the cost of
+    // a full draw, docs/web.md). A material given in the options is drawn as it is, in one pass.
+    this.material = options.material || MTObject.defaultMaterial(scene.hasColors, THREE.FrontSide);
+    this.backMaterial = options.material ? null : MTObject.defaultMaterial(scene.hasColors, THREE.BackSide);
+    this.backFaces = !!this.backMaterial;  // whether the last update drew the back pass
     this.cache = new PatchCache(options.cacheBytes || 256 * 2 ** 20, (id, e) => this._evicted(id, e));
     this.warnings = [];
     this.fatal = null;
@@ -68,6 +78,7 @@ export class MTObject extends THREE.Group {
       fixedTriangles: options.fixedTriangles || 0,
     });
     this.meshes = new Map();  // patch id -> Mesh (patches of the cut)
+    this.backMeshes = new Map();  // patch id -> Mesh of its back faces (the back pass)
     this.frame = 0;
     this.lastTime = 0;
     this.prevPose = null;
@@ -97,9 +108,9 @@ export class MTObject extends THREE.Group {
    * their shading), shown as stored (interpolated in their sRGB bytes, as mtrender does); without
    * colours, a Lambert surface lit by the page's lights.
    */
-  static defaultMaterial(hasColors) {
-    if (!hasColors) return new THREE.MeshLambertMaterial({ color: 0xd8cfc0, side: THREE.DoubleSide });
-    const m = new THREE.MeshBasicMaterial({ vertexColors: true, side: THREE.DoubleSide });
+  static defaultMaterial(hasColors, side = THREE.DoubleSide) {
+    if (!hasColors) return new THREE.MeshLambertMaterial({ color: 0xd8cfc0, side });
+    const m = new THREE.MeshBasicMaterial({ vertexColors: true, side });
     // three takes vertex colours as linear and encodes the output to sRGB: decode the stored bytes
     // per fragment so the screen shows them.
     m.onBeforeCompile = (sh) => {
@@ -151,10 +162,12 @@ export class MTObject extends THREE.Group {
     return g;
   }
   _evicted(id, e) {
-    const m = this.meshes.get(id);
-    if (m) {
-      this.remove(m);
-      this.meshes.delete(id);
+    for (const map of [this.meshes, this.backMeshes]) {
+      const m = map.get(id);
+      if (m) {
+        this.remove(m);
+        map.delete(id);
+      }
     }
     if (e.data) e.data.dispose();
   }
@@ -232,7 +245,9 @@ export class MTObject extends THREE.Group {
     const { arcs, arcPatches } = this.mt;
     const { center, radius } = this.mt.nodes;
     const keep = new Set();
-    let drawnTriangles = 0, drawnPatches = 0;
+    let drawnTriangles = 0, drawnPatches = 0, minOrder = Infinity, maxOrder = -Infinity;
+    const backs = !!this.backMaterial && !this.extract.outsideClosed(view);
+    this.backFaces = backs;
     for (const a of this.extract.cutArcs) {
       if (!this.extract.arcVisible(a, view)) continue;
       const s = arcs.cullNode[a];
@@ -251,6 +266,8 @@ export class MTObject extends THREE.Group {
           this.add(m);
         }
         m.renderOrder = order;
+        minOrder = Math.min(minOrder, order);
+        maxOrder = Math.max(maxOrder, order);
         drawnTriangles += e.data.index.count / 3;
         ++drawnPatches;
       }
@@ -260,8 +277,29 @@ export class MTObject extends THREE.Group {
         this.remove(m);
         this.meshes.delete(id);
       }
+    // The back pass: after every front face, front to back as well.
+    for (const [id, m] of this.backMeshes)
+      if (!backs || !keep.has(id)) {
+        this.remove(m);
+        this.backMeshes.delete(id);
+      }
+    if (backs) {
+      const base = maxOrder + 1;
+      for (const [id, f] of this.meshes) {
+        let m = this.backMeshes.get(id);
+        if (!m) {
+          m = new THREE.Mesh(f.geometry, this.backMaterial);
+          m.frustumCulled = false;
+          m.matrixAutoUpdate = false;
+          m.userData.mtBack = true;
+          this.backMeshes.set(id, m);
+          this.add(m);
+        }
+        m.renderOrder = base + (f.renderOrder - minOrder);
+      }
+    }
     if (this.progressiveNow && this.cutChanged && (!this.accum || this.accum.next >= this.accum.list.length)) {
-      this.accum = { list: [...this.meshes.values()].sort((x, y) => x.renderOrder - y.renderOrder), next: 0, err: st.maxScreenError, fresh: true, triangles: drawnTriangles };
+      this.accum = { list: [...this.meshes.values(), ...this.backMeshes.values()].sort((x, y) => x.renderOrder - y.renderOrder), next: 0, err: st.maxScreenError, fresh: true, triangles: drawnTriangles };
       this.cutChanged = false;
     }
     this.drawnTriangles = drawnTriangles;

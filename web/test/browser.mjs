@@ -15,7 +15,12 @@
 //   no-ranges     mtserve --no-ranges (200 instead of 206): the page shows the clear message;
 //   colours       a coloured scan (c.mt) converged: on a grid of pixels the colour on screen is the
 //                 stored per-vertex colour interpolated at the surface point a ray through the
-//                 pixel hits, unlit (as mtrender --color vertex draws it): >= 90% within 8 levels.
+//                 pixel hits, unlit (as mtrender --color vertex draws it): >= 90% within 8 levels;
+//   back-faces    the open scan (c.mt, 10 holes): where an oracle drawing (both sides, one pass,
+//                 white where the nearest surface is a back face) sees the inside through a hole,
+//                 the viewer's image is not background (its back pass draws them); with side=front
+//                 the same check fails (the check can fail). The closed torus (t.mt) seen from
+//                 outside is drawn single-sided (no back pass) and shows no back face.
 // Prints one line per test and "N passed, M failed"; exits 1 on any failure.
 import fs from 'node:fs';
 import path from 'node:path';
@@ -55,7 +60,9 @@ function serve(extra) {
 }
 
 const results = [];
+const only = process.env.ONLY ? process.env.ONLY.split(',') : null;  // run only these tests
 async function test(name, fn) {
+  if (only && !only.includes(name)) return;
   const t0 = Date.now();
   try {
     const note = await fn();
@@ -215,6 +222,37 @@ await test('colours', async () => {
     notes.push(`${r.within}/${r.hits} within 8 levels, median ${r.median.toFixed(1)}`);
   }
   return notes.join('; ');
+});
+
+await test('back-faces', async () => {
+  const notes = [];
+  let seen = 0;
+  for (const view of ['0.4,-1.6,0.9,0,0,0', '-1.3,0.8,0.5,0,0,0', '0.9,1.2,-0.6,0,0,0']) {
+    for (const side of ['', 'front']) {
+      const { page } = await open(`file=/data/c.mt&tol=1&fixed=3000000&bg=ff00ff&view=${view}${side ? '&side=' + side : ''}`);
+      await converge(page);
+      await page.waitForTimeout(200);
+      const r = await page.evaluate(() => window.mtViewer.backFaces('ff00ff'));
+      await page.close();
+      if (!side) {
+        check(r.twoPass, `view ${view}: the open scan is drawn without its back faces`);
+        check(r.backBg <= 0.02 * r.back, `view ${view}: ${r.backBg} of ${r.back} pixels showing the inside through a hole are background`);
+        seen += r.back;
+        notes.push(`${r.back} px inside, ${r.backBg} background`);
+      } else if (r.back >= 100) {
+        check(r.backBg >= 0.5 * r.back, `view ${view}, side=front: only ${r.backBg} of ${r.back} back-face pixels are background: the check cannot fail`);
+        notes.push(`side=front ${r.backBg}/${r.back} background`);
+      }
+    }
+  }
+  check(seen >= 300, `the views see only ${seen} pixels of the inside: the test tests nothing`);
+  const { page } = await open('file=/data/t.mt&tol=1&fixed=3000000&bg=ff00ff&view=0.4,-1.6,0.9,0,0,0');
+  await converge(page);
+  const r = await page.evaluate(() => window.mtViewer.backFaces('ff00ff'));
+  await page.close();
+  check(!r.twoPass, 'the closed torus seen from outside is drawn with a back pass');
+  check(r.back <= 0.001 * W * H, `the closed torus seen from outside shows ${r.back} back-face pixels`);
+  return `${notes.join('; ')}; closed torus: one pass, ${r.back} back-face px`;
 });
 
 await browser.close();
