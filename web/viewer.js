@@ -139,7 +139,7 @@ async function main() {
     state.frames.push({
       t: now, frameMs: i > 0 ? dt : 0, updateMs, renderMs, drawn: st.drawnTriangles, patches: st.drawnPatches, cacheBytes: st.cacheBytes,
       cacheCap: st.cacheCap, bytesRead: st.bytesRead, err: st.maxScreenError, cutErr: st.cutErr, accumulating: mtAccumulating(mt), pending: st.loadsPending,
-      budget: st.budgetTriangles, modelA: st.modelA, modelB: st.modelB, loads: st.loads, moves: st.refinements + st.coarsenings, evictions: st.evictions, givenUp: st.givenUp, triangles: st.triangles, still: path === 'orbit' ? i >= Math.floor(frames * 0.85) : null,
+      budget: st.budgetTriangles, modelA: st.modelA, modelB: st.modelB, loads: st.loads, moves: st.refinements + st.coarsenings, requests: st.requests, fetchMs: st.fetchMs, decodeMs: st.decodeMs, evictions: st.evictions, givenUp: st.givenUp, triangles: st.triangles, still: path === 'orbit' ? i >= Math.floor(frames * 0.85) : null,
     });
     if (state.frames.length > 5000) state.frames.shift();
     if (i % 10 === 0) hud.textContent =

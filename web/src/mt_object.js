@@ -49,13 +49,12 @@ export class MTObject extends THREE.Group {
     // Two passes by default: every patch's front faces (front to back), then, only when back faces
     // can be seen (the surface is open, or the eye is inside it), its back faces. A closed surface
     // seen from outside is drawn single-sided, as a GPU culls it; an open scan's inside shows through
-    // its holes. Two passes instead of THREE.DoubleSide: the back pass comes after every front face
-    // is in the depth buffer, so the back faces hidden behind the front (all but those seen through
-    // a hole) fail the depth test before they are shaded; drawn double-sided in one pass, the far
-    // side's back faces were shaded wherever their patch came first (SwiftShader: 1.8x the cost of
-    // a full draw, docs/web.md). A material given in the options is drawn as it is, in one pass.
+    // its holes. The back pass is lit per vertex (MTObject.backMaterial): SwiftShader shades the
+    // fragments of the far side's back faces although they fail the depth test, and with the
+    // per-fragment Lambert of the front that doubled the cost of a frame whose model fills the
+    // screen (docs/web.md). A material given in the options is drawn as it is, in one pass.
     this.material = options.material || MTObject.defaultMaterial(scene.hasColors, THREE.FrontSide);
-    this.backMaterial = options.material ? null : MTObject.defaultMaterial(scene.hasColors, THREE.BackSide);
+    this.backMaterial = options.material ? null : MTObject.backMaterial(scene.hasColors);
     this.backFaces = !!this.backMaterial;  // whether the last update drew the back pass
     this.cache = new PatchCache(options.cacheBytes || 256 * 2 ** 20, (id, e) => this._evicted(id, e));
     this.warnings = [];
@@ -118,6 +117,43 @@ export class MTObject extends THREE.Group {
         '#include <color_fragment>\n\tdiffuseColor.rgb = sRGBTransferEOTF( vec4( diffuseColor.rgb, 1.0 ) ).rgb;');
     };
     return m;
+  }
+
+  /**
+   * The back pass's material: the back faces (seen through a hole, or from inside) lit as the
+   * default material lights the front, by the page's ambient, hemisphere and directional lights,
+   * with the normal reversed, but per vertex (Gouraud) instead of per fragment: the fragments of
+   * this pass are mostly hidden (they fail the depth test after the front pass) and a software
+   * renderer shades them anyway. Per-vertex colours are unlit already (MeshBasicMaterial).
+   */
+  static backMaterial(hasColors) {
+    if (hasColors) return MTObject.defaultMaterial(true, THREE.BackSide);
+    return new THREE.ShaderMaterial({
+      side: THREE.BackSide,
+      lights: true,
+      uniforms: THREE.UniformsUtils.merge([THREE.UniformsLib.lights, { diffuse: { value: new THREE.Color(0xd8cfc0) } }]),
+      vertexShader: `#include <common>
+#include <lights_pars_begin>
+uniform vec3 diffuse;
+varying vec3 vLit;
+void main() {
+  vec3 n = -normalize(normalMatrix * normal);
+  vec3 irradiance = getAmbientLightIrradiance(ambientLightColor);
+#if NUM_HEMI_LIGHTS > 0
+  for (int i = 0; i < NUM_HEMI_LIGHTS; ++i) irradiance += getHemisphereLightIrradiance(hemisphereLights[i], n);
+#endif
+#if NUM_DIR_LIGHTS > 0
+  for (int i = 0; i < NUM_DIR_LIGHTS; ++i) irradiance += saturate(dot(n, directionalLights[i].direction)) * directionalLights[i].color;
+#endif
+  vLit = irradiance * BRDF_Lambert(diffuse);
+  gl_Position = projectionMatrix * modelViewMatrix * vec4(position, 1.0);
+}`,
+      fragmentShader: `varying vec3 vLit;
+void main() {
+  gl_FragColor = vec4(vLit, 1.0);
+#include <colorspace_fragment>
+}`,
+    });
   }
 
   async _start() {
@@ -313,6 +349,9 @@ export class MTObject extends THREE.Group {
     st.bytesRead = this.mt.source.bytesFetched;
     st.badPatches = this.server.bad;
     st.loadsPending = this.server.queue.length + this.server.inFlight;
+    st.requests = this.server.requests;
+    st.fetchMs = this.server.fetchMs;
+    st.decodeMs = this.server.decodeMs;
     this.stats = st;
     return st;
   }
