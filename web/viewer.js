@@ -297,14 +297,15 @@ state.backFaces = (bgHex) => {
   scene.overrideMaterial = null;
   renderer.setClearColor(clear, alpha);
   const o = pixels();
-  let back = 0, backBg = 0;
+  let back = 0, backBg = 0, backDark = 0;
   for (let i = 0; i < o.width * o.height; ++i) {
     if (o.data[4 * i] < 128) continue;
     ++back;
     const d = Math.abs(img.data[4 * i] - bg[0]) + Math.abs(img.data[4 * i + 1] - bg[1]) + Math.abs(img.data[4 * i + 2] - bg[2]);
     if (d < 12) ++backBg;
+    if (img.data[4 * i] + img.data[4 * i + 1] + img.data[4 * i + 2] < 30) ++backDark;
   }
-  return { back, backBg, twoPass: state.mt.backFaces };
+  return { back, backBg, backDark, twoPass: state.mt.backFaces };
 };
 state.png = () => state.canvas.toDataURL('image/png');
 main().catch((e) => showError(e.stack || e.message));

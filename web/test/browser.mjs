@@ -1,7 +1,7 @@
 // The web viewer in a real browser: Debian's chromium, headless, driven by playwright-core, WebGL
 // on SwiftShader, the MT files served by mtserve.
 //   node test/browser.mjs BIN_DIR DATA_DIR [--update-golden]
-// DATA_DIR holds t.mt, t-draco.mt and c.mt (tests/web_browser.sh builds them). Tests:
+// DATA_DIR holds t.mt, t-draco.mt, c.mt and h.mt (tests/web_browser.sh builds them). Tests:
 //   golden        a fixed view at a fixed tolerance, converged, against test/golden/torus.png
 //                 (at most 2% of the pixels differ by more than 48 in RGB);
 //   cracks        several views and tolerances, converged: no background pixel enclosed by the
@@ -16,9 +16,10 @@
 //   colours       a coloured scan (c.mt) converged: on a grid of pixels the colour on screen is the
 //                 stored per-vertex colour interpolated at the surface point a ray through the
 //                 pixel hits, unlit (as mtrender --color vertex draws it): >= 90% within 8 levels;
-//   back-faces    the open scan (c.mt, 10 holes): where an oracle drawing (both sides, one pass,
-//                 white where the nearest surface is a back face) sees the inside through a hole,
-//                 the viewer's image is not background (its back pass draws them); with side=front
+//   back-faces    the open scans (c.mt coloured, h.mt lit; 10 holes each): where an oracle drawing
+//                 (both sides, one pass, white where the nearest surface is a back face) sees the
+//                 inside through a hole, the viewer's image is neither background (its back pass
+//                 draws them) nor black (the lit back pass has its light); with side=front
 //                 the same check fails (the check can fail). The closed torus (t.mt) seen from
 //                 outside is drawn single-sided (no back pass) and shows no back face.
 // Prints one line per test and "N passed, M failed"; exits 1 on any failure.
@@ -227,18 +228,19 @@ await test('colours', async () => {
 await test('back-faces', async () => {
   const notes = [];
   let seen = 0;
-  for (const view of ['0.4,-1.6,0.9,0,0,0', '-1.3,0.8,0.5,0,0,0', '0.9,1.2,-0.6,0,0,0']) {
+  for (const [file, view] of [['c', '0.4,-1.6,0.9,0,0,0'], ['h', '-1.3,0.8,0.5,0,0,0'], ['h', '0.4,-1.6,0.9,0,0,0']]) {
     for (const side of ['', 'front']) {
-      const { page } = await open(`file=/data/c.mt&tol=1&fixed=3000000&bg=ff00ff&view=${view}${side ? '&side=' + side : ''}`);
+      const { page } = await open(`file=/data/${file}.mt&tol=1&fixed=3000000&bg=ff00ff&view=${view}${side ? '&side=' + side : ''}`);
       await converge(page);
       await page.waitForTimeout(200);
       const r = await page.evaluate(() => window.mtViewer.backFaces('ff00ff'));
       await page.close();
       if (!side) {
         check(r.twoPass, `view ${view}: the open scan is drawn without its back faces`);
-        check(r.backBg <= 0.02 * r.back, `view ${view}: ${r.backBg} of ${r.back} pixels showing the inside through a hole are background`);
+        check(r.backBg <= 0.02 * r.back, `${file}.mt view ${view}: ${r.backBg} of ${r.back} pixels showing the inside through a hole are background`);
+        check(r.backDark <= 0.02 * r.back, `${file}.mt view ${view}: ${r.backDark} of ${r.back} pixels showing the inside through a hole are black`);
         seen += r.back;
-        notes.push(`${r.back} px inside, ${r.backBg} background`);
+        notes.push(`${file}.mt ${r.back} px inside, ${r.backBg} background, ${r.backDark} black`);
       } else if (r.back >= 100) {
         check(r.backBg >= 0.5 * r.back, `view ${view}, side=front: only ${r.backBg} of ${r.back} back-face pixels are background: the check cannot fail`);
         notes.push(`side=front ${r.backBg}/${r.back} background`);
