@@ -2,7 +2,7 @@
 // [&path=orbit|fixed&frames=600][&view=EX,EY,EZ,TX,TY,TZ (unit space)]. Orbit/pan/zoom with the
 // mouse (three's OrbitControls); the HUD shows fps, triangles, cache, loads and the screen error,
 // and the file's coordinate reference system when its metadata block names one.
-// `side=front` culls back faces, `side=double` draws both in one pass (measurements). `plain` draws with renderer.render (no progressive still image). `capture` keeps the drawing buffer for reading the image back (the tests). `path` plays a recorded camera path frame by frame (the browser tests and bench/web.sh); the
+// `side=front` culls back faces, `side=double` draws both in one pass, `twopass=T` sets MTObject's twoPassPerPixel (measurements, tests). `plain` draws with renderer.render (no progressive still image). `capture` keeps the drawing buffer for reading the image back (the tests). `path` plays a recorded camera path frame by frame (the browser tests and bench/web.sh); the
 // per-frame figures are in window.mtViewer.frames.
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
@@ -62,6 +62,8 @@ async function main() {
       // (THREE.DoubleSide, the viewer's drawing before the two passes; docs/web.md compares them).
       material: q.get('side') === 'front' || q.get('side') === 'double' ? MTObject.defaultMaterial(false, q.get('side') === 'front' ? THREE.FrontSide : THREE.DoubleSide) : undefined,
       cacheBytes: Number(q.get('cache') || 256) * 2 ** 20,
+      // twopass=T: back faces in a second pass up to T triangles a pixel (default 1/16; 0: one pass).
+      twoPassPerPixel: q.has('twopass') ? Number(q.get('twopass')) : undefined,
       onWarning: (m) => {
         state.warnings.push(m);
         warnBox.textContent = `${state.warnings.length} damaged patch(es) skipped: ${m}`;
@@ -137,7 +139,7 @@ async function main() {
     if (state.firstImageMs === null) state.firstImageMs = performance.now();
     if (i > 0) fpsAvg = fpsAvg ? 0.9 * fpsAvg + 0.1 * (1000 / dt) : 1000 / dt;
     state.frames.push({
-      t: now, frameMs: i > 0 ? dt : 0, updateMs, renderMs, drawn: st.drawnTriangles, patches: st.drawnPatches, cacheBytes: st.cacheBytes,
+      t: now, frameMs: i > 0 ? dt : 0, updateMs, renderMs, drawn: st.drawnTriangles, patches: st.drawnPatches, backPatches: st.backPatches, cacheBytes: st.cacheBytes,
       cacheCap: st.cacheCap, bytesRead: st.bytesRead, err: st.maxScreenError, cutErr: st.cutErr, accumulating: mtAccumulating(mt), pending: st.loadsPending,
       budget: st.budgetTriangles, modelA: st.modelA, modelB: st.modelB, loads: st.loads, moves: st.refinements + st.coarsenings, requests: st.requests, fetchMs: st.fetchMs, decodeMs: st.decodeMs, evictions: st.evictions, givenUp: st.givenUp, triangles: st.triangles, still: path === 'orbit' ? i >= Math.floor(frames * 0.85) : null,
     });
@@ -305,7 +307,7 @@ state.backFaces = (bgHex) => {
     if (d < 12) ++backBg;
     if (img.data[4 * i] + img.data[4 * i + 1] + img.data[4 * i + 2] < 30) ++backDark;
   }
-  return { back, backBg, backDark, twoPass: state.mt.backFaces };
+  return { back, backBg, backDark, backFaces: state.mt.backFaces, twoPass: state.mt.twoPass };
 };
 state.png = () => state.canvas.toDataURL('image/png');
 main().catch((e) => showError(e.stack || e.message));

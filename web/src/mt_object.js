@@ -46,15 +46,23 @@ export class MTObject extends THREE.Group {
     this.mt = scene;
     this.options = options;
     this.position.set(scene.center[0], scene.center[1], scene.center[2]);
-    // Two passes by default: every patch's front faces (front to back), then, only when back faces
-    // can be seen (the surface is open, or the eye is inside it), its back faces. A closed surface
-    // seen from outside is drawn single-sided, as a GPU culls it; an open scan's inside shows through
-    // its holes. The back pass is lit per vertex (MTObject.backMaterial): SwiftShader shades the
+    // Back faces are drawn only when they can be seen (the surface is open, or the eye is inside
+    // it): a closed surface seen from outside is drawn single-sided, as a GPU culls it; an open
+    // scan's inside shows through its holes. When they are drawn, a cut of few triangles (the
+    // moving frames' coarse cuts: their cost is filling the screen) is drawn in two passes, the
+    // front faces then the back faces lit per vertex (MTObject.backMaterial): SwiftShader shades the
     // fragments of the far side's back faces although they fail the depth test, and with the
-    // per-fragment Lambert of the front that doubled the cost of a frame whose model fills the
-    // screen (docs/web.md). A material given in the options is drawn as it is, in one pass.
+    // per-fragment Lambert of the front that doubled the cost of such a frame. A cut of many
+    // triangles (a still image: its cost is the vertices, which a second pass would process
+    // again) is drawn in one pass, both sides (docs/web.md has the figures). A material given in the
+    // options is drawn as it is, in one pass.
     this.material = options.material || MTObject.defaultMaterial(scene.hasColors, THREE.FrontSide);
     this.backMaterial = options.material ? null : MTObject.backMaterial(scene.hasColors);
+    this.doubleMaterial = options.material ? null : MTObject.defaultMaterial(scene.hasColors, THREE.DoubleSide);
+    // Two passes up to this many triangles in the cut drawn a pixel of the drawing buffer (the
+    // crossing point measured on SwiftShader: the back pass's vertices against the back faces'
+    // per-fragment shading in one pass, ~57 k triangles at 1280x720).
+    this.twoPassPerPixel = options.twoPassPerPixel ?? 1 / 16;
     this.backFaces = !!this.backMaterial;  // whether the last update drew the back pass
     this.cache = new PatchCache(options.cacheBytes || 256 * 2 ** 20, (id, e) => this._evicted(id, e));
     this.warnings = [];
@@ -284,15 +292,19 @@ void main() {
     let drawnTriangles = 0, drawnPatches = 0, minOrder = Infinity, maxOrder = -Infinity;
     const backs = !!this.backMaterial && !this.extract.outsideClosed(view);
     this.backFaces = backs;
+    this.twoPass = false;
+    const backIds = new Set();  // patches whose back faces may be seen (their arc's cone does not face the eye)
     for (const a of this.extract.cutArcs) {
       if (!this.extract.arcVisible(a, view)) continue;
       const s = arcs.cullNode[a];
       const order = Math.hypot(center[3 * s] - view.eye[0], center[3 * s + 1] - view.eye[1], center[3 * s + 2] - view.eye[2]) - radius[s];
+      const back = backs && !this.extract.arcFacesEye(a, view);
       for (let k = 0; k < arcs.patchCount[a]; ++k) {
         const id = arcPatches[arcs.firstPatch[a] + k];
         const e = this.cache.get(id);
         if (!e || e.state !== 'ready') continue;
         keep.add(id);
+        if (back) backIds.add(id);
         let m = this.meshes.get(id);
         if (!m) {
           m = new THREE.Mesh(e.data, this.material);
@@ -313,15 +325,21 @@ void main() {
         this.remove(m);
         this.meshes.delete(id);
       }
-    // The back pass: after every front face, front to back as well.
+    // Both sides in one pass (a cut of many triangles) or the back pass: after every front face,
+    // front to back as well; only the patches that may show a back face.
+    const twoPass = backs && drawnTriangles <= this.twoPassPerPixel * width * height;
+    this.twoPass = twoPass;
+    for (const [id, m] of this.meshes) m.material = backs && !twoPass && backIds.has(id) ? this.doubleMaterial : this.material;
+    if (!twoPass) backIds.clear();
     for (const [id, m] of this.backMeshes)
-      if (!backs || !keep.has(id)) {
+      if (!backIds.has(id)) {
         this.remove(m);
         this.backMeshes.delete(id);
       }
-    if (backs) {
+    if (twoPass) {
       const base = maxOrder + 1;
-      for (const [id, f] of this.meshes) {
+      for (const id of backIds) {
+        const f = this.meshes.get(id);
         let m = this.backMeshes.get(id);
         if (!m) {
           m = new THREE.Mesh(f.geometry, this.backMaterial);
@@ -341,6 +359,7 @@ void main() {
     this.drawnTriangles = drawnTriangles;
     st.drawnTriangles = drawnTriangles;
     st.drawnPatches = drawnPatches;
+    st.backPatches = this.backMeshes.size;
     st.cacheBytes = this.cache.usedBytes;
     st.cacheCap = this.cache.capBytes;
     st.evictions = this.cache.evictions;
