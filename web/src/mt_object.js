@@ -134,10 +134,10 @@ export class MTObject extends THREE.Group {
    * this pass are mostly hidden (they fail the depth test after the front pass) and a software
    * renderer shades them anyway. Per-vertex colours are unlit already (MeshBasicMaterial).
    */
-  static backMaterial(hasColors) {
-    if (hasColors) return MTObject.defaultMaterial(true, THREE.BackSide);
+  static backMaterial(hasColors, side = THREE.BackSide) {
+    if (hasColors) return MTObject.defaultMaterial(true, side);
     return new THREE.ShaderMaterial({
-      side: THREE.BackSide,
+      side,
       lights: true,
       uniforms: THREE.UniformsUtils.merge([THREE.UniformsLib.lights, { diffuse: { value: new THREE.Color(0xd8cfc0) } }]),
       vertexShader: `#include <common>
@@ -145,7 +145,10 @@ export class MTObject extends THREE.Group {
 uniform vec3 diffuse;
 varying vec3 vLit;
 void main() {
-  vec3 n = -normalize(normalMatrix * normal);
+  vec3 n = normalize(normalMatrix * normal);
+#ifdef FLIP_SIDED
+  n = -n;
+#endif
   vec3 irradiance = getAmbientLightIrradiance(ambientLightColor);
 #if NUM_HEMI_LIGHTS > 0
   for (int i = 0; i < NUM_HEMI_LIGHTS; ++i) irradiance += getHemisphereLightIrradiance(hemisphereLights[i], n);
