@@ -62,7 +62,7 @@ async function main() {
       // (THREE.DoubleSide, the viewer's drawing before the two passes; docs/web.md compares them).
       material: q.get('side') === 'front' || q.get('side') === 'double' ? MTObject.defaultMaterial(false, q.get('side') === 'front' ? THREE.FrontSide : THREE.DoubleSide) : undefined,
       cacheBytes: Number(q.get('cache') || 256) * 2 ** 20,
-      // twopass=T: back faces in a second pass up to T triangles a pixel (default 1/16; 0: one pass).
+      // twopass=T: back faces in a second pass up to T triangles a pixel (default 1/256; 0: one pass).
       twoPassPerPixel: q.has('twopass') ? Number(q.get('twopass')) : undefined,
       onWarning: (m) => {
         state.warnings.push(m);

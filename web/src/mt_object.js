@@ -59,10 +59,10 @@ export class MTObject extends THREE.Group {
     this.material = options.material || MTObject.defaultMaterial(scene.hasColors, THREE.FrontSide);
     this.backMaterial = options.material ? null : MTObject.backMaterial(scene.hasColors);
     this.doubleMaterial = options.material ? null : MTObject.defaultMaterial(scene.hasColors, THREE.DoubleSide);
-    // Two passes up to this many triangles in the cut drawn a pixel of the drawing buffer (the
-    // crossing point measured on SwiftShader: the back pass's vertices against the back faces'
-    // per-fragment shading in one pass, ~57 k triangles at 1280x720).
-    this.twoPassPerPixel = options.twoPassPerPixel ?? 1 / 16;
+    // Two passes up to this many triangles in the cut drawn a pixel of the drawing buffer: 3600 at
+    // 1280x720. Measured on SwiftShader (docs/web.md): two passes won on m53M's 1998-triangle
+    // coarsest cut and lost on arm53M's 12,936-triangle one and on a 400 k-triangle cut.
+    this.twoPassPerPixel = options.twoPassPerPixel ?? 1 / 256;
     this.backFaces = !!this.backMaterial;  // whether the last update drew the back pass
     this.cache = new PatchCache(options.cacheBytes || 256 * 2 ** 20, (id, e) => this._evicted(id, e));
     this.warnings = [];
