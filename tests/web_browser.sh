@@ -18,5 +18,8 @@ run "$bin/mtbuild" "$t/t.ply" -o "$t/t-draco.mt" --threads 2 --codec draco
 # Per-vertex colours (the colours test): a coloured scan with holes.
 run "$bin/mtgen" -o "$t/c.ply" --triangles 60k --colors --holes 10 --seed 3
 run "$bin/mtbuild" "$t/c.ply" -o "$t/c.mt" --threads 2
-rm -f "$t/t.ply" "$t/c.ply"
+# The same kind of scan without colours (the back-faces test: the lit back pass).
+run "$bin/mtgen" -o "$t/h.ply" --triangles 60k --holes 10 --seed 3
+run "$bin/mtbuild" "$t/h.ply" -o "$t/h.mt" --threads 2
+rm -f "$t/t.ply" "$t/c.ply" "$t/h.ply"
 node "$src/web/test/browser.mjs" "$bin" "$t"

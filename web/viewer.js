@@ -2,7 +2,7 @@
 // [&path=orbit|fixed&frames=600][&view=EX,EY,EZ,TX,TY,TZ (unit space)]. Orbit/pan/zoom with the
 // mouse (three's OrbitControls); the HUD shows fps, triangles, cache, loads and the screen error,
 // and the file's coordinate reference system when its metadata block names one.
-// `side=front` culls back faces (measurement). `plain` draws with renderer.render (no progressive still image). `capture` keeps the drawing buffer for reading the image back (the tests). `path` plays a recorded camera path frame by frame (the browser tests and bench/web.sh); the
+// `side=front` culls back faces, `side=double` draws both in one pass, `twopass=T` sets MTObject's twoPassPerPixel (measurements, tests). `plain` draws with renderer.render (no progressive still image). `capture` keeps the drawing buffer for reading the image back (the tests). `path` plays a recorded camera path frame by frame (the browser tests and bench/web.sh); the
 // per-frame figures are in window.mtViewer.frames.
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
@@ -57,10 +57,13 @@ async function main() {
       pixelTolerance: Number(q.get('tol') || 1),
       budgetMs: Number(q.get('budget') || 50),
       fixedTriangles: Number(q.get('fixed') || 0),
-      // side=front: back faces culled by the GL (measurement only: an open scan's inside then shows
-      // the background through its holes; docs/web.md has what drawing both sides costs).
-      material: q.get('side') === 'front' ? new THREE.MeshLambertMaterial({ color: 0xd8cfc0 }) : undefined,
+      // side=front: back faces always culled by the GL (measurement only: an open scan's inside
+      // then shows the background through its holes); side=double: both sides in one pass
+      // (THREE.DoubleSide, the viewer's drawing before the two passes; docs/web.md compares them).
+      material: q.get('side') === 'front' || q.get('side') === 'double' ? MTObject.defaultMaterial(false, q.get('side') === 'front' ? THREE.FrontSide : THREE.DoubleSide) : undefined,
       cacheBytes: Number(q.get('cache') || 256) * 2 ** 20,
+      // twopass=T: back faces in a second pass up to T triangles a pixel (default 1/256; 0: one pass).
+      twoPassPerPixel: q.has('twopass') ? Number(q.get('twopass')) : undefined,
       onWarning: (m) => {
         state.warnings.push(m);
         warnBox.textContent = `${state.warnings.length} damaged patch(es) skipped: ${m}`;
@@ -88,6 +91,7 @@ async function main() {
   const path = q.get('path');
   const frames = Number(q.get('frames') || 600);
   state.canvas = renderer.domElement;
+  state.renderer = renderer;
   state.camera = camera;
   state.mt = mt;
   // The cut's meshes drawn whole, straight to the screen, `reps` times, each waited for (one pixel
@@ -96,7 +100,7 @@ async function main() {
   state.drawRate = (reps = 3) => {
     const gl = renderer.getContext(), px = new Uint8Array(4), ms = [];
     let triangles = 0;
-    for (const m of mt.children) if (m.isMesh && m.visible) triangles += m.geometry.index.count / 3;
+    for (const m of mt.children) if (m.isMesh && m.visible && !m.userData.mtBack) triangles += m.geometry.index.count / 3;
     for (let k = 0; k < reps; ++k) {
       const t = performance.now();
       renderer.setRenderTarget(null);
@@ -135,9 +139,9 @@ async function main() {
     if (state.firstImageMs === null) state.firstImageMs = performance.now();
     if (i > 0) fpsAvg = fpsAvg ? 0.9 * fpsAvg + 0.1 * (1000 / dt) : 1000 / dt;
     state.frames.push({
-      t: now, frameMs: i > 0 ? dt : 0, updateMs, renderMs, drawn: st.drawnTriangles, patches: st.drawnPatches, cacheBytes: st.cacheBytes,
+      t: now, frameMs: i > 0 ? dt : 0, updateMs, renderMs, drawn: st.drawnTriangles, patches: st.drawnPatches, backPatches: st.backPatches, cacheBytes: st.cacheBytes,
       cacheCap: st.cacheCap, bytesRead: st.bytesRead, err: st.maxScreenError, cutErr: st.cutErr, accumulating: mtAccumulating(mt), pending: st.loadsPending,
-      budget: st.budgetTriangles, modelA: st.modelA, modelB: st.modelB, loads: st.loads, moves: st.refinements + st.coarsenings, evictions: st.evictions, givenUp: st.givenUp, triangles: st.triangles, still: path === 'orbit' ? i >= Math.floor(frames * 0.85) : null,
+      budget: st.budgetTriangles, modelA: st.modelA, modelB: st.modelB, loads: st.loads, moves: st.refinements + st.coarsenings, requests: st.requests, fetchMs: st.fetchMs, decodeMs: st.decodeMs, evictions: st.evictions, givenUp: st.givenUp, triangles: st.triangles, still: path === 'orbit' ? i >= Math.floor(frames * 0.85) : null,
     });
     if (state.frames.length > 5000) state.frames.shift();
     if (i % 10 === 0) hud.textContent =
@@ -271,6 +275,39 @@ state.colours = (grid = 32, tol = 8) => {
     }
   diffs.sort((a, b) => a - b);
   return { hits: diffs.length, within: diffs.filter((d) => d <= tol).length, median: diffs.length ? diffs[diffs.length >> 1] : NaN };
+};
+// Back faces seen through holes: the cut drawn once more, both sides in one pass with the depth
+// test, white where the nearest surface shows its back face (a view into the inside of an open
+// scan, through a hole or past its border), black elsewhere: an oracle independent of the viewer's
+// two passes. Returns the back-face pixels and how many of them the image on screen (taken first)
+// shows as background. The screen then holds the oracle's image.
+state.backFaces = (bgHex) => {
+  const img = pixels();
+  const bg = [parseInt(bgHex.slice(0, 2), 16), parseInt(bgHex.slice(2, 4), 16), parseInt(bgHex.slice(4, 6), 16)];
+  const scene = state.mt.parent;
+  const oracle = new THREE.ShaderMaterial({
+    side: THREE.DoubleSide,
+    vertexShader: 'void main() { gl_Position = projectionMatrix * modelViewMatrix * vec4(position, 1.0); }',
+    fragmentShader: 'void main() { gl_FragColor = gl_FrontFacing ? vec4(0.0, 0.0, 0.0, 1.0) : vec4(1.0, 1.0, 1.0, 1.0); }',
+  });
+  const renderer = state.renderer;
+  scene.overrideMaterial = oracle;
+  const clear = renderer.getClearColor(new THREE.Color()), alpha = renderer.getClearAlpha();
+  renderer.setClearColor(0x000000, 1);
+  renderer.setRenderTarget(null);
+  renderer.render(scene, state.camera);
+  scene.overrideMaterial = null;
+  renderer.setClearColor(clear, alpha);
+  const o = pixels();
+  let back = 0, backBg = 0, backDark = 0;
+  for (let i = 0; i < o.width * o.height; ++i) {
+    if (o.data[4 * i] < 128) continue;
+    ++back;
+    const d = Math.abs(img.data[4 * i] - bg[0]) + Math.abs(img.data[4 * i + 1] - bg[1]) + Math.abs(img.data[4 * i + 2] - bg[2]);
+    if (d < 12) ++backBg;
+    if (img.data[4 * i] + img.data[4 * i + 1] + img.data[4 * i + 2] < 30) ++backDark;
+  }
+  return { back, backBg, backDark, backFaces: state.mt.backFaces, twoPass: state.mt.twoPass };
 };
 state.png = () => state.canvas.toDataURL('image/png');
 main().catch((e) => showError(e.stack || e.message));

@@ -95,7 +95,16 @@ export class ExtractRender {
   /** Whether normal cones cull for this view's eye (memoised for the last eye; held for the views ahead). */
   coneOn(view) {
     if (this.options.cones === 'always') return true;
-    if (this.options.cones === 'off' || !this.surface) return false;
+    if (this.options.cones === 'off') return false;
+    return this.outsideClosed(view);
+  }
+  /**
+   * Whether the file is a closed surface and this view's eye is outside the solid it bounds
+   * (closed_surface.js): no back face can then be seen. Memoised for the last eye; held for the
+   * views ahead.
+   */
+  outsideClosed(view) {
+    if (!this.surface) return false;
     const e = view.eye;
     if (!this.coneHeld && !(this.coneEye && this.coneEye[0] === e[0] && this.coneEye[1] === e[1] && this.coneEye[2] === e[2])) {
       this.coneFlag = this.surface.eyeOutside(e);
@@ -198,6 +207,20 @@ export class ExtractRender {
       if (this.coneAway(s, c0, c1, c2, radius, view)) return false;
     }
     return true;
+  }
+  /**
+   * Every triangle of the arc's patches faces the eye (its from-node's normal cone, as arcVisible
+   * reads it): none shows its back face, whatever the rest of the surface (MTObject's back pass).
+   */
+  arcFacesEye(arc, view) {
+    const { nodes, arcs } = this.scene;
+    const s = arcs.cullNode[arc];
+    if (s !== arcs.from[arc] || !(nodes.coneCutoff[s] > 0)) return false;
+    const c = nodes.center, e = view.eye;
+    // The eye mirrored through the sphere's centre: the cone faces the eye when every triangle
+    // faces away from the mirrored eye.
+    const mirrored = { eye: [2 * c[3 * s] - e[0], 2 * c[3 * s + 1] - e[1], 2 * c[3 * s + 2] - e[2]] };
+    return this.coneAway(s, c[3 * s], c[3 * s + 1], c[3 * s + 2], nodes.radius[s], mirrored);
   }
   // Every triangle of the node's fragment faces away from the eye (normal-cone culling).
   coneAway(s, c0, c1, c2, radius, view) {

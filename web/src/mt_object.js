@@ -46,7 +46,24 @@ export class MTObject extends THREE.Group {
     this.mt = scene;
     this.options = options;
     this.position.set(scene.center[0], scene.center[1], scene.center[2]);
-    this.material = options.material || MTObject.defaultMaterial(scene.hasColors);
+    // Back faces are drawn only when they can be seen (the surface is open, or the eye is inside
+    // it): a closed surface seen from outside is drawn single-sided, as a GPU culls it; an open
+    // scan's inside shows through its holes. When they are drawn, a cut of few triangles (the
+    // moving frames' coarse cuts: their cost is filling the screen) is drawn in two passes, the
+    // front faces then the back faces lit per vertex (MTObject.backMaterial): SwiftShader shades the
+    // fragments of the far side's back faces although they fail the depth test, and with the
+    // per-fragment Lambert of the front that doubled the cost of such a frame. A cut of many
+    // triangles (a still image: its cost is the vertices, which a second pass would process
+    // again) is drawn in one pass, both sides (docs/web.md has the figures). A material given in the
+    // options is drawn as it is, in one pass.
+    this.material = options.material || MTObject.defaultMaterial(scene.hasColors, THREE.FrontSide);
+    this.backMaterial = options.material ? null : MTObject.backMaterial(scene.hasColors);
+    this.doubleMaterial = options.material ? null : MTObject.defaultMaterial(scene.hasColors, THREE.DoubleSide);
+    // Two passes up to this many triangles in the cut drawn a pixel of the drawing buffer: 3600 at
+    // 1280x720. Measured on SwiftShader (docs/web.md): two passes won on m53M's 1998-triangle
+    // coarsest cut and lost on arm53M's 12,936-triangle one and on a 400 k-triangle cut.
+    this.twoPassPerPixel = options.twoPassPerPixel ?? 1 / 256;
+    this.backFaces = !!this.backMaterial;  // whether the last update drew the back pass
     this.cache = new PatchCache(options.cacheBytes || 256 * 2 ** 20, (id, e) => this._evicted(id, e));
     this.warnings = [];
     this.fatal = null;
@@ -68,6 +85,7 @@ export class MTObject extends THREE.Group {
       fixedTriangles: options.fixedTriangles || 0,
     });
     this.meshes = new Map();  // patch id -> Mesh (patches of the cut)
+    this.backMeshes = new Map();  // patch id -> Mesh of its back faces (the back pass)
     this.frame = 0;
     this.lastTime = 0;
     this.prevPose = null;
@@ -97,9 +115,9 @@ export class MTObject extends THREE.Group {
    * their shading), shown as stored (interpolated in their sRGB bytes, as mtrender does); without
    * colours, a Lambert surface lit by the page's lights.
    */
-  static defaultMaterial(hasColors) {
-    if (!hasColors) return new THREE.MeshLambertMaterial({ color: 0xd8cfc0, side: THREE.DoubleSide });
-    const m = new THREE.MeshBasicMaterial({ vertexColors: true, side: THREE.DoubleSide });
+  static defaultMaterial(hasColors, side = THREE.DoubleSide) {
+    if (!hasColors) return new THREE.MeshLambertMaterial({ color: 0xd8cfc0, side });
+    const m = new THREE.MeshBasicMaterial({ vertexColors: true, side });
     // three takes vertex colours as linear and encodes the output to sRGB: decode the stored bytes
     // per fragment so the screen shows them.
     m.onBeforeCompile = (sh) => {
@@ -107,6 +125,46 @@ export class MTObject extends THREE.Group {
         '#include <color_fragment>\n\tdiffuseColor.rgb = sRGBTransferEOTF( vec4( diffuseColor.rgb, 1.0 ) ).rgb;');
     };
     return m;
+  }
+
+  /**
+   * The back pass's material: the back faces (seen through a hole, or from inside) lit as the
+   * default material lights the front, by the page's ambient, hemisphere and directional lights,
+   * with the normal reversed, but per vertex (Gouraud) instead of per fragment: the fragments of
+   * this pass are mostly hidden (they fail the depth test after the front pass) and a software
+   * renderer shades them anyway. Per-vertex colours are unlit already (MeshBasicMaterial).
+   */
+  static backMaterial(hasColors, side = THREE.BackSide) {
+    if (hasColors) return MTObject.defaultMaterial(true, side);
+    return new THREE.ShaderMaterial({
+      side,
+      lights: true,
+      uniforms: THREE.UniformsUtils.merge([THREE.UniformsLib.lights, { diffuse: { value: new THREE.Color(0xd8cfc0) } }]),
+      vertexShader: `#include <common>
+#include <lights_pars_begin>
+uniform vec3 diffuse;
+varying vec3 vLit;
+void main() {
+  vec3 n = normalize(normalMatrix * normal);
+#ifdef FLIP_SIDED
+  n = -n;
+#endif
+  vec3 irradiance = getAmbientLightIrradiance(ambientLightColor);
+#if NUM_HEMI_LIGHTS > 0
+  for (int i = 0; i < NUM_HEMI_LIGHTS; ++i) irradiance += getHemisphereLightIrradiance(hemisphereLights[i], n);
+#endif
+#if NUM_DIR_LIGHTS > 0
+  for (int i = 0; i < NUM_DIR_LIGHTS; ++i) irradiance += saturate(dot(n, directionalLights[i].direction)) * directionalLights[i].color;
+#endif
+  vLit = irradiance * BRDF_Lambert(diffuse);
+  gl_Position = projectionMatrix * modelViewMatrix * vec4(position, 1.0);
+}`,
+      fragmentShader: `varying vec3 vLit;
+void main() {
+  gl_FragColor = vec4(vLit, 1.0);
+#include <colorspace_fragment>
+}`,
+    });
   }
 
   async _start() {
@@ -151,10 +209,12 @@ export class MTObject extends THREE.Group {
     return g;
   }
   _evicted(id, e) {
-    const m = this.meshes.get(id);
-    if (m) {
-      this.remove(m);
-      this.meshes.delete(id);
+    for (const map of [this.meshes, this.backMeshes]) {
+      const m = map.get(id);
+      if (m) {
+        this.remove(m);
+        map.delete(id);
+      }
     }
     if (e.data) e.data.dispose();
   }
@@ -232,16 +292,22 @@ export class MTObject extends THREE.Group {
     const { arcs, arcPatches } = this.mt;
     const { center, radius } = this.mt.nodes;
     const keep = new Set();
-    let drawnTriangles = 0, drawnPatches = 0;
+    let drawnTriangles = 0, drawnPatches = 0, minOrder = Infinity, maxOrder = -Infinity;
+    const backs = !!this.backMaterial && !this.extract.outsideClosed(view);
+    this.backFaces = backs;
+    this.twoPass = false;
+    const backIds = new Set();  // patches whose back faces may be seen (their arc's cone does not face the eye)
     for (const a of this.extract.cutArcs) {
       if (!this.extract.arcVisible(a, view)) continue;
       const s = arcs.cullNode[a];
       const order = Math.hypot(center[3 * s] - view.eye[0], center[3 * s + 1] - view.eye[1], center[3 * s + 2] - view.eye[2]) - radius[s];
+      const back = backs && !this.extract.arcFacesEye(a, view);
       for (let k = 0; k < arcs.patchCount[a]; ++k) {
         const id = arcPatches[arcs.firstPatch[a] + k];
         const e = this.cache.get(id);
         if (!e || e.state !== 'ready') continue;
         keep.add(id);
+        if (back) backIds.add(id);
         let m = this.meshes.get(id);
         if (!m) {
           m = new THREE.Mesh(e.data, this.material);
@@ -251,6 +317,8 @@ export class MTObject extends THREE.Group {
           this.add(m);
         }
         m.renderOrder = order;
+        minOrder = Math.min(minOrder, order);
+        maxOrder = Math.max(maxOrder, order);
         drawnTriangles += e.data.index.count / 3;
         ++drawnPatches;
       }
@@ -260,13 +328,41 @@ export class MTObject extends THREE.Group {
         this.remove(m);
         this.meshes.delete(id);
       }
+    // Both sides in one pass (a cut of many triangles) or the back pass: after every front face,
+    // front to back as well; only the patches that may show a back face.
+    const twoPass = backs && drawnTriangles <= this.twoPassPerPixel * width * height;
+    this.twoPass = twoPass;
+    for (const [id, m] of this.meshes) m.material = backs && !twoPass && backIds.has(id) ? this.doubleMaterial : this.material;
+    if (!twoPass) backIds.clear();
+    for (const [id, m] of this.backMeshes)
+      if (!backIds.has(id)) {
+        this.remove(m);
+        this.backMeshes.delete(id);
+      }
+    if (twoPass) {
+      const base = maxOrder + 1;
+      for (const id of backIds) {
+        const f = this.meshes.get(id);
+        let m = this.backMeshes.get(id);
+        if (!m) {
+          m = new THREE.Mesh(f.geometry, this.backMaterial);
+          m.frustumCulled = false;
+          m.matrixAutoUpdate = false;
+          m.userData.mtBack = true;
+          this.backMeshes.set(id, m);
+          this.add(m);
+        }
+        m.renderOrder = base + (f.renderOrder - minOrder);
+      }
+    }
     if (this.progressiveNow && this.cutChanged && (!this.accum || this.accum.next >= this.accum.list.length)) {
-      this.accum = { list: [...this.meshes.values()].sort((x, y) => x.renderOrder - y.renderOrder), next: 0, err: st.maxScreenError, fresh: true, triangles: drawnTriangles };
+      this.accum = { list: [...this.meshes.values(), ...this.backMeshes.values()].sort((x, y) => x.renderOrder - y.renderOrder), next: 0, err: st.maxScreenError, fresh: true, triangles: drawnTriangles };
       this.cutChanged = false;
     }
     this.drawnTriangles = drawnTriangles;
     st.drawnTriangles = drawnTriangles;
     st.drawnPatches = drawnPatches;
+    st.backPatches = this.backMeshes.size;
     st.cacheBytes = this.cache.usedBytes;
     st.cacheCap = this.cache.capBytes;
     st.evictions = this.cache.evictions;
@@ -275,6 +371,9 @@ export class MTObject extends THREE.Group {
     st.bytesRead = this.mt.source.bytesFetched;
     st.badPatches = this.server.bad;
     st.loadsPending = this.server.queue.length + this.server.inFlight;
+    st.requests = this.server.requests;
+    st.fetchMs = this.server.fetchMs;
+    st.decodeMs = this.server.decodeMs;
     this.stats = st;
     return st;
   }

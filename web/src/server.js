@@ -24,6 +24,12 @@ export class PatchServer {
     this.bad = 0;
     this.bytesRead = 0;
     this.requests = 0;
+    // Where a load's time goes (the bench's profile of a still view): the range reads' wall time
+    // (summed over requests, which overlap), the workers' decoding time (summed over workers), and
+    // the decoded results' wait between the worker and the page.
+    this.fetchMs = 0;
+    this.decodeMs = 0;
+    this.geometryMs = 0;
     this.loadMsAvg = 0;
     this.warnings = [];
     this.jobs = new Map();
@@ -121,6 +127,7 @@ export class PatchServer {
     }
     this.bytesRead += end - begin;
     ++this.requests;
+    this.fetchMs += performance.now() - t0;
     const items = batch.map((id) => ({
       id, offset: p.offset[id], triangles: p.triangles[id], checksumLo: p.checksumLo[id], checksumHi: p.checksumHi[id],
       buffer: buf.slice(p.offset[id] - begin, p.offset[id] - begin + p.size[id]),
@@ -133,6 +140,8 @@ export class PatchServer {
   onDecoded(msg) {
     const j = this.jobs.get(msg.job);
     this.jobs.delete(msg.job);
+    this.decodeMs += msg.busyMs || 0;
+    const tg = performance.now();
     for (const r of msg.results) {
       if (r.error) {
         ++this.bad;
@@ -143,6 +152,7 @@ export class PatchServer {
       this.cache.commit(r.id, this.opt.makeGeometry(r));
       ++this.loads;
     }
+    this.geometryMs += performance.now() - tg;
     const ms = (performance.now() - j.t0) / Math.max(1, j.count);
     this.loadMsAvg = this.loadMsAvg === 0 ? ms : 0.9 * this.loadMsAvg + 0.1 * ms;
     --this.inFlight;

@@ -82,6 +82,7 @@ self.onmessage = async (e) => {
     return;
   }
   if (msg.type !== 'decode') return;
+  const t0 = performance.now();
   const results = [], transfer = [];
   for (const it of msg.items) {
     const data = new Uint8Array(it.buffer);
@@ -103,5 +104,5 @@ self.onmessage = async (e) => {
       results.push({ id: it.id, error: `patch ${it.id} at byte offset ${it.offset}: ${err.message}` });
     }
   }
-  self.postMessage({ type: 'decoded', job: msg.job, results }, transfer);
+  self.postMessage({ type: 'decoded', job: msg.job, results, busyMs: performance.now() - t0 }, transfer);
 };

@@ -140,4 +140,18 @@ console.log(`screen error after stop   ${reach ? `reached ${tol} px ${(reach.t -
     `images shown ${st.filter((x, i) => i > 0 && x.err !== st[i - 1].err).length}, triangles drawn ${(st.filter((x) => !reach || x.t <= reach.t).reduce((a, x) => a + x.drawn, 0) / 1e6).toFixed(2)} M until then`);
   console.log(`raw draw of the last cut  ${(raw.triangles / 1e6).toFixed(2)} M triangles in ${rawMs.map((x) => x.toFixed(0)).join(' / ')} ms = ${(raw.triangles / rawMs[1] / 1000).toFixed(2)} M triangles/s (median; one full draw, synchronised)`);
 }
+{
+  // Where the still stretch's time goes, from the stop to the cut at the tolerance with nothing
+  // loading (or the end): the loads (range requests, bytes, the reads' wall time summed over the
+  // requests in flight, the workers' decoding time), and the page's own work (cut updates; render
+  // calls: geometry upload and the drawing of each chunk, waited for).
+  const st = f.filter((x) => x.t >= stillFrom);
+  const end = st.find((x) => x.cutErr <= tol && x.pending === 0) || st.at(-1), a = st[0];
+  const upto = st.filter((x) => x.t <= end.t);
+  const sum = (k) => upto.reduce((acc, x) => acc + x[k], 0);
+  const secs = (ms) => (ms / 1000).toFixed(2);
+  console.log(`still profile             to loaded ${secs(end.t - a.t)} s: ${end.loads - a.loads} patches in ${end.requests - a.requests} requests, ${mib(end.bytesRead - a.bytesRead)} MiB; ` +
+    `reads ${secs(end.fetchMs - a.fetchMs)} s (summed over requests in flight), workers decoding ${secs(end.decodeMs - a.decodeMs)} s; ` +
+    `page: cut updates ${secs(sum('updateMs'))} s, render calls ${secs(sum('renderMs'))} s over ${upto.length} frames`);
+}
 console.log(`damaged patches skipped   ${s.warnings}`);

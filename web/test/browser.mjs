@@ -1,7 +1,7 @@
 // The web viewer in a real browser: Debian's chromium, headless, driven by playwright-core, WebGL
 // on SwiftShader, the MT files served by mtserve.
 //   node test/browser.mjs BIN_DIR DATA_DIR [--update-golden]
-// DATA_DIR holds t.mt, t-draco.mt and c.mt (tests/web_browser.sh builds them). Tests:
+// DATA_DIR holds t.mt, t-draco.mt, c.mt and h.mt (tests/web_browser.sh builds them). Tests:
 //   golden        a fixed view at a fixed tolerance, converged, against test/golden/torus.png
 //                 (at most 2% of the pixels differ by more than 48 in RGB);
 //   cracks        several views and tolerances, converged: no background pixel enclosed by the
@@ -15,7 +15,13 @@
 //   no-ranges     mtserve --no-ranges (200 instead of 206): the page shows the clear message;
 //   colours       a coloured scan (c.mt) converged: on a grid of pixels the colour on screen is the
 //                 stored per-vertex colour interpolated at the surface point a ray through the
-//                 pixel hits, unlit (as mtrender --color vertex draws it): >= 90% within 8 levels.
+//                 pixel hits, unlit (as mtrender --color vertex draws it): >= 90% within 8 levels;
+//   back-faces    the open scans (c.mt coloured, h.mt lit; 10 holes each): where an oracle drawing
+//                 (both sides, one pass, white where the nearest surface is a back face) sees the
+//                 inside through a hole, the viewer's image is neither background (its back pass
+//                 draws them) nor black (the lit back pass has its light); with side=front
+//                 the same check fails (the check can fail). The closed torus (t.mt) seen from
+//                 outside is drawn single-sided (no back pass) and shows no back face.
 // Prints one line per test and "N passed, M failed"; exits 1 on any failure.
 import fs from 'node:fs';
 import path from 'node:path';
@@ -55,7 +61,9 @@ function serve(extra) {
 }
 
 const results = [];
+const only = process.env.ONLY ? process.env.ONLY.split(',') : null;  // run only these tests
 async function test(name, fn) {
+  if (only && !only.includes(name)) return;
   const t0 = Date.now();
   try {
     const note = await fn();
@@ -215,6 +223,41 @@ await test('colours', async () => {
     notes.push(`${r.within}/${r.hits} within 8 levels, median ${r.median.toFixed(1)}`);
   }
   return notes.join('; ');
+});
+
+await test('back-faces', async () => {
+  const notes = [];
+  let seen = 0;
+  // Both ways of drawing the back faces: one pass (twopass=0) and a second pass (twopass=1: up to
+  // a triangle a pixel, so this cut takes two passes); c.mt's by the default rule.
+  for (const [file, view, passes] of [['c', '0.4,-1.6,0.9,0,0,0', ''], ['h', '-1.3,0.8,0.5,0,0,0', '0'], ['h', '0.4,-1.6,0.9,0,0,0', '1']]) {
+    for (const side of ['', 'front']) {
+      const { page } = await open(`file=/data/${file}.mt&tol=1&fixed=3000000&bg=ff00ff&view=${view}${side ? '&side=' + side : ''}${passes ? '&twopass=' + passes : ''}`);
+      await converge(page);
+      await page.waitForTimeout(200);
+      const r = await page.evaluate(() => window.mtViewer.backFaces('ff00ff'));
+      await page.close();
+      if (!side) {
+        check(r.backFaces, `view ${view}: the open scan is drawn without its back faces`);
+        if (passes) check(r.twoPass === (passes === '1'), `${file}.mt twopass=${passes}: drawn in ${r.twoPass ? 'two passes' : 'one pass'}`);
+        check(r.backBg <= 0.02 * r.back, `${file}.mt view ${view}: ${r.backBg} of ${r.back} pixels showing the inside through a hole are background`);
+        check(r.backDark <= 0.02 * r.back, `${file}.mt view ${view}: ${r.backDark} of ${r.back} pixels showing the inside through a hole are black`);
+        seen += r.back;
+        notes.push(`${file}.mt ${r.twoPass ? 'two passes' : 'one pass'}: ${r.back} px inside, ${r.backBg} background, ${r.backDark} black`);
+      } else if (r.back >= 100) {
+        check(r.backBg >= 0.5 * r.back, `view ${view}, side=front: only ${r.backBg} of ${r.back} back-face pixels are background: the check cannot fail`);
+        notes.push(`side=front ${r.backBg}/${r.back} background`);
+      }
+    }
+  }
+  check(seen >= 300, `the views see only ${seen} pixels of the inside: the test tests nothing`);
+  const { page } = await open('file=/data/t.mt&tol=1&fixed=3000000&bg=ff00ff&view=0.4,-1.6,0.9,0,0,0');
+  await converge(page);
+  const r = await page.evaluate(() => window.mtViewer.backFaces('ff00ff'));
+  await page.close();
+  check(!r.backFaces, 'the closed torus seen from outside is drawn with its back faces');
+  check(r.back <= 0.001 * W * H, `the closed torus seen from outside shows ${r.back} back-face pixels`);
+  return `${notes.join('; ')}; closed torus: one pass, ${r.back} back-face px`;
 });
 
 await browser.close();
