@@ -245,6 +245,28 @@ int run(const Options& o) {
                         " MiB): raise --memory, choose a coarser cut, or write .ply (streamed within the cap)",
                     mt::ErrorKind::Resource);
   }
+  if (gltf && r.hasTextures()) {
+    // Textured: a vertex per distinct texture coordinate, a material per patch atlas, the atlases
+    // embedded as stored (gltf_writer.h).
+    mt::TexturedCut tcut = mt::assembleTexturedCut(r, mt::cutArcs(r, cut.inSet));
+    mt::checkInterrupt(o.output);
+    mt::interop::TexturedGltfMesh tmesh;
+    mt::interop::texturedGltfMeshOf(tcut, r.header().gridOrigin, r.header().gridStep, tmesh);
+    mt::interop::GltfOptions go;
+    go.meshopt = o.meshopt;
+    go.quantize = o.quantize;
+    go.generator = "batched-mt mtextract";
+    go.crs = r.crs();
+    mt::interop::GltfInfo info = mt::interop::writeGltfFile(o.output, tmesh.view, go);
+    if (o.quantize && !info.quantized)
+      std::fprintf(stderr, "mtextract: warning: %s: float positions, not KHR_mesh_quantization: %s\n", o.output.c_str(),
+                   info.fallbackReason.c_str());
+    std::fprintf(stderr, "mtextract: %s: %u triangles, %zu vertices (split at texture seams) from %" PRIu64
+                 " patches, %zu textures (%" PRIu64 " bytes); %u nodes in the set, %u on the front; max error %.9g\n",
+                 o.output.c_str(), tcut.mesh.triangleCount(), tmesh.view.vertexCount, tcut.mesh.patches, tcut.textures.size(),
+                 tcut.textureBytes(), stats.nodes, stats.frontNodes, stats.maxError);
+    return 0;
+  }
   mt::WeldedMesh mesh = mt::assembleCut(r, mt::cutArcs(r, cut.inSet));
   mt::checkInterrupt(o.output);
 
