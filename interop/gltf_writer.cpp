@@ -535,6 +535,11 @@ void removeQuietly(Env* env, const std::string& path) {
 
 }  // namespace
 
+static std::string parentOf(const std::string& path) {
+  const size_t slash = path.find_last_of('/');
+  return slash == std::string::npos ? "." : slash == 0 ? "/" : path.substr(0, slash);
+}
+
 void writeFileAtomic(const std::string& path, const void* data, size_t size, Env* env) {
   const std::string tmp = uniqueTempName(path);
   try {
@@ -544,6 +549,7 @@ void writeFileAtomic(const std::string& path, const void* data, size_t size, Env
     removeQuietly(env, tmp);
     throw;
   }
+  env->syncDir(parentOf(path));  // the new name survives a crash
 }
 
 GltfInfo writeGltfFile(const std::string& path, const GltfMeshView& mesh, const GltfOptions& options, Env* env) {
@@ -575,6 +581,7 @@ GltfInfo writeGltfFile(const std::string& path, const GltfMeshView& mesh, const 
     removeQuietly(env, jsonTmp);
     throw;
   }
+  env->syncDir(parentOf(path));
   return g.info;
 }
 
