@@ -248,7 +248,16 @@ int run(const Options& o) {
   if (gltf && r.hasTextures()) {
     // Textured: a vertex per distinct texture coordinate, a material per patch atlas, the atlases
     // embedded as stored (gltf_writer.h).
-    mt::TexturedCut tcut = mt::assembleTexturedCut(r, mt::cutArcs(r, cut.inSet));
+    const std::vector<uint32_t> arcs = mt::cutArcs(r, cut.inSet);
+    uint64_t imageBytes = 0;
+    for (uint32_t p : mt::cutPatchIdsOf(r, arcs)) imageBytes += r.textures()[p].imageBytes;
+    // The welded cut, its split copy (about as large) and the images twice (the cut's, the GLB's).
+    const uint64_t need = 2 * mt::assembledCutBytes(r, arcs) + 2 * imageBytes;
+    if (need > o.memoryBytes)
+      throw mt::Error(o.output + ": this cut needs about " + std::to_string(need >> 20) + " MiB to write as textured glTF, more than --memory (" +
+                          std::to_string(o.memoryBytes >> 20) + " MiB): raise --memory or choose a coarser cut",
+                      mt::ErrorKind::Resource);
+    mt::TexturedCut tcut = mt::assembleTexturedCut(r, arcs);
     mt::checkInterrupt(o.output);
     mt::interop::TexturedGltfMesh tmesh;
     mt::interop::texturedGltfMeshOf(tcut, r.header().gridOrigin, r.header().gridStep, tmesh);
