@@ -782,6 +782,7 @@ TEST(GltfReader, BadTexturesGiveOneClearErrorNamingTheFileAndWhere) {
       EXPECT_NE(m.find(c.name), std::string::npos) << m;
       EXPECT_NE(m.find(c.expect), std::string::npos) << m;
       EXPECT_EQ(m.find('\n'), std::string::npos) << m;
+      std::printf("%s\n", m.c_str());
     }
   }
   // mtbuild: the same message, exit 1, nothing left.
