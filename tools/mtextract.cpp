@@ -6,7 +6,8 @@
 // The cut is chosen by mtfile/mt_cut.h, its patches decoded and welded by exact grid position,
 // and written with PlyWriter under a name unique to the process (CUT.ply.tmp.PID.RANDOM), renamed
 // over CUT.ply when complete: on any error nothing is left under CUT.ply. The input is never the
-// output (refused by inode), and the output format is chosen by the extension: .ply, .glb/.gltf,
+// output (refused by inode), and the output format is chosen by the extension: .ply, .glb/.gltf
+// (with a textured file: texture coordinates and the patch atlases embedded, interop/gltf_writer.h),
 // or .obj (with a textured file: + .mtl and the textures re-packed into PNG pages beside it).
 #include <CLI/CLI.hpp>
 
@@ -341,7 +342,8 @@ int main(int argc, char** argv) {
   app.add_option("file", o.input, "The MT file")->required();
   app.add_option("-o,--output", o.output,
                  "The file to write, by its extension: .ply (binary little-endian, welded), .glb or .gltf (+ .bin "
-                 "beside it), or .obj (a textured file's cut: + CUT.mtl and its textures re-packed into CUT_<k>.png pages "
+                 "beside it; a textured file's cut: texture coordinates and one material per patch atlas, the "
+                 "atlases embedded as stored), or .obj (a textured file's cut: + CUT.mtl and its textures re-packed into CUT_<k>.png pages "
                  "beside it); may not be the input")
       ->required();
   auto* err = app.add_option("--error", o.error, "Maximum object-space error of the cut")
