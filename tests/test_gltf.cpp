@@ -670,6 +670,36 @@ TEST(GltfReader, ReadsBaseColourTexturesFromBufferViewsAndFiles) {
   const std::string embedded = s.header.materials[0].texture;
   reader.reset();
   EXPECT_FALSE(test::fileExists(embedded)) << "the reader's copy of an embedded image outlives it";
+
+  // The JPEG as a base64 data URI, in a .gltf with an external .bin: the same texels.
+  Doc d = texturedDoc(dir);
+  const std::string jpeg = test::readFile(dir.file("tex b.jpg"));
+  static const char* k64 = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  std::string b64;
+  for (size_t i = 0; i < jpeg.size(); i += 3) {
+    uint32_t n = uint32_t(uint8_t(jpeg[i])) << 16;
+    if (i + 1 < jpeg.size()) n |= uint32_t(uint8_t(jpeg[i + 1])) << 8;
+    if (i + 2 < jpeg.size()) n |= uint8_t(jpeg[i + 2]);
+    b64 += k64[(n >> 18) & 63];
+    b64 += k64[(n >> 12) & 63];
+    b64 += i + 1 < jpeg.size() ? k64[(n >> 6) & 63] : '=';
+    b64 += i + 2 < jpeg.size() ? k64[n & 63] : '=';
+  }
+  d.j["images"][1] = {{"uri", "data:image/jpeg;base64," + b64}};
+  d.writeGltf(dir, "uri.gltf", "uri.bin");
+  Soup u;
+  openMesh(dir.file("uri.gltf"))->read(u);
+  ASSERT_EQ(u.header.materials.size(), 2u);
+  EXPECT_EQ(u.v.size(), s.v.size());
+  EXPECT_EQ(u.v[900 + 5].material, 1u);
+  EXPECT_EQ(u.v[900 + 5].uv[0], s.v[900 + 5].uv[0]);
+  EXPECT_FALSE(test::fileExists(u.header.materials[1].texture));  // removed with its reader
+  const tex::RgbImage fromUri = [&] {
+    auto r = openMesh(dir.file("uri.gltf"));
+    return tex::readImageFile(r->header().materials[1].texture);
+  }();
+  const tex::RgbImage fromFile = tex::readImageFile(dir.file("tex b.jpg"));
+  EXPECT_EQ(fromUri.rgb, fromFile.rgb);
 }
 
 TEST(GltfTextures, TexturedGltfToMtToGltfKeepsTrianglesAndTexels) {
