@@ -702,6 +702,59 @@ TEST(GltfReader, ReadsBaseColourTexturesFromBufferViewsAndFiles) {
   EXPECT_EQ(fromUri.rgb, fromFile.rgb);
 }
 
+// A Draco primitive's TEXCOORD_0 (KHR_draco_mesh_compression names it among its attributes) is
+// read like a plain one: every vertex gets its grid vertex's coordinates, v flipped up.
+TEST(GltfReader, ReadsTextureCoordinatesOfDracoPrimitives) {
+  TempDir dir;
+  Grid a(12);
+  const std::vector<float> uv = gridUV(a);
+  draco::TriangleSoupMeshBuilder builder;
+  builder.Start(int(a.t.size() / 3));
+  const int pos = builder.AddAttribute(draco::GeometryAttribute::POSITION, 3, draco::DT_FLOAT32);
+  const int tc = builder.AddAttribute(draco::GeometryAttribute::TEX_COORD, 2, draco::DT_FLOAT32);
+  for (size_t f = 0; f < a.t.size() / 3; ++f) {
+    const uint32_t* c = &a.t[3 * f];
+    builder.SetAttributeValuesForFace(pos, draco::FaceIndex(uint32_t(f)), &a.p[3 * c[0]], &a.p[3 * c[1]], &a.p[3 * c[2]]);
+    builder.SetAttributeValuesForFace(tc, draco::FaceIndex(uint32_t(f)), &uv[2 * c[0]], &uv[2 * c[1]], &uv[2 * c[2]]);
+  }
+  std::unique_ptr<draco::Mesh> mesh = builder.Finalize();
+  ASSERT_TRUE(mesh);
+  draco::Encoder encoder;
+  encoder.SetSpeedOptions(5, 5);
+  draco::EncoderBuffer buffer;
+  ASSERT_TRUE(encoder.EncodeMeshToBuffer(*mesh, &buffer).ok());
+  Doc d;
+  const std::vector<uint8_t> png = tex::encodePng(testPicture(16, 16, 3));
+  const int pngView = d.view(png.data(), png.size());
+  d.j["images"] = json::array({{{"bufferView", pngView}, {"mimeType", "image/png"}}});
+  d.j["textures"] = json::array({{{"source", 0}}});
+  d.j["materials"] = json::array({{{"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 0}}}}}}});
+  const int bv = d.view(buffer.data(), buffer.size());
+  d.j["accessors"].push_back({{"componentType", 5126}, {"count", mesh->num_points()}, {"type", "VEC3"},
+                              {"min", {0, 0, -0.5}}, {"max", {3, 3, 0.5}}});
+  d.j["accessors"].push_back({{"componentType", 5126}, {"count", mesh->num_points()}, {"type", "VEC2"}});
+  d.j["accessors"].push_back({{"componentType", 5125}, {"count", a.t.size()}, {"type", "SCALAR"}});
+  d.mesh({{"attributes", {{"POSITION", 0}, {"TEXCOORD_0", 1}}}, {"indices", 2}, {"material", 0},
+          {"extensions", {{"KHR_draco_mesh_compression", {{"bufferView", bv},
+                                                         {"attributes", {{"POSITION", mesh->attribute(pos)->unique_id()},
+                                                                         {"TEXCOORD_0", mesh->attribute(tc)->unique_id()}}}}}}}});
+  d.node({{"mesh", 0}});
+  d.scene();
+  d.j["extensionsUsed"] = json::array({"KHR_draco_mesh_compression"});
+  d.j["extensionsRequired"] = json::array({"KHR_draco_mesh_compression"});
+  test::writeFile(dir.file("draco.glb"), d.glb());
+  Soup s = readMesh(dir.file("draco.glb"));
+  ASSERT_TRUE(s.header.hasTexcoords);
+  ASSERT_EQ(s.t.size(), a.t.size());
+  for (const InputVertex& v : s.v) {
+    const int i = int(std::lround(v.p[0] / 0.25)), j = int(std::lround(v.p[1] / 0.25));
+    ASSERT_TRUE(i >= 0 && i < a.n && j >= 0 && j < a.n);
+    EXPECT_EQ(v.material, 0u);
+    EXPECT_FLOAT_EQ(v.uv[0], uv[2 * size_t(j * a.n + i)]);
+    EXPECT_NEAR(v.uv[1], 1.0 - double(uv[2 * size_t(j * a.n + i) + 1]), 1e-6);
+  }
+}
+
 TEST(GltfTextures, TexturedGltfToMtToGltfKeepsTrianglesAndTexels) {
   TempDir dir;
   test::writeFile(dir.file("tex.glb"), texturedDoc(dir).glb());
