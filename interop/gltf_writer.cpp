@@ -12,9 +12,11 @@
 #include <cstring>
 #include <limits>
 #include <nlohmann/json.hpp>
+#include <unordered_map>
 
 #include "base/error.h"
 #include "base/output_path.h"
+#include "mtfile/mt_format.h"
 
 namespace mt::interop {
 
@@ -79,6 +81,13 @@ class Views {
       view["byteStride"] = s.stride;
     }
     views_.push_back(std::move(view));
+    return int(views_.size() - 1);
+  }
+  // Bytes stored as they are (an image): buffer 0, no stride, no target.
+  int addRaw(const uint8_t* data, size_t size) {
+    pad4(bin_);
+    views_.push_back({{"buffer", 0}, {"byteOffset", bin_.size()}, {"byteLength", size}});
+    bin_.insert(bin_.end(), data, data + size);
     return int(views_.size() - 1);
   }
   json& views() { return views_; }
@@ -217,8 +226,10 @@ DracoPrimitive encodeDraco(const GltfMeshView& m, const uint32_t qMin[3], int sp
 GltfBytes buildGltf(const GltfMeshView& input, const GltfOptions& o, const std::string& binUri) {
   if (input.vertexCount == 0 || input.triangleCount == 0) throw Error("glTF writer: the mesh has no triangles");
   if (input.vertexCount > 0xFFFFFFFEu) throw Error("glTF writer: more vertices than 32-bit indices address");
+  // Textured meshes keep their order (the triangles are grouped per image below).
+  const bool textured = input.texcoords && input.triangleImage;
   Reordered reordered;
-  if (o.meshopt && !o.draco) reorderForCompression(input, reordered);
+  if (o.meshopt && !o.draco && !textured) reorderForCompression(input, reordered);
   const GltfMeshView& m = reordered.view.positions ? reordered.view : input;
   GltfBytes out;
   GltfInfo& info = out.info;
@@ -245,8 +256,9 @@ GltfBytes buildGltf(const GltfMeshView& input, const GltfOptions& o, const std::
   }
   info.quantized = quantized;
   // Draco codes the grid coordinates: without the grid (or wider than 16 bits) the plain layout.
-  const bool draco = o.draco && quantized;
+  const bool draco = o.draco && quantized && !textured;
   if (o.draco && !quantized) info.fallbackReason += "; written without Draco";
+  if (o.draco && textured) info.fallbackReason += "textured: written without Draco";
 
   // The node translation: a grid point (exact in double) near the mesh, so the stored differences
   // are small; the bounding box's centre when there is no grid.
@@ -315,22 +327,53 @@ GltfBytes buildGltf(const GltfMeshView& input, const GltfOptions& o, const std::
     col.bytes.assign(m.colors, m.colors + 4 * n);
     streams.push_back(std::move(col));
   }
-  Stream idx;
-  idx.indices = true;
-  idx.count = 3 * m.triangleCount;
-  idx.stride = n <= 65535 ? 2 : 4;
-  idx.bytes.reserve(idx.count * idx.stride);
-  for (size_t i = 0; i < idx.count; ++i) {
-    assert(m.triangles[i] < n);
-    if (idx.stride == 2) put<uint16_t>(idx.bytes, uint16_t(m.triangles[i]));
-    else put<uint32_t>(idx.bytes, m.triangles[i]);
+  if (textured) {
+    // glTF's v runs down the image, as the view's does. Always float: the MT keeps 1/16 texel of
+    // atlases up to 2048 texels, which 16-bit normalized coordinates would not hold exactly.
+    Stream uv;
+    uv.count = n;
+    uv.stride = 8;
+    for (size_t v = 0; v < n; ++v)
+      for (int c = 0; c < 2; ++c) put<float>(uv.bytes, std::clamp(m.texcoords[2 * v + c], 0.0f, 1.0f));
+    streams.push_back(std::move(uv));
   }
-  streams.push_back(std::move(idx));
+  // The triangles: one index stream, or with textures one per image (then the untextured ones).
+  std::vector<uint32_t> groupImage;  // per index stream: its image, UINT32_MAX none
+  {
+    std::vector<std::vector<uint32_t>> groups(textured ? m.imageCount + 1 : 1);
+    for (size_t t = 0; t < m.triangleCount; ++t) {
+      size_t g = 0;
+      if (textured) {
+        const uint32_t img = m.triangleImage[t];
+        assert(img == UINT32_MAX || img < m.imageCount);
+        g = img == UINT32_MAX || img >= m.imageCount ? m.imageCount : img;
+      }
+      groups[g].push_back(uint32_t(t));
+    }
+    for (size_t g = 0; g < groups.size(); ++g) {
+      if (groups[g].empty()) continue;
+      Stream idx;
+      idx.indices = true;
+      idx.count = 3 * groups[g].size();
+      idx.stride = n <= 65535 ? 2 : 4;
+      idx.bytes.reserve(idx.count * idx.stride);
+      for (uint32_t t : groups[g])
+        for (int k = 0; k < 3; ++k) {
+          const uint32_t i = m.triangles[3 * size_t(t) + size_t(k)];
+          assert(i < n);
+          if (idx.stride == 2) put<uint16_t>(idx.bytes, uint16_t(i));
+          else put<uint32_t>(idx.bytes, i);
+        }
+      streams.push_back(std::move(idx));
+      groupImage.push_back(textured && g < m.imageCount ? uint32_t(g) : UINT32_MAX);
+    }
+  }
 
   Views views(o.meshopt && !draco, out.bin);
   json accessors = json::array();
   json attributes = json::object();
   json primitiveExtensions;
+  std::vector<size_t> indexAccessors;
   size_t s = 0;
   if (draco) {
     // The accessors describe the decoded data and have no buffer view; the one view holds Draco's bytes.
@@ -352,6 +395,7 @@ GltfBytes buildGltf(const GltfMeshView& input, const GltfOptions& o, const std::
       dattr["COLOR_0"] = d.color;
     }
     accessors.push_back({{"componentType", d.points <= 65535 ? kUnsignedShort : kUnsignedInt}, {"count", 3 * d.faces}, {"type", "SCALAR"}});
+    indexAccessors.push_back(accessors.size() - 1);
     primitiveExtensions["KHR_draco_mesh_compression"] = {{"bufferView", 0}, {"attributes", dattr}};
   } else {
     json p = {{"bufferView", views.add(streams[s++])}, {"componentType", quantized ? kUnsignedShort : kFloat},
@@ -371,10 +415,29 @@ GltfBytes buildGltf(const GltfMeshView& input, const GltfOptions& o, const std::
       accessors.push_back(a);
       attributes["COLOR_0"] = accessors.size() - 1;
     }
-    const Stream& is = streams[s];
-    json a = {{"bufferView", views.add(is)}, {"componentType", is.stride == 2 ? kUnsignedShort : kUnsignedInt},
-              {"count", is.count}, {"type", "SCALAR"}};
-    accessors.push_back(a);
+    if (textured) {
+      json a = {{"bufferView", views.add(streams[s++])}, {"componentType", kFloat}, {"count", n}, {"type", "VEC2"}};
+      accessors.push_back(a);
+      attributes["TEXCOORD_0"] = accessors.size() - 1;
+    }
+    for (; s < streams.size(); ++s) {
+      const Stream& is = streams[s];
+      json a = {{"bufferView", views.add(is)}, {"componentType", is.stride == 2 ? kUnsignedShort : kUnsignedInt},
+                {"count", is.count}, {"type", "SCALAR"}};
+      accessors.push_back(a);
+      indexAccessors.push_back(accessors.size() - 1);
+    }
+  }
+  // The images, one material each (only those some triangle uses), stored as they are.
+  json images = json::array(), textures = json::array(), materials = json::array();
+  std::vector<int> materialOfImage(textured ? m.imageCount : 0, -1);
+  for (uint32_t img : groupImage) {
+    if (img == UINT32_MAX) continue;
+    const GltfMeshView::Image& im = m.images[img];
+    images.push_back({{"bufferView", views.addRaw(im.data, im.size)}, {"mimeType", im.png ? "image/png" : "image/jpeg"}});
+    textures.push_back({{"source", images.size() - 1}, {"sampler", 0}});
+    materials.push_back({{"pbrMetallicRoughness", {{"baseColorTexture", {{"index", textures.size() - 1}}}, {"metallicFactor", 0.0}}}});
+    materialOfImage[img] = int(materials.size() - 1);
   }
   pad4(out.bin);
 
@@ -398,9 +461,21 @@ GltfBytes buildGltf(const GltfMeshView& input, const GltfOptions& o, const std::
   doc["buffers"] = buffers;
   doc["bufferViews"] = views.views();
   doc["accessors"] = accessors;
-  json primitive = {{"attributes", attributes}, {"indices", accessors.size() - 1}, {"mode", 4}};
-  if (!primitiveExtensions.is_null()) primitive["extensions"] = primitiveExtensions;
-  doc["meshes"] = json::array({{{"primitives", json::array({primitive})}}});
+  if (!materials.empty()) {
+    // Linear filtering, mipmaps, clamped: the atlases' gutters hold the border texels.
+    doc["samplers"] = json::array({{{"magFilter", 9729}, {"minFilter", 9987}, {"wrapS", 33071}, {"wrapT", 33071}}});
+    doc["images"] = images;
+    doc["textures"] = textures;
+    doc["materials"] = materials;
+  }
+  json primitives = json::array();
+  for (size_t g = 0; g < indexAccessors.size(); ++g) {
+    json primitive = {{"attributes", attributes}, {"indices", indexAccessors[g]}, {"mode", 4}};
+    if (!primitiveExtensions.is_null()) primitive["extensions"] = primitiveExtensions;
+    if (g < groupImage.size() && groupImage[g] != UINT32_MAX) primitive["material"] = materialOfImage[groupImage[g]];
+    primitives.push_back(primitive);
+  }
+  doc["meshes"] = json::array({{{"primitives", primitives}}});
   json meshNode = {{"mesh", 0}};
   double local[3];
   for (int a = 0; a < 3; ++a) local[a] = t[a] - o.frame[a];
@@ -460,6 +535,11 @@ void removeQuietly(Env* env, const std::string& path) {
 
 }  // namespace
 
+static std::string parentOf(const std::string& path) {
+  const size_t slash = path.find_last_of('/');
+  return slash == std::string::npos ? "." : slash == 0 ? "/" : path.substr(0, slash);
+}
+
 void writeFileAtomic(const std::string& path, const void* data, size_t size, Env* env) {
   const std::string tmp = uniqueTempName(path);
   try {
@@ -469,6 +549,7 @@ void writeFileAtomic(const std::string& path, const void* data, size_t size, Env
     removeQuietly(env, tmp);
     throw;
   }
+  env->syncDir(parentOf(path));  // the new name survives a crash
 }
 
 GltfInfo writeGltfFile(const std::string& path, const GltfMeshView& mesh, const GltfOptions& options, Env* env) {
@@ -500,7 +581,97 @@ GltfInfo writeGltfFile(const std::string& path, const GltfMeshView& mesh, const 
     removeQuietly(env, jsonTmp);
     throw;
   }
+  env->syncDir(parentOf(path));
   return g.info;
+}
+
+void texturedGltfMeshOf(const TexturedCut& cut, const double gridOrigin[3], double gridStep, TexturedGltfMesh& out) {
+  const WeldedMesh& m = cut.mesh;
+  const size_t triangles = m.triangleCount();
+  assert(cut.cornerUV.size() == 6 * triangles && cut.triangleTexture.size() == triangles);
+  // A vertex per distinct (welded vertex, texture, coordinate): the coordinates are the MT's
+  // (multiples of 1/16 texel), compared as the floats written.
+  std::unordered_map<uint64_t, uint32_t> first;  // (vertex, texture) -> first split vertex: a chain
+  std::vector<uint32_t> next;                     // of the split vertices of one key
+  std::vector<uint32_t> source;                   // split vertex -> welded vertex
+  std::vector<uint64_t> uvKey;                    // split vertex -> the float bits of u, 1 - v
+  out.triangles.resize(3 * triangles);
+  out.triangleImage.assign(cut.triangleTexture.begin(), cut.triangleTexture.end());
+  for (size_t t = 0; t < triangles; ++t)
+    for (int k = 0; k < 3; ++k) {
+      const uint32_t w = m.triangles[3 * t + size_t(k)];
+      const uint32_t tex = cut.triangleTexture[t];
+      uint64_t key = 0;
+      if (tex != UINT32_MAX) {
+        const float u = std::clamp(cut.cornerUV[6 * t + 2 * size_t(k)], 0.0f, 1.0f);
+        const float v = float(1.0 - double(std::clamp(cut.cornerUV[6 * t + 2 * size_t(k) + 1], 0.0f, 1.0f)));
+        uint32_t bu, bv;
+        std::memcpy(&bu, &u, 4);
+        std::memcpy(&bv, &v, 4);
+        key = uint64_t(bu) << 32 | bv;
+      }
+      const uint64_t vk = uint64_t(w) << 32 | tex;
+      auto it = first.find(vk);
+      uint32_t found = UINT32_MAX;
+      if (it != first.end())
+        for (uint32_t s = it->second; s != UINT32_MAX; s = next[s])
+          if (uvKey[s] == key) {
+            found = s;
+            break;
+          }
+      if (found == UINT32_MAX) {
+        found = uint32_t(source.size());
+        source.push_back(w);
+        uvKey.push_back(key);
+        if (it == first.end()) {
+          next.push_back(UINT32_MAX);
+          first.emplace(vk, found);
+        } else {
+          next.push_back(it->second);
+          it->second = found;
+        }
+      }
+      out.triangles[3 * t + size_t(k)] = found;
+    }
+  const size_t n = source.size();
+  out.positions.resize(3 * n);
+  out.q.resize(m.q.empty() ? 0 : 3 * n);
+  out.normals.resize(m.normals.empty() ? 0 : 3 * n);
+  out.colors.resize(m.colors.empty() ? 0 : 4 * n);
+  out.texcoords.resize(2 * n);
+  for (size_t v = 0; v < n; ++v) {
+    const size_t w = source[v];
+    std::copy_n(&m.positions[3 * w], 3, &out.positions[3 * v]);
+    if (!m.q.empty()) std::copy_n(&m.q[3 * w], 3, &out.q[3 * v]);
+    if (!m.normals.empty()) std::copy_n(&m.normals[3 * w], 3, &out.normals[3 * v]);
+    if (!m.colors.empty()) std::copy_n(&m.colors[4 * w], 4, &out.colors[4 * v]);
+    const uint32_t bu = uint32_t(uvKey[v] >> 32), bv = uint32_t(uvKey[v]);
+    std::memcpy(&out.texcoords[2 * v], &bu, 4);
+    std::memcpy(&out.texcoords[2 * v + 1], &bv, 4);
+  }
+  out.images.clear();
+  for (const CutTexture& t : cut.textures) {
+    GltfMeshView::Image im;
+    im.data = t.image.data();
+    im.size = t.image.size();
+    im.png = t.imageFormat == format::kImagePng;
+    out.images.push_back(im);
+  }
+  GltfMeshView& view = out.view;
+  view = GltfMeshView{};
+  view.vertexCount = n;
+  view.triangleCount = triangles;
+  view.positions = out.positions.data();
+  view.triangles = out.triangles.data();
+  view.normals = out.normals.empty() ? nullptr : out.normals.data();
+  view.colors = out.colors.empty() ? nullptr : out.colors.data();
+  view.q = out.q.empty() ? nullptr : out.q.data();
+  for (int a = 0; a < 3; ++a) view.gridOrigin[a] = gridOrigin[a];
+  view.gridStep = gridStep;
+  view.texcoords = out.texcoords.data();
+  view.triangleImage = out.triangleImage.data();
+  view.images = out.images.data();
+  view.imageCount = out.images.size();
 }
 
 }  // namespace mt::interop

@@ -14,6 +14,12 @@
 // (Draco's mesh coding of the grid coordinates, lossless) and KHR_mesh_quantization (uint16
 // positions, int16 normals). Colours (RGBA8, COLOR_0) and normals
 // when the mesh has them.
+//
+// Textures (a cut of a textured MT file, texturedGltfMeshOf): TEXCOORD_0 per vertex (a vertex per
+// distinct grid point and texture coordinate), one primitive and one material per texture (the
+// patch's atlas, its JPEG or PNG bytes as stored in the MT file, embedded in a buffer view of the
+// GLB or of the .gltf's .bin: nothing is re-encoded), pbrMetallicRoughness.baseColorTexture with
+// metallicFactor 0. Coordinates as float (the MT's multiples of 1/16 texel, exact to the float). Draco is not used for textured meshes (plain or meshopt layout).
 #pragma once
 
 #include <cstddef>
@@ -23,6 +29,7 @@
 
 #include "base/env.h"
 #include "mtfile/mt_cut.h"
+#include "mtfile/textured_cut.h"
 
 namespace mt::interop {
 
@@ -38,7 +45,30 @@ struct GltfMeshView {
   const uint32_t* q = nullptr;        // 3 per vertex
   double gridOrigin[3] = {0, 0, 0};
   double gridStep = 0;
+  // Textures: texcoords null for an untextured mesh.
+  const float* texcoords = nullptr;          // 2 per vertex, glTF's convention (v = 0 at the top row)
+  const uint32_t* triangleImage = nullptr;   // 1 per triangle: index into images, UINT32_MAX untextured
+  struct Image {
+    const uint8_t* data = nullptr;
+    size_t size = 0;
+    bool png = false;  // else JPEG
+  };
+  const Image* images = nullptr;
+  size_t imageCount = 0;
 };
+
+// A textured cut as a glTF mesh: the welded mesh's vertices split per distinct texture coordinate
+// (and texture), with the textures' bytes. The view points into this object.
+struct TexturedGltfMesh {
+  std::vector<double> positions;
+  std::vector<uint32_t> q, triangles, triangleImage;
+  std::vector<float> normals, texcoords;
+  std::vector<uint8_t> colors;
+  std::vector<GltfMeshView::Image> images;
+  GltfMeshView view;
+};
+// `cut` must outlive the result (the images point into it).
+void texturedGltfMeshOf(const TexturedCut& cut, const double gridOrigin[3], double gridStep, TexturedGltfMesh& out);
 
 // The view of a welded cut of an MT file (assembleCut) on its grid (header gridOrigin, gridStep).
 inline GltfMeshView gltfMeshViewOf(const WeldedMesh& mesh, const double gridOrigin[3], double gridStep) {

@@ -18,6 +18,7 @@
 #include "base/output_path.h"
 #include "interop/gltf_writer.h"
 #include "mtfile/mt_cut.h"
+#include "mtfile/textured_cut.h"
 
 namespace mt::interop {
 
@@ -44,6 +45,32 @@ struct Tree {
   std::vector<std::vector<std::pair<uint64_t, int>>> children;
 };
 
+std::string parentOf(const std::string& path) {
+  const size_t slash = path.find_last_of('/');
+  return slash == std::string::npos ? "." : slash == 0 ? "/" : path.substr(0, slash);
+}
+
+// The temporary directory after a failure: its files through the Env, then the two directories.
+void removeTemporary(Env* env, const std::string& tmp) {
+  for (const std::string& sub : {tmp + "/tiles", tmp}) {
+    std::vector<std::string> names;
+    try {
+      names = env->listDir(sub);
+    } catch (const Error&) {
+      continue;
+    }
+    for (const std::string& n : names) {
+      try {
+        env->removeFile(sub + "/" + n);
+      } catch (const Error&) {
+      }
+    }
+  }
+  std::error_code ec;
+  fs::remove(tmp + "/tiles", ec);  // empty directories: the Env has no removeDir
+  fs::remove(tmp, ec);
+}
+
 }  // namespace
 
 TilesReport exportTiles(const MtFileReader& r, const std::string& dir, const TilesOptions& options) {
@@ -56,8 +83,8 @@ TilesReport exportTiles(const MtFileReader& r, const std::string& dir, const Til
   const uint32_t N = uint32_t(nodes.size());
   if (N < 2) fail(r.path(), "the DAG has no nodes to export");
   const uint32_t source = 0, sink = N - 1;
-  std::error_code ec;
-  if (fs::exists(dir, ec)) fail(dir, "exists: give a directory name that does not exist yet (nothing is overwritten)");
+  Env* env = Env::Default();
+  if (env->exists(dir)) fail(dir, "exists: give a directory name that does not exist yet (nothing is overwritten)");
 
   auto arcTriangles = [&](uint32_t a) {
     uint64_t t = 0;
@@ -122,22 +149,30 @@ TilesReport exportTiles(const MtFileReader& r, const std::string& dir, const Til
     applyPlacement(report.placement, origin, rootTransform + 12);
   }
   const std::string tmp = uniqueTempName(dir);
-  Env* env = Env::Default();
   try {
     env->createDir(tmp);
     env->createDir(tmp + "/tiles");
     std::atomic<uint64_t> done{0};
     tbb::parallel_for(size_t(0), contents.size(), [&](size_t i) {
       Content& c = contents[i];
-      WeldedMesh mesh = assembleCut(r, c.arcs);
+      // A textured file's contents carry their patches' atlases (gltf_writer.h): each patch is in
+      // one content, so no image is stored twice. Draco does not code them: meshopt stands in.
+      TexturedCut tcut;
+      TexturedGltfMesh tmesh;
+      WeldedMesh plain;
+      const bool textured = r.hasTextures();
+      if (textured) tcut = assembleTexturedCut(r, c.arcs);
+      else plain = assembleCut(r, c.arcs);
+      const WeldedMesh& mesh = textured ? tcut.mesh : plain;
       c.triangles = mesh.triangleCount();
       if (c.triangles == 0) {
         c.empty = true;
         return;
       }
-      const GltfMeshView view = gltfMeshViewOf(mesh, origin, h.gridStep);
+      if (textured) texturedGltfMeshOf(tcut, origin, h.gridStep, tmesh);
+      const GltfMeshView view = textured ? tmesh.view : gltfMeshViewOf(mesh, origin, h.gridStep);
       GltfOptions go;
-      go.meshopt = options.meshopt;
+      go.meshopt = options.meshopt || (textured && options.draco);
       go.draco = options.draco;
       go.quantize = options.quantize;
       go.zUpToYUp = true;
@@ -149,6 +184,7 @@ TilesReport exportTiles(const MtFileReader& r, const std::string& dir, const Til
       c.bytes = glb.size();
       auto f = env->newWritableFile(tmp + "/" + c.uri);
       f->append(glb.data(), glb.size());
+      f->sync();
       f->close();
       const uint64_t k = ++done;
       if (options.progress && k % 2000 == 0)
@@ -241,11 +277,16 @@ TilesReport exportTiles(const MtFileReader& r, const std::string& dir, const Til
       report.triangles += c.triangles;
       report.floatTiles += c.floatPositions;
     }
+    // Durable before it is published: the files were synced, now their directories' entries;
+    // after the rename, the parent's.
+    env->syncDir(tmp + "/tiles");
+    env->syncDir(tmp);
     env->renameFile(tmp, dir);
   } catch (...) {
-    fs::remove_all(tmp, ec);
+    removeTemporary(env, tmp);
     throw;
   }
+  env->syncDir(parentOf(dir));
   report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return report;
 }

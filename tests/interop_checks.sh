@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The checks of interop/checks (npm ci there first; scripts/setup.sh does it) on files the tools write:
-#   tests/interop_checks.sh validate BIN_DIR   every glTF variant mtextract writes and a 3D Tiles export,
+#   tests/interop_checks.sh validate BIN_DIR   every glTF variant mtextract writes (of a textured scan too)
+#                                              and a 3D Tiles export,
 #                                              through the Khronos glTF-Validator (no error, no warning)
 #                                              and the tileset rules (interop/checks/validate.mjs); meshopt
 #                                              and Draco files also decoded and validated again; CesiumGS's
@@ -67,6 +68,18 @@ case "$mode" in
       files+=("$t/$mt-full.glb" "$t/$mt-coarse.gltf" "$t/$mt-quantized.glb" "$t/$mt-meshopt.glb" "$t/$mt-qm.gltf"
               "$t/$mt-tiles" "$t/$mt-tiles-meshopt" "$t/$mt-tiles-draco")
     done
+    # A textured scan (format v6): its cuts and tiles carry TEXCOORD_0 and one material per patch atlas.
+    "$bin/mtgen" -o "$t/tex.ply" --triangles 20k --texture charts >/dev/null 2>&1
+    "$bin/mtbuild" "$t/tex.ply" -o "$t/tex.mt" -q --patch-triangles 500
+    "$bin/mtextract" "$t/tex.mt" --error 0 -o "$t/tex-full.glb" 2>/dev/null
+    "$bin/mtextract" "$t/tex.mt" --triangles 5000 -o "$t/tex-coarse.gltf" 2>/dev/null
+    "$bin/mtextract" "$t/tex.mt" --error 0 --quantize -o "$t/tex-quantized.glb" 2>/dev/null
+    "$bin/mtextract" "$t/tex.mt" --error 0 --meshopt -o "$t/tex-meshopt.glb" 2>/dev/null
+    "$bin/mtextract" "$t/tex.mt" --triangles 5000 --quantize --meshopt -o "$t/tex-qm.gltf" 2>/dev/null
+    "$bin/mtexport" tiles "$t/tex.mt" "$t/tex-tiles" --codec none 2>/dev/null
+    "$bin/mtexport" tiles "$t/tex.mt" "$t/tex-tiles-default" 2>/dev/null
+    files+=("$t/tex-full.glb" "$t/tex-coarse.gltf" "$t/tex-quantized.glb" "$t/tex-meshopt.glb" "$t/tex-qm.gltf"
+            "$t/tex-tiles" "$t/tex-tiles-default")
     node "$checks/validate.mjs" "${files[@]}"
     # CesiumGS's 3d-tiles-validator is not in the npm registry this project installs from (docs/interop.md
     # "Tileset validation"): where one is built by hand, MT_TILES_VALIDATOR names its bin/main and it

@@ -13,6 +13,7 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <functional>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -21,6 +22,7 @@
 #include "interop/gltf_writer.h"
 #include "mtfile/mt_file.h"
 #include "patchstore/io/mesh_reader.h"
+#include "texture/image_codec.h"
 #include "tests/test_support.h"
 
 namespace mt {
@@ -531,6 +533,348 @@ TEST(GltfReader, BadFilesGiveOneClearErrorNamingTheFileAndWhere) {
   auto r = runTool("mtbuild", dir.file("index.glb") + " -o " + dir.file("x.mt") + " -q");
   EXPECT_EQ(r.exitCode, 1);
   EXPECT_NE(r.output.find("index 99"), std::string::npos) << r.output;
+  EXPECT_FALSE(test::fileExists(dir.file("x.mt")));
+}
+
+// ---- Textures ---------------------------------------------------------------------------------
+
+// A smooth test picture (JPEG keeps it within a few levels): each texel's colour from its position.
+tex::RgbImage testPicture(int w, int h, int seed) {
+  tex::RgbImage im(w, h);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      uint8_t* p = im.pixel(x, y);
+      p[0] = uint8_t(128 + 100 * std::sin(0.21 * x + seed));
+      p[1] = uint8_t(128 + 100 * std::cos(0.17 * y + 2 * seed));
+      p[2] = uint8_t(128 + 90 * std::sin(0.11 * (x + y)));
+    }
+  return im;
+}
+
+// Texture coordinates of a Grid in glTF's convention (v down), inside [0.05, 0.95].
+std::vector<float> gridUV(const Grid& g) {
+  std::vector<float> uv;
+  for (int j = 0; j < g.n; ++j)
+    for (int i = 0; i < g.n; ++i) uv.insert(uv.end(), {0.05f + 0.9f * float(i) / float(g.n - 1), 0.05f + 0.9f * float(j) / float(g.n - 1)});
+  return uv;
+}
+
+// Two textured meshes (a PNG in a buffer view; a JPEG beside the file, its uri %-escaped) and an
+// untextured one, at UTM-like coordinates under node transforms.
+Doc texturedDoc(const TempDir& dir) {
+  Doc d;
+  Grid a(30), b(20, 1.0f), c(10, 2.0f);
+  const std::vector<uint8_t> png = tex::encodePng(testPicture(64, 48, 1));
+  const std::vector<uint8_t> jpeg = tex::encodeJpeg(testPicture(40, 40, 2), 95);
+  test::writeFile(dir.file("tex b.jpg"), std::string(jpeg.begin(), jpeg.end()));
+  const int pngView = d.view(png.data(), png.size());
+  d.j["images"] = json::array({{{"bufferView", pngView}, {"mimeType", "image/png"}}, {{"uri", "tex%20b.jpg"}}});
+  d.j["textures"] = json::array({{{"source", 0}}, {{"source", 1}}});
+  d.j["materials"] = json::array({{{"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 0}}}}}},
+                                  {{"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 1}, {"texCoord", 1}}}}}},
+                                  {{"pbrMetallicRoughness", {{"baseColorFactor", {0.5, 0.5, 0.5, 1.0}}}}}});
+  auto uvAccessor = [&](const Grid& g) {
+    const std::vector<float> uv = gridUV(g);
+    return d.accessor(d.view(uv.data(), uv.size() * 4), 5126, uv.size() / 2, "VEC2");
+  };
+  const int ua = uvAccessor(a), ub = uvAccessor(b);
+  int ma = d.mesh({{"attributes", {{"POSITION", d.positions(a.p)}, {"TEXCOORD_0", ua}}},
+                   {"indices", d.accessor(d.view(a.t.data(), a.t.size() * 4), 5125, a.t.size(), "SCALAR")},
+                   {"material", 0}});
+  // Material 1 reads TEXCOORD_1 (TEXCOORD_0 is there too, and is not its coordinates).
+  int mb = d.mesh({{"attributes", {{"POSITION", d.positions(b.p)}, {"TEXCOORD_0", ua}, {"TEXCOORD_1", ub}}},
+                   {"indices", d.accessor(d.view(b.t.data(), b.t.size() * 4), 5125, b.t.size(), "SCALAR")},
+                   {"material", 1}});
+  const std::vector<float> other(2 * size_t(b.n * b.n), 0.9f);
+  d.j["meshes"][size_t(mb)]["primitives"][0]["attributes"]["TEXCOORD_0"] = d.accessor(d.view(other.data(), other.size() * 4), 5126, other.size() / 2, "VEC2");
+  int mc = d.mesh({{"attributes", {{"POSITION", d.positions(c.p)}}},
+                   {"indices", d.accessor(d.view(c.t.data(), c.t.size() * 4), 5125, c.t.size(), "SCALAR")},
+                   {"material", 2}});
+  d.node({{"mesh", ma}, {"translation", {500000.0, 4000000.0, 100.0}}, {"children", json::array({1})}});
+  d.node({{"mesh", mb}, {"translation", {9.0, 0.0, 0.0}}, {"rotation", {0.0, 0.0, 0.38268343236508978, 0.92387953251128674}},
+          {"scale", {1.5, 1.5, 1.5}}});
+  d.node({{"mesh", mc}, {"translation", {500000.0, 4000020.0, 100.0}}});
+  d.j["scenes"] = json::array({{{"nodes", {0, 2}}}});
+  d.j["scene"] = 0;
+  return d;
+}
+
+// Per triangle (as grid points, rotated to its smallest corner): its corners' texture coordinates
+// in texels of its image (v up, as readers deliver), and the image. Reads with the reader alive,
+// so embedded images are still where its materials say.
+struct TexturedTri {
+  double texel[6];
+  const tex::RgbImage* image = nullptr;
+};
+struct TexturedSoup {
+  std::vector<tex::RgbImage> images;
+  std::map<GridTri, TexturedTri> tris;
+  size_t untextured = 0, vertices = 0;
+};
+void readTextured(const std::string& path, const double origin[3], double step, TexturedSoup& out) {
+  auto reader = openMesh(path);
+  Soup s;
+  reader->read(s);
+  ASSERT_TRUE(s.header.hasTexcoords) << path;
+  out.images.clear();
+  for (const InputMaterial& m : s.header.materials)
+    out.images.push_back(m.texture.empty() ? tex::RgbImage() : tex::readImageFile(m.texture));
+  out.vertices = s.v.size();
+  for (size_t i = 0; i < s.t.size(); i += 3) {
+    std::array<std::array<int64_t, 3>, 3> c;
+    for (int k = 0; k < 3; ++k)
+      for (int a = 0; a < 3; ++a) c[k][a] = int64_t(std::floor((s.v[s.t[i + k]].p[a] - origin[a]) / step + 0.5));
+    int m = 0;
+    for (int k = 1; k < 3; ++k)
+      if (c[k] < c[m]) m = k;
+    GridTri g;
+    TexturedTri t;
+    const uint32_t material = s.v[s.t[i]].material;
+    for (int k = 0; k < 3; ++k) EXPECT_EQ(s.v[s.t[i + k]].material, material);
+    for (int k = 0; k < 3; ++k) {
+      const InputVertex& v = s.v[s.t[i + (m + k) % 3]];
+      for (int a = 0; a < 3; ++a) g[3 * k + a] = c[(m + k) % 3][a];
+      if (material != kNoMaterial) {
+        const tex::RgbImage& im = out.images.at(material);
+        t.texel[2 * k] = double(v.uv[0]) * im.width;
+        t.texel[2 * k + 1] = double(v.uv[1]) * im.height;
+      }
+    }
+    if (material == kNoMaterial) {
+      ++out.untextured;
+      continue;
+    }
+    t.image = &out.images[material];
+    EXPECT_TRUE(out.tris.emplace(g, t).second) << "a triangle twice";
+  }
+}
+
+TEST(GltfReader, ReadsBaseColourTexturesFromBufferViewsAndFiles) {
+  TempDir dir;
+  test::writeFile(dir.file("tex.glb"), texturedDoc(dir).glb());
+  auto reader = openMesh(dir.file("tex.glb"));
+  Soup s;
+  reader->read(s);
+  ASSERT_TRUE(s.header.hasTexcoords);
+  ASSERT_EQ(s.header.materials.size(), 2u);  // the untextured material plays no part
+  EXPECT_EQ(tex::readImageFile(s.header.materials[0].texture).width, 64);
+  EXPECT_EQ(s.header.materials[1].texture, dir.file("tex b.jpg"));
+  // Mesh a's vertex (i, j) = (3, 2): u = 0.05 + 0.9 * 3 / 29, v flipped to up.
+  const InputVertex& v = s.v[2 * 30 + 3];
+  EXPECT_EQ(v.material, 0u);
+  EXPECT_FLOAT_EQ(v.uv[0], 0.05f + 0.9f * 3.0f / 29.0f);
+  EXPECT_NEAR(v.uv[1], 1.0 - (0.05 + 0.9 * 2.0 / 29.0), 1e-6);
+  EXPECT_EQ(s.v[900].material, 1u);           // mesh b reads TEXCOORD_1
+  EXPECT_NEAR(s.v[900 + 5].uv[0], 0.05 + 0.9 * 5 / 19.0, 1e-6);
+  EXPECT_EQ(s.v.back().material, kNoMaterial);  // mesh c
+  const std::string embedded = s.header.materials[0].texture;
+  reader.reset();
+  EXPECT_FALSE(test::fileExists(embedded)) << "the reader's copy of an embedded image outlives it";
+
+  // The JPEG as a base64 data URI, in a .gltf with an external .bin: the same texels.
+  Doc d = texturedDoc(dir);
+  const std::string jpeg = test::readFile(dir.file("tex b.jpg"));
+  static const char* k64 = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  std::string b64;
+  for (size_t i = 0; i < jpeg.size(); i += 3) {
+    uint32_t n = uint32_t(uint8_t(jpeg[i])) << 16;
+    if (i + 1 < jpeg.size()) n |= uint32_t(uint8_t(jpeg[i + 1])) << 8;
+    if (i + 2 < jpeg.size()) n |= uint8_t(jpeg[i + 2]);
+    b64 += k64[(n >> 18) & 63];
+    b64 += k64[(n >> 12) & 63];
+    b64 += i + 1 < jpeg.size() ? k64[(n >> 6) & 63] : '=';
+    b64 += i + 2 < jpeg.size() ? k64[n & 63] : '=';
+  }
+  d.j["images"][1] = {{"uri", "data:image/jpeg;base64," + b64}};
+  d.writeGltf(dir, "uri.gltf", "uri.bin");
+  Soup u;
+  openMesh(dir.file("uri.gltf"))->read(u);
+  ASSERT_EQ(u.header.materials.size(), 2u);
+  EXPECT_EQ(u.v.size(), s.v.size());
+  EXPECT_EQ(u.v[900 + 5].material, 1u);
+  EXPECT_EQ(u.v[900 + 5].uv[0], s.v[900 + 5].uv[0]);
+  EXPECT_FALSE(test::fileExists(u.header.materials[1].texture));  // removed with its reader
+  const tex::RgbImage fromUri = [&] {
+    auto r = openMesh(dir.file("uri.gltf"));
+    return tex::readImageFile(r->header().materials[1].texture);
+  }();
+  const tex::RgbImage fromFile = tex::readImageFile(dir.file("tex b.jpg"));
+  EXPECT_EQ(fromUri.rgb, fromFile.rgb);
+}
+
+// A Draco primitive's TEXCOORD_0 (KHR_draco_mesh_compression names it among its attributes) is
+// read like a plain one: every vertex gets its grid vertex's coordinates, v flipped up.
+TEST(GltfReader, ReadsTextureCoordinatesOfDracoPrimitives) {
+  TempDir dir;
+  Grid a(12);
+  const std::vector<float> uv = gridUV(a);
+  draco::TriangleSoupMeshBuilder builder;
+  builder.Start(int(a.t.size() / 3));
+  const int pos = builder.AddAttribute(draco::GeometryAttribute::POSITION, 3, draco::DT_FLOAT32);
+  const int tc = builder.AddAttribute(draco::GeometryAttribute::TEX_COORD, 2, draco::DT_FLOAT32);
+  for (size_t f = 0; f < a.t.size() / 3; ++f) {
+    const uint32_t* c = &a.t[3 * f];
+    builder.SetAttributeValuesForFace(pos, draco::FaceIndex(uint32_t(f)), &a.p[3 * c[0]], &a.p[3 * c[1]], &a.p[3 * c[2]]);
+    builder.SetAttributeValuesForFace(tc, draco::FaceIndex(uint32_t(f)), &uv[2 * c[0]], &uv[2 * c[1]], &uv[2 * c[2]]);
+  }
+  std::unique_ptr<draco::Mesh> mesh = builder.Finalize();
+  ASSERT_TRUE(mesh);
+  draco::Encoder encoder;
+  encoder.SetSpeedOptions(5, 5);
+  draco::EncoderBuffer buffer;
+  ASSERT_TRUE(encoder.EncodeMeshToBuffer(*mesh, &buffer).ok());
+  Doc d;
+  const std::vector<uint8_t> png = tex::encodePng(testPicture(16, 16, 3));
+  const int pngView = d.view(png.data(), png.size());
+  d.j["images"] = json::array({{{"bufferView", pngView}, {"mimeType", "image/png"}}});
+  d.j["textures"] = json::array({{{"source", 0}}});
+  d.j["materials"] = json::array({{{"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 0}}}}}}});
+  const int bv = d.view(buffer.data(), buffer.size());
+  d.j["accessors"].push_back({{"componentType", 5126}, {"count", mesh->num_points()}, {"type", "VEC3"},
+                              {"min", {0, 0, -0.5}}, {"max", {3, 3, 0.5}}});
+  d.j["accessors"].push_back({{"componentType", 5126}, {"count", mesh->num_points()}, {"type", "VEC2"}});
+  d.j["accessors"].push_back({{"componentType", 5125}, {"count", a.t.size()}, {"type", "SCALAR"}});
+  d.mesh({{"attributes", {{"POSITION", 0}, {"TEXCOORD_0", 1}}}, {"indices", 2}, {"material", 0},
+          {"extensions", {{"KHR_draco_mesh_compression", {{"bufferView", bv},
+                                                         {"attributes", {{"POSITION", mesh->attribute(pos)->unique_id()},
+                                                                         {"TEXCOORD_0", mesh->attribute(tc)->unique_id()}}}}}}}});
+  d.node({{"mesh", 0}});
+  d.scene();
+  d.j["extensionsUsed"] = json::array({"KHR_draco_mesh_compression"});
+  d.j["extensionsRequired"] = json::array({"KHR_draco_mesh_compression"});
+  test::writeFile(dir.file("draco.glb"), d.glb());
+  Soup s = readMesh(dir.file("draco.glb"));
+  ASSERT_TRUE(s.header.hasTexcoords);
+  ASSERT_EQ(s.t.size(), a.t.size());
+  for (const InputVertex& v : s.v) {
+    const int i = int(std::lround(v.p[0] / 0.25)), j = int(std::lround(v.p[1] / 0.25));
+    ASSERT_TRUE(i >= 0 && i < a.n && j >= 0 && j < a.n);
+    EXPECT_EQ(v.material, 0u);
+    EXPECT_FLOAT_EQ(v.uv[0], uv[2 * size_t(j * a.n + i)]);
+    EXPECT_NEAR(v.uv[1], 1.0 - double(uv[2 * size_t(j * a.n + i) + 1]), 1e-6);
+  }
+}
+
+TEST(GltfTextures, TexturedGltfToMtToGltfKeepsTrianglesAndTexels) {
+  TempDir dir;
+  test::writeFile(dir.file("tex.glb"), texturedDoc(dir).glb());
+  auto built = runTool("mtbuild", dir.file("tex.glb") + " -o " + dir.file("tex.mt") + " -q --patch-triangles 300");
+  ASSERT_EQ(built.exitCode, 0) << built.output;
+  auto reader = MtFileReader::open(dir.file("tex.mt"));
+  ASSERT_TRUE(reader->hasTextures());
+  const double* origin = reader->header().gridOrigin;
+  const double step = reader->header().gridStep;
+  const auto input = onGrid(readMesh(dir.file("tex.glb")), origin, step);
+  TexturedSoup in;
+  readTextured(dir.file("tex.glb"), origin, step, in);
+  ASSERT_EQ(in.untextured, 2u * 9 * 9);
+  for (const std::string variant : {"cut.glb", "cut.gltf", "cut-meshopt.glb --meshopt", "cut-q.glb --quantize"}) {
+    SCOPED_TRACE(variant);
+    auto ex = runTool("mtextract", dir.file("tex.mt") + " --error 0 -o " + dir.path() + "/" + variant);
+    ASSERT_EQ(ex.exitCode, 0) << ex.output;
+    EXPECT_EQ(ex.output.find("warning"), std::string::npos) << ex.output;
+    const std::string out = dir.file(variant.substr(0, variant.find(' ')));
+    // The triangles, bit-exact on the grid.
+    EXPECT_EQ(onGrid(readMesh(out), origin, step), input);
+    // A material and an embedded image per patch atlas.
+    const json doc = gltfJson(out);
+    ASSERT_TRUE(doc.contains("materials"));
+    EXPECT_EQ(doc["materials"].size(), doc["images"].size());
+    EXPECT_GT(doc["images"].size(), 2u);
+    for (const json& im : doc["images"]) EXPECT_TRUE(im.contains("bufferView")) << im.dump();
+    // The texels: the build cuts each patch's islands out of the input image and moves them by
+    // whole texels, keeping coordinates to 1/16 texel. So every corner's texel position differs
+    // from the input's by one whole-texel offset per triangle (within 1/32 texel), and the texels
+    // there are the input's (through the MT's JPEG, quality 90).
+    TexturedSoup cut;
+    readTextured(out, origin, step, cut);
+    EXPECT_EQ(cut.tris.size() + cut.untextured, input.size());
+    double worst = 0, sumDiff = 0;
+    int maxDiff = 0;
+    size_t samples = 0;
+    for (const auto& [g, ti] : in.tris) {
+      auto it = cut.tris.find(g);
+      ASSERT_TRUE(it != cut.tris.end());
+      const TexturedTri& to = it->second;
+      double shift[2];
+      for (int a = 0; a < 2; ++a) shift[a] = std::round(to.texel[a] - ti.texel[a]);
+      for (int k = 0; k < 3; ++k)
+        for (int a = 0; a < 2; ++a) worst = std::max(worst, std::abs(to.texel[2 * k + a] - ti.texel[2 * k + a] - shift[a]));
+      // The texel under the triangle's centroid, in both images (rows top first, v up).
+      double cin[2] = {0, 0}, cout[2] = {0, 0};
+      for (int k = 0; k < 3; ++k)
+        for (int a = 0; a < 2; ++a) cin[a] += ti.texel[2 * k + a] / 3, cout[a] += to.texel[2 * k + a] / 3;
+      auto texel = [](const tex::RgbImage& im, const double at[2]) {
+        const int x = std::clamp(int(std::floor(at[0])), 0, im.width - 1);
+        const int y = std::clamp(im.height - 1 - int(std::floor(at[1])), 0, im.height - 1);
+        return im.pixel(x, y);
+      };
+      const uint8_t* a = texel(*ti.image, cin);
+      const uint8_t* b = texel(*to.image, cout);
+      for (int c = 0; c < 3; ++c) {
+        const int d = std::abs(int(a[c]) - int(b[c]));
+        maxDiff = std::max(maxDiff, d);
+        sumDiff += d;
+        ++samples;
+      }
+    }
+    EXPECT_LE(worst, 1.0 / 32 + 1e-3) << "texture coordinates moved by more than the MT keeps";
+    EXPECT_LT(sumDiff / double(samples), 4.0);
+    EXPECT_LE(maxDiff, 40);
+    std::printf("%s: %zu bytes, %zu vertices, %zu images; texel positions within %.4f texel of a whole-texel shift; "
+                "texel colour difference mean %.2f max %d\n",
+                variant.c_str(), size_t(test::readFile(out).size()), cut.vertices, size_t(doc["images"].size()), worst,
+                sumDiff / double(samples), maxDiff);
+  }
+}
+
+TEST(GltfReader, BadTexturesGiveOneClearErrorNamingTheFileAndWhere) {
+  TempDir dir;
+  struct Case {
+    std::string name, expect;
+    std::function<void(Doc&)> damage;
+  };
+  const std::vector<Case> cases = {
+      {"missing.glb", "cannot open", [](Doc& d) { d.j["images"][1]["uri"] = "nothere.jpg"; }},
+      {"corrupt.glb", "image 0 (buffer view 0, byte offset", [](Doc& d) { d.bin[1] = 'X'; }},
+      {"texcoord.glb", "material 1 baseColorTexture uses texCoord 3, but mesh 1 primitive 0 has no TEXCOORD_3",
+       [](Doc& d) { d.j["materials"][1]["pbrMetallicRoughness"]["baseColorTexture"]["texCoord"] = 3; }},
+      {"texture.glb", "material 0 baseColorTexture refers to textures 7, which does not exist",
+       [](Doc& d) { d.j["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]["index"] = 7; }},
+      {"image.glb", "texture 1 refers to images 9, which does not exist", [](Doc& d) { d.j["textures"][1]["source"] = 9; }},
+      {"range.glb", "TEXCOORD_0 of mesh 0 primitive 0) element 0: texture coordinate (-0.500000",
+       [](Doc& d) {
+         const int a = d.j["meshes"][0]["primitives"][0]["attributes"]["TEXCOORD_0"];
+         const size_t at = d.j["bufferViews"][d.j["accessors"][size_t(a)]["bufferView"].get<size_t>()]["byteOffset"];
+         const float bad = -0.5f;
+         std::memcpy(&d.bin[at], &bad, 4);
+       }},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    Doc d = texturedDoc(dir);
+    c.damage(d);
+    const std::string path = dir.file(c.name);
+    test::writeFile(path, d.glb());
+    try {
+      Soup s;
+      openMesh(path)->read(s);
+      ADD_FAILURE() << "no error";
+    } catch (const Error& e) {
+      const std::string m = e.what();
+      EXPECT_NE(m.find(c.name), std::string::npos) << m;
+      EXPECT_NE(m.find(c.expect), std::string::npos) << m;
+      EXPECT_EQ(m.find('\n'), std::string::npos) << m;
+      std::printf("%s\n", m.c_str());
+    }
+  }
+  // mtbuild: the same message, exit 1, nothing left.
+  Doc d = texturedDoc(dir);
+  d.bin[1] = 'X';
+  test::writeFile(dir.file("bad.glb"), d.glb());
+  auto r = runTool("mtbuild", dir.file("bad.glb") + " -o " + dir.file("x.mt") + " -q");
+  EXPECT_EQ(r.exitCode, 1) << r.output;
+  EXPECT_NE(r.output.find("neither PNG nor JPEG"), std::string::npos) << r.output;
   EXPECT_FALSE(test::fileExists(dir.file("x.mt")));
 }
 

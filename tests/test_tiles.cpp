@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <functional>
 #include <nlohmann/json.hpp>
+#include <cstring>
 #include <set>
 
 #include "mtfile/mt_cut.h"
@@ -187,6 +188,59 @@ TEST(Tiles, WithACrsTheRootTransformPutsTheModelOnTheGlobe) {
   EXPECT_NE(bad.output.find("EPSG:999999"), std::string::npos) << bad.output;
   EXPECT_EQ(std::count(bad.output.begin(), bad.output.end(), '\n'), 1) << bad.output;
   EXPECT_FALSE(std::filesystem::exists(dir.file("bad")));
+}
+
+// A textured file's export: every content carries texture coordinates and its patches' atlases,
+// one material and one embedded image each; every stored patch is in one content, so the images
+// over all contents are the MT's textured patches, each once; the glTF reader takes them back.
+TEST(Tiles, ATexturedBuildsContentsCarryTheirPatchesAtlases) {
+  TempDir dir;
+  ASSERT_EQ(runTool("mtgen", "-o " + dir.file("tex.ply") + " --triangles 20k --texture charts").exitCode, 0);
+  auto built = runTool("mtbuild", dir.file("tex.ply") + " -o " + dir.file("tex.mt") + " -q --patch-triangles 500");
+  ASSERT_EQ(built.exitCode, 0) << built.output;
+  auto reader = MtFileReader::open(dir.file("tex.mt"));
+  ASSERT_TRUE(reader->hasTextures());
+  size_t texturedPatches = 0;
+  for (const auto& t : reader->textures()) texturedPatches += t.width > 0;
+  ASSERT_GT(texturedPatches, 10u);
+  for (const std::string codec : {"draco", "none"}) {
+    SCOPED_TRACE(codec);
+    const std::string out = dir.file("tiles-" + codec);
+    auto ex = runTool("mtexport", "tiles " + dir.file("tex.mt") + " " + out + " --codec " + codec);
+    ASSERT_EQ(ex.exitCode, 0) << ex.output;
+    size_t images = 0, contents = 0;
+    for (const auto& e : std::filesystem::directory_iterator(out + "/tiles")) {
+      ++contents;
+      const std::string bytes = test::readFile(e.path().string());
+      uint32_t length = 0;
+      std::memcpy(&length, bytes.data() + 12, 4);
+      const json doc = json::parse(bytes.substr(20, length));
+      ASSERT_TRUE(doc.contains("images")) << e.path();
+      EXPECT_EQ(doc["images"].size(), doc["materials"].size());
+      images += doc["images"].size();
+      // Draco does not code texture coordinates here: meshopt stands in.
+      const bool meshopt = doc.contains("extensionsUsed") &&
+                           std::find(doc["extensionsUsed"].begin(), doc["extensionsUsed"].end(), "EXT_meshopt_compression") !=
+                               doc["extensionsUsed"].end();
+      EXPECT_EQ(meshopt, codec == "draco") << e.path();
+      struct Check : MeshSink {
+        size_t untextured = 0, count = 0;
+        void vertices(const InputVertex* p, size_t n, uint64_t) override {
+          for (size_t i = 0; i < n; ++i) untextured += p[i].material == kNoMaterial;
+          count += n;
+        }
+        void triangles(const uint32_t*, size_t) override {}
+      } check;
+      auto mesh = openMesh(e.path().string());
+      ASSERT_TRUE(mesh->header().hasTexcoords) << e.path();
+      EXPECT_EQ(mesh->header().materials.size(), doc["images"].size());
+      mesh->read(check);
+      EXPECT_EQ(check.untextured, 0u) << e.path();
+      EXPECT_GT(check.count, 0u);
+    }
+    EXPECT_GT(contents, 3u);
+    EXPECT_EQ(images, texturedPatches);
+  }
 }
 
 }  // namespace

@@ -6,7 +6,8 @@
 // The cut is chosen by mtfile/mt_cut.h, its patches decoded and welded by exact grid position,
 // and written with PlyWriter under a name unique to the process (CUT.ply.tmp.PID.RANDOM), renamed
 // over CUT.ply when complete: on any error nothing is left under CUT.ply. The input is never the
-// output (refused by inode), and the output format is chosen by the extension: .ply, .glb/.gltf,
+// output (refused by inode), and the output format is chosen by the extension: .ply, .glb/.gltf
+// (with a textured file: texture coordinates and the patch atlases embedded, interop/gltf_writer.h),
 // or .obj (with a textured file: + .mtl and the textures re-packed into PNG pages beside it).
 #include <CLI/CLI.hpp>
 
@@ -245,6 +246,37 @@ int run(const Options& o) {
                         " MiB): raise --memory, choose a coarser cut, or write .ply (streamed within the cap)",
                     mt::ErrorKind::Resource);
   }
+  if (gltf && r.hasTextures()) {
+    // Textured: a vertex per distinct texture coordinate, a material per patch atlas, the atlases
+    // embedded as stored (gltf_writer.h).
+    const std::vector<uint32_t> arcs = mt::cutArcs(r, cut.inSet);
+    uint64_t imageBytes = 0;
+    for (uint32_t p : mt::cutPatchIdsOf(r, arcs)) imageBytes += r.textures()[p].imageBytes;
+    // The welded cut, its split copy (about as large) and the images twice (the cut's, the GLB's).
+    const uint64_t need = 2 * mt::assembledCutBytes(r, arcs) + 2 * imageBytes;
+    if (need > o.memoryBytes)
+      throw mt::Error(o.output + ": this cut needs about " + std::to_string(need >> 20) + " MiB to write as textured glTF, more than --memory (" +
+                          std::to_string(o.memoryBytes >> 20) + " MiB): raise --memory or choose a coarser cut",
+                      mt::ErrorKind::Resource);
+    mt::TexturedCut tcut = mt::assembleTexturedCut(r, arcs);
+    mt::checkInterrupt(o.output);
+    mt::interop::TexturedGltfMesh tmesh;
+    mt::interop::texturedGltfMeshOf(tcut, r.header().gridOrigin, r.header().gridStep, tmesh);
+    mt::interop::GltfOptions go;
+    go.meshopt = o.meshopt;
+    go.quantize = o.quantize;
+    go.generator = "batched-mt mtextract";
+    go.crs = r.crs();
+    mt::interop::GltfInfo info = mt::interop::writeGltfFile(o.output, tmesh.view, go);
+    if (o.quantize && !info.quantized)
+      std::fprintf(stderr, "mtextract: warning: %s: float positions, not KHR_mesh_quantization: %s\n", o.output.c_str(),
+                   info.fallbackReason.c_str());
+    std::fprintf(stderr, "mtextract: %s: %u triangles, %zu vertices (split at texture seams) from %" PRIu64
+                 " patches, %zu textures (%" PRIu64 " bytes); %u nodes in the set, %u on the front; max error %.9g\n",
+                 o.output.c_str(), tcut.mesh.triangleCount(), tmesh.view.vertexCount, tcut.mesh.patches, tcut.textures.size(),
+                 tcut.textureBytes(), stats.nodes, stats.frontNodes, stats.maxError);
+    return 0;
+  }
   mt::WeldedMesh mesh = mt::assembleCut(r, mt::cutArcs(r, cut.inSet));
   mt::checkInterrupt(o.output);
 
@@ -310,7 +342,8 @@ int main(int argc, char** argv) {
   app.add_option("file", o.input, "The MT file")->required();
   app.add_option("-o,--output", o.output,
                  "The file to write, by its extension: .ply (binary little-endian, welded), .glb or .gltf (+ .bin "
-                 "beside it), or .obj (a textured file's cut: + CUT.mtl and its textures re-packed into CUT_<k>.png pages "
+                 "beside it; a textured file's cut: texture coordinates and one material per patch atlas, the "
+                 "atlases embedded as stored), or .obj (a textured file's cut: + CUT.mtl and its textures re-packed into CUT_<k>.png pages "
                  "beside it); may not be the input")
       ->required();
   auto* err = app.add_option("--error", o.error, "Maximum object-space error of the cut")

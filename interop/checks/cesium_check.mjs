@@ -80,13 +80,14 @@ try {
     viewer.scene.light = new Cesium.DirectionalLight({ direction: new Cesium.Cartesian3(0.3, -0.5, -0.8) });
     const tileset = await Cesium.Cesium3DTileset.fromUrl('/tiles/tileset.json', { maximumScreenSpaceError: 4 });
     // Shading from the screen-space derivatives of the position (the GLBs carry normals only when
-    // the MT has them): the picture shows the surface, not only its silhouette.
+    // the MT has them): the picture shows the surface, not only its silhouette. It multiplies the
+    // material's own colour (white, the vertex colours, or a textured content's base-colour texture).
     tileset.customShader = new Cesium.CustomShader({
       lightingModel: Cesium.LightingModel.UNLIT,
       fragmentShaderText: `void fragmentMain(FragmentInput fsInput, inout czm_modelMaterial material) {
         vec3 p = fsInput.attributes.positionEC;
         vec3 n = normalize(cross(dFdx(p), dFdy(p)));
-        material.diffuse = vec3(0.25 + 0.75 * abs(n.z));
+        material.diffuse *= 0.25 + 0.75 * abs(n.z);
       }`,
     });
     viewer.scene.primitives.add(tileset);

@@ -13,8 +13,11 @@
 // What is read: every mesh instance of the default scene (scene, else scene 0; without scenes,
 // every mesh once, untransformed), with its node's world transform applied in double (so a
 // georeferenced model placed by a node translation keeps its precision); POSITION, NORMAL
-// (transformed by the inverse transpose), COLOR_0 (to RGBA8); TEXCOORD_n and other attributes are
-// checked for their accessor's bounds but not delivered (no other reader delivers them either);
+// (transformed by the inverse transpose), COLOR_0 (to RGBA8), and the texture coordinates a
+// material's pbrMetallicRoughness.baseColorTexture names (TEXCOORD_<texCoord>, flipped to v up as
+// the other readers deliver them) with the material, per vertex (glTF's vertices are per primitive,
+// so a seam already is two vertices); other attributes are checked for their accessor's bounds
+// but not delivered;
 // TRIANGLES, TRIANGLE_STRIP and TRIANGLE_FAN primitives, indexed or not; POINTS and LINES are
 // skipped. A transform with a negative determinant flips the winding back (glTF 3.7.4). Sparse
 // accessors, external buffers by URL (http...), and KHR_mesh_quantization's integer positions
@@ -33,6 +36,7 @@
 #include <optional>
 
 #include "base/env.h"
+#include "base/output_path.h"
 #include "patchstore/io/reader_util.h"
 
 namespace mt::io {
@@ -121,7 +125,7 @@ std::vector<uint8_t> decodeBase64(std::string_view s, const std::string& path, c
 
 class GltfReader final : public MeshReader {
  public:
-  GltfReader(const std::string& path, bool glb) : path_(path) {
+  GltfReader(const std::string& path, bool glb, const MeshOpenOptions& options) : path_(path), options_(options) {
     env_ = Env::Default();
     file_ = env_->newRandomAccessFile(path);
     size_ = file_->size();
@@ -148,6 +152,15 @@ class GltfReader final : public MeshReader {
     checkAsset();
     openBuffers();
     planInstances();
+    planMaterials();
+  }
+  ~GltfReader() override {
+    for (const std::string& f : ownedFiles_) {
+      try {
+        env_->removeFile(f);
+      } catch (const Error&) {
+      }
+    }
   }
 
   const MeshHeader& header() const override { return header_; }
@@ -174,6 +187,8 @@ class GltfReader final : public MeshReader {
   struct Instance {
     Mat4 world;
     size_t mesh, primitive;
+    uint32_t material = kNoMaterial;  // index into header_.materials when the primitive is textured
+    int64_t texCoord = -1;            // its TEXCOORD_<n>
   };
 
   // ---- Container ------------------------------------------------------------------------------
@@ -554,6 +569,172 @@ class GltfReader final : public MeshReader {
     }
   }
 
+  // ---- Materials and their base-colour images -----------------------------------------------
+  // A primitive whose material has pbrMetallicRoughness.baseColorTexture is textured: its
+  // TEXCOORD_<texCoord> is delivered per vertex with the material. The images become
+  // InputMaterial::texture paths (what ingest tiles into the store, as for OBJ map_Kd): an
+  // external image by its uri beside the file; one embedded in a buffer view or a data URI is
+  // copied to a file in the scratch folder (MeshOpenOptions::scratchDir, which its owner removes;
+  // without one, $TMPDIR, removed with the reader). Primitives without a base-colour texture are
+  // untextured (kNoMaterial), as OBJ faces of a material without map_Kd.
+  void planMaterials() {
+    std::map<int64_t, uint32_t> used;  // glTF material -> header_.materials
+    bool textured = false;
+    for (Instance& inst : instances_) {
+      const json& prim = doc_["meshes"][inst.mesh]["primitives"][inst.primitive];
+      if (!prim.contains("material")) continue;
+      const std::string what = "mesh " + std::to_string(inst.mesh) + " primitive " + std::to_string(inst.primitive);
+      const int64_t m = integer(prim, "material", INT64_MIN, path_, what);
+      const json& mat = element("materials", m, what);
+      const std::string mwhat = "material " + std::to_string(m);
+      auto pbr = mat.find("pbrMetallicRoughness");
+      if (pbr == mat.end() || !pbr->is_object() || !pbr->contains("baseColorTexture")) continue;  // untextured
+      const json& info = (*pbr)["baseColorTexture"];
+      const std::string twhat = mwhat + " baseColorTexture";
+      if (!info.is_object()) fail(path_, twhat + " is not an object");
+      if (info.contains("extensions") && info["extensions"].contains("KHR_texture_transform"))
+        fail(path_, twhat + ": KHR_texture_transform on a base-colour texture is not read");
+      const int64_t texCoord = integer(info, "texCoord", 0, path_, twhat);
+      const std::string attr = "TEXCOORD_" + std::to_string(texCoord);
+      if (!prim["attributes"].contains(attr) &&
+          !(prim.contains("extensions") && prim["extensions"].contains("KHR_draco_mesh_compression")))
+        fail(path_, twhat + " uses texCoord " + std::to_string(texCoord) + ", but " + what + " has no " + attr);
+      const int64_t texture = integer(info, "index", INT64_MIN, path_, twhat);
+      const json& tex = element("textures", texture, twhat);
+      const std::string xwhat = "texture " + std::to_string(texture);
+      if (!tex.contains("source")) fail(path_, xwhat + " has no source image (only core glTF images, PNG and JPEG, are read)");
+      const int64_t image = integer(tex, "source", INT64_MIN, path_, xwhat);
+      element("images", image, xwhat);
+      inst.material = materialIndex(used, m, mat, mwhat, image);
+      inst.texCoord = texCoord;
+      textured = true;
+    }
+    header_.hasTexcoords = textured;
+  }
+
+  uint32_t materialIndex(std::map<int64_t, uint32_t>& used, int64_t m, const json& mat, const std::string& what, int64_t image) {
+    auto it = used.find(m);
+    if (it != used.end()) return it->second;
+    InputMaterial out;
+    out.name = text(mat, "name", what, path_, what);
+    out.source = path_ + " (" + what + ")";
+    auto pbr = mat.find("pbrMetallicRoughness");
+    if (pbr != mat.end() && pbr->is_object() && pbr->contains("baseColorFactor")) {
+      const json& f = (*pbr)["baseColorFactor"];
+      if (!f.is_array() || f.size() != 4) fail(path_, what + ": baseColorFactor is not 4 numbers");
+      for (int c = 0; c < 3; ++c) {
+        if (!f[size_t(c)].is_number()) fail(path_, what + ": baseColorFactor is not 4 numbers");
+        out.diffuse[c] = uint8_t(std::lround(std::clamp(f[size_t(c)].get<double>(), 0.0, 1.0) * 255.0));
+      }
+    }
+    if (image >= 0) {
+      out.texture = imageFile(image, out.source);
+      out.source = path_ + " (" + what + ", image " + std::to_string(image) + ")";
+    }
+    header_.materials.push_back(out);
+    return used.emplace(m, uint32_t(header_.materials.size() - 1)).first->second;
+  }
+
+  // The path of image `index`'s bytes (its own file, or a copy of embedded bytes), its format
+  // checked by the magic bytes (PNG or JPEG); deeper damage is found when ingest decodes it, with
+  // the material and image named.
+  std::string imageFile(int64_t index, const std::string& by) {
+    auto done = imageFiles_.find(index);
+    if (done != imageFiles_.end()) return done->second;
+    const json& img = element("images", index, by);
+    const std::string what = "image " + std::to_string(index);
+    const std::string mime = text(img, "mimeType", "", path_, what);
+    std::string file, where;
+    std::vector<uint8_t> head(8, 0);
+    size_t headSize = 0;
+    if (img.contains("uri") && !(img["uri"].is_string() && img["uri"].get<std::string>().rfind("data:", 0) == 0)) {
+      const std::string u = text(img, "uri", "", path_, what);
+      if (u.find("://") != std::string::npos) fail(path_, what + ": uri " + u + " is not a local file");
+      file = resolveBeside(path_, percentDecoded(u, what));
+      where = " (" + file + ")";
+      struct stat st;
+      if (::stat(file.c_str(), &st) != 0) fail(path_, what + where + ": cannot open: " + std::strerror(errno));
+      if (!S_ISREG(st.st_mode)) fail(path_, what + where + " is not a regular file");
+      auto f = env_->newRandomAccessFile(file);
+      headSize = size_t(std::min<uint64_t>(8, f->size()));
+      f->read(0, headSize, head.data());
+    } else {
+      // Embedded: a data URI or a buffer view. Copied to the scratch folder in 1 MiB pieces.
+      std::vector<uint8_t> memory;
+      std::optional<View> v;
+      uint64_t size = 0;
+      if (img.contains("uri")) {
+        const std::string u = img["uri"];
+        const size_t comma = u.find(',');
+        if (comma == std::string::npos || u.substr(0, comma).find(";base64") == std::string::npos)
+          fail(path_, what + ": a data URI that is not base64");
+        memory = decodeBase64(std::string_view(u).substr(comma + 1), path_, what);
+        size = memory.size();
+        where = " (data URI)";
+      } else if (img.contains("bufferView")) {
+        if (mime.empty()) fail(path_, what + ": an image in a buffer view needs a mimeType");
+        v = view(integer(img, "bufferView", INT64_MIN, path_, what), what);
+        size = v->length;
+        where = " (buffer view " + std::to_string(v->index) +
+                (v->decoded ? std::string(")") : ", byte offset " + std::to_string(buffers_[v->buffer].base + v->offset) + ")");
+      } else {
+        fail(path_, what + " has neither uri nor bufferView");
+      }
+      const std::string ext = mime == "image/png" ? ".png" : ".jpg";
+      std::string dir = options_.scratchDir;
+      const bool own = dir.empty();
+      if (own) {
+        const char* t = std::getenv("TMPDIR");
+        dir = t && *t ? t : "/tmp";
+      }
+      const std::string base = path_.substr(path_.find_last_of('/') + 1);
+      file = dir + "/" + base + "-image" + std::to_string(index) + ext;
+      if (own) file = uniqueTempName(file) + ext;
+      auto out = env_->newWritableFile(file);
+      ownedFiles_.push_back(file);
+      if (!own) ownedFiles_.pop_back();  // the scratch folder's owner removes it
+      std::vector<uint8_t> piece;
+      for (uint64_t off = 0; off < size; off += piece.size()) {
+        piece.resize(size_t(std::min<uint64_t>(1 << 20, size - off)));
+        if (v) readView(*v, off, piece.size(), piece.data(), what);
+        else std::memcpy(piece.data(), memory.data() + off, piece.size());
+        if (off == 0) {
+          headSize = std::min<size_t>(8, piece.size());
+          std::memcpy(head.data(), piece.data(), headSize);
+        }
+        out->append(piece.data(), piece.size());
+      }
+      out->close();
+    }
+    static const uint8_t kPng[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1A, '\n'};
+    const bool png = headSize == 8 && std::memcmp(head.data(), kPng, 8) == 0;
+    const bool jpeg = headSize >= 3 && head[0] == 0xFF && head[1] == 0xD8 && head[2] == 0xFF;
+    if (!png && !jpeg)
+      fail(path_, what + where + " is neither PNG nor JPEG (bad magic bytes): a corrupt image or another format");
+    imageFiles_.emplace(index, file);
+    return file;
+  }
+
+  std::string percentDecoded(const std::string& u, const std::string& what) {
+    std::string out;
+    for (size_t i = 0; i < u.size(); ++i) {
+      if (u[i] != '%') {
+        out += u[i];
+        continue;
+      }
+      auto hex = [&](char c) -> int {
+        if (c >= '0' && c <= '9') return c - '0';
+        if (c >= 'a' && c <= 'f') return c - 'a' + 10;
+        if (c >= 'A' && c <= 'F') return c - 'A' + 10;
+        return -1;
+      };
+      if (i + 2 >= u.size() || hex(u[i + 1]) < 0 || hex(u[i + 2]) < 0) fail(path_, what + ": bad %-escape in uri " + u);
+      out += char(hex(u[i + 1]) * 16 + hex(u[i + 2]));
+      i += 2;
+    }
+    return out;
+  }
+
   // ---- Primitives -----------------------------------------------------------------------------
   void readPrimitive(const Instance& inst, Batcher& batch) {
     const json& prim = doc_["meshes"][inst.mesh]["primitives"][inst.primitive];
@@ -576,13 +757,20 @@ class GltfReader final : public MeshReader {
     uint64_t vertexCount = 0;
     std::vector<uint32_t> dracoIndices;
     if (draco) {
-      vertexCount = readDraco(prim["extensions"]["KHR_draco_mesh_compression"], what, M, C, batch, dracoIndices);
+      vertexCount = readDraco(prim["extensions"]["KHR_draco_mesh_compression"], what, M, C, batch, dracoIndices, inst);
     } else {
       if (!attrs.contains("POSITION")) fail(path_, what + " has no POSITION");
       Accessor pos = accessor(integer(attrs, "POSITION", INT64_MIN, path_, what), "POSITION of " + what);
       if (pos.components != 3) fail(path_, pos.what + " is not VEC3");
       if (!pos.view && pos.count) fail(path_, pos.what + " has no bufferView: every position would be zero (sparse is not read)");
-      std::optional<Accessor> nor, col;
+      std::optional<Accessor> nor, col, uvs;
+      if (inst.texCoord >= 0) {
+        const std::string name = "TEXCOORD_" + std::to_string(inst.texCoord);
+        uvs = accessor(integer(attrs, name.c_str(), INT64_MIN, path_, what), name + " of " + what);
+        if (uvs->components != 2 || uvs->count != pos.count) fail(path_, uvs->what + " is not VEC2 with one per vertex");
+        if (uvs->type != 5126 && !((uvs->type == 5121 || uvs->type == 5123) && uvs->normalized))
+          fail(path_, uvs->what + ": not float, normalized unsigned byte or normalized unsigned short");
+      }
       if (attrs.contains("NORMAL")) {
         nor = accessor(integer(attrs, "NORMAL", INT64_MIN, path_, what), "NORMAL of " + what);
         if (nor->components != 3 || nor->count != pos.count) fail(path_, nor->what + " is not VEC3 with one per vertex");
@@ -596,12 +784,13 @@ class GltfReader final : public MeshReader {
         if (name != "POSITION" && name != "NORMAL" && name != "COLOR_0" && value.is_number_integer())
           accessor(value.get<int64_t>(), name + " of " + what);
       vertexCount = pos.count;
-      std::vector<double> P, Nn, Cc;
+      std::vector<double> P, Nn, Cc, Uv;
       for (uint64_t first = 0; first < pos.count; first += kBatch) {
         const size_t n = size_t(std::min<uint64_t>(kBatch, pos.count - first));
         readAccessor(pos, first, n, P);
         if (nor) readAccessor(*nor, first, n, Nn);
         if (col) readAccessor(*col, first, n, Cc);
+        if (uvs) readAccessor(*uvs, first, n, Uv);
         for (size_t i = 0; i < n; ++i) {
           InputVertex& v = batch.addVertex();
           if (!(std::isfinite(P[3 * i]) && std::isfinite(P[3 * i + 1]) && std::isfinite(P[3 * i + 2])))
@@ -611,6 +800,14 @@ class GltfReader final : public MeshReader {
           if (!(std::isfinite(v.p[0]) && std::isfinite(v.p[1]) && std::isfinite(v.p[2])))
             fail(path_, pos.what + " element " + std::to_string(first + i) + ": the node transform makes its position non-finite");
           color(col ? &Cc[size_t(col->components) * i] : nullptr, col ? col->components : 0, v);
+          if (uvs) {
+            if (!texcoord(Uv[2 * i], Uv[2 * i + 1], inst.material, v))
+              fail(path_, uvs->what + " element " + std::to_string(first + i) + ": texture coordinate (" + std::to_string(Uv[2 * i]) +
+                              ", " + std::to_string(Uv[2 * i + 1]) + ") is outside [0, 1] (repeating textures are not supported), at byte offset " +
+                              std::to_string(elementOffset(*uvs, first + i)));
+          } else {
+            texcoord(0, 1, kNoMaterial, v);
+          }
         }
       }
     }
@@ -692,6 +889,15 @@ class GltfReader final : public MeshReader {
       v.n[0] = v.n[1] = v.n[2] = 0;
     }
   }
+  // glTF's v runs down the image; the readers deliver v up (OBJ's convention).
+  static bool texcoord(double u, double v, uint32_t material, InputVertex& out) {
+    double uu = u, vv = 1.0 - v;
+    if (!acceptTexcoord(uu, vv)) return false;
+    out.uv[0] = float(uu);
+    out.uv[1] = float(vv);
+    out.material = material;
+    return true;
+  }
   static void color(const double* c, int components, InputVertex& v) {
     for (int i = 0; i < 4; ++i) {
       const double x = i < components ? c[i] : 1.0;
@@ -700,7 +906,7 @@ class GltfReader final : public MeshReader {
   }
 
   uint64_t readDraco(const json& ext, const std::string& what, const Mat4& M, const double C[9], Batcher& batch,
-                     std::vector<uint32_t>& indices) {
+                     std::vector<uint32_t>& indices, const Instance& inst) {
     const std::string dwhat = what + " (KHR_draco_mesh_compression)";
     View v = view(integer(ext, "bufferView", INT64_MIN, path_, dwhat), dwhat);
     std::vector<uint8_t> bytes(size_t(v.length));
@@ -725,6 +931,10 @@ class GltfReader final : public MeshReader {
     if (!pos || pos->num_components() != 3) fail(path_, dwhat + ": no 3-component POSITION");
     const draco::PointAttribute* nor = attribute("NORMAL");
     const draco::PointAttribute* col = attribute("COLOR_0");
+    const std::string uvName = "TEXCOORD_" + std::to_string(inst.texCoord);
+    const draco::PointAttribute* uvs = inst.texCoord >= 0 ? attribute(uvName.c_str()) : nullptr;
+    if (inst.texCoord >= 0 && (!uvs || uvs->num_components() != 2))
+      fail(path_, dwhat + ": no 2-component " + uvName + " for its material's base-colour texture");
     const uint32_t points = mesh->num_points();
     for (uint32_t i = 0; i < points; ++i) {
       const draco::PointIndex pi(i);
@@ -750,6 +960,11 @@ class GltfReader final : public MeshReader {
       if (!(std::isfinite(out.p[0]) && std::isfinite(out.p[1]) && std::isfinite(out.p[2])))
         fail(path_, dwhat + ": point " + std::to_string(i) + ": the node transform makes its position non-finite");
       color(col ? cd : nullptr, col ? 4 : 0, out);
+      float uv[2] = {0, 1};
+      if (uvs) uvs->ConvertValue<float>(uvs->mapped_index(pi), 2, uv);
+      if (!texcoord(uv[0], uv[1], uvs ? inst.material : kNoMaterial, out))
+        fail(path_, dwhat + ": point " + std::to_string(i) + ": texture coordinate (" + std::to_string(uv[0]) + ", " +
+                        std::to_string(uv[1]) + ") is outside [0, 1] (repeating textures are not supported)");
     }
     indices.clear();
     indices.reserve(size_t(mesh->num_faces()) * 3);
@@ -764,6 +979,9 @@ class GltfReader final : public MeshReader {
   }
 
   std::string path_;
+  MeshOpenOptions options_;
+  std::map<int64_t, std::string> imageFiles_;  // image index -> the file holding its bytes
+  std::vector<std::string> ownedFiles_;         // copies of embedded images removed with the reader
   Env* env_ = nullptr;
   std::unique_ptr<RandomAccessFile> file_;
   uint64_t size_ = 0, jsonStart_ = 0, binStart_ = UINT64_MAX, binLength_ = 0;
@@ -779,6 +997,8 @@ class GltfReader final : public MeshReader {
 
 }  // namespace
 
-std::unique_ptr<MeshReader> openGltf(const std::string& path, bool glb) { return std::make_unique<GltfReader>(path, glb); }
+std::unique_ptr<MeshReader> openGltf(const std::string& path, bool glb, const MeshOpenOptions& options) {
+  return std::make_unique<GltfReader>(path, glb, options);
+}
 
 }  // namespace mt::io

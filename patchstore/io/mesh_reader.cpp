@@ -127,8 +127,8 @@ std::unique_ptr<MeshReader> openFormat(const std::string& path, const MeshOpenOp
     case Kind::Off: return io::openOff(std::move(in));
     case Kind::StlAscii: return io::openStl(std::move(in), false);
     case Kind::StlBinary: return io::openStl(std::move(in), true);
-    case Kind::Gltf: in.reset(); return io::openGltf(path, false);
-    case Kind::Glb: in.reset(); return io::openGltf(path, true);
+    case Kind::Gltf: in.reset(); return io::openGltf(path, false, options);
+    case Kind::Glb: in.reset(); return io::openGltf(path, true, options);
     case Kind::Unknown: break;
   }
   fail(path, "unknown mesh format (expected PLY, OBJ, OFF, STL or glTF)");

@@ -413,6 +413,6 @@ std::unique_ptr<MeshReader> splitWedges(std::unique_ptr<MeshReader> source, cons
 std::unique_ptr<MeshReader> openOff(std::unique_ptr<InputFile> in);
 std::unique_ptr<MeshReader> openStl(std::unique_ptr<InputFile> in, bool binary);
 // glTF reads its buffers with positional reads (base/env.h), not through InputFile.
-std::unique_ptr<MeshReader> openGltf(const std::string& path, bool glb);
+std::unique_ptr<MeshReader> openGltf(const std::string& path, bool glb, const MeshOpenOptions& options);
 
 }  // namespace mt::io
