@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <set>
@@ -53,7 +54,9 @@ TEST(FuzzRegressions, MeshoptPayloadWithAnEmptyStoredStreamIsRefused) {
 // fuzz_patch_meshopt (a timeout): a 105-byte payload whose header claims 3.7M triangles of 38
 // vertices, index code range-coded: the decoder read the whole count from zeros past the stream's
 // end before checking for the overrun (1.4 s of CPU under ASan). It now stops at the first byte
-// past the end; this checks the refusal (the time is the fuzzer's replay, docs/hardening.md).
+// past the end, and the refusal names the triangle it had reached: this checks that the decoder
+// stopped within the stream's bytes, not after decoding the claimed count (which the old decoder
+// did, refusing the same payload only at the end, with no triangle named).
 TEST(FuzzRegressions, MeshoptPayloadClaimingMillionsOfTrianglesIsRefusedAtTheStreamsEnd) {
   const std::vector<uint8_t> payload = {
     0x26, 0x00, 0x00, 0x00, 0xaf, 0x0d, 0x39, 0x00, 0x3d, 0x00, 0x00, 0x00, 0x0c, 0x00, 0x00, 0x00,
@@ -69,7 +72,15 @@ TEST(FuzzRegressions, MeshoptPayloadClaimingMillionsOfTrianglesIsRefusedAtTheStr
     mt::decodePatch(payload.data(), payload.size(), mt::format::Codec::Meshopt, grid);
     ADD_FAILURE() << "decoded";
   } catch (const mt::Error& e) {
-    EXPECT_NE(std::string(e.what()).find("index stream truncated"), std::string::npos) << e.what();
+    const std::string what = e.what();
+    unsigned long long at = 0, of = 0;
+    const size_t pos = what.find("index stream truncated at triangle ");
+    ASSERT_NE(pos, std::string::npos) << what;
+    ASSERT_EQ(std::sscanf(what.c_str() + pos, "index stream truncated at triangle %llu of %llu", &at, &of), 2) << what;
+    EXPECT_EQ(of, 0x390dafu) << what;  // the header's claim (bytes 4-7)
+    // Every triangle's code is 8 binary decisions of an adaptive model; what the 105 bytes can
+    // hold is far below one triangle per payload bit.
+    EXPECT_LT(at, payload.size() * 8) << what;
   }
 }
 
