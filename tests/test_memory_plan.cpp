@@ -105,15 +105,18 @@ TEST(MemoryPlan, StagesBesideResidentDataPlanWithWhatTheCapLeaves) {
         const uint64_t left = std::max(total > resident ? total - resident : 0, kMinPlanBytes / 2);
         EXPECT_EQ(b.total, left) << total << " " << resident;
         for (const auto& [name, bytes] : b.phases())
-          if (std::string(name).rfind("ingest_chunked", 0) == 0 || name == "ingest_boundary")
+          if (std::string(name).rfind("ingest_chunked", 0) == 0 || name == "ingest_boundary") {
             EXPECT_LE(bytes, std::max(left, kMinPlanBytes)) << name << " at " << total << " beside " << resident;
+          }
         EXPECT_LE(b.chunkedSorter, lastSorter) << "more resident, less for the sorters";
         EXPECT_LE(b.chunkedSorter, p.chunkedSorter);
         lastSorter = b.chunkedSorter;
         const uint64_t entries = p.boundarySorterBesides(resident);
         EXPECT_LE(entries, std::max<uint64_t>(p.boundarySorter, 1 * kMiB));
         EXPECT_GE(entries, 1 * kMiB) << "the sorter's floor";
-        if (total > resident + 2 * kMiB) EXPECT_LE(entries, (total - resident) / 2);
+        if (total > resident + 2 * kMiB) {
+          EXPECT_LE(entries, (total - resident) / 2);
+        }
         EXPECT_LE(entries, lastBoundary);
         lastBoundary = entries;
       }
