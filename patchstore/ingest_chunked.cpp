@@ -91,8 +91,8 @@ void reportJoin(IngestContext& ctx, const FaceJoin& join, const char* what) {
 
 // besideBytes: what the caller keeps resident through the join (the positions' share gives it up).
 FaceJoin makeJoin(IngestContext& ctx, const ParsedInput& in, const char* name, uint64_t besideBytes = 0) {
-  const uint64_t positions = positionBytes(ctx);
-  const uint64_t share = positions > besideBytes + (4 << 20) ? positions - besideBytes : uint64_t(4) << 20;
+  const uint64_t positions = positionBytes(ctx), floor = std::min<uint64_t>(positions, 4 << 20);
+  const uint64_t share = positions > besideBytes + floor ? positions - besideBytes : floor;
   return FaceJoin(in.faceFile, in.vertexFile, in.layout, in.faces, share, ctx.plan.chunkedBuckets, ctx.scratch + "/" + name);
 }
 
