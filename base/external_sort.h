@@ -350,7 +350,7 @@ class ExternalSorter {
     }
     input_.spillRest();
     // Each run gets an equal share of the budget as its read buffer.
-    size_t perRun = std::max<size_t>(64 << 10, budgetBytes_ / (runs_.size() + 1));
+    size_t perRun = std::max<size_t>(kMinReadBuffer, budgetBytes_ / (runs_.size() + 1));
     merger_.open(runs_, perRun, less_);
   }
 
@@ -434,7 +434,7 @@ class StableKeySorter {
     }
     input_.spillRest();
     std::vector<Record>().swap(tmp_);
-    size_t perRun = std::max<size_t>(64 << 10, capacity_ * 2 * sizeof(Record) / (runs_.size() + 1));
+    size_t perRun = std::max<size_t>(kMinReadBuffer, capacity_ * 2 * sizeof(Record) / (runs_.size() + 1));
     merger_.open(runs_, std::min<size_t>(perRun, 4 << 20), Less{key_});
   }
 
@@ -500,7 +500,7 @@ class StableKeySorter {
       }
       cut[r].push_back(runLength_[r]);
     }
-    size_t perRun = std::clamp<size_t>(capacity_ * 2 * sizeof(Record) / ((runs_.size() + 1) * parts), 64 << 10, 4 << 20);
+    size_t perRun = std::clamp<size_t>(capacity_ * 2 * sizeof(Record) / ((runs_.size() + 1) * parts), kMinReadBuffer, 4 << 20);
     tbb::parallel_for(size_t(0), parts, [&](size_t p) {
       std::vector<uint64_t> begin(runs_.size()), end(runs_.size());
       uint64_t first = 0;
@@ -637,7 +637,7 @@ class KeyGroupSorter {
     if (readers_.empty()) {
       // Reads are sequential and the file is usually in the page cache: 512 KiB a run is plenty,
       // and a pass over the groups may be sharing the cap with resident data.
-      size_t perRun = std::clamp<size_t>(capacity_ * (8 + 4 + 2 * sizeof(Record)) / (runs_.size() + 1), 64 << 10, 512 << 10);
+      size_t perRun = std::clamp<size_t>(capacity_ * (8 + 4 + 2 * sizeof(Record)) / (runs_.size() + 1), kMinReadBuffer, 512 << 10);
       for (auto& path : runs_) readers_.push_back(std::make_unique<TempReader>(path, perRun));
     } else {
       for (auto& r : readers_) r->rewind();

@@ -46,6 +46,16 @@ MemoryPlan planMemory(uint64_t totalBytes, unsigned threads) {
   return p;
 }
 
+MemoryPlan MemoryPlan::besides(uint64_t resident) const {
+  const uint64_t left = total > resident ? total - resident : 0;
+  return planMemory(std::max(left, kMinPlanBytes / 2), threads);
+}
+
+uint64_t MemoryPlan::boundarySorterBesides(uint64_t inUse) const {
+  const uint64_t left = total > inUse ? total - inUse : 0;
+  return std::max(kSorterFloor, std::min(boundarySorter, left / 2));
+}
+
 uint64_t MemoryPlan::residentRecordLimit(uint64_t recordBytes) const {
   if (total <= residentReserve || recordBytes == 0) return 0;
   // Per vertex: its record, a state byte, and a bit per thread (at least two).

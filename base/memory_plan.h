@@ -28,6 +28,14 @@
 //   heal pass           one external sorter of half its heal cap (the pass's tables the rest)
 //   level loop          the regions in flight (all threads): total/2; the store, the MT writer,
 //                       the DAG and the process keep the other half
+// Beside a stage's buffers some data stays resident from one stage to the next: once the chunked
+// path has made the V-partition, its seeds and candidate tables (up to the assigner's share, a
+// quarter of the cap and more at a billion triangles) stay for the rest of the ingest, and the
+// store's patch records (one std::map node per patch, kPatchRecordBytes) grow with the patches.
+// The stages that run beside them (the chunked path's assign, group, join and patch stages, and
+// the boundary stage) take their shares from besides(resident): the same rule applied to what the
+// cap leaves. Counted in the whole-cap rule instead, they took the billion-triangle build to
+// 582 MiB at --memory 512M.
 // Every share has a floor (1 MiB for a sorter, 8 MiB for the level loop and the resident
 // sorters) so that a small cap still runs; from kMinPlanBytes up the floors fit in the rule.
 // No share changes the output: every sort is total or stable over a fixed input order.
@@ -42,6 +50,9 @@ namespace mt {
 
 // The least cap for which every phase's shares fit in it (mtbuild's kMinBuildMemory).
 constexpr uint64_t kMinPlanBytes = 16ull << 20;
+// What one patch record of a store being ingested keeps resident: a std::map node (the key, the
+// 128-byte record, the tree's links) and malloc's header, rounded up.
+constexpr uint64_t kPatchRecordBytes = 192;
 
 struct MemoryPlan {
   uint64_t total = 0;          // the --memory cap
@@ -72,6 +83,16 @@ struct MemoryPlan {
   // The shared-vertex and edge sorters of the resident patch stage (which fill together).
   uint64_t residentSharedSorter(uint64_t inUse) const;
   uint64_t residentEdgeSorter(uint64_t inUse) const;
+
+  // The plan for stages that run beside `resident` bytes that stay resident (the process, the
+  // V-partition, the store's patch records): the rule applied to total - resident (at least
+  // kMinPlanBytes / 2, so a stage still runs when the resident part nears the cap; it is then
+  // over the cap by what its floors need).
+  MemoryPlan besides(uint64_t resident) const;
+  // The boundary stage's entry sorter once `inUse` bytes are resident (the V-partition, the patch
+  // records and the shared-vertex sorter's merge included): boundarySorter, or half of what the
+  // cap leaves when that is less (the stage's lists and payloads the other half); at least 1 MiB.
+  uint64_t boundarySorterBesides(uint64_t inUse) const;
 
   // For every stage, the sum of the shares alive at the same time (the resident path's with the
   // largest records the plan admits, measured as in use).

@@ -3,6 +3,7 @@
 // loaded and processed on threads, as many in flight as RegionWindow admits. See build.h.
 #include "mtbuild/build.h"
 
+#include <malloc.h>
 #include <tbb/global_control.h>
 #include <tbb/task_arena.h>
 
@@ -17,6 +18,8 @@
 #include <vector>
 
 #include "base/interrupt.h"
+#include "base/memory_plan.h"
+#include "base/process.h"
 #include "mtbuild/level_state.h"
 #include "mtbuild/region_window.h"
 
@@ -174,7 +177,15 @@ BuildReport buildLevels(LevelBuilder& builder, const BuildOptions& options) {
   size_t peakRegions = 0;
   while (builder.beginLevel()) {
     // 2 x threads regions at most: one processed, one loaded or waiting for its commit per thread.
-    RegionWindow window(options.levelLoopBytes, 2 * size_t(threads));
+    // Their bytes: the level loop's share, or less when what stays resident through the loop (the
+    // store's patch records, the V-partition, the DAG and the file's index, the process) leaves
+    // less (MemoryPlan::besides, measured at the start of each level with the heap trimmed).
+    uint64_t windowBytes = options.levelLoopBytes;
+    if (windowBytes && options.memoryBytes) {
+      malloc_trim(0);
+      windowBytes = std::min(windowBytes, planMemory(options.memoryBytes, threads).besides(currentRssBytes()).levelLoop);
+    }
+    RegionWindow window(windowBytes, 2 * size_t(threads));
     ThreadedLevel(builder, options, window).run(threads);
     peakBytes = std::max(peakBytes, window.peakBytes());
     peakRegions = std::max(peakRegions, window.peakRegions());

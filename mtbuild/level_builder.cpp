@@ -10,6 +10,7 @@
 #include <limits>
 #include <thread>
 
+#include <malloc.h>
 #include <unistd.h>
 
 #include "base/interrupt.h"
@@ -147,7 +148,10 @@ bool LevelBuilder::State::weldToGrid(const QuantizationGrid& grid) {
   for (int a = 0; a < 3; ++a) cells.origin[a] = grid.origin[a];
   cells.step = grid.step;
   heal::HealOptions ho;
-  ho.memoryBytes = planMemory(options.memoryBytes, 1).gridWeld;
+  // Its heal cap comes from what the store's patch records, the V-partition and the process leave
+  // of --memory (MemoryPlan::besides; the whole cap's half took a 100 M build to 110 MiB at 96M).
+  malloc_trim(0);
+  ho.memoryBytes = planMemory(options.memoryBytes, 1).besides(currentRssBytes()).gridWeld;
   ho.progress = options.progress;
   heal::PassReport w = heal::weldToGrid(*store, cells, ho);
   report.weldedVertices = w.get("merged");

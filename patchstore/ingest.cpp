@@ -107,7 +107,10 @@ void boundaryStage(IngestContext& ctx, PatchStageOutput& patches) {
   SharedSorter& shared = *patches.shared;
   checkInterrupt("ingest: sort");
   shared.finish();
-  EntrySorter entries(ctx.scratch + "/s6", ctx.plan.boundarySorter);
+  // The entries' sorter gets what the V-partition, the patch records and the shared-vertex
+  // merge leave of the cap (MemoryPlan::boundarySorterBesides), measured with the heap trimmed.
+  malloc_trim(0);
+  EntrySorter entries(ctx.scratch + "/s6", ctx.plan.boundarySorterBesides(currentRssBytes()));
   {
     LocalRec r;
     bool have = shared.next(r);

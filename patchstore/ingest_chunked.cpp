@@ -89,8 +89,11 @@ void reportJoin(IngestContext& ctx, const FaceJoin& join, const char* what) {
                  (unsigned long long)join.swept(), (unsigned long long)join.bucketed(), (unsigned long long)join.chunks());
 }
 
-FaceJoin makeJoin(IngestContext& ctx, const ParsedInput& in, const char* name) {
-  return FaceJoin(in.faceFile, in.vertexFile, in.layout, in.faces, positionBytes(ctx), ctx.plan.chunkedBuckets, ctx.scratch + "/" + name);
+// besideBytes: what the caller keeps resident through the join (the positions' share gives it up).
+FaceJoin makeJoin(IngestContext& ctx, const ParsedInput& in, const char* name, uint64_t besideBytes = 0) {
+  const uint64_t positions = positionBytes(ctx), floor = std::min<uint64_t>(positions, 4 << 20);
+  const uint64_t share = positions > besideBytes + floor ? positions - besideBytes : floor;
+  return FaceJoin(in.faceFile, in.vertexFile, in.layout, in.faces, share, ctx.plan.chunkedBuckets, ctx.scratch + "/" + name);
 }
 
 // Stage 2: every face joined with its corners; its Morton code goes to the sort. Returns whether
@@ -185,7 +188,10 @@ class ChunkedCentroids : public CentroidSource {
     std::vector<float> out(4 * faces.size());
     std::vector<Centroid> cents(kBatch);
     std::vector<uint32_t> faceAt(kBatch);
-    FaceJoin join = makeJoin(ctx_, in_, "j0");
+    // The picks' faces, ranks and centroids (24 bytes a pick: 4 Mi picks at a billion triangles,
+    // 2 M at 100 M) stay beside the join's windows: they come out of the positions' share (at 100 M
+    // and --memory 96M they took the sample stage to 103 MiB).
+    FaceJoin join = makeJoin(ctx_, in_, "j0", uint64_t(faces.size()) * (4 + 4 + 16));
     Progress progress(ctx_.progress, "ingest: sample", faces.size());
     join.run(
         [&](size_t slot, uint32_t face, const uint32_t* v, const float* const* p) {
@@ -672,16 +678,36 @@ void chunkedPatches(IngestContext& ctx, const ParsedInput& in, FaceGroups& group
 
 }  // namespace
 
+// A store's patch record as ingest keeps it: a node of Impl::patches (the pair, the tree's
+// three links and colour) and malloc's header; base/memory_plan.h plans with kPatchRecordBytes.
+static_assert(sizeof(std::pair<const PatchId, PatchRecord>) + 32 + 16 <= kPatchRecordBytes,
+              "kPatchRecordBytes no longer covers a patch record");
+
 template <bool Full>
 void chunkedStages(IngestContext& ctx, const ParsedInput& in, PatchStageOutput& out) {
   assert(!in.resident);
   const bool coherent = chunkedPartition(ctx, in);
-  std::unique_ptr<FaceGroups> groups = chunkedAssign(ctx, in, coherent);
+  // From here to the end of the ingest the V-partition stays resident beside every stage's
+  // buffers (its seeds, candidate tables and key table: tens of MiB at 100 M triangles, ~200 MiB
+  // at a billion), with the process itself: measured once the partition stage has trimmed the
+  // heap, and left out of what the later stages plan with (MemoryPlan::besides).
+  const uint64_t resident = currentRssBytes();
+  const MemoryPlan assignPlan = ctx.plan.besides(resident);
+  IngestContext assignCtx{ctx.scratch, ctx.options, assignPlan, ctx.progress, ctx.assigner, ctx.report, ctx.impl, ctx.clock};
+  std::unique_ptr<FaceGroups> groups = chunkedAssign(assignCtx, in, coherent);
   if (!in.faceFile.ply) std::remove(in.faceFile.path.c_str());
-  std::unique_ptr<PairSorter> pairs = chunkedGroup(ctx, *groups, out);
-  std::unique_ptr<PatchSorter<Full>> byPatch = chunkedJoin<Full>(ctx, in, *pairs, out);
+  std::unique_ptr<PairSorter> pairs = chunkedGroup(assignCtx, *groups, out);
+  // The join and the patch stage also run beside the store's patch records, which the patch stage
+  // adds one per patch (and the patch keys).
+  const MemoryPlan patchPlan = ctx.plan.besides(resident + uint64_t(out.patchKey.size()) * (kPatchRecordBytes + 8));
+  IngestContext patchCtx{ctx.scratch, ctx.options, patchPlan, ctx.progress, ctx.assigner, ctx.report, ctx.impl, ctx.clock};
+  if (ctx.progress)
+    std::fprintf(stderr, "ingest: beside the stages: %.0f MiB resident after the partition, %.0f MiB of %zu patch records; sorters %.0f then %.0f MiB\n",
+                 double(resident) / double(1 << 20), double(out.patchKey.size() * (kPatchRecordBytes + 8)) / double(1 << 20),
+                 out.patchKey.size(), double(assignPlan.chunkedSorter) / double(1 << 20), double(patchPlan.chunkedSorter) / double(1 << 20));
+  std::unique_ptr<PatchSorter<Full>> byPatch = chunkedJoin<Full>(patchCtx, in, *pairs, out);
   pairs.reset();
-  chunkedPatches<Full>(ctx, in, *groups, *byPatch, out);
+  chunkedPatches<Full>(patchCtx, in, *groups, *byPatch, out);
   groups.reset();
 }
 

@@ -91,6 +91,39 @@ TEST(MemoryPlan, FloorsAndTheResidentRule) {
   EXPECT_GT(planMemory(1ull << 30, 2).residentRecordLimit(12), planMemory(1ull << 30, 64).residentRecordLimit(12));
 }
 
+// Stages that run beside data resident from stage to stage (the V-partition, the store's patch
+// records) plan with what the cap leaves: their phases fit in total - resident, shrink as the
+// resident part grows, and keep their floors when it reaches the cap.
+TEST(MemoryPlan, StagesBesideResidentDataPlanWithWhatTheCapLeaves) {
+  for (uint64_t total : kTotals)
+    for (unsigned threads : {1u, 2u, 8u}) {
+      const MemoryPlan p = planMemory(total, threads);
+      uint64_t lastSorter = UINT64_MAX, lastBoundary = UINT64_MAX;
+      for (uint64_t resident : {uint64_t(0), total / 8, total / 4, total / 2, total - total / 8, total, 2 * total}) {
+        const MemoryPlan b = p.besides(resident);
+        EXPECT_EQ(b.threads, p.threads);
+        const uint64_t left = std::max(total > resident ? total - resident : 0, kMinPlanBytes / 2);
+        EXPECT_EQ(b.total, left) << total << " " << resident;
+        for (const auto& [name, bytes] : b.phases())
+          if (std::string(name).rfind("ingest_chunked", 0) == 0 || name == "ingest_boundary") {
+            EXPECT_LE(bytes, std::max(left, kMinPlanBytes)) << name << " at " << total << " beside " << resident;
+          }
+        EXPECT_LE(b.chunkedSorter, lastSorter) << "more resident, less for the sorters";
+        EXPECT_LE(b.chunkedSorter, p.chunkedSorter);
+        lastSorter = b.chunkedSorter;
+        const uint64_t entries = p.boundarySorterBesides(resident);
+        EXPECT_LE(entries, std::max<uint64_t>(p.boundarySorter, 1 * kMiB));
+        EXPECT_GE(entries, 1 * kMiB) << "the sorter's floor";
+        if (total > resident + 2 * kMiB) {
+          EXPECT_LE(entries, (total - resident) / 2);
+        }
+        EXPECT_LE(entries, lastBoundary);
+        lastBoundary = entries;
+      }
+      EXPECT_EQ(p.besides(0).chunkedSorter, p.chunkedSorter) << "nothing resident: the whole-cap rule";
+    }
+}
+
 TEST(MemoryPlan, DescribeAndJsonNameEveryShare) {
   const MemoryPlan p = planMemory(512 * kMiB, 2);
   const std::string text = describe(p), json = toJson(p);
