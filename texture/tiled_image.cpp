@@ -162,14 +162,15 @@ void TileCache::copyRect(size_t k, int x0, int y0, int w, int h, uint8_t* out) c
   for (int y = 0; y < h;) {
     const int sy = std::clamp(y0 + y, 0, img.height() - 1);
     const int ty = sy / ts;
-    // The rows of this output band that read tile row ty (rows clamped below/above repeat it).
+    // The rows of this output band that read tile row ty (rows clamped below/above repeat it); the
+    // last tile row and column stop at the image's edge, not at a whole tile.
     int rows = 1;
-    if (y0 + y >= 0 && y0 + y < img.height()) rows = std::min(h - y, (ty + 1) * ts - sy);
+    if (y0 + y >= 0 && y0 + y < img.height()) rows = std::min(h - y, std::min((ty + 1) * ts, img.height()) - sy);
     for (int x = 0; x < w;) {
       const int sx = std::clamp(x0 + x, 0, img.width() - 1);
       const int tx = sx / ts;
       int cols = 1;
-      if (x0 + x >= 0 && x0 + x < img.width()) cols = std::min(w - x, (tx + 1) * ts - sx);
+      if (x0 + x >= 0 && x0 + x < img.width()) cols = std::min(w - x, std::min((tx + 1) * ts, img.width()) - sx);
       Tile t = tile(k, tx, ty);
       const int tw = img.tileWidth(tx);
       for (int r = 0; r < rows; ++r) {
