@@ -35,6 +35,28 @@ function orbitPose(i, frames) {
 async function main() {
   const file = q.get('file');
   if (!file) return showError('viewer.html?file=URL: no MT file given');
+  // The file's opening (three range reads, the workers loading their decoders, the coarsest cut)
+  // starts first; making the WebGL context (SwiftShader: 100-300 ms of the main thread) overlaps it.
+  const precompile = {};  // filled below, before the opening needs it (its first awaits are reads)
+  const opening = MTObject.open(file, {
+    precompile,
+    pool: window.mtWorkerPool,
+    pixelTolerance: Number(q.get('tol') || 1),
+    budgetMs: Number(q.get('budget') || 50),
+    fixedTriangles: Number(q.get('fixed') || 0),
+    // side=front: back faces always culled by the GL (measurement only: an open scan's inside
+    // then shows the background through its holes); side=double: both sides in one pass
+    // (THREE.DoubleSide, the viewer's drawing before the two passes; docs/web.md compares them).
+    material: q.get('side') === 'front' || q.get('side') === 'double' ? MTObject.defaultMaterial(false, q.get('side') === 'front' ? THREE.FrontSide : THREE.DoubleSide) : undefined,
+    cacheBytes: Number(q.get('cache') || 256) * 2 ** 20,
+    // twopass=T: back faces in a second pass up to T triangles a pixel (default 1/256; 0: one pass).
+    twoPassPerPixel: q.has('twopass') ? Number(q.get('twopass')) : undefined,
+    onWarning: (m) => {
+      state.warnings.push(m);
+      warnBox.textContent = `${state.warnings.length} damaged patch(es) skipped: ${m}`;
+    },
+  });
+  opening.catch(() => {});  // reported below
   const width = window.innerWidth, height = window.innerHeight;
   const renderer = new THREE.WebGLRenderer({ antialias: false, preserveDrawingBuffer: q.has('capture'), powerPreference: 'high-performance' });
   renderer.setPixelRatio(1);
@@ -50,25 +72,11 @@ async function main() {
   camera.add(sun);
   sun.position.set(0.5, 1, 0.3);
   scene.add(camera);
+  Object.assign(precompile, { renderer, scene, camera });
 
   let mt;
   try {
-    mt = await MTObject.open(file, {
-      pixelTolerance: Number(q.get('tol') || 1),
-      budgetMs: Number(q.get('budget') || 50),
-      fixedTriangles: Number(q.get('fixed') || 0),
-      // side=front: back faces always culled by the GL (measurement only: an open scan's inside
-      // then shows the background through its holes); side=double: both sides in one pass
-      // (THREE.DoubleSide, the viewer's drawing before the two passes; docs/web.md compares them).
-      material: q.get('side') === 'front' || q.get('side') === 'double' ? MTObject.defaultMaterial(false, q.get('side') === 'front' ? THREE.FrontSide : THREE.DoubleSide) : undefined,
-      cacheBytes: Number(q.get('cache') || 256) * 2 ** 20,
-      // twopass=T: back faces in a second pass up to T triangles a pixel (default 1/256; 0: one pass).
-      twoPassPerPixel: q.has('twopass') ? Number(q.get('twopass')) : undefined,
-      onWarning: (m) => {
-        state.warnings.push(m);
-        warnBox.textContent = `${state.warnings.length} damaged patch(es) skipped: ${m}`;
-      },
-    });
+    mt = await opening;
   } catch (e) {
     return showError(e.message);
   }
@@ -136,7 +144,14 @@ async function main() {
     if (q.has('plain')) renderer.render(scene, camera);
     else mt.render(renderer, scene, camera);
     const renderMs = performance.now() - tr;
-    if (state.firstImageMs === null) state.firstImageMs = performance.now();
+    if (state.firstImageMs === null) {
+      // The first image: its drawing waited for (one pixel read back), so the time is when it is on
+      // screen, not when its commands were issued.
+      const tf = performance.now(), gl = renderer.getContext();
+      gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, new Uint8Array(4));
+      state.firstImageMs = performance.now();
+      state.openTimes = Object.assign({}, mt.openTimes, { frame: now, update: tr, render: tf, drawn: state.firstImageMs });
+    }
     if (i > 0) fpsAvg = fpsAvg ? 0.9 * fpsAvg + 0.1 * (1000 / dt) : 1000 / dt;
     state.frames.push({
       t: now, frameMs: i > 0 ? dt : 0, updateMs, renderMs, drawn: st.drawnTriangles, patches: st.drawnPatches, backPatches: st.backPatches, cacheBytes: st.cacheBytes,

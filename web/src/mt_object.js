@@ -22,12 +22,18 @@ export class MTObject extends THREE.Group {
    * Opens an MT file by URL and loads its coarsest cut.
    * @param {string} url
    * @param {{pixelTolerance?:number, budgetMs?:number, cacheBytes?:number, workers?:number,
-   *          libs?:object, material?:THREE.Material, onWarning?:(msg:string)=>void, source?:object}} [options]
+   *          libs?:object, material?:THREE.Material, onWarning?:(msg:string)=>void, source?:object,
+   *          precompile?:{renderer:THREE.WebGLRenderer, scene:THREE.Scene, camera:THREE.Camera}}} [options]
+   * `precompile`: the materials' shaders are compiled for that renderer and scene (its lights)
+   * while the coarsest cut loads, so the first frame does not wait for them.
    */
   static async open(url, options = {}) {
+    const times = { start: performance.now() };  // the opening's milestones (performance.now(), ms)
     const source = options.source || new HttpSource(url);
     const libs = Object.assign(defaultLibUrls(), options.libs || {});
-    const pool = PatchServer.spawnWorkers(libs, options.workers);  // load the decoders meanwhile
+    // Workers the page started (viewer.html, before its modules load), or started here: they load
+    // the decoders while the index is read.
+    const pool = options.pool || PatchServer.spawnWorkers(libs, options.workers);
     let scene;
     try {
       scene = await openMtFile(source);
@@ -35,7 +41,10 @@ export class MTObject extends THREE.Group {
       for (const w of pool) w.terminate();
       throw e;
     }
+    times.index = performance.now();
+    times.file = scene.openTimes;
     const obj = new MTObject(scene, Object.assign({}, options, { libs, pool }));
+    obj.openTimes = times;
     await obj._start();
     return obj;
   }
@@ -168,8 +177,16 @@ void main() {
   }
 
   async _start() {
-    await this.server.ready;
+    // The materials' shader programs compiled while the workers start and the coarsest cut loads
+    // (KHR_parallel_shader_compile: the page is not blocked), not in the first frame: SwiftShader
+    // took 100-300 ms of the first image for them.
+    const compiling = this._precompile(this.options.precompile);
+    // The coarsest cut's reads start now; the workers take its payloads once their decoders are in.
+    const ready = this.server.ready.then(() => {
+      if (this.openTimes) this.openTimes.workers = performance.now(), (this.openTimes.worker = this.server.workerTimes);
+    });
     this.extract.start();
+    await ready;
     await new Promise((resolve, reject) => {
       const poll = () => {
         if (this.fatal) return reject(this.fatal);
@@ -178,8 +195,46 @@ void main() {
       };
       poll();
     });
+    if (this.openTimes) this.openTimes.coarsest = performance.now();
+    await compiling;
+    if (this.openTimes) this.openTimes.compiled = performance.now();
     this.extract.pinStart();
     this.extract.setSurface(this._coarsestSurface());
+    if (this.openTimes) this.openTimes.surface = performance.now();
+  }
+
+  // Compiles the shader programs of the materials the cut may be drawn with, for `scene`'s lights
+  // and `renderer`'s output, with a one-triangle stand-in of a patch's attributes.
+  async _precompile(p) {
+    if (!p || !p.renderer || !p.renderer.compileAsync) return;
+    const g = new THREE.BufferGeometry();
+    g.setAttribute('position', new THREE.BufferAttribute(new Float32Array(9), 3));
+    g.setAttribute('normal', new THREE.BufferAttribute(new Int8Array(9), 3, true));
+    if (this.mt.hasColors) g.setAttribute('color', new THREE.BufferAttribute(new Uint8Array(12), 4, true));
+    g.setIndex(new THREE.BufferAttribute(new Uint16Array([0, 1, 2]), 1));
+    const group = new THREE.Group();
+    for (const m of [this.material, this.backMaterial, this.doubleMaterial]) if (m) group.add(new THREE.Mesh(g, m));
+    try {
+      await p.renderer.compileAsync(group, p.camera, p.scene);
+      // One draw of the stand-in into a 1x1 sRGB target (the programs of the screen and of the still
+      // image's target), waited for: WebGL links programs lazily, at their first use, and that
+      // first use was the first frame's.
+      if (p.scene) {
+        const rt = new THREE.WebGLRenderTarget(1, 1, { colorSpace: THREE.SRGBColorSpace });
+        const prev = p.renderer.getRenderTarget();
+        p.scene.add(group);
+        p.renderer.setRenderTarget(rt);
+        p.renderer.render(p.scene, p.camera);
+        const gl = p.renderer.getContext();
+        gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, new Uint8Array(4));
+        p.renderer.setRenderTarget(prev);
+        p.scene.remove(group);
+        rt.dispose();
+      }
+    } catch (e) {
+      console.warn(`shader precompile: ${e.message}`);  // the first frame compiles them then
+    }
+    g.dispose();
   }
 
   // The coarsest cut, welded, as a ClosedSurface in object space (when normal cones may cull:

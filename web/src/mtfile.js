@@ -22,14 +22,19 @@ export function hasher() {
  */
 export async function openMtFile(source) {
   // One suffix read gives the size and the footer; the header follows.
+  const now = () => performance.now();
+  const times = { begin: now() };  // the opening's steps (the bench's profile of the first image)
   const tail = await source.openTail(kFooterSize);
+  times.tail = now();
   const size = source.size;
   if (size < kHeaderSize + kFooterSize)
     throw new MtError(source.path, `not an MT file: ${size} bytes is shorter than header + footer (truncated?)`);
   const headerBuf = await source.read(0, kHeaderSize);
   const { header, footer } = readHeaderAndFooter(source.path, size, headerBuf, tail);
   const range = indexRange(source.path, size, header);
+  times.header = now();
   const meta = await source.read(range.begin, range.end);
+  times.read = now();
   const { create64 } = await hasher();
   const h = create64(0n);
   h.update(new Uint8Array(headerBuf));
@@ -38,10 +43,14 @@ export async function openMtFile(source) {
   const want = (BigInt(footer.checksumHi) << 32n) | BigInt(footer.checksumLo);
   if (sum !== want)
     throw new MtError(source.path, `checksum mismatch over header + DAG + index (bytes 0-${kHeaderSize} and ${range.begin}-${range.end})`);
+  times.hashed = now();
   const idx = readIndex(header, meta);
   const metadata = readMetadata(source.path, header, meta);
   checkIndex(source.path, header, idx);
+  times.parsed = now();
   const scene = buildScene(header, idx);
+  times.built = now();
+  scene.openTimes = times;
   // The metadata block (MtFileReader::crs()): '' when the file names no coordinate system.
   scene.metadata = metadata;
   scene.crs = metadata.get(kMetadataCrs) || '';

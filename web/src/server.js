@@ -42,6 +42,9 @@ export class PatchServer {
       return new Promise((resolve, reject) => {
         w.onmessage = (e) => {
           if (e.data.type === 'ready') {
+            // When the worker's module ran, its decoders were in, and it was ready (page time, ms).
+            const rel = (x) => x - performance.timeOrigin;
+            this.workerTimes = { started: rel(e.data.startedAt), libs: rel(e.data.libsAt), ready: rel(e.data.readyAt) };
             if (e.data.error) reject(new Error(e.data.error));
             else resolve();
             w.onmessage = (ev) => this.onDecoded(ev.data);

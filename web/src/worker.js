@@ -3,6 +3,7 @@
 // normalized; area-weighted from the triangles when the file stores none), colours (RGBA8),
 // indices (uint16 when they fit). A damaged payload comes back as an error naming the patch.
 import { decodePatch } from './patch_codec.js';
+import { defaultLibUrls } from './libs.js';
 
 let libs = null, cfg = null, h64Raw = null;
 
@@ -15,11 +16,19 @@ function loadLibs(urls) {
       const meshopt = meshoptMod.MeshoptDecoder;
       await meshopt.ready;
       const xx = await xxMod.default();
+      libsAt = performance.timeOrigin + performance.now();
       return { zstdMod, meshopt, xx };
     });
   return libsPromise;
 }
 
+// A page may start the workers before its modules load (viewer.html: `worker.js?preload`): they
+// load the default decoders at once, overlapping the page's own start-up.
+const startedAt = performance.timeOrigin + performance.now();  // the bench's profile of the first image
+let libsAt = 0;
+if (new URL(self.location.href).searchParams.has('preload')) loadLibs(defaultLibUrls()).catch(() => {});
+
+let initPromise = null;
 async function init(msg) {
   cfg = msg;
   const { zstdMod, meshopt, xx } = await loadLibs(msg.libs);
@@ -74,14 +83,23 @@ self.onmessage = async (e) => {
   }
   if (msg.type === 'init') {
     try {
-      await init(msg);
-      self.postMessage({ type: 'ready' });
+      initPromise = init(msg);
+      await initPromise;
+      self.postMessage({ type: 'ready', startedAt, libsAt, readyAt: performance.timeOrigin + performance.now() });
     } catch (err) {
       self.postMessage({ type: 'ready', error: `decoder set-up failed: ${err.message}` });
     }
     return;
   }
   if (msg.type !== 'decode') return;
+  // Payloads may arrive while the decoders still load (the page reads them meanwhile).
+  try {
+    await initPromise;
+  } catch (_) { /* reported by 'init' */ }
+  if (!libs) {
+    self.postMessage({ type: 'decoded', job: msg.job, results: msg.items.map((it) => ({ id: it.id, error: `patch ${it.id}: no decoder` })), busyMs: 0 });
+    return;
+  }
   const t0 = performance.now();
   const results = [], transfer = [];
   for (const it of msg.items) {

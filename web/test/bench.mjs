@@ -91,7 +91,8 @@ if (shots) await page.screenshot({ path: path.join(shots, 'web-viewer-still.png'
 // The final cut drawn whole, three times, each waited for: SwiftShader's raw rate on it.
 const raw = await page.evaluate(() => window.mtViewer.drawRate(3));
 const s = await page.evaluate(() => ({ frames: window.mtViewer.frames, first: window.mtViewer.firstImageMs, fileSize: window.mtViewer.fileSize,
-  openBytes: window.mtViewer.openBytes, error: window.mtViewer.error, warnings: window.mtViewer.warnings.length }));
+  openBytes: window.mtViewer.openBytes, resources: performance.getEntriesByType('resource').map((r) => [r.name.replace(location.origin, ''), r.startTime, r.responseEnd, r.transferSize]).filter((r) => r[1] < window.mtViewer.firstImageMs),
+  nav: (({ responseEnd, domInteractive, domContentLoadedEventEnd }) => ({ responseEnd, domInteractive, domContentLoadedEventEnd }))(performance.getEntriesByType('navigation')[0]), openTimes: window.mtViewer.openTimes, moduleMs: window.mtViewer.moduleMs, error: window.mtViewer.error, warnings: window.mtViewer.warnings.length }));
 await browser.close();
 srv.proc.kill();
 fs.rmSync(root, { recursive: true, force: true });
@@ -111,6 +112,22 @@ const mib = (b) => (b / 2 ** 20).toFixed(2);
 console.log(`file                      ${file} (${mib(s.fileSize)} MiB)`);
 console.log(`page load                 ${loadMs} ms (load event)`);
 console.log(`first image               ${s.first.toFixed(0)} ms after navigation start (header+DAG+index ${mib(s.openBytes)} MiB, coarsest cut loaded)`);
+if (s.openTimes) {
+  const o = s.openTimes, d = (a, b) => (o[b] - o[a]).toFixed(0);
+  console.log(`first image's steps       page script ${o.start.toFixed(0)} ms, header+DAG+index ${d('start', 'index')} ms, workers ready ${d('index', 'workers')} ms, ` +
+    `coarsest cut loaded ${d('workers', 'coarsest')} ms, shaders ${o.compiled ? d('coarsest', 'compiled') : '-'} ms, closed-surface test ${d(o.compiled ? 'compiled' : 'coarsest', 'surface')} ms, to the first frame ${d('surface', 'frame')} ms, ` +
+    `update ${d('frame', 'update')} ms, render calls ${d('update', 'render')} ms, drawing waited for ${d('render', 'drawn')} ms`);
+  if (process.env.BENCH_RESOURCES) {
+    console.log('  navigation', JSON.stringify(s.nav));
+    for (const r of s.resources) console.log(`  ${r[1].toFixed(0)}-${r[2].toFixed(0)} ms ${r[0]} (${r[3]} B)`);
+  }
+  if (o.worker) console.log(`  a decoding worker        module running ${o.worker.started.toFixed(0)} ms, decoders in ${o.worker.libs.toFixed(0)} ms, ready ${o.worker.ready.toFixed(0)} ms (page time)`);
+  if (o.file) {
+    const f = o.file, e = (a, b) => (f[b] - f[a]).toFixed(0);
+    console.log(`  the file's opening       begun ${f.begin.toFixed(0)} ms: footer ${e('begin', 'tail')} ms, header ${e('tail', 'header')} ms, DAG+index read ${e('header', 'read')} ms, ` +
+      `checksum ${e('read', 'hashed')} ms, records ${e('hashed', 'parsed')} ms, checks + DAG ${e('parsed', 'built')} ms`);
+  }
+}
 console.log(`frames within ${budget} ms     ${(100 * within).toFixed(1)}% of ${ms.length} path frames (median ${ms[ms.length >> 1].toFixed(1)} ms, p95 ${ms[Math.floor(0.95 * ms.length)].toFixed(1)} ms, max ${ms.at(-1).toFixed(1)} ms)`);
 const med = (k) => pathFrames.map((x) => x[k]).sort((a, b) => a - b)[pathFrames.length >> 1];
 console.log(`browser CPU               ${((cpu1 - cpu0) / (frame1 - frame0)).toFixed(1)} ms a frame (all its processes, user + system) against ${((wall1 - wall0) / (frame1 - frame0)).toFixed(1)} ms of wall time a frame, over ${frame1 - frame0} frames; load average ${load0} before, ${load1} after (${os.cpus().length} cores)`);
