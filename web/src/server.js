@@ -19,7 +19,7 @@ export class PatchServer {
     this.opt = opt;
     this.queue = [];
     this.inFlight = 0;
-    this.maxInFlight = opt.inFlight || 4;
+    this.maxInFlight = opt.inFlight || 12;
     this.loads = 0;
     this.bad = 0;
     this.bytesRead = 0;
