@@ -311,6 +311,10 @@ std::vector<uint8_t> encodeMeshoptWith(const Prepared& p, const std::vector<uint
   appendBytes(raw, ibuf.data(), ibuf.size());
   appendBytes(raw, abuf.data(), abuf.size());
   std::vector<uint8_t> frame = zstdFrame(raw, options.zstdLevel);
+  // The range-coded stream: when C is chosen its encoder has coded the connectivity already and
+  // goes on with the positions (one connectivity pass, not one to compare and one to write).
+  std::vector<uint8_t> stream;
+  std::unique_ptr<RangeEncoder> connEncoder;
   // C: the frame without the index code, and the connectivity code's bytes (coded alone here to
   // compare; the positions cost the same in both).
   if (!strip) {
@@ -320,18 +324,17 @@ std::vector<uint8_t> encodeMeshoptWith(const Prepared& p, const std::vector<uint
     appendBytes(rawC, abuf.data(), abuf.size());
     std::vector<uint8_t> frameC = abuf.empty() ? std::vector<uint8_t>() : zstdFrame(rawC, options.zstdLevel);
     bool stored = frameC.empty() || frameC.size() >= rawC.size();
-    std::vector<uint8_t> conn;
     std::vector<uint32_t> coded;
-    {
-      RangeEncoder rc(conn);
-      encodeConnectivity(rc, tri.data(), tri.size(), n, coded);
-      rc.finish();
-    }
-    if ((stored ? rawC.size() : frameC.size()) + conn.size() <= frame.size()) {
+    connEncoder = std::make_unique<RangeEncoder>(stream);
+    encodeConnectivity(*connEncoder, tri.data(), tri.size(), n, coded);
+    if ((stored ? rawC.size() : frameC.size()) + connEncoder->finishedSize() <= frame.size()) {
       flags |= format::kPayloadConnectivity;
       raw.swap(rawC);
       if (stored) frame.clear();
       else frame.swap(frameC);
+    } else {
+      connEncoder.reset();
+      stream.clear();
     }
   }
 
@@ -346,15 +349,13 @@ std::vector<uint8_t> encodeMeshoptWith(const Prepared& p, const std::vector<uint
   else appendBytes(out, raw.data(), raw.size());
   // After the frame one range-coded stream: the connectivity code (kPayloadConnectivity), then
   // the position residuals in vertex order, x y z per vertex.
-  RangeEncoder rc(out);
-  if (flags & format::kPayloadConnectivity) {
-    std::vector<uint32_t> coded;
-    encodeConnectivity(rc, tri.data(), tri.size(), n, coded);
-  }
+  RangeEncoder positionsOnly(stream);
+  RangeEncoder& rc = connEncoder ? *connEncoder : positionsOnly;
   auto model = std::make_unique<ContextModel>();
   for (size_t v = 0; v < n; ++v)
     for (uint32_t x = 0; x < 3; ++x) encodeResidual(rc, *model, kind[v], x, res[v * 3 + x]);
   rc.finish();
+  appendBytes(out, stream.data(), stream.size());
   return out;
 }
 

@@ -75,6 +75,18 @@ class RangeEncoder {
       m = (m << 1) | b;
     }
   }
+  // How many bytes finish() would leave in the output now, without changing the coder: the bytes
+  // already out (less the unstored first one) and what its five flushing shifts would add.
+  size_t finishedSize() const {
+    uint64_t low = low_, pending = cacheSize_;
+    size_t written = out_.size() - start_;
+    for (int i = 0; i < 5; ++i) {
+      if (uint32_t(low) < 0xFF000000u || (low >> 32) != 0) written += pending, pending = 0;
+      ++pending;
+      low = (low & 0x00FFFFFFu) << 8;
+    }
+    return written - 1;
+  }
   void finish() {
     for (int i = 0; i < 5; ++i) shiftLow();
     out_.erase(out_.begin() + std::ptrdiff_t(start_));  // LZMA's first byte is always 0: not stored

@@ -418,6 +418,38 @@ TEST(Codec, ConnectivityCodeTakesAnyTriangleList) {
   EXPECT_EQ(rd.overrun(), 0u);
 }
 
+// RangeEncoder::finishedSize (the encoder compares its codings by it, then goes on coding) is the
+// size finish() leaves, at any point of a stream: after each of many bits, with skewed
+// probabilities that make long carry runs, and coded after bytes already in the vector.
+TEST(Codec, RangeEncoderFinishedSizeIsTheSizeFinishLeaves) {
+  std::mt19937 rng(11);
+  for (int round = 0; round < 40; ++round) {
+    std::vector<uint8_t> prefix(size_t(round % 3) * 5, 0x5A);
+    std::vector<uint8_t> bytes = prefix;
+    codec_detail::RangeEncoder rc(bytes);
+    std::vector<codec_detail::CountedBit> probs(8);
+    std::vector<uint32_t> bits;
+    const uint32_t skew = 1 + uint32_t(round % 5) * 200;  // 1 in skew bits is a 1: long carry runs
+    for (int i = 0; i < 3000; ++i) {
+      uint32_t b = rng() % skew == 0 ? 1u : 0u;
+      if (round % 2) b ^= 1u;
+      bits.push_back(b);
+      rc.bit(probs[size_t(i) % probs.size()], b);
+      if (i % 97 != 0) continue;
+      // What finish() would leave now: code the same bits into a fresh encoder and finish it.
+      std::vector<uint8_t> copy = prefix;
+      codec_detail::RangeEncoder again(copy);
+      std::vector<codec_detail::CountedBit> p2(8);
+      for (size_t k = 0; k < bits.size(); ++k) again.bit(p2[k % p2.size()], bits[k]);
+      again.finish();
+      ASSERT_EQ(rc.finishedSize(), copy.size() - prefix.size()) << "round " << round << " bit " << i;
+    }
+    size_t predicted = rc.finishedSize();
+    rc.finish();
+    EXPECT_EQ(predicted, bytes.size() - prefix.size()) << "round " << round;
+  }
+}
+
 // A connectivity-coded payload, truncated or with any byte changed, throws mt::Error or decodes to
 // valid indices; never crashes.
 TEST(Codec, DamagedConnectivityPayloadsThrowOrStayValid) {
