@@ -257,6 +257,27 @@ TEST_F(TexturedBuild, RendersTheTextureCloseToTheFullResolution) {
               psnr, psnr1);
 }
 
+// Drawn other than textured (headless), a textured file's atlases are neither read nor counted:
+// the place holders are sized without texels, and the caches hold none.
+TEST_F(TexturedBuild, ShadedDrawingLoadsNoTexels) {
+  Scene withTexels({mt()}), without({mt()});
+  without.setLoadTextures(false);
+  uint64_t texelBytes = 0;
+  for (uint32_t p = 0; p < withTexels.patches().size(); ++p) {
+    const auto& rec = withTexels.reader(0).textures()[withTexels.patches()[p].local];
+    const uint64_t expected = rec.size ? renderTextureBytes(withTexels.patches()[p].triangles, rec.width, rec.height) : 0;
+    EXPECT_EQ(withTexels.decodedBytesBound(p), without.decodedBytesBound(p) + expected) << "patch " << p;
+    texelBytes += expected;
+  }
+  EXPECT_GT(texelBytes, 0u);
+  std::string textured, shaded;
+  render(mt(), dir_->file("tex"), "--color texture --tolerance 0.01", &textured);
+  render(mt(), dir_->file("shaded"), "--color shaded --tolerance 0.01", &shaded);
+  EXPECT_GT(statOf(textured, "gpu_texture_bytes"), 0u) << textured;
+  EXPECT_EQ(statOf(shaded, "gpu_texture_bytes"), 0u) << shaded;
+  EXPECT_LT(statOf(shaded, "cache_max_bytes"), statOf(textured, "cache_max_bytes"));
+}
+
 // A file without textures still falls back, saying so.
 TEST(TextureRender, FileWithoutTexturesFallsBack) {
   TempDir dir;
