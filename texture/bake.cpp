@@ -217,7 +217,7 @@ BakeResult bakeAtlas(const double* positions, size_t nv, const uint32_t* tri, si
   out.texelSize = texelSize;
   // Samples per texel side: a texel wider than the finer surface's averages its texels under it
   // (a box filter) instead of point-sampling one of them, which would drop thin lines (aliasing).
-  const int n = fineTexelSize > 0 ? std::clamp(int(std::ceil(texelSize / fineTexelSize - 0.01)), 1, 4) : 1;
+  const int n = fineTexelSize > 0 ? std::clamp(int(std::lround(texelSize / fineTexelSize)), 1, 4) : 1;
   // Corner coordinates in atlas texels: chart origin + padding, y down.
   std::vector<double> corner(6 * nt);
   for (size_t t = 0; t < nt; ++t) {

@@ -57,7 +57,8 @@ struct BakeResult {
 // texel asked for; grown by 1.25x until the charts fit maxSide x maxSide. margin: how far the
 // finer surface may be from these triangles (the simplification's measured deviation).
 // fineTexelSize: the finer surface's texel size (meanTexelSize); a texel k times wider takes the
-// mean of ceil(k) x ceil(k) samples (up to 4 x 4), one sample when 0.
+// mean of round(k) x round(k) samples (up to 4 x 4; one below 1.5 x, where the bilinear lookup
+// already spans the finer texels under it), one sample when 0.
 BakeResult bakeAtlas(const double* positions, size_t vertexCount, const uint32_t* triangles, size_t triangleCount,
                      const SurfaceIndex& fine, double texelSize, double margin, int maxSide = 2048, int padding = 2,
                      double fineTexelSize = 0);
