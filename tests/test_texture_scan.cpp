@@ -84,7 +84,7 @@ TEST(TexturedScan, DragonBuildsCrackFreeAndDrawsItsTextureAtOnePixel) {
   // The 1 px cut (tolerance 4 at 4x the size) against the full resolution (every patch of the
   // input, without culling). A node's texels are no wider than its error (the texel size enters
   // the error when the floor's texels are wider: mtbuild/region_texture.h), so the cut shows no
-  // texel wider than a pixel: 31.6 dB measured, 27.6 dB when the texel size followed the level.
+  // texel wider than a pixel: 31.5 dB measured, 27.6 dB when the texel size followed the level.
   uint64_t fullTriangles = 0, cutTriangles = 0, coarseTriangles = 0;
   const auto full = render(dir.file("dt.mt"), dir.file("full"), "--tolerance 0.01 --no-cull", &fullTriangles);
   const auto cut = render(dir.file("dt.mt"), dir.file("cut"), "--tolerance 4", &cutTriangles);
