@@ -178,6 +178,9 @@ struct RegionTask {
   // Root levels only: the largest deviation a root simplification that had to fall back to a
   // halving may add (twice the previous level's largest node error); 0: none. See processRegion.
   double rootDeviationLimit = 0;
+  // The largest error of the nodes whose fragments hold the floor patches: the new node's error
+  // is this plus the measured deviation (textured builds tie the atlases' texel size to it).
+  double floorError = 0;
   LoadedMesh mesh;
   double loadSeconds = 0;             // measured by whoever loaded it
 };
@@ -198,6 +201,7 @@ struct RegionResult {
   ReplacementMesh replacement;        // the simplified region, split by V*(level)
   double deviation = 0;               // measured distance simplified <-> floor
   double colorDeviation = 0;          // measured colour deviation simplified <-> floor (color_error.h)
+  double textureError = 0;            // textured builds: the node error its atlases' texels need (region_texture.h)
   double sphere[4] = {0, 0, 0, 0};    // centre, radius of the simplified region
   float coneAxis[3] = {0, 0, 1};
   float coneCutoff = -1;

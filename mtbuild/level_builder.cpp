@@ -368,8 +368,12 @@ bool LevelBuilder::beginLevel() {
   s.floors.clear();
   s.floorTriangles.clear();
   s.floorVertices.clear();
+  s.floorErrors.clear();
   for (auto& [r, ids] : regions) {
     s.regionIds.push_back(r);
+    float floorError = 0;  // here, not in loadRegion: commits change `producer` while regions load
+    for (PatchId id : ids) floorError = std::max(floorError, s.nodes.at(s.producer.at(id)).error);
+    s.floorErrors.push_back(floorError);
     s.floors.push_back(std::move(ids));
     s.floorTriangles.push_back(counts[r].first);
     s.floorVertices.push_back(counts[r].second);
@@ -395,6 +399,7 @@ RegionTask LevelBuilder::loadRegion(size_t i) const {
   task.region = s.regionIds.at(i);
   task.root = s.root;
   if (s.root && !s.report.levels.empty()) task.rootDeviationLimit = 2 * s.report.levels.back().maxError;
+  task.floorError = s.floorErrors.at(i);
   std::vector<Patch> floor;
   for (PatchId id : s.floors[i]) floor.push_back(s.store->patch(id));
   task.mesh = s.store->assemble(floor);
@@ -444,6 +449,10 @@ uint32_t LevelBuilder::State::addNode(const RegionTask& task, const RegionResult
   // A real, monotone bound: the floor is within predecessorError of the input,
   // the new fragment within `deviation` of the floor.
   rec.error = std::nextafter(float(predecessorError + result.deviation), std::numeric_limits<float>::infinity());
+  // Textured builds: the error also covers the new patches' texel size (region_texture.h), so a
+  // cut at a screen tolerance shows texels no wider than it.
+  if (result.textureError > rec.error)
+    rec.error = std::nextafter(float(result.textureError), std::numeric_limits<float>::infinity());
   assert(rec.error >= predecessorError && "a node's error is at least each predecessor's");
   // The colour error accumulates the same way (0 throughout without colours).
   rec.colorError = result.colorDeviation > 0

@@ -71,6 +71,7 @@ struct LevelBuilder::State {
   std::vector<uint32_t> regionIds;
   std::vector<std::vector<PatchId>> floors;
   std::vector<uint64_t> floorTriangles, floorVertices;
+  std::vector<float> floorErrors;  // per region: the largest error of its floor's producers
   bool root = false;
   size_t nextCommit = 0;
   LevelReport lr;

@@ -37,6 +37,15 @@ class StoreTexels final : public tex::TexelSource {
 
 }  // namespace
 
+double texelSizeFor(double nodeError, double floorTexel) {
+  // Finer than the floor would only copy its texels (more bytes, no detail); more than twice as
+  // wide, the 2 x 2 mean of bakeAtlas would no longer cover each floor texel under it.
+  if (!(floorTexel > 0)) return kTexelPerError * nodeError;
+  return std::clamp(kTexelPerError * nodeError, floorTexel, 2 * floorTexel);
+}
+
+double textureErrorOf(double texelSize) { return texelSize / kTexelPerError; }
+
 FloorAtlases floorAtlases(const std::vector<Patch>& floor, const TextureContext& context) {
   FloorAtlases out;
   StoreTexels texels(context);
@@ -89,8 +98,8 @@ void encodeTextures(const std::vector<Patch>& floor, const FloorAtlases& atlases
   }
 }
 
-void bakeRegion(const LoadedMesh& lm, const FloorAtlases& atlases, double deviation, const TextureContext& context,
-                ReplacementMesh& rep) {
+double bakeRegion(const LoadedMesh& lm, const FloorAtlases& atlases, double deviation, double nodeError,
+                  const TextureContext& context, ReplacementMesh& rep) {
   // The floor as a textured surface: triangles are grouped by patch, in lm.patches order.
   tex::TexturedSurface fine;
   fine.positions = lm.positions.data();
@@ -112,10 +121,9 @@ void bakeRegion(const LoadedMesh& lm, const FloorAtlases& atlases, double deviat
   fine.cornerUV = uv.data();
   fine.image = image.data();
   tex::SurfaceIndex index(fine);
-  // Texels halve with the triangles (sqrt(2) coarser per level), or follow the deviation when
-  // that is coarser: texels finer than the geometry's error are not worth their bytes.
   const double floorTexel = tex::meanTexelSize(fine);
-  const double texel = std::max(std::sqrt(2.0) * floorTexel, 0.5 * deviation);
+  const double texel = texelSizeFor(nodeError, floorTexel);
+  double textureError = 0;
   const size_t nt = rep.triangles.size() / 3;
   rep.cornerUV.assign(6 * nt, 0.0f);
   rep.triangleMaterial.assign(nt, kAtlasMaterial);
@@ -137,11 +145,14 @@ void bakeRegion(const LoadedMesh& lm, const FloorAtlases& atlases, double deviat
         idx.push_back(local[v]);
       }
     for (uint32_t v : used) local[v] = UINT32_MAX;
-    tex::BakeResult b = tex::bakeAtlas(pos.data(), used.size(), idx.data(), tris.size(), index, texel, deviation, context.maxSide);
+    tex::BakeResult b = tex::bakeAtlas(pos.data(), used.size(), idx.data(), tris.size(), index, texel, deviation,
+                                       context.maxSide, 2, floorTexel);
+    textureError = std::max(textureError, textureErrorOf(b.texelSize));
     for (size_t i = 0; i < tris.size(); ++i) std::copy_n(&b.cornerUV[6 * i], 6, &rep.cornerUV[6 * size_t(tris[i])]);
     const std::vector<uint8_t> raw = tex::encodeRaw(b.image);
     rep.cellAtlas[key] = std::string(raw.begin(), raw.end());
   }
+  return textureError;
 }
 
 }  // namespace mt

@@ -190,7 +190,7 @@ RegionResult processRegion(const RegionTask& task, const RegionContext& ctx) {
   normalCone(sr.positions, sr.triangles, out.coneAxis, out.coneCutoff);
   rep.positions = std::move(sr.positions);
   // The new patches' own atlases, baked from the floor.
-  if (ctx.texture) bakeRegion(lm, atlases, sr.error, *ctx.texture, rep);
+  if (ctx.texture) out.textureError = bakeRegion(lm, atlases, sr.error, task.floorError + sr.error, *ctx.texture, rep);
   out.seconds = std::chrono::duration<double>(Clock::now() - start).count();
   return out;
 }

@@ -14,6 +14,7 @@ namespace mt::render {
 
 Engine::Engine(EngineOptions options) : options_(std::move(options)) {
   scene_ = std::make_unique<Scene>(options_.files);
+  scene_->setLoadTextures(options_.textures);
   drawnPerFile_.assign(scene_->fileCount(), 0);
   double c[3], r;
   scene_->boundingSphere(c, r);
@@ -85,7 +86,7 @@ PatchView Engine::baselineFetch(uint32_t id) {
     v.vertexCount = counts.first;
     v.indices = reinterpret_cast<const uint32_t*>(scratch_.data() + uint64_t(counts.first) * sizeof(RenderVertex));
     v.indexCount = counts.second;
-    if (reader.hasTextures()) {
+    if (scene_->loadsTextures(sp.file)) {
       const TexturePayload t = reader.readTexture(sp.local, d);
       const auto atlas = decodeTextureInto(t, counts.first, counts.second / 3, scratch_.data(), scratch_.size());
       if (atlas.first) {

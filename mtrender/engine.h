@@ -51,6 +51,8 @@ struct EngineOptions {
   // frames; 1 turns it off (every frame draws the whole cut).
   uint32_t stillFrames = 16;
   OcclusionTest occlusionTest = OcclusionTest::Pyramid;
+  // Load textured files' atlases (Scene::setLoadTextures): off when nothing is drawn textured.
+  bool textures = true;
 };
 
 struct FrameRecord : FrameStats {

@@ -521,9 +521,12 @@ int main(int argc, char** argv) {
   try {
     checkFiles(o);
     if (o.cold) dropFromPageCache(o.files);
-    const EngineOptions eo = engineOptions(o);
+    EngineOptions eo = engineOptions(o);
     const DrawSettings ds = drawSettings(o);
+    // The viewer keeps the atlases (its C key may switch to texture at any time); a headless run
+    // draws one mode, and loads texels only for texture.
     if (!o.headless) return runViewerFor(o, eo, ds);
+    eo.textures = ds.mode == ColorMode::Texture;
     return runHeadless(o, eo, ds, programStart);
   } catch (const std::exception& e) {
     return mt::reportError("mtrender", e);  // one line "mtrender: MESSAGE"; the exit code by kind

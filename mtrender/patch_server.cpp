@@ -189,7 +189,8 @@ void PatchServer::run() {
       PatchBound bound;
       // The reader's errors name the file; ours are prefixed with it.
       TexturePayload texture;
-      if (reader.hasTextures()) texture = reader.readTexture(sp.local, decoded);
+      const bool textured = scene_.loadsTextures(sp.file);
+      if (textured) texture = reader.readTexture(sp.local, decoded);
       try {
         counts = decodeInto(scene_, req.id, decoded, cache_.slotData(slot), cache_.slotBytes(slot), &bound);
       } catch (const Error& e) {
@@ -201,7 +202,7 @@ void PatchServer::run() {
         throw Error(reader.path() + ": patch " + std::to_string(sp.local) + ": " + e.what());
       }
       cache_.commit(slot, counts.first, counts.second, bound, atlas.first, atlas.second);
-      bytesRead_ += reader.hasTextures() ? reader.textures()[sp.local].size : 0;
+      bytesRead_ += textured ? reader.textures()[sp.local].size : 0;
       bytesRead_ += sp.fileBytes;
       trianglesLoaded_ += sp.triangles;
       const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();

@@ -116,7 +116,7 @@ uint64_t Scene::decodedBytesBound(uint32_t patch) const {
   uint64_t bytes = uint64_t(v) * 20 + uint64_t(p.triangles) * 12;
   // A textured patch's corner coordinates and texels share its place holder (patch_cache.h).
   const MtFileReader& r = *readers_[p.file];
-  if (r.hasTextures() && r.textures()[p.local].size != 0)
+  if (loadsTextures(p.file) && r.textures()[p.local].size != 0)
     bytes += renderTextureBytes(p.triangles, r.textures()[p.local].width, r.textures()[p.local].height);
   return bytes;
 }

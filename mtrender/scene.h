@@ -74,6 +74,11 @@ class Scene {
   // Decoded size of a patch in the renderer's layout (RenderPatch in patch_cache.h), an upper
   // bound the cache sizes its place holders with; a textured patch's coordinates and texels included.
   uint64_t decodedBytesBound(uint32_t patch) const;
+  // Whether textured files' atlases are loaded (the default); off when nothing will be drawn
+  // textured (mtrender --headless with --color other than texture): then no texture byte is read,
+  // decoded, or counted in the caches. Set before the caches are sized.
+  void setLoadTextures(bool load) { loadTextures_ = load; }
+  bool loadsTextures(uint32_t file) const { return loadTextures_ && readers_[file]->hasTextures(); }
   // The double-precision origin a patch's vertices are stored relative to (camera-relative
   // drawing: floats hold small offsets from it, so a model millions of units from the origin keeps
   // its centimetres; the GL backend composes the model-view matrix in double). It is the centre
@@ -90,6 +95,7 @@ class Scene {
   }
 
  private:
+  bool loadTextures_ = true;
   std::vector<std::unique_ptr<MtFileReader>> readers_;
   std::vector<SceneNode> nodes_;
   std::vector<SceneArc> arcs_;

@@ -188,7 +188,7 @@ double meanTexelSize(const TexturedSurface& s) {
 }
 
 BakeResult bakeAtlas(const double* positions, size_t nv, const uint32_t* tri, size_t nt, const SurfaceIndex& fine,
-                     double texelSize, double margin, int maxSide, int padding) {
+                     double texelSize, double margin, int maxSide, int padding, double fineTexelSize) {
   BakeResult out;
   Charts charts = makeCharts(positions, nv, tri, nt);
   out.charts = charts.count;
@@ -215,6 +215,9 @@ BakeResult bakeAtlas(const double* positions, size_t nv, const uint32_t* tri, si
     texelSize *= 1.25;
   }
   out.texelSize = texelSize;
+  // Samples per texel side: a texel wider than the finer surface's averages its texels under it
+  // (a box filter) instead of point-sampling one of them, which would drop thin lines (aliasing).
+  const int n = fineTexelSize > 0 ? std::clamp(int(std::lround(texelSize / fineTexelSize)), 1, 4) : 1;
   // Corner coordinates in atlas texels: chart origin + padding, y down.
   std::vector<double> corner(6 * nt);
   for (size_t t = 0; t < nt; ++t) {
@@ -251,11 +254,25 @@ BakeResult bakeAtlas(const double* positions, size_t nv, const uint32_t* tri, si
         // Texel centres inside, or within half a texel of an edge (the edge's texels).
         const double eps = 0.5 / std::max(1.0, std::sqrt(std::fabs(det)));
         if (b0 < -eps || b1 < -eps || b2 < -eps) continue;
-        double p[3];
-        for (int a = 0; a < 3; ++a) p[a] = b0 * P[0][a] + b1 * P[1][a] + b2 * P[2][a];
-        uint8_t rgb[3];
-        if (!fine.colorAt(p, candidates, rgb)) continue;
-        std::memcpy(out.image.pixel(x, y), rgb, 3);
+        // The mean of n x n samples over the texel's square (the plane of the triangle extended
+        // past its edges for the border texels' outer samples).
+        uint32_t acc[3] = {0, 0, 0}, found = 0;
+        for (int sy = 0; sy < n; ++sy)
+          for (int sx = 0; sx < n; ++sx) {
+            const double qx = x + (sx + 0.5) / n, qy = y + (sy + 0.5) / n;
+            const double q1 = ((qx - C[0]) * (C[5] - C[1]) - (C[4] - C[0]) * (qy - C[1])) / det;
+            const double q2 = ((C[2] - C[0]) * (qy - C[1]) - (qx - C[0]) * (C[3] - C[1])) / det;
+            const double q0 = 1 - q1 - q2;
+            double p[3];
+            for (int a = 0; a < 3; ++a) p[a] = q0 * P[0][a] + q1 * P[1][a] + q2 * P[2][a];
+            uint8_t rgb[3];
+            if (!fine.colorAt(p, candidates, rgb)) continue;
+            for (int c = 0; c < 3; ++c) acc[c] += rgb[c];
+            ++found;
+          }
+        if (!found) continue;
+        uint8_t* texel = out.image.pixel(x, y);
+        for (int c = 0; c < 3; ++c) texel[c] = uint8_t((acc[c] + found / 2) / found);
         filled[size_t(y) * size_t(aw) + size_t(x)] = 1;
       }
   }

@@ -1,7 +1,8 @@
 // Atlases of the levels above the finest: a coarser patch gets its own charts (charts.h), packed
-// at a texel size the caller ties to the level (atlas_pack.h), and each texel takes the colour of
-// the finer surface's nearest point (the floor the patch was simplified from, textured by its own
-// atlases), sampled bilinearly. Texels around the charts (the gutter) are filled from their
+// at a texel size the caller ties to the node's error (atlas_pack.h), and each texel takes the
+// colour of the finer surface's nearest point (the floor the patch was simplified from, textured by
+// its own atlases), sampled bilinearly, or the mean of several such points across the texel when
+// it is wider than the finer surface's texels. Texels around the charts (the gutter) are filled from their
 // neighbours so that filtering across a chart's border does not bring in black.
 #pragma once
 
@@ -55,8 +56,12 @@ struct BakeResult {
 // The atlas of triangles (positions, 3 per vertex) baked from `fine`. texelSize: world units per
 // texel asked for; grown by 1.25x until the charts fit maxSide x maxSide. margin: how far the
 // finer surface may be from these triangles (the simplification's measured deviation).
+// fineTexelSize: the finer surface's texel size (meanTexelSize); a texel k times wider takes the
+// mean of round(k) x round(k) samples (up to 4 x 4; one below 1.5 x, where the bilinear lookup
+// already spans the finer texels under it), one sample when 0.
 BakeResult bakeAtlas(const double* positions, size_t vertexCount, const uint32_t* triangles, size_t triangleCount,
-                     const SurfaceIndex& fine, double texelSize, double margin, int maxSide = 2048, int padding = 2);
+                     const SurfaceIndex& fine, double texelSize, double margin, int maxSide = 2048, int padding = 2,
+                     double fineTexelSize = 0);
 
 // The texel size of a textured surface: sqrt(area / texel area) over all its triangles.
 double meanTexelSize(const TexturedSurface& surface);

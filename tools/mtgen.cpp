@@ -35,11 +35,14 @@
 #include "base/error.h"
 #include "base/exit_code.h"
 #include "base/output_path.h"
+#include "patchstore/io/mesh_reader.h"
 #include "patchstore/io/ply_writer.h"
 #include "base/cli_checks.h"
+#include "testing/box_texture.h"
 #include "testing/color_field.h"
 #include "testing/scan_generator.h"
 #include "testing/texture_atlas.h"
+#include "texture/image_codec.h"
 
 namespace {
 
@@ -699,8 +702,10 @@ void addOutputOptions(CLI::App& app, Cli& c) {
                  "A textured scan [ply only]: per-face texture coordinates (PLY texcoord lists, texnumber) and texture pages\n"
                  "OUT_tex<k>.jpg beside the output (named by 'comment TextureFile'). charts: charts of 48 x 48 cells, each\n"
                  "its own slot, so chart borders are seams; fragmented: charts of 1 x 2 cells (four triangles each): thousands\n"
-                 "of tiny charts. The texels show sharp checks and lines in the torus angles (testing/texture_atlas.h)")
-      ->check(CLI::IsMember({"charts", "fragmented"}));
+                 "of tiny charts. The texels show sharp checks and lines in the torus angles (testing/texture_atlas.h).\n"
+                 "box (with --paint IN only): IN with box-mapped charts (testing/box_texture.h) and one PNG page of the\n"
+                 "--colors field")
+      ->check(CLI::IsMember({"charts", "fragmented", "box"}));
   app.add_option("--texels-per-cell", c.texture.texelsPerCell, "--texture: texels per grid cell side")
       ->check(mt::cli::countIn(1, 64))
       ->default_str("2");
@@ -787,6 +792,7 @@ bool chooseFormat(Cli& c) {
   if (settings.colors && !anyPly) return refuse("--colors needs --format ply or ply-ascii");
   if (!c.textureText.empty()) {
     if (settings.format != Format::PlyBinary) return refuse("--texture needs --format ply");
+    if (c.textureText == "box" && c.paintInput.empty()) return refuse("--texture box textures a mesh given by --paint IN");
     if (c.shuffle) return refuse("--texture writes faces in grid order: it cannot be combined with --shuffle");
     if (settings.normals || settings.colors || settings.doublePrecision)
       return refuse("--texture writes float x, y, z only: it cannot be combined with --normals, --colors, --double or --offset");
@@ -873,6 +879,47 @@ int paintMesh(const std::string& input, const std::string& output) {
   return 0;
 }
 
+// --paint IN --texture box: IN with box-mapped charts and the colour field baked into one PNG page
+// (testing/box_texture.h), as a PLY with per-face texcoord lists naming OUT_tex0.png. Holds IN in
+// RAM (24 bytes a vertex, 36 a triangle) and the page.
+int textureMesh(const std::string& input, const std::string& output, int pageSide) {
+  struct Load : mt::MeshSink {
+    std::vector<double> positions;
+    std::vector<uint32_t> tris;
+    void vertices(const mt::InputVertex* v, size_t n, uint64_t) override {
+      for (size_t i = 0; i < n; ++i) positions.insert(positions.end(), v[i].p, v[i].p + 3);
+    }
+    void triangles(const uint32_t* t, size_t n) override { tris.insert(tris.end(), t, t + 3 * n); }
+  } in;
+  mt::openMesh(input)->read(in);
+  mt::checkOutputPath(output, {input});
+  const size_t nv = in.positions.size() / 3, nt = in.tris.size() / 3;
+  double lo[3] = {1e300, 1e300, 1e300}, hi[3] = {-1e300, -1e300, -1e300};
+  for (size_t v = 0; v < nv; ++v)
+    for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], in.positions[3 * v + size_t(a)]), hi[a] = std::max(hi[a], in.positions[3 * v + size_t(a)]);
+  const mt::testing::ColorField field(lo, hi);
+  mt::testing::BoxTextureOptions options;
+  options.pageSide = pageSide;
+  const mt::testing::BoxTexture box = mt::testing::boxTexture(in.positions.data(), nv, in.tris.data(), nt, field, options);
+  const std::filesystem::path p(output);
+  const std::string page = p.stem().string() + "_tex0.png";
+  mt::tex::writeFileAtomically((p.parent_path() / page).string(), mt::tex::encodePng(box.page));
+  OutputSettings settings;
+  settings.path = output;
+  settings.tmpPath = mt::uniqueTempName(output);
+  if (settings.tmpPath.size() < sizeof gTemporaryPath)
+    std::memcpy(gTemporaryPath, settings.tmpPath.c_str(), settings.tmpPath.size() + 1);
+  for (int sig : {SIGINT, SIGTERM, SIGHUP}) signal(sig, removeTemporaryAndExit);
+  TexturedPlyOutput out(settings, nv, nt, {page});
+  for (size_t v = 0; v < nv; ++v) out.vertex(&in.positions[3 * v], nullptr, nullptr);
+  for (size_t t = 0; t < nt; ++t) out.triangleUV(&in.tris[3 * t], &box.cornerUV[6 * t], 0);
+  out.finish();
+  gTemporaryPath[0] = 0;
+  std::fprintf(stderr, "mtgen: textured %s -> %s: %zu vertices, %zu triangles, %u charts, page %s %d x %d\n", input.c_str(),
+               output.c_str(), nv, nt, box.charts, page.c_str(), box.page.width, box.page.height);
+  return 0;
+}
+
 int run(int argc, char** argv) {
   CLI::App app{
       "mtgen: streams a procedurally generated, scan-like closed mesh of any size to a mesh file.\n"
@@ -895,9 +942,9 @@ int run(int argc, char** argv) {
   if (!checkSurface(c) || !chooseFormat(c)) return 1;
   // --paint copies IN with the colour field: it writes no texture coordinates nor pages, so a
   // --texture there would be silently dropped.
-  if (!c.paintInput.empty() && !c.textureText.empty())
-    return refuse("--texture cannot be combined with --paint (--paint copies IN with per-vertex colours only; it writes no "
-                  "texture coordinates or pages)"), 1;
+  if (!c.paintInput.empty() && !c.textureText.empty() && c.textureText != "box")
+    return refuse("--texture cannot be combined with --paint, except as --texture box (--texture %s makes the torus's "
+                  "charts; --paint copies IN)", c.textureText.c_str()), 1;
   if (!c.paintInput.empty() && c.settings.format != Format::PlyBinary)
     return refuse("--paint writes binary PLY: the output name must end in .ply (got %s)", c.settings.path.c_str()), 1;
 
@@ -905,6 +952,7 @@ int run(int argc, char** argv) {
   if (c.threads > 0)
     threadLimit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, c.threads);
   try {
+    if (!c.paintInput.empty() && c.textureText == "box") return textureMesh(c.paintInput, c.settings.path, c.texture.pageSide);
     if (!c.paintInput.empty()) return paintMesh(c.paintInput, c.settings.path);
     const ScanGenerator generator(c.gen);
     if (c.settings.colors) c.settings.colorField = colorFieldOf(generator);
