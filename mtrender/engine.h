@@ -51,6 +51,10 @@ struct EngineOptions {
   // frames; 1 turns it off (every frame draws the whole cut).
   uint32_t stillFrames = 16;
   OcclusionTest occlusionTest = OcclusionTest::Pyramid;
+  // The occlusion tests run on every this-many-th frame of a moving (or non-progressive) view;
+  // 0 = adaptive (k in 1..16 keeping their measured cost near 5% of the budget, Engine::frame).
+  // A fixed cadence makes what is loaded independent of the machine's speed (tests, benches).
+  uint32_t occlusionEvery = 0;
 };
 
 struct FrameRecord : FrameStats {
