@@ -280,10 +280,19 @@ void FaultInjectionEnv::renameFile(const std::string& from, const std::string& t
   written.insert(to);
 }
 
+void FaultInjectionEnv::syncDir(const std::string& dir) {
+  hit(Op::DirSync, dir);
+  base_->syncDir(dir);
+}
+
 void FaultInjectionEnv::hit(Op op, const std::string& path, const std::string& where) {
-  static const char* const kNames[] = {"write", "fsync", "rename", "read"};
+  static const char* const kNames[] = {"write", "fsync", "rename", "read", "directory fsync"};
   std::lock_guard<std::mutex> guard(mutex_);
-  int64_t& counter = op == Op::Write ? writes : op == Op::Sync ? syncs : op == Op::Rename ? renames : reads;
+  int64_t& counter = op == Op::Write    ? writes
+                     : op == Op::Sync   ? syncs
+                     : op == Op::Rename ? renames
+                     : op == Op::Read   ? reads
+                                        : dirSyncs;
   ++counter;
   if (remaining_ < 0 || op != op_) return;
   if (--remaining_ == 0) {

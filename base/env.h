@@ -73,14 +73,14 @@ class ScopedDefaultEnv {
   Env* previous_;
 };
 
-// Wraps another Env and fails the N-th write, fsync, rename or read from now on (counting from
-// 1), by throwing mt::Error (Io) as a real failure would. Used by the crash-safety tests.
+// Wraps another Env and fails the N-th write, fsync, rename, read or directory fsync from now on
+// (counting from 1), by throwing mt::Error (Io) as a real failure would. Used by the crash-safety tests.
 // failAfter's `errnum` (e.g. ENOSPC) puts the system's text for it in the message, as a real
 // failure of that kind would ("...: injected write failure: No space left on device"); with
 // `partial`, a failed write first writes half of its bytes (a disk that fills mid-write).
 class FaultInjectionEnv : public Env {
  public:
-  enum class Op { Write, Sync, Rename, Read };
+  enum class Op { Write, Sync, Rename, Read, DirSync };
   explicit FaultInjectionEnv(Env* base) : base_(base) {}
   void failAfter(Op op, int64_t count, int errnum = 0, bool partial = false) {
     op_ = op;
@@ -93,7 +93,7 @@ class FaultInjectionEnv : public Env {
   bool fired() const { return fired_; }
   // Counts of each operation so far (to enumerate every failure point in a test). Reads may come
   // from several threads at once (the MT reader's): hit() counts under a lock.
-  int64_t writes = 0, syncs = 0, renames = 0, reads = 0;
+  int64_t writes = 0, syncs = 0, renames = 0, reads = 0, dirSyncs = 0;
   // Every path opened for writing or renamed to through this Env (to check that a process wrote
   // nothing behind its back).
   std::set<std::string> written;
@@ -104,7 +104,7 @@ class FaultInjectionEnv : public Env {
   std::unique_ptr<RandomAccessFile> newRandomAccessFile(const std::string& path) override;
   void renameFile(const std::string& from, const std::string& to) override;
   void removeFile(const std::string& path) override { base_->removeFile(path); }
-  void syncDir(const std::string& dir) override { base_->syncDir(dir); }
+  void syncDir(const std::string& dir) override;
   void createDir(const std::string& dir) override { base_->createDir(dir); }
   bool exists(const std::string& path) override { return base_->exists(path); }
   std::vector<std::string> listDir(const std::string& dir) override { return base_->listDir(dir); }

@@ -83,6 +83,19 @@ void writeWholeFile(const std::string& path, const void* data, size_t size, Env*
     }
     throw;
   }
+  // The rename is durable once the folder's entry is: without this fsync a crash can leave the
+  // old file (or none) under `path` after the call returned. If it fails, the new name's
+  // durability is unknown and the caller reports an error: nothing is left under it.
+  const std::string parent = std::filesystem::path(path).parent_path().string();
+  try {
+    env->syncDir(parent.empty() ? "." : parent);
+  } catch (...) {
+    try {
+      env->removeFile(path);
+    } catch (const Error&) {
+    }
+    throw;
+  }
 }
 
 }  // namespace mt

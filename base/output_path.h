@@ -29,8 +29,8 @@ bool sameFile(const std::string& a, const std::string& b);
 std::string uniqueTempName(const std::string& finalPath);
 
 // A small file (a report, a stats JSON) written whole under uniqueTempName(path) through `env`
-// (nullptr: Env::Default()), synced and renamed over `path`: on any error (mt::Error naming the
-// file, kind Io) nothing is left under either name.
+// (nullptr: Env::Default()), synced, renamed over `path` and its folder synced: on any error
+// (mt::Error naming the file or its folder, kind Io) nothing is left under either name.
 void writeWholeFile(const std::string& path, const std::string& bytes, Env* env = nullptr);
 void writeWholeFile(const std::string& path, const void* data, size_t size, Env* env = nullptr);
 

@@ -95,10 +95,13 @@ void runWorker(int rank) {
   bool haveContext = false;
   RankStats stats;
   stats.rank = rank;
-  // Test hook: MT_TEST_KILL_RANK=R:K makes rank R SIGKILL itself when its (K+1)-th task arrives.
-  long killAfter = -1;
+  // Test hook: MT_TEST_KILL_RANK=R:L makes rank R SIGKILL itself when its first task of level L
+  // arrives. By level, not by a count of tasks: how many regions of a level each rank gets depends
+  // on the ranks' speeds, but rank 0 hands every idle worker a region as a level starts (when it
+  // has as many), so the level the job dies in does not.
+  long killLevel = -1;
   if (const char* k = std::getenv("MT_TEST_KILL_RANK"); k && std::atoi(k) == rank && std::strchr(k, ':'))
-    killAfter = std::atol(std::strchr(k, ':') + 1);
+    killLevel = std::atol(std::strchr(k, ':') + 1);
   for (;;) {
     MPI_Status st;
     check(MPI_Probe(0, MPI_ANY_TAG, MPI_COMM_WORLD, &st), "probe", 0);
@@ -119,8 +122,8 @@ void runWorker(int rank) {
         continue;
       }
       if (st.MPI_TAG != kTask || !haveContext) fail("mtcluster", "unexpected message tag " + std::to_string(st.MPI_TAG));
-      if (killAfter >= 0 && long(stats.tasks) >= killAfter) std::raise(SIGKILL);
       task = decodeTask(bytes, index);
+      if (killLevel >= 0 && long(task.level) == killLevel) std::raise(SIGKILL);
       RegionResult result = processRegion(task, ctx.context);
       stats.processSeconds += result.seconds;
       std::string reply = encodeResult(index, result);

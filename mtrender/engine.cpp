@@ -375,8 +375,9 @@ FrameRecord Engine::frame(const CameraPose& pose, const CameraPose& prev, GlRend
     still_ = Still();
     extract_->setBudgetScale(1);
     // The occlusion tests cost several ms on llvmpipe (docs/mtrender.md): they run on every k-th
-    // frame, k keeping their measured cost near 5% of the budget; the other frames draw every
-    // visible arc and keep the last flags. A frame that runs them draws that much less.
+    // frame, k keeping their measured cost near 5% of the budget (or k = occlusionEvery, fixed);
+    // the other frames draw every visible arc and keep the last flags. A frame that runs them
+    // draws that much less.
     const bool testFrame = occlusionOn() && frame_ >= nextOcclusionFrame_;
     extract_->setFrameOverheadMs(testFrame ? occlusionMs_ : 0);
     static_cast<FrameStats&>(rec) = extract_->update(frame_, view, ahead);
@@ -388,7 +389,9 @@ FrameRecord Engine::frame(const CameraPose& pose, const CameraPose& prev, GlRend
       const double ms = rec.occlusionMs;
       occlusionMs_ = occlusionMs_ == 0 ? ms : 0.8 * occlusionMs_ + 0.2 * ms;
       const double share = 0.05 * options_.extract.budgetMs;
-      nextOcclusionFrame_ = frame_ + std::clamp<uint64_t>(uint64_t(occlusionMs_ / share) + 1, 1, 16);
+      nextOcclusionFrame_ = frame_ + (options_.occlusionEvery
+                                          ? options_.occlusionEvery
+                                          : std::clamp<uint64_t>(uint64_t(occlusionMs_ / share) + 1, 1, 16));
     } else {
       drawArcs(0, drawOrder_.size(), gl, rec, view);
       // The cut's new front is marked against the last depth read (its own view: a few frames old

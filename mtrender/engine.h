@@ -53,6 +53,10 @@ struct EngineOptions {
   OcclusionTest occlusionTest = OcclusionTest::Pyramid;
   // Load textured files' atlases (Scene::setLoadTextures): off when nothing is drawn textured.
   bool textures = true;
+  // The occlusion tests run on every this-many-th frame of a moving (or non-progressive) view;
+  // 0 = adaptive (k in 1..16 keeping their measured cost near 5% of the budget, Engine::frame).
+  // A fixed cadence makes what is loaded independent of the machine's speed (tests, benches).
+  uint32_t occlusionEvery = 0;
 };
 
 struct FrameRecord : FrameStats {

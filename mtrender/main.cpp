@@ -153,7 +153,7 @@ struct CliOptions {
   int frames = 0, width = 1280, height = 720, screenshotEvery = 1, maxFrames = 0;
   double budgetMs = 0, tolerance = 0, readDelayMs = 0, extractMs = 0, frameInterval = 0;
   uint64_t fixedTriangles = 0;
-  uint32_t loadBudget = 0, stillFrames = 0;
+  uint32_t loadBudget = 0, stillFrames = 0, occlusionEvery = 0;
   std::vector<int> background;
 };
 
@@ -225,6 +225,12 @@ void addRenderOptions(CLI::App& app, CliOptions& o) {
                  "pyramid, spheres tested on the CPU) or queries (GL occlusion queries of the spheres' boxes); "
                  "docs/mtrender.md compares them")
       ->check(CLI::IsMember({"pyramid", "queries"}))
+      ->capture_default_str();
+  app.add_option("--occlusion-every", o.occlusionEvery,
+                 "run the occlusion tests on every N-th frame; 0 (default) = adaptive, every k-th frame with k in "
+                 "1..16 keeping their measured cost near 5% of the budget (so what is loaded depends on the "
+                 "machine's speed; a fixed N does not)")
+      ->check(mt::cli::countIn(0, 1000))
       ->capture_default_str();
 }
 
@@ -304,6 +310,7 @@ EngineOptions engineOptions(const CliOptions& o) {
   eo.extract.occlusion = !o.noOcclusion;
   eo.extract.boundedRekey = o.rekey != "all";
   eo.occlusionTest = o.occlusionTest == "queries" ? OcclusionTest::Queries : OcclusionTest::Pyramid;
+  eo.occlusionEvery = o.occlusionEvery;
   return eo;
 }
 

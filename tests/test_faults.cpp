@@ -16,6 +16,7 @@
 #include "base/env.h"
 #include "base/error.h"
 #include "base/exit_code.h"
+#include "base/output_path.h"
 #include "interop/gltf_writer.h"
 #include "interop/tiles_export.h"
 #include "mtbuild/build.h"
@@ -225,6 +226,37 @@ TEST(Faults, EveryWriteOfAPlyOutputLeavesNothingUnderItsName) {
       EXPECT_EQ(filesOf(tmp.file("out.ply")), std::vector<std::string>{}) << message;
     }
   std::printf("[ faults ] PLY output: %d failures injected\n", injected);
+}
+
+// A whole small file (a stats JSON, a PNG): every write, fsync, rename and fsync of its folder
+// that fails leaves nothing under its name, nor the temporary file, with an error naming it; the
+// folder's fsync is counted (the rename is not durable without it).
+TEST(Faults, EveryOperationOfAWholeFileWriteLeavesNothingUnderItsName) {
+  TempDir tmp;
+  const std::string bytes(100000, 'x');
+  mt::FaultInjectionEnv env(mt::Env::Default());
+  mt::writeWholeFile(tmp.file("count.json"), bytes, &env);
+  EXPECT_EQ(readFile(tmp.file("count.json")), bytes);
+  using Op = mt::FaultInjectionEnv::Op;
+  const std::pair<Op, int64_t> counts[] = {{Op::Write, env.writes}, {Op::Sync, env.syncs}, {Op::Rename, env.renames},
+                                           {Op::DirSync, env.dirSyncs}};
+  for (const auto& [op, count] : counts) {
+    ASSERT_GE(count, 1) << int(op);
+    for (int64_t k = 1; k <= count; ++k) {
+      SCOPED_TRACE("operation " + std::to_string(int(op)) + ", " + std::to_string(k) + " of " + std::to_string(count));
+      env.failAfter(op, k, ENOSPC, /*partial=*/true);
+      std::string message;
+      try {
+        mt::writeWholeFile(tmp.file("out.json"), bytes, &env);
+      } catch (const mt::Error& e) {
+        message = e.what();
+      }
+      env.disarm();
+      EXPECT_NE(message.find(op == Op::DirSync ? tmp.path() : tmp.file("out.json")), std::string::npos) << message;
+      EXPECT_NE(message.find("No space left on device"), std::string::npos) << message;
+      EXPECT_EQ(filesOf(tmp.file("out.json")), std::vector<std::string>{}) << message;
+    }
+  }
 }
 
 // mtextract's and mtexport's glTF outputs (a .glb; a .gltf and its .bin; a 3D Tiles directory)
