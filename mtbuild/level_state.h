@@ -72,6 +72,7 @@ struct LevelBuilder::State {
   std::vector<std::vector<PatchId>> floors;
   std::vector<uint64_t> floorTriangles, floorVertices;
   bool root = false;
+  bool levelDropped = false;  // commitRegion refused this root level (no gain): the loop ends
   size_t nextCommit = 0;
   LevelReport lr;
   Clock::time_point levelStart;
