@@ -71,7 +71,8 @@ struct BuildOptions {
   // alone: the build uses DIR/<output's file name>.work instead.
   std::string workDir;
   // Stop adding levels once the top level has at most this many triangles (0: 2 x patch size),
-  // or when a level removes less than 10% of the triangles.
+  // or when a level removes less than 10% of the triangles (such a level is not added when it is
+  // a further root level: LevelBuilder::commitRegion).
   uint64_t rootTriangles = 0;
   // When set, one CSV line per region (level, region, triangles, seconds of load/process/commit,
   // bytes a cluster would move) is written here: the input of the scaling model in docs/cluster.md.

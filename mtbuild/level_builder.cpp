@@ -474,6 +474,20 @@ void LevelBuilder::commitRegion(size_t i, RegionTask task, RegionResult result, 
   State& s = *s_;
   if (i != s.nextCommit) fail(s.output, "region " + std::to_string(i) + " committed out of order");
   auto start = Clock::now();
+  const uint64_t in = task.mesh.triangleCount(), out = result.replacement.triangles.size() / 3;
+  // A further root level (the whole model in one region, after the first level) that removes
+  // less than a tenth of the triangles is not added: it would be a copy of the level below or
+  // next to one (settleRoot keeps the region whole when every step is over its deviation limit),
+  // with a larger error and nothing a cut could gain from. The store and the DAG stay as the
+  // previous level left them, and endLevel ends the loop; the sink takes the previous level's
+  // patches.
+  if (s.root && s.builtLevels > 0 && s.regionIds.size() == 1 && out * 10 > in * 9) {
+    s.levelDropped = true;
+    s.doneTriangles += in;
+    s.outTriangles += in;
+    ++s.nextCommit;
+    return;
+  }
   // Commit in region order: ids, payload order and node numbers do not depend on which worker
   // finished first.
   const uint32_t node = s.addNode(task, result);
@@ -481,7 +495,6 @@ void LevelBuilder::commitRegion(size_t i, RegionTask task, RegionResult result, 
   std::vector<PatchId> created = s.store->writeBack(task.mesh, result.replacement);
   for (PatchId id : created) s.producer[id] = node;
   s.lr.maxError = std::max(s.lr.maxError, double(rec.error));
-  const uint64_t in = task.mesh.triangleCount(), out = result.replacement.triangles.size() / 3;
   s.doneTriangles += in;
   s.outTriangles += out;
   s.progress->update(s.doneTriangles);
@@ -502,6 +515,10 @@ void LevelBuilder::endLevel() {
   State& s = *s_;
   if (s.nextCommit != s.regionIds.size()) fail(s.output, "level ended before all regions were committed");
   s.progress->finish(s.doneTriangles);
+  if (s.levelDropped) {  // commitRegion refused the level: the previous one is the root
+    s.finished = true;
+    return;
+  }
   s.lr.trianglesOut = s.outTriangles;
   s.lr.seconds = secondsSince(s.levelStart);
   s.report.levels.push_back(s.lr);
@@ -509,7 +526,8 @@ void LevelBuilder::endLevel() {
   ++s.builtLevels;
   // The root level simplifies the whole model at once; when it could only halve it
   // (processRegion's settleRoot), another root level follows while the root is over twice its
-  // size and each level gains.
+  // size and each level gains (a further root level that does not gain is not even added:
+  // commitRegion).
   if ((s.root && s.outTriangles <= 2 * s.ctx.rootTriangles) || s.outTriangles <= s.ctx.rootTriangles ||
       s.outTriangles * 10 > s.lr.trianglesIn * 9)
     s.finished = true;

@@ -73,6 +73,7 @@ struct LevelBuilder::State {
   std::vector<uint64_t> floorTriangles, floorVertices;
   std::vector<float> floorErrors;  // per region: the largest error of its floor's producers
   bool root = false;
+  bool levelDropped = false;  // commitRegion refused this root level (no gain): the loop ends
   size_t nextCommit = 0;
   LevelReport lr;
   Clock::time_point levelStart;
