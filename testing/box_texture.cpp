@@ -9,6 +9,7 @@
 
 #include "base/error.h"
 #include "texture/atlas_pack.h"
+#include "texture/bake.h"
 
 namespace mt::testing {
 
@@ -112,27 +113,7 @@ BoxTexture boxTexture(const double* pos, size_t nv, const uint32_t* tri, size_t 
         filled[size_t(y) * size_t(W) + size_t(x)] = 1;
       }
   }
-  // The gutter: unfilled texels next to filled ones take their mean, gutter + 1 times.
-  for (int pass = 0; pass <= o.gutter; ++pass) {
-    std::vector<uint8_t> grown = filled;
-    for (int y = 0; y < H; ++y)
-      for (int x = 0; x < W; ++x) {
-        if (filled[size_t(y) * size_t(W) + size_t(x)]) continue;
-        uint32_t acc[3] = {0, 0, 0}, n = 0;
-        for (int dy = -1; dy <= 1; ++dy)
-          for (int dx = -1; dx <= 1; ++dx) {
-            const int xx = x + dx, yy = y + dy;
-            if (xx < 0 || yy < 0 || xx >= W || yy >= H || !filled[size_t(yy) * size_t(W) + size_t(xx)]) continue;
-            const uint8_t* s = out.page.pixel(xx, yy);
-            acc[0] += s[0], acc[1] += s[1], acc[2] += s[2], ++n;
-          }
-        if (!n) continue;
-        uint8_t* d = out.page.pixel(x, y);
-        for (int c = 0; c < 3; ++c) d[c] = uint8_t((acc[c] + n / 2) / n);
-        grown[size_t(y) * size_t(W) + size_t(x)] = 1;
-      }
-    filled.swap(grown);
-  }
+  tex::fillGutter(out.page, filled, o.gutter + 1);
   out.cornerUV.resize(6 * nt);
   for (size_t t = 0; t < nt; ++t)
     for (int k = 0; k < 3; ++k) {

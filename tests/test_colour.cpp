@@ -11,7 +11,6 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
-#include <limits>
 #include <set>
 #include <string>
 #include <vector>
@@ -376,18 +375,8 @@ mt::render::Image render(const std::string& mt, const std::string& dir, const st
 
 // PSNR over the pixels the model covers in either image (the background is 20, 23, 28).
 double coveredPsnr(const mt::render::Image& a, const mt::render::Image& b) {
-  double sse = 0;
-  size_t n = 0;
-  auto bg = [](const uint8_t* p) { return p[0] == 20 && p[1] == 23 && p[2] == 28; };
-  for (int y = 0; y < a.height; ++y)
-    for (int x = 0; x < a.width; ++x) {
-      const uint8_t *p = a.pixel(x, y), *q = b.pixel(x, y);
-      if (bg(p) && bg(q)) continue;
-      ++n;
-      for (int k = 0; k < 3; ++k) sse += (double(p[k]) - q[k]) * (double(p[k]) - q[k]);
-    }
-  const double mse = n ? sse / (3.0 * double(n)) : 0;
-  return mse > 0 ? 10 * std::log10(255.0 * 255.0 / mse) : std::numeric_limits<double>::infinity();
+  const uint8_t background[3] = {20, 23, 28};
+  return mt::render::psnr(a, b, background).covered;
 }
 
 // Pixels whose colour is far from grey: max channel - min channel > 60.

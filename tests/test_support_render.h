@@ -6,7 +6,6 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
-#include <limits>
 #include <memory>
 #include <string>
 #include <utility>
@@ -60,46 +59,14 @@ inline std::pair<size_t, double> imageDiff(const render::Image& a, const render:
   return {differ, sum / (double(a.width) * a.height)};
 }
 
-// mtrender's background colour (the headless screenshots).
-inline bool isBackground(const uint8_t* p) { return p[0] == 20 && p[1] == 23 && p[2] == 28; }
+// mtrender's background colour (the headless screenshots), as mtrender/image.h's comparisons take it.
+inline constexpr uint8_t kBackground[3] = {20, 23, 28};
+inline bool isBackground(const uint8_t* p) { return p[0] == kBackground[0] && p[1] == kBackground[1] && p[2] == kBackground[2]; }
 
-// Box filter by k x k (as bench_psnr --downsample): a rendering made at k times the size, so that
-// a reference whose triangles and texels are far below a pixel is compared antialiased, not
-// point-sampled. A pixel is background when all its samples are.
-inline render::Image boxDownsample(const render::Image& in, int k) {
-  render::Image out;
-  out.width = in.width / k, out.height = in.height / k;
-  out.rgba.assign(size_t(out.width) * size_t(out.height) * 4, 255);
-  for (int y = 0; y < out.height; ++y)
-    for (int x = 0; x < out.width; ++x) {
-      int sum[3] = {0, 0, 0}, background = 0;
-      for (int dy = 0; dy < k; ++dy)
-        for (int dx = 0; dx < k; ++dx) {
-          const uint8_t* p = in.pixel(x * k + dx, y * k + dy);
-          for (int c = 0; c < 3; ++c) sum[c] += p[c];
-          background += isBackground(p);
-        }
-      uint8_t* o = &out.rgba[(size_t(y) * size_t(out.width) + size_t(x)) * 4];
-      const uint8_t bg[3] = {20, 23, 28};
-      for (int c = 0; c < 3; ++c) o[c] = background == k * k ? bg[c] : uint8_t((sum[c] + k * k / 2) / (k * k));
-    }
-  return out;
-}
+// Box filter by k x k (as bench_psnr --downsample): render::boxDownsample on the background.
+inline render::Image boxDownsample(const render::Image& in, int k) { return render::boxDownsample(in, k, kBackground); }
 
-// PSNR over the pixels the model covers in either image (the stricter figure: the background,
-// equal in both, would raise it).
-inline double coveredPsnr(const render::Image& a, const render::Image& b) {
-  double sse = 0;
-  size_t n = 0;
-  for (int y = 0; y < a.height; ++y)
-    for (int x = 0; x < a.width; ++x) {
-      const uint8_t *p = a.pixel(x, y), *q = b.pixel(x, y);
-      if (isBackground(p) && isBackground(q)) continue;
-      ++n;
-      for (int k = 0; k < 3; ++k) sse += (double(p[k]) - q[k]) * (double(p[k]) - q[k]);
-    }
-  const double mse = n ? sse / (3.0 * double(n)) : 0;
-  return mse > 0 ? 10 * std::log10(255.0 * 255.0 / mse) : std::numeric_limits<double>::infinity();
-}
+// PSNR over the pixels the model covers in either image (render::psnr).
+inline double coveredPsnr(const render::Image& a, const render::Image& b) { return render::psnr(a, b, kBackground).covered; }
 
 }  // namespace mt::test

@@ -2,6 +2,7 @@
 #include "texture/bake.h"
 
 #include <algorithm>
+#include <cassert>
 #include <cmath>
 #include <cstring>
 
@@ -187,6 +188,31 @@ double meanTexelSize(const TexturedSurface& s) {
   return texels > 0 ? std::sqrt(area / texels) : 0;
 }
 
+void fillGutter(RgbImage& image, std::vector<uint8_t>& filled, int passes) {
+  const int w = image.width, h = image.height;
+  assert(filled.size() == size_t(w) * size_t(h));
+  for (int pass = 0; pass < passes; ++pass) {
+    std::vector<uint8_t> next = filled;
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        if (filled[size_t(y) * size_t(w) + size_t(x)]) continue;
+        uint32_t acc[3] = {0, 0, 0}, n = 0;
+        for (int dy = -1; dy <= 1; ++dy)
+          for (int dx = -1; dx <= 1; ++dx) {
+            const int xx = x + dx, yy = y + dy;
+            if (xx < 0 || yy < 0 || xx >= w || yy >= h || !filled[size_t(yy) * size_t(w) + size_t(xx)]) continue;
+            const uint8_t* s = image.pixel(xx, yy);
+            acc[0] += s[0], acc[1] += s[1], acc[2] += s[2], ++n;
+          }
+        if (!n) continue;
+        uint8_t* d = image.pixel(x, y);
+        for (int c = 0; c < 3; ++c) d[c] = uint8_t((acc[c] + n / 2) / n);
+        next[size_t(y) * size_t(w) + size_t(x)] = 1;
+      }
+    filled.swap(next);
+  }
+}
+
 BakeResult bakeAtlas(const double* positions, size_t nv, const uint32_t* tri, size_t nt, const SurfaceIndex& fine,
                      double texelSize, double margin, int maxSide, int padding, double fineTexelSize) {
   BakeResult out;
@@ -276,27 +302,7 @@ BakeResult bakeAtlas(const double* positions, size_t nv, const uint32_t* tri, si
         filled[size_t(y) * size_t(aw) + size_t(x)] = 1;
       }
   }
-  // The gutter: unfilled texels next to filled ones take their mean, `padding` + 1 times.
-  for (int pass = 0; pass <= padding; ++pass) {
-    std::vector<uint8_t> next = filled;
-    for (int y = 0; y < ah; ++y)
-      for (int x = 0; x < aw; ++x) {
-        if (filled[size_t(y) * size_t(aw) + size_t(x)]) continue;
-        uint32_t acc[3] = {0, 0, 0}, n = 0;
-        for (int dy = -1; dy <= 1; ++dy)
-          for (int dx = -1; dx <= 1; ++dx) {
-            const int xx = x + dx, yy = y + dy;
-            if (xx < 0 || yy < 0 || xx >= aw || yy >= ah || !filled[size_t(yy) * size_t(aw) + size_t(xx)]) continue;
-            const uint8_t* s = out.image.pixel(xx, yy);
-            acc[0] += s[0], acc[1] += s[1], acc[2] += s[2], ++n;
-          }
-        if (!n) continue;
-        uint8_t* d = out.image.pixel(x, y);
-        for (int c = 0; c < 3; ++c) d[c] = uint8_t((acc[c] + n / 2) / n);
-        next[size_t(y) * size_t(aw) + size_t(x)] = 1;
-      }
-    filled.swap(next);
-  }
+  fillGutter(out.image, filled, padding + 1);
   out.cornerUV.resize(6 * nt);
   for (size_t t = 0; t < nt; ++t)
     for (int k = 0; k < 3; ++k) {

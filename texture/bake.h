@@ -63,6 +63,11 @@ BakeResult bakeAtlas(const double* positions, size_t vertexCount, const uint32_t
                      const SurfaceIndex& fine, double texelSize, double margin, int maxSide = 2048, int padding = 2,
                      double fineTexelSize = 0);
 
+// The gutter around baked charts (so bilinear lookups and mipmaps near a chart's edge do not
+// mix in unrelated texels): `passes` times, each unfilled texel next to filled ones takes their
+// mean and becomes filled. filled: one flag per texel, row-major, updated.
+void fillGutter(RgbImage& image, std::vector<uint8_t>& filled, int passes);
+
 // The texel size of a textured surface: sqrt(area / texel area) over all its triangles.
 double meanTexelSize(const TexturedSurface& surface);
 
