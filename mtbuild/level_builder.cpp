@@ -63,6 +63,11 @@ RegionSimplifier resolvedSimplifier(const BuildOptions& options, bool colors) {
   return colors ? RegionSimplifier::Quadric : RegionSimplifier::Meshopt;
 }
 
+// A level gains when it keeps at most 90% of the triangles it was given: the one rule that ends
+// the level loop (endLevel) and that refuses a further root level before it is written
+// (commitRegion).
+bool gains(uint64_t in, uint64_t out) { return out * 10 <= in * 9; }
+
 }  // namespace
 
 void LevelBuilder::State::startFresh(bool storeInput) {
@@ -481,7 +486,7 @@ void LevelBuilder::commitRegion(size_t i, RegionTask task, RegionResult result, 
   // with a larger error and nothing a cut could gain from. The store and the DAG stay as the
   // previous level left them, and endLevel ends the loop; the sink takes the previous level's
   // patches.
-  if (s.root && s.builtLevels > 0 && s.regionIds.size() == 1 && out * 10 > in * 9) {
+  if (s.root && s.builtLevels > 0 && s.regionIds.size() == 1 && !gains(in, out)) {
     s.levelDropped = true;
     s.doneTriangles += in;
     s.outTriangles += in;
@@ -529,7 +534,7 @@ void LevelBuilder::endLevel() {
   // size and each level gains (a further root level that does not gain is not even added:
   // commitRegion).
   if ((s.root && s.outTriangles <= 2 * s.ctx.rootTriangles) || s.outTriangles <= s.ctx.rootTriangles ||
-      s.outTriangles * 10 > s.lr.trianglesIn * 9)
+      !gains(s.lr.trianglesIn, s.outTriangles))
     s.finished = true;
   // The level is durable: the checkpoint a resumed build restarts from.
   s.writeCheckpoint();
