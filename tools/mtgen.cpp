@@ -76,6 +76,14 @@ extern "C" void removeTemporaryAndExit(int signal) {
   _exit(128 + signal);
 }
 
+// Gives `settings` its temporary name beside the output and arms its removal on interruption.
+void armTemporary(OutputSettings& settings) {
+  settings.tmpPath = mt::uniqueTempName(settings.path);
+  if (settings.tmpPath.size() < sizeof gTemporaryPath)
+    std::memcpy(gTemporaryPath, settings.tmpPath.c_str(), settings.tmpPath.size() + 1);
+  for (int sig : {SIGINT, SIGTERM, SIGHUP}) signal(sig, removeTemporaryAndExit);
+}
+
 // ---------------------------------------------------------------------------------------------
 // Output formats.
 
@@ -906,10 +914,7 @@ int textureMesh(const std::string& input, const std::string& output, int pageSid
   mt::tex::writeFileAtomically((p.parent_path() / page).string(), mt::tex::encodePng(box.page));
   OutputSettings settings;
   settings.path = output;
-  settings.tmpPath = mt::uniqueTempName(output);
-  if (settings.tmpPath.size() < sizeof gTemporaryPath)
-    std::memcpy(gTemporaryPath, settings.tmpPath.c_str(), settings.tmpPath.size() + 1);
-  for (int sig : {SIGINT, SIGTERM, SIGHUP}) signal(sig, removeTemporaryAndExit);
+  armTemporary(settings);
   TexturedPlyOutput out(settings, nv, nt, {page});
   for (size_t v = 0; v < nv; ++v) out.vertex(&in.positions[3 * v], nullptr, nullptr);
   for (size_t t = 0; t < nt; ++t) out.triangleUV(&in.tris[3 * t], &box.cornerUV[6 * t], 0);
@@ -957,10 +962,7 @@ int run(int argc, char** argv) {
     const ScanGenerator generator(c.gen);
     if (c.settings.colors) c.settings.colorField = colorFieldOf(generator);
     mt::checkOutputPath(c.settings.path, {});  // not a directory, and its folder exists
-    c.settings.tmpPath = mt::uniqueTempName(c.settings.path);
-    if (c.settings.tmpPath.size() < sizeof gTemporaryPath)
-      std::memcpy(gTemporaryPath, c.settings.tmpPath.c_str(), c.settings.tmpPath.size() + 1);
-    for (int sig : {SIGINT, SIGTERM, SIGHUP}) signal(sig, removeTemporaryAndExit);
+    armTemporary(c.settings);
     writeMesh(c.settings, generator, c.shuffle, c.textureText.empty() ? nullptr : &c.texture);
   } catch (const std::exception& e) {
     return mt::reportError("mtgen", e);
