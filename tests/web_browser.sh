@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Web.Browser: the web viewer in headless Chromium (web/test/browser.mjs says what each test checks)
-# on a 200k-triangle build served by mtserve. Needs /usr/bin/chromium (scripts/setup.sh installs it)
+# on a 200k-triangle build served by mtserve, and on a textured scan (version 6). Needs /usr/bin/chromium (scripts/setup.sh installs it)
 # and web/node_modules (`npm ci` in web/, scripts/test.sh runs it).
 # Usage: web_browser.sh BIN_DIR SOURCE_DIR
 set -euo pipefail
@@ -21,5 +21,8 @@ run "$bin/mtbuild" "$t/c.ply" -o "$t/c.mt" --threads 2
 # The same kind of scan without colours (the back-faces test: the lit back pass).
 run "$bin/mtgen" -o "$t/h.ply" --triangles 60k --holes 10 --seed 3
 run "$bin/mtbuild" "$t/h.ply" -o "$t/h.mt" --threads 2
-rm -f "$t/t.ply" "$t/c.ply" "$t/h.ply"
+# A textured scan (version 6; the textured tests, and web/test/golden/textured.png is of this file).
+run "$bin/mtgen" -o "$t/x.ply" --triangles 60k --holes 3 --seed 5 --texture charts
+run "$bin/mtbuild" "$t/x.ply" -o "$t/x.mt" --threads 2 --patch-triangles 500
+rm -f "$t/t.ply" "$t/c.ply" "$t/h.ply" "$t/x.ply" "$t"/x_tex*.jpg
 node "$src/web/test/browser.mjs" "$bin" "$t"

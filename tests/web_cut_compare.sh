@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Web.CutMatchesExtractRender: for the same file, view and tolerance the web viewer's cut
 # (web/src/extract.js, run in node by web/test/cut_nodes.mjs) is ExtractRender's (mtrender/extract.h,
-# printed by web_cut_nodes), node for node, both run to convergence. 5 files x 8 views x 2 tolerances.
-# And the web decoder decodes every patch of the meshopt files to the C++ decoder's grid coordinates.
+# printed by web_cut_nodes), node for node, both run to convergence. 6 files x 8 views x 2 tolerances
+# (x.mt textured, version 6). And the web decoder decodes every patch of the meshopt files to the C++
+# decoder's grid coordinates (and x.mt's texture coordinates and images to the C++ reader's).
 # Usage: web_cut_compare.sh BIN_DIR SOURCE_DIR
 set -euo pipefail
 bin=$1 src=$2
@@ -23,6 +24,10 @@ run node "$src/web/test/sphere_ply.mjs" "$t/d.ply" 120
 run node "$src/web/test/sphere_ply.mjs" "$t/e.ply" 120 6
 run "$bin/mtbuild" "$t/d.ply" -o "$t/d.mt" --threads 2 --patch-triangles 300
 run "$bin/mtbuild" "$t/e.ply" -o "$t/e.mt" --threads 2 --patch-triangles 300
+# A textured scan (version 6: TextureRecords after the patch index, texture payloads between the
+# patches' payloads; the byte bounds of its patches include their atlases).
+run "$bin/mtgen" -o "$t/x.ply" --triangles 100k --seed 9 --texture charts
+run "$bin/mtbuild" "$t/x.ply" -o "$t/x.mt" --threads 2 --patch-triangles 500
 # Unit-space views (eye, target): the default view, close-ups grazing the surface, views from
 # inside the sphere, from above and below, one looking away from most of the model.
 cat > "$t/views" <<'VIEWS'
@@ -36,11 +41,11 @@ cat > "$t/views" <<'VIEWS'
 0.6 0 0.1 2 0 0.1
 VIEWS
 fail=0 compared=0
-for f in a b c d e; do
+for f in a b c d e x; do
   for tol in 1 3; do
     "$bin/web_cut_nodes" "$t/$f.mt" "$t/views" $tol 1280 720 >"$t/cpp"
     node "$src/web/test/cut_nodes.mjs" "$t/$f.mt" "$t/views" $tol 1280 720 >"$t/js" 2>"$t/jserr" || { cat "$t/jserr" >&2; exit 1; }
-    # Normal cones cull only a closed surface (closed_surface.js): a, c and d are closed, b and e have holes.
+    # Normal cones cull only a closed surface (closed_surface.js): a, c, d and x are closed, b and e have holes.
     want=true; [[ $f == b || $f == e ]] && want=false
     grep -q "closed $want" "$t/jserr" || { echo "web_cut_compare: $f.mt: expected closed $want: $(cat "$t/jserr")" >&2; exit 1; }
     n=$(wc -l <"$t/cpp")
@@ -59,11 +64,12 @@ nodes=$(awk '{print NF - 2}' "$t/cpp" | sort -n | uniq | wc -l)
 [[ $nodes -ge 2 ]] || { echo "web_cut_compare: every view gave the same cut size: the views test nothing" >&2; exit 1; }
 # The web decoder (range coder, position prediction, meshopt and zstd from npm, checksums) gives
 # the C++ decoder's grid coordinates on every patch of the meshopt files.
-for f in a c; do
+for f in a c x; do
   "$bin/web_cut_nodes" --decode "$t/$f.mt" >"$t/cpp"
   node "$src/web/test/decode_check.mjs" "$t/$f.mt" --require-connectivity >"$t/js"
   diff "$t/cpp" "$t/js" >&2 || { echo "DIFFERENT: $f.mt decoded patches" >&2; fail=1; }
   echo "$f.mt decoded: $(cat "$t/js")"
 done
+grep -q ' textures [1-9]' "$t/js" || { echo "web_cut_compare: x.mt: no texture decoded" >&2; fail=1; }
 echo "web_cut_compare: $compared (file, view, tolerance) cuts compared"
 exit $fail

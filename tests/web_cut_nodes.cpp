@@ -7,6 +7,7 @@
 // scene's bounding sphere, as mtrender's camera paths), up = +z, 45 degree vertical field of view.
 // Convergence: no cache (everything resident), an unbounded render budget and no deadline, so the
 // update is repeated until a frame moves nothing.
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
@@ -18,22 +19,40 @@
 #include "mtrender/extract.h"
 #include "mtrender/scene.h"
 
-// web_cut_nodes --decode FILE.mt: every patch decoded by the C++ decoder, printed as
+// web_cut_nodes --decode FILE.mt: every patch (and texture) decoded by the C++ decoder, printed as
 // web/test/decode_check.mjs prints the web decoder's (patches, triangles, vertices, the sum of
 // every decoded grid coordinate, and a weighted sum of every patch's index list in decoded order:
 // sum over i of (i % 1021 + 1) * triangles[i], modulo 2^64, which a changed order or index changes).
+// A textured file (version 6) adds "textures N imagebytes B uvsum U": the patches with a texture,
+// their images' bytes, and over every corner k of each texture's coordinates, in decoded order,
+// the sum of (k % 1021 + 1) * (s + 3 t) with (s, t) the coordinate in 1/16 texel (mt_format.h
+// kUvCornerLists), which a changed coordinate or order changes.
 static int decodeAll(const char* path) {
   auto r = mt::MtFileReader::open(path);
-  uint64_t tris = 0, verts = 0, qsum = 0, tsum = 0;
+  uint64_t tris = 0, verts = 0, qsum = 0, tsum = 0, textures = 0, imageBytes = 0, uvsum = 0;
   for (uint32_t i = 0; i < r->patches().size(); ++i) {
     mt::DecodedPatch d = r->readPatch(i);
     tris += d.triangleCount();
     verts += d.q.size() / 3;
     for (uint32_t v : d.q) qsum += v;
     for (size_t k = 0; k < d.triangles.size(); ++k) tsum += uint64_t(k % 1021 + 1) * d.triangles[k];
+    if (!r->hasTextures()) continue;
+    const mt::TexturePayload t = r->readTexture(i, d);
+    if (t.image.empty()) continue;
+    ++textures;
+    imageBytes += t.image.size();
+    for (size_t k = 0; k < t.cornerUV.size() / 2; ++k) {
+      const uint64_t s = uint64_t(std::lround(double(t.cornerUV[2 * k]) * 16.0 * t.width));
+      const uint64_t q = uint64_t(std::lround(double(t.cornerUV[2 * k + 1]) * 16.0 * t.height));
+      uvsum += uint64_t(k % 1021 + 1) * (s + 3 * q);
+    }
   }
-  std::printf("patches %zu triangles %llu vertices %llu qsum %llu tsum %llu\n", r->patches().size(),
-              (unsigned long long)tris, (unsigned long long)verts, (unsigned long long)qsum, (unsigned long long)tsum);
+  std::printf("patches %zu triangles %llu vertices %llu qsum %llu tsum %llu", r->patches().size(), (unsigned long long)tris,
+              (unsigned long long)verts, (unsigned long long)qsum, (unsigned long long)tsum);
+  if (r->hasTextures())
+    std::printf(" textures %llu imagebytes %llu uvsum %llu", (unsigned long long)textures, (unsigned long long)imageBytes,
+                (unsigned long long)uvsum);
+  std::printf("\n");
   return 0;
 }
 

@@ -1,7 +1,8 @@
 // The standalone viewer page: viewer.html?file=URL[&tol=1][&budget=50][&cache=256][&bg=20242a]
 // [&path=orbit|fixed&frames=600][&view=EX,EY,EZ,TX,TY,TZ (unit space)]. Orbit/pan/zoom with the
-// mouse (three's OrbitControls); the HUD shows fps, triangles, cache, loads and the screen error,
-// and the file's coordinate reference system when its metadata block names one.
+// mouse (three's OrbitControls); the HUD shows fps, triangles, cache (and its textures' share for a
+// textured file), loads and the screen error, and the file's coordinate reference system when its
+// metadata block names one.
 // `side=front` culls back faces, `side=double` draws both in one pass, `twopass=T` sets MTObject's twoPassPerPixel (measurements, tests). `plain` draws with renderer.render (no progressive still image). `capture` keeps the drawing buffer for reading the image back (the tests). `path` plays a recorded camera path frame by frame (the browser tests and bench/web.sh); the
 // per-frame figures are in window.mtViewer.frames.
 import * as THREE from 'three';
@@ -53,7 +54,7 @@ async function main() {
     twoPassPerPixel: q.has('twopass') ? Number(q.get('twopass')) : undefined,
     onWarning: (m) => {
       state.warnings.push(m);
-      warnBox.textContent = `${state.warnings.length} damaged patch(es) skipped: ${m}`;
+      warnBox.textContent = `${state.warnings.length} damaged patch(es) ${/drawn untextured/.test(m) ? 'drawn untextured' : 'skipped'}: ${m}`;
     },
   });
   opening.catch(() => {});  // reported below
@@ -157,12 +158,14 @@ async function main() {
       t: now, frameMs: i > 0 ? dt : 0, updateMs, renderMs, drawn: st.drawnTriangles, patches: st.drawnPatches, backPatches: st.backPatches, cacheBytes: st.cacheBytes,
       cacheCap: st.cacheCap, bytesRead: st.bytesRead, err: st.maxScreenError, cutErr: st.cutErr, accumulating: mtAccumulating(mt), pending: st.loadsPending,
       budget: st.budgetTriangles, modelA: st.modelA, modelB: st.modelB, loads: st.loads, moves: st.refinements + st.coarsenings, requests: st.requests, fetchMs: st.fetchMs, decodeMs: st.decodeMs, evictions: st.evictions, givenUp: st.givenUp, triangles: st.triangles, still: path === 'orbit' ? i >= Math.floor(frames * 0.85) : null,
+      cacheTextureBytes: st.cacheTextureBytes, texturedPatches: st.texturedPatches, badTextures: st.badTextures,
     });
     if (state.frames.length > 5000) state.frames.shift();
     if (i % 10 === 0) hud.textContent =
       `fps ${fpsAvg.toFixed(1)}  (budget ${state.budgetMs} ms)\n` +
       `triangles ${(st.triangles / 1e6).toFixed(2)} M in the cut, ${(st.drawnTriangles / 1e6).toFixed(2)} M drawn this frame, ${st.drawnPatches} patches\n` +
-      `cache ${(st.cacheBytes / 2 ** 20).toFixed(1)} / ${(st.cacheCap / 2 ** 20).toFixed(0)} MiB\n` +
+      `cache ${(st.cacheBytes / 2 ** 20).toFixed(1)} / ${(st.cacheCap / 2 ** 20).toFixed(0)} MiB` +
+      (mt.mt.hasTextures ? ` (textures ${(st.cacheTextureBytes / 2 ** 20).toFixed(1)} MiB, ${st.texturedPatches} textured patches drawn)` : '') + '\n' +
       `loads ${st.loads}, pending ${st.loadsPending}, fetched ${(st.bytesRead / 2 ** 20).toFixed(1)} MiB of ${(mt.mt.fileSize / 2 ** 20).toFixed(1)}\n` +
       `screen error ${st.maxScreenError.toFixed(2)} px (tolerance ${state.tolerance})` +
       (state.crs ? `\ncrs ${state.crs.length > 60 ? state.crs.slice(0, 57) + '...' : state.crs}` : '');
@@ -263,6 +266,65 @@ state.compare = async (url, tol = 48) => {
     if (d > tol) ++off;
   }
   return { differing: off / n, mean: sum / (3 * n) };
+};
+// The cache's bytes recounted from what it holds: each ready patch's arrays (positions, normals,
+// colours, coordinates, indices) and, textured, its atlas as RGBA8 (the ImageBitmap's size), each
+// against the entry's bytes and the bound the load reserved and the cut's budget counts
+// (scene.decodedBytes); loading entries hold their reservation. Returns the sums.
+state.cacheAudit = () => {
+  const mt = state.mt, cache = mt.cache;
+  let ready = 0, loading = 0, textures = 0, texturedPatches = 0, mismatched = 0, overBound = 0, atlasOutsideBound = 0;
+  for (const [id, e] of cache.entries) {
+    if (e.state === 'loading') { loading += e.bytes; continue; }
+    if (e.state !== 'ready') continue;
+    const g = e.data;
+    let b = g.index.array.byteLength;
+    for (const a of Object.values(g.attributes)) b += a.array.byteLength;
+    const t = g.userData.mtTexture;
+    if (t) {
+      const atlas = 4 * t.texture.image.width * t.texture.image.height;
+      b += atlas;
+      textures += atlas;
+      ++texturedPatches;
+      if (mt.mt.decodedBytes[id] < atlas) ++atlasOutsideBound;
+    }
+    if (b !== e.bytes) ++mismatched;
+    if (b > mt.mt.decodedBytes[id]) ++overBound;
+    ready += b;
+  }
+  return { usedBytes: cache.usedBytes, capBytes: cache.capBytes, peakBytes: cache.peakBytes, ready, loading, textures, texturedPatches,
+    mismatched, overBound, atlasOutsideBound, evictions: cache.evictions, textureBytesDecoded: mt.server.textureBytes };
+};
+// PSNR of the image against a PNG at `url` (mtrender's screenshot of the same view): over every
+// pixel, and over the pixels the model covers in either image (a pixel within 3 levels of the
+// background `bgHex` in both is background), as mtrender/image.h's psnr does.
+state.psnr = async (url, bgHex) => {
+  const img = pixels();
+  const ref = await new Promise((resolve, reject) => {
+    const im = new Image();
+    im.onload = () => resolve(im);
+    im.onerror = () => reject(new Error(`cannot load ${url}`));
+    im.src = url;
+  });
+  if (ref.width !== img.width || ref.height !== img.height) return { error: `size ${ref.width}x${ref.height} vs ${img.width}x${img.height}` };
+  const c2 = document.createElement('canvas');
+  c2.width = ref.width;
+  c2.height = ref.height;
+  const g = c2.getContext('2d');
+  g.drawImage(ref, 0, 0);
+  const r = g.getImageData(0, 0, ref.width, ref.height).data;
+  const bg = [parseInt(bgHex.slice(0, 2), 16), parseInt(bgHex.slice(2, 4), 16), parseInt(bgHex.slice(4, 6), 16)];
+  const isBg = (d, i) => Math.abs(d[4 * i] - bg[0]) <= 3 && Math.abs(d[4 * i + 1] - bg[1]) <= 3 && Math.abs(d[4 * i + 2] - bg[2]) <= 3;
+  let all = 0, covered = 0, n = 0;
+  const N = img.width * img.height;
+  for (let i = 0; i < N; ++i) {
+    let e = 0;
+    for (let k = 0; k < 3; ++k) e += (img.data[4 * i + k] - r[4 * i + k]) ** 2;
+    all += e;
+    if (!isBg(img.data, i) || !isBg(r, i)) covered += e, ++n;
+  }
+  const db = (sse, count) => (sse === 0 ? Infinity : 10 * Math.log10((255 * 255) / (sse / (3 * count))));
+  return { all: db(all, N), covered: db(covered, Math.max(n, 1)), coveredPixels: n };
 };
 // The colours on screen against the stored ones: on a grid of pixels, a ray through the pixel's
 // centre finds the surface (the cut's meshes); the expected colour is the stored per-vertex colour

@@ -2,8 +2,10 @@
 // them) by patch id, with the states of mtrender/patch_cache.h (absent, loading, ready, bad), pins
 // for the patches of the cut, and eviction of the least recently wanted unpinned patch when a load
 // needs room. The cap counts every patch's decoded size bound (Scene::decodedBytesBound: 20 bytes a
-// vertex, 12 a triangle) from the moment its load is reserved, so the bytes held never exceed it;
-// a load that cannot find room is refused (counted in givenUp) and asked for again later.
+// vertex, 12 a triangle; a textured patch's split vertices and RGBA8 atlas, texture.js) from the
+// moment its load is reserved, then, once it is decoded, the bytes it actually takes (its arrays
+// and atlas), so the bytes held never exceed the cap; a load that cannot find room is refused
+// (counted in givenUp) and asked for again later.
 
 export class PatchCache {
   /**
@@ -55,12 +57,19 @@ export class PatchCache {
     this.entries.delete(id);
     ++this.evictions;
   }
-  /** A reserved load arrived. */
-  commit(id, data) {
+  /**
+   * A reserved load arrived. `bytes`: what it actually takes (its arrays and, textured, its RGBA8
+   * atlas), at most the reserved bound; the entry holds that from now on.
+   */
+  commit(id, data, bytes) {
     const e = this.entries.get(id);
     if (!e) return;
     e.state = 'ready';
     e.data = data;
+    if (bytes !== undefined && bytes <= e.bytes) {
+      this.usedBytes -= e.bytes - bytes;
+      e.bytes = bytes;
+    }
   }
   /** A reserved load failed for good (damaged payload): keeps the id as bad, frees its bytes. */
   markBad(id) {

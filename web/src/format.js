@@ -7,10 +7,12 @@ export const kMagic = 'BMT-MT\r\n';
 export const kFooterMagic = 'BMT-END\n';
 // Readers accept kMinReadableVersion..kVersion (mt_format.h); a later file version is refused with
 // a message naming it, never guessed at.
-export const kVersion = 5;
+export const kVersion = 6;
 export const kMinReadableVersion = 1;
 // Version 5: NodeRecord.colorError (was reserved and zero: older files read as 0, not measured).
 export const kFirstColorErrorVersion = 5;
+// Version 6: textured files (kHasTextures): a TextureRecord per patch after the patch index.
+export const kFirstTextureVersion = 6;
 export const kHeaderSize = 256;
 export const kFooterSize = 32;
 
@@ -18,11 +20,20 @@ export const Codec = Object.freeze({ Meshopt: 1, Draco: 2 });
 
 export const kHasNormals = 1 << 0;
 export const kHasColors = 1 << 1;
+export const kHasTextures = 1 << 2;  // a TextureRecord per patch (version 6)
 
 export const kNodeRecordSize = 80;
 export const kArcRecordSize = 16;
 export const kPatchRecordSize = 32;
 export const kPayloadHeaderSize = 24;
+// Textures (mt_format.h "Textures"): TextureRecord (32 B: offset u64, size u32, width u16,
+// height u16, checksum u64, imageBytes u32, reserved u32) and the payload's 16-byte header.
+export const kTextureRecordSize = 32;
+export const kTexturePayloadHeaderSize = 16;
+export const kMaxAtlasSide = 2048;
+export const kImageJpeg = 1;
+export const kImagePng = 2;
+export const kUvCornerLists = 1;
 
 // PayloadHeader flags.
 export const kPayloadNormals = 1 << 0;
@@ -175,6 +186,9 @@ export function indexRange(path, size, h) {
   section(h.backArcsOffset, h.arcCount * 4, 'backward-star array');
   section(h.patchRefsOffset, h.patchRefCount * 4, 'patch reference array');
   section(h.patchesOffset, h.patchCount * kPatchRecordSize, 'patch index');
+  const textured = (h.vertexFlags & kHasTextures) !== 0;
+  if (textured && h.version < kFirstTextureVersion) throw new MtError(path, `textures flagged in a version ${h.version} file`);
+  if (textured) expect += h.patchCount * kTextureRecordSize;  // TextureRecord[patchCount], right after the patch index
   if (h.metadataSize > kMaxMetadataSize || (h.metadataSize === 0 && h.metadataOffset !== 0))
     throw new MtError(path, `bad metadata block size ${h.metadataSize} in header (byte offset ${kMetadataSizeOffset})`);
   if (h.metadataSize) section(h.metadataOffset, h.metadataSize, 'metadata block');
@@ -321,7 +335,34 @@ export function readIndex(h, meta) {
       patches.checksumHi[i] = dv.getUint32(o + 28, true);
     }
   }
-  return { nodes, arcs, backArcs, patchRefs, patches };
+  // TextureRecord[patchCount] (textured files only; `textures` is null otherwise).
+  let textures = null;
+  if (h.vertexFlags & kHasTextures) {
+    const at = h.patchesOffset + pc * kPatchRecordSize - base;
+    textures = {
+      count: pc,
+      offset: new Float64Array(pc),
+      size: new Uint32Array(pc),
+      width: new Uint16Array(pc),
+      height: new Uint16Array(pc),
+      checksumLo: new Uint32Array(pc),
+      checksumHi: new Uint32Array(pc),
+      imageBytes: new Uint32Array(pc),
+      reserved: new Uint32Array(pc),
+    };
+    for (let i = 0; i < pc; ++i) {
+      const o = at + i * kTextureRecordSize;
+      textures.offset[i] = u64(dv, o);
+      textures.size[i] = dv.getUint32(o + 8, true);
+      textures.width[i] = dv.getUint16(o + 12, true);
+      textures.height[i] = dv.getUint16(o + 14, true);
+      textures.checksumLo[i] = dv.getUint32(o + 16, true);
+      textures.checksumHi[i] = dv.getUint32(o + 20, true);
+      textures.imageBytes[i] = dv.getUint32(o + 24, true);
+      textures.reserved[i] = dv.getUint32(o + 28, true);
+    }
+  }
+  return { nodes, arcs, backArcs, patchRefs, patches, textures };
 }
 
 /**
@@ -374,6 +415,18 @@ export function checkIndex(path, h, idx) {
     if (off < kHeaderSize || off % h.payloadAlignment || off + size > h.metaOffset)
       throw new MtError(path, `patch ${i}: payload at byte offset ${off} size ${size} outside the payload area`);
     if (patches.arc[i] >= h.arcCount) throw new MtError(path, `patch ${i}: arc ${patches.arc[i]} out of range`);
+  }
+  const t = idx.textures;
+  for (let i = 0; t && i < t.count; ++i) {
+    // A texture payload lies after its patch's payload and before the next one (or the index).
+    const next = i + 1 < patches.count ? patches.offset[i + 1] : h.metaOffset;
+    const empty = t.size[i] === 0 && t.offset[i] === 0 && t.width[i] === 0 && t.height[i] === 0 && t.imageBytes[i] === 0 &&
+      t.checksumLo[i] === 0 && t.checksumHi[i] === 0;
+    if (t.reserved[i] !== 0 ||
+        (!empty && (t.size[i] === 0 || t.offset[i] < patches.offset[i] + patches.size[i] || t.offset[i] % h.payloadAlignment ||
+                    t.offset[i] + t.size[i] > next || t.width[i] === 0 || t.height[i] === 0 || t.width[i] > kMaxAtlasSide ||
+                    t.height[i] > kMaxAtlasSide || t.imageBytes[i] > t.size[i])))
+      throw new MtError(path, `texture of patch ${i}: record (payload at byte offset ${t.offset[i]} size ${t.size[i]}) is damaged or outside its place`);
   }
   for (let i = 0; i < arcs.count; ++i) {
     if (arcs.from[i] >= h.nodeCount || arcs.to[i] >= h.nodeCount || arcs.firstPatchRef[i] + arcs.patchCount[i] > h.patchRefCount)

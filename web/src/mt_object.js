@@ -261,6 +261,20 @@ void main() {
     g.setAttribute('normal', new THREE.BufferAttribute(r.normals, 3, true));
     if (r.colors) g.setAttribute('color', new THREE.BufferAttribute(r.colors, 4, true));
     g.setIndex(new THREE.BufferAttribute(r.indices, 1));
+    if (r.texture && !this.options.material) {
+      // A textured patch: its coordinates (unorm16, vertices split per coordinate by the worker) and
+      // its atlas (the ImageBitmap the worker decoded), drawn by a material of its own.
+      g.setAttribute('uv', new THREE.BufferAttribute(r.uv, 2, true));
+      const tex = new THREE.Texture(r.texture.image);
+      tex.flipY = false;  // ignored for an ImageBitmap: the worker flipped the coordinates instead
+      tex.minFilter = THREE.LinearMipmapLinearFilter;  // trilinear from the mips, as mtrender
+      tex.magFilter = THREE.LinearFilter;
+      tex.wrapS = tex.wrapT = THREE.ClampToEdgeWrapping;
+      tex.needsUpdate = true;
+      g.userData.mtTexture = { texture: tex, front: MTObject.textureMaterial(tex, THREE.FrontSide), double: MTObject.textureMaterial(tex, THREE.DoubleSide) };
+    } else if (r.texture) {
+      r.texture.image.close();
+    }
     return g;
   }
   _evicted(id, e) {
@@ -271,7 +285,34 @@ void main() {
         map.delete(id);
       }
     }
-    if (e.data) e.data.dispose();
+    if (e.data) MTObject.disposeGeometry(e.data);
+  }
+  /** A patch's geometry and, textured, its atlas (GPU texture and ImageBitmap) and materials. */
+  static disposeGeometry(g) {
+    const t = g.userData.mtTexture;
+    if (t) {
+      t.texture.dispose();
+      if (t.texture.image && t.texture.image.close) t.texture.image.close();
+      t.front.dispose();
+      t.double.dispose();
+    }
+    g.dispose();
+  }
+
+  /**
+   * A textured patch's material: its atlas unlit (as `mtrender --color texture` draws it: a
+   * photographic texture carries the light it was captured under), sampled trilinearly in the
+   * stored sRGB bytes and shown as stored (as the vertex colours, defaultMaterial). One shader
+   * program for every patch (the same cache key); each patch's material binds its own texture.
+   */
+  static textureMaterial(texture, side) {
+    const m = new THREE.MeshBasicMaterial({ map: texture, side });
+    m.onBeforeCompile = (sh) => {
+      sh.fragmentShader = sh.fragmentShader.replace('#include <map_fragment>',
+        '#include <map_fragment>\n\tdiffuseColor.rgb = sRGBTransferEOTF( vec4( diffuseColor.rgb, 1.0 ) ).rgb;');
+    };
+    m.customProgramCacheKey = () => 'mt-texture';
+    return m;
   }
 
   /** The camera as an MT view (object space of the file). */
@@ -387,7 +428,16 @@ void main() {
     // front to back as well; only the patches that may show a back face.
     const twoPass = backs && drawnTriangles <= this.twoPassPerPixel * width * height;
     this.twoPass = twoPass;
-    for (const [id, m] of this.meshes) m.material = backs && !twoPass && backIds.has(id) ? this.doubleMaterial : this.material;
+    for (const [id, m] of this.meshes) {
+      const tex = m.geometry.userData.mtTexture;
+      if (tex) {
+        // A textured patch shows its atlas on both sides where its back may be seen (one pass).
+        m.material = backs && backIds.has(id) ? tex.double : tex.front;
+        backIds.delete(id);
+      } else {
+        m.material = backs && !twoPass && backIds.has(id) ? this.doubleMaterial : this.material;
+      }
+    }
     if (!twoPass) backIds.clear();
     for (const [id, m] of this.backMeshes)
       if (!backIds.has(id)) {
@@ -425,6 +475,16 @@ void main() {
     st.loads = this.server.loads;
     st.bytesRead = this.mt.source.bytesFetched;
     st.badPatches = this.server.bad;
+    st.badTextures = this.server.badTextures;
+    let texBytes = 0, textured = 0;  // the cache's atlases (RGBA8) and the textured patches drawn
+    for (const [, e] of this.cache.entries)
+      if (e.data && e.data.userData.mtTexture) {
+        const im = e.data.userData.mtTexture.texture.image;
+        texBytes += 4 * im.width * im.height;
+      }
+    for (const [, m] of this.meshes) if (m.geometry.userData.mtTexture) ++textured;
+    st.cacheTextureBytes = texBytes;
+    st.texturedPatches = textured;
     st.loadsPending = this.server.queue.length + this.server.inFlight;
     st.requests = this.server.requests;
     st.fetchMs = this.server.fetchMs;
@@ -529,6 +589,6 @@ void main() {
 
   dispose() {
     this.server.dispose();
-    for (const [, e] of this.cache.entries) if (e.data) e.data.dispose();
+    for (const [, e] of this.cache.entries) if (e.data) MTObject.disposeGeometry(e.data);
   }
 }

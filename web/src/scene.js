@@ -2,12 +2,14 @@
 // triangle counts, in/out triangles per node, the node whose sphere and cone bound each arc).
 // Node centres are kept as float32 values, as Scene does, so screen errors match ExtractRender's.
 
+import { texturedBytesBound } from './texture.js';
+
 /**
  * @param {object} header parsed FileHeader (format.js)
  * @param {object} idx records from readIndex (format.js)
  */
 export function buildScene(header, idx) {
-  const { nodes: rn, arcs: ra, backArcs, patchRefs, patches: rp } = idx;
+  const { nodes: rn, arcs: ra, backArcs, patchRefs, patches: rp, textures } = idx;
   const nc = rn.count, ac = ra.count;
   const nodes = {
     count: nc,
@@ -63,7 +65,13 @@ export function buildScene(header, idx) {
     let v = rp.vertices[p];
     if (header.codec === 2) v = Math.min(3 * rp.triangles[p], v + Math.floor(v / 4) + 64);
     decodedBytes[p] = v * 20 + rp.triangles[p] * 12;
+    // A textured patch (version 6): its split vertices, coordinates and RGBA8 atlas (texture.js).
+    if (textures && textures.size[p]) decodedBytes[p] = texturedBytesBound(rp.triangles[p], textures.width[p], textures.height[p]);
   }
+  // Where a patch's read ends: its texture payload follows its geometry (one range read for both).
+  const loadEnd = new Float64Array(rp.count);
+  for (let p = 0; p < rp.count; ++p)
+    loadEnd[p] = textures && textures.size[p] ? textures.offset[p] + textures.size[p] : rp.offset[p] + rp.size[p];
   const c = [0, 0, 0];
   let d2 = 0;
   for (let a = 0; a < 3; ++a) {
@@ -78,8 +86,11 @@ export function buildScene(header, idx) {
     arcPatches: patchRefs,
     patches: rp,
     decodedBytes,
+    loadEnd,
+    textures,  // TextureRecord arrays (format.js readIndex), null for a file without textures
     center: c,
     radius: Math.max(Math.sqrt(d2), 1e-9),
     hasColors: (header.vertexFlags & 2) !== 0,
+    hasTextures: textures !== null,
   };
 }

@@ -22,6 +22,8 @@ export class PatchServer {
     this.maxInFlight = opt.inFlight || 12;
     this.loads = 0;
     this.bad = 0;
+    this.badTextures = 0;  // patches whose texture payload was damaged (drawn untextured)
+    this.textureBytes = 0;  // RGBA8 atlas bytes decoded so far (all loads, evicted ones too)
     this.bytesRead = 0;
     this.requests = 0;
     // Where a load's time goes (the bench's profile of a still view): the range reads' wall time
@@ -88,8 +90,9 @@ export class PatchServer {
       near.push(head);
       near.sort((a, b) => p.offset[a.id] - p.offset[b.id]);
       let i = near.indexOf(head), lo = i, hi = i;
-      const gap = (a, b) => p.offset[near[b].id] - (p.offset[near[a].id] + p.size[near[a].id]);
-      const span = () => p.offset[near[hi].id] + p.size[near[hi].id] - p.offset[near[lo].id];
+      const end = this.scene.loadEnd;  // a patch's payload, then its texture payload if it has one
+      const gap = (a, b) => p.offset[near[b].id] - end[near[a].id];
+      const span = () => end[near[hi].id] - p.offset[near[lo].id];
       while (hi + 1 < near.length && gap(hi, hi + 1) <= 16384 && span() < 524288) ++hi;
       while (lo > 0 && gap(lo - 1, lo) <= 16384 && span() < 524288) --lo;
       const batch = [];
@@ -117,7 +120,7 @@ export class PatchServer {
     const t0 = performance.now();
     const begin = p.offset[batch[0]];
     const last = batch[batch.length - 1];
-    const end = p.offset[last] + p.size[last];
+    const end = this.scene.loadEnd[last];
     let buf;
     try {
       buf = await this.scene.source.read(begin, end);
@@ -131,14 +134,29 @@ export class PatchServer {
     this.bytesRead += end - begin;
     ++this.requests;
     this.fetchMs += performance.now() - t0;
-    const items = batch.map((id) => ({
-      id, offset: p.offset[id], triangles: p.triangles[id], checksumLo: p.checksumLo[id], checksumHi: p.checksumHi[id],
-      buffer: buf.slice(p.offset[id] - begin, p.offset[id] - begin + p.size[id]),
-    }));
+    const tx = this.scene.textures;
+    const items = batch.map((id) => {
+      const it = {
+        id, offset: p.offset[id], triangles: p.triangles[id], checksumLo: p.checksumLo[id], checksumHi: p.checksumHi[id],
+        buffer: buf.slice(p.offset[id] - begin, p.offset[id] - begin + p.size[id]),
+      };
+      // The texture payload read with it (mt_format.h: it follows the patch's payload), checked and
+      // decoded by the worker as well.
+      if (tx && tx.size[id]) {
+        it.texture = {
+          offset: tx.offset[id], width: tx.width[id], height: tx.height[id], imageBytes: tx.imageBytes[id],
+          checksumLo: tx.checksumLo[id], checksumHi: tx.checksumHi[id],
+          buffer: buf.slice(tx.offset[id] - begin, tx.offset[id] - begin + tx.size[id]),
+        };
+      }
+      return it;
+    });
     const job = this.nextJob++;
     this.jobs.set(job, { t0, count: batch.length });
     const w = this.workers[this.nextWorker++ % this.workers.length];
-    w.postMessage({ type: 'decode', job, items }, items.map((it) => it.buffer));
+    const transfer = [];
+    for (const it of items) transfer.push(it.buffer), it.texture && transfer.push(it.texture.buffer);
+    w.postMessage({ type: 'decode', job, items }, transfer);
   }
   onDecoded(msg) {
     const j = this.jobs.get(msg.job);
@@ -152,7 +170,14 @@ export class PatchServer {
         this.warn(`${this.scene.path}: ${r.error}; the patch is skipped`);
         continue;
       }
-      this.cache.commit(r.id, this.opt.makeGeometry(r));
+      // A damaged texture: the patch is drawn untextured, with a warning (its geometry is sound).
+      if (r.textureError) {
+        ++this.badTextures;
+        this.warn(`${this.scene.path}: ${r.textureError}; the patch is drawn untextured`);
+      }
+      // The cache holds what the patch actually takes (its reservation was a bound).
+      this.cache.commit(r.id, this.opt.makeGeometry(r), r.bytes);
+      if (r.texture) this.textureBytes += 4 * r.texture.width * r.texture.height;
       ++this.loads;
     }
     this.geometryMs += performance.now() - tg;

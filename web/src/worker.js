@@ -2,7 +2,11 @@
 // arrays three.js draws: positions relative to the scene centre (float32), normals (int8,
 // normalized; area-weighted from the triangles when the file stores none), colours (RGBA8),
 // indices (uint16 when they fit). A damaged payload comes back as an error naming the patch.
+// A textured patch (version 6) also has its texture payload checked (XXH64), its corner
+// coordinates decoded and its vertices split per coordinate (texture.js), and its atlas decoded by
+// createImageBitmap; a damaged texture comes back as `textureError` with the untextured patch.
 import { decodePatch } from './patch_codec.js';
+import { decodeTexturePayload, splitTexturedVertices } from './texture.js';
 import { defaultLibUrls } from './libs.js';
 
 let libs = null, cfg = null, h64Raw = null;
@@ -75,6 +79,48 @@ function toRender(d) {
   return { positions, normals, colors: d.colors, indices };
 }
 
+// The bytes a decoded patch takes in the page (the cache counts these): its arrays and, textured,
+// its atlas as RGBA8.
+function renderBytes(r) {
+  let b = r.positions.byteLength + r.normals.byteLength + r.indices.byteLength;
+  if (r.colors) b += r.colors.byteLength;
+  if (r.uv) b += r.uv.byteLength;
+  if (r.texture) b += 4 * r.texture.width * r.texture.height;
+  return b;
+}
+
+// The texture payload of item `it` over the decoded patch `d` (render arrays `r`): checksum, corner
+// coordinates, the vertices split per coordinate, the image decoded. Throws on any damage.
+async function withTexture(it, d, r) {
+  const t = it.texture;
+  const data = new Uint8Array(t.buffer);
+  if (h64Raw(data, 0n) !== ((BigInt(t.checksumHi) << 32n) | BigInt(t.checksumLo)))
+    throw new Error(`checksum mismatch in payload at byte offset ${t.offset} (${data.length} bytes)`);
+  const n = d.q.length / 3;
+  const p = decodeTexturePayload(data, d.triangles, n, t, libs.zstd);
+  let bitmap;
+  try {
+    bitmap = await createImageBitmap(new Blob([p.image], { type: p.imageFormat === 1 ? 'image/jpeg' : 'image/png' }),
+      { premultiplyAlpha: 'none', colorSpaceConversion: 'none' });
+  } catch (err) {
+    throw new Error(`the image does not decode (${err.message})`);
+  }
+  if (bitmap.width !== p.width || bitmap.height !== p.height) {
+    bitmap.close();
+    throw new Error(`the image is ${bitmap.width} x ${bitmap.height}, the payload says ${p.width} x ${p.height}`);
+  }
+  const s = splitTexturedVertices(d.triangles, n, p.cornerUV);
+  const m = s.remap.length;
+  const positions = new Float32Array(3 * m), normals = new Int8Array(3 * m), colors = r.colors ? new Uint8Array(4 * m) : null;
+  for (let i = 0; i < m; ++i) {
+    const v = s.remap[i];
+    for (let a = 0; a < 3; ++a) positions[3 * i + a] = r.positions[3 * v + a], (normals[3 * i + a] = r.normals[3 * v + a]);
+    if (colors) for (let a = 0; a < 4; ++a) colors[4 * i + a] = r.colors[4 * v + a];
+  }
+  const indices = m <= 65536 ? Uint16Array.from(s.triangles) : s.triangles;
+  return { positions, normals, colors, indices, uv: s.uv, texture: { image: bitmap, width: p.width, height: p.height } };
+}
+
 self.onmessage = async (e) => {
   const msg = e.data;
   if (msg.type === 'libs') {
@@ -114,10 +160,20 @@ self.onmessage = async (e) => {
       const d = decodePatch(data, cfg.codec, { bits: cfg.gridBits }, libs);
       if (d.triangles.length / 3 !== it.triangles)
         throw new Error(`triangle count ${d.triangles.length / 3} differs from the index (${it.triangles})`);
-      const r = toRender(d);
-      results.push({ id: it.id, ...r });
+      let r = toRender(d), textureError = null;
+      if (it.texture) {
+        try {
+          r = await withTexture(it, d, r);
+        } catch (err) {
+          textureError = `texture of patch ${it.id} at byte offset ${it.texture.offset}: ${err.message}`;
+        }
+      }
+      r.bytes = renderBytes(r);
+      results.push({ id: it.id, ...r, textureError });
       transfer.push(r.positions.buffer, r.normals.buffer, r.indices.buffer);
       if (r.colors) transfer.push(r.colors.buffer);
+      if (r.uv) transfer.push(r.uv.buffer);
+      if (r.texture) transfer.push(r.texture.image);
     } catch (err) {
       results.push({ id: it.id, error: `patch ${it.id} at byte offset ${it.offset}: ${err.message}` });
     }

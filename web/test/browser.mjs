@@ -22,11 +22,21 @@
 //                 draws them) nor black (the lit back pass has its light); with side=front
 //                 the same check fails (the check can fail). The closed torus (t.mt) seen from
 //                 outside is drawn single-sided (no back pass) and shows no back face.
+//   textured      a textured scan (x.mt, version 6: mtgen --texture charts) at a fixed view,
+//                 converged: every patch drawn with its atlas, the image within 35 dB PSNR (over
+//                 the pixels the model covers) of mtrender's headless image of the same view and
+//                 tolerance (--color texture), and against test/golden/textured.png as the torus;
+//   texture-cache x.mt on an orbit under a 6 MiB cache: every frame's cache bytes under the cap;
+//                 at the end the cache recounted from what it holds (arrays + RGBA8 atlases) is
+//                 what it says it holds, entry by entry, and every entry within the bound its load
+//                 reserved (which the cut's byte budget counts, atlases included);
+//   texture-corrupted  a copy of x.mt with damaged texture payloads: a warning for each, the
+//                 patches drawn untextured (their geometry shown), the page keeps drawing.
 // Prints one line per test and "N passed, M failed"; exits 1 on any failure.
 import fs from 'node:fs';
 import path from 'node:path';
 import os from 'node:os';
-import { spawn } from 'node:child_process';
+import { spawn, spawnSync } from 'node:child_process';
 import { fileURLToPath } from 'node:url';
 import { chromium } from 'playwright-core';
 import { FileSource } from '../src/source.js';
@@ -258,6 +268,111 @@ await test('back-faces', async () => {
   check(!r.backFaces, 'the closed torus seen from outside is drawn with its back faces');
   check(r.back <= 0.001 * W * H, `the closed torus seen from outside shows ${r.back} back-face pixels`);
   return `${notes.join('; ')}; closed torus: one pass, ${r.back} back-face px`;
+});
+
+// ---- version 6: textures ----
+const texView = '0.5,-1.5,0.8,0,0,0', texTol = 1, texBg = '141414';
+await test('textured', async () => {
+  // mtrender's image of the same view: headless, --color texture, the same size, tolerance and
+  // background, converged (the camera still for 120 frames).
+  const tmp = fs.mkdtempSync(path.join(os.tmpdir(), 'mtref-'));
+  fs.writeFileSync(path.join(tmp, 'view'), `space unit\nfov 45\n${texView.split(',').join(' ')}\n`);
+  const frames = 120;
+  const r = spawnSync(path.join(binDir, 'mtrender'), [path.join(dataDir, 'x.mt'), '--headless', '--quiet', '--camera-path', path.join(tmp, 'view'),
+    '--frames', String(frames), '--width', String(W), '--height', String(H), '--tolerance', String(texTol), '--fixed-triangles', '3000000',
+    '--color', 'texture', '--background', '20', '20', '20', '--screenshots', tmp, '--screenshot-every', '100000'], { encoding: 'utf8' });
+  check(r.status === 0, `mtrender failed: ${r.stderr || r.stdout}`);
+  const ref = path.join(dataDir, 'x-mtrender.png');
+  fs.copyFileSync(path.join(tmp, `frame_${String(frames - 1).padStart(5, '0')}.png`), ref);
+  fs.rmSync(tmp, { recursive: true, force: true });
+  const { page, log } = await open(`file=/data/x.mt&tol=${texTol}&fixed=3000000&bg=${texBg}&view=${texView}`);
+  await converge(page);
+  await page.waitForTimeout(200);
+  const st = await page.evaluate(() => ({ f: window.mtViewer.frames.at(-1), w: window.mtViewer.warnings }));
+  const p = await page.evaluate((bg) => window.mtViewer.psnr('/data/x-mtrender.png', bg), texBg);
+  const golden = path.join(here, 'golden', 'textured.png');
+  let g = null;
+  if (update || !fs.existsSync(golden)) {
+    const url = await page.evaluate(() => window.mtViewer.png());
+    fs.writeFileSync(golden, Buffer.from(url.split(',')[1], 'base64'));
+  } else {
+    g = await page.evaluate(() => window.mtViewer.compare('/web/test/golden/textured.png'));
+  }
+  await page.close();
+  check(!p.error, p.error);
+  check(st.w.length === 0, `warnings: ${st.w[0]}`);
+  check(!log.some((m) => m.startsWith('pageerror')), `page error: ${log.find((m) => m.startsWith('pageerror'))}`);
+  check(st.f.patches > 10 && st.f.texturedPatches === st.f.patches, `${st.f.texturedPatches} of ${st.f.patches} patches drawn textured`);
+  check(p.coveredPixels > 0.1 * W * H, `the model covers only ${p.coveredPixels} pixels`);
+  check(p.covered >= 35, `PSNR against mtrender's image ${p.covered.toFixed(2)} dB over ${p.coveredPixels} covered pixels (< 35)`);
+  if (!g) throw new Error(`no golden image: wrote ${golden}; check it and commit it`);
+  check(!g.error, g.error);
+  check(g.differing <= 0.02, `${(100 * g.differing).toFixed(2)}% of the pixels differ from the golden image (mean ${g.mean.toFixed(2)})`);
+  return `${st.f.patches} patches textured, ${st.f.triangles} triangles; PSNR against mtrender --color texture ${p.covered.toFixed(2)} dB ` +
+    `over ${p.coveredPixels} covered pixels (${p.all.toFixed(2)} dB over all); golden: ${(100 * g.differing).toFixed(3)}% pixels differ`;
+});
+
+await test('texture-cache', async () => {
+  const capMiB = 6, cap = capMiB * 2 ** 20;
+  const { page } = await open(`file=/data/x.mt&tol=1&budget=50&cache=${capMiB}&path=orbit&frames=240`);
+  await page.waitForFunction(() => window.mtViewer.done, null, { timeout: 240000, polling: 200 });
+  const f = await page.evaluate(() => window.mtViewer.frames);
+  const a = await page.evaluate(() => window.mtViewer.cacheAudit());
+  await page.close();
+  const over = f.filter((x) => x.cacheBytes > cap);
+  check(over.length === 0, `cache above its cap of ${cap} bytes in ${over.length} frames (max ${Math.max(...f.map((x) => x.cacheBytes))})`);
+  check(a.mismatched === 0, `${a.mismatched} entries hold other bytes than their arrays and atlas take`);
+  check(a.ready + a.loading === a.usedBytes, `the cache says ${a.usedBytes} bytes, its entries take ${a.ready} + ${a.loading} loading`);
+  check(a.overBound === 0 && a.atlasOutsideBound === 0, `${a.overBound} entries over their reserved bound, ${a.atlasOutsideBound} atlases outside it`);
+  check(a.texturedPatches > 0 && a.textures > 0, 'no textured patch in the cache: the test tests nothing');
+  check(f.at(-1).evictions > 0, 'nothing was evicted: the test tests nothing');
+  const maxTex = Math.max(...f.map((x) => x.cacheTextureBytes));
+  return `cache max ${(Math.max(...f.map((x) => x.cacheBytes)) / 2 ** 20).toFixed(2)} of ${capMiB} MiB, textures up to ${(maxTex / 2 ** 20).toFixed(2)} MiB; ` +
+    `at the end ${a.usedBytes} bytes = ${a.ready} in ${a.texturedPatches} textured patches (atlases ${a.textures}) + ${a.loading} loading; ` +
+    `${f.at(-1).evictions} evictions, ${(a.textureBytesDecoded / 2 ** 20).toFixed(2)} MiB of atlases decoded`;
+});
+
+await test('texture-corrupted', async () => {
+  // One byte changed in the image of every 4th texture payload: their checksums fail.
+  const src = path.join(dataDir, 'x.mt'), dst = path.join(dataDir, 'x-bad.mt');
+  fs.copyFileSync(src, dst);
+  const s = await openMtFile(new FileSource(src, fs));
+  const fd = fs.openSync(dst, 'r+');
+  const damaged = new Set();
+  for (let i = 0; i < s.patches.count; i += 4) {
+    const t = s.textures;
+    if (!t.size[i]) continue;
+    const at = t.offset[i] + t.size[i] - (t.imageBytes[i] >> 1);
+    const b = Buffer.alloc(1);
+    fs.readSync(fd, b, 0, 1, at);
+    b[0] ^= 0x5a;
+    fs.writeSync(fd, b, 0, 1, at);
+    damaged.add(i);
+  }
+  fs.closeSync(fd);
+  const { page, log } = await open(`file=/data/x-bad.mt&tol=${texTol}&fixed=3000000&bg=${texBg}&view=${texView}`);
+  await converge(page);
+  const n0 = await page.evaluate(() => window.mtViewer.frames.length);
+  await page.waitForTimeout(1500);
+  const st = await page.evaluate(() => {
+    const v = window.mtViewer, mt = v.mt;
+    const drawn = [...mt.meshes.entries()].map(([id, m]) => ({ id, textured: !!m.geometry.userData.mtTexture, triangles: m.geometry.index.count / 3 }));
+    return { n: v.frames.length, w: v.warnings, err: v.error, f: v.frames.at(-1), drawn };
+  });
+  await page.close();
+  fs.unlinkSync(dst);
+  check(!st.err, `the page stopped: ${st.err}`);
+  check(st.n > n0 + 3, `the page stopped drawing frames after the warnings (${n0} -> ${st.n})`);
+  check(!log.some((m) => m.startsWith('pageerror')), `page error: ${log.find((m) => m.startsWith('pageerror'))}`);
+  check(st.w.length > 0, 'no warning');
+  check(st.w.every((m) => /texture of patch (\d+) at byte offset \d+: checksum mismatch .*drawn untextured/.test(m) && damaged.has(Number(/texture of patch (\d+)/.exec(m)[1]))),
+    `unexpected warning: ${st.w.find((m) => !/texture of patch/.test(m))}`);
+  const untextured = st.drawn.filter((d) => !d.textured);
+  check(untextured.length > 0 && untextured.every((d) => damaged.has(d.id) && d.triangles > 0), `drawn untextured: ${untextured.map((d) => d.id).join(',')}`);
+  check(st.drawn.some((d) => d.textured), 'no patch drawn textured');
+  check(log.some((m) => /drawn untextured/.test(m)), 'no warning on the console');
+  return `${damaged.size} texture payloads damaged, ${st.w.length} warnings ("${st.w[0].replace(/^.*?: /, '').slice(0, 80)}..."), ` +
+    `${untextured.length} of ${st.drawn.length} patches drawn untextured, still drawing`;
 });
 
 await browser.close();

@@ -3,7 +3,9 @@
 // every decoded grid coordinate, I: sum over each patch's index list of (i % 1021 + 1) * index,
 // modulo 2^64: fingerprints compared with the C++ decoder's (web_cut_nodes --decode) by the test).
 // Also prints, on stderr, how many payloads of each kind it met and their decode time (CPU time
-// of the process, user + sys, ms: wall time means nothing on a shared machine); with --require-connectivity it fails when no payload has kPayloadConnectivity (the
+// of the process, user + sys, ms: wall time means nothing on a shared machine). A textured file
+// (version 6) adds "textures N imagebytes B uvsum U" (texture.js's decoder; U as web_cut_nodes
+// --decode defines it); with --require-connectivity it fails when no payload has kPayloadConnectivity (the
 // file does not test the version-4 decoder).
 import fs from 'node:fs';
 import { decompress } from 'fzstd';
@@ -11,6 +13,7 @@ import { MeshoptDecoder } from 'meshoptimizer/decoder';
 import { FileSource } from '../src/source.js';
 import { openMtFile, hasher } from '../src/mtfile.js';
 import { decodePatch } from '../src/patch_codec.js';
+import { decodeTexturePayload } from '../src/texture.js';
 
 const file = process.argv[2];
 const requireConnectivity = process.argv.includes('--require-connectivity');
@@ -21,7 +24,8 @@ const { h64Raw } = await hasher();
 const scene = await openMtFile(new FileSource(file, fs));
 const libs = { zstd: (b, n) => decompress(b, new Uint8Array(n)), meshopt: MeshoptDecoder, draco: null };
 const p = scene.patches;
-let tris = 0, verts = 0, qsum = 0n, tsum = 0n;
+let tris = 0, verts = 0, qsum = 0n, tsum = 0n, textures = 0, imageBytes = 0, uvsum = 0n;
+const tx = scene.textures;
 for (let i = 0; i < p.count; ++i) {
   const data = new Uint8Array(await scene.source.read(p.offset[i], p.offset[i] + p.size[i]));
   const sum = h64Raw(data, 0n);
@@ -47,7 +51,20 @@ for (let i = 0; i < p.count; ++i) {
     for (let k = k0; k < Math.min(t.length, k0 + 1000); ++k) w += (k % 1021 + 1) * t[k];
     tsum += BigInt(w);
   }
+  if (tx && tx.size[i]) {
+    const td = new Uint8Array(await scene.source.read(tx.offset[i], tx.offset[i] + tx.size[i]));
+    if (h64Raw(td, 0n) !== ((BigInt(tx.checksumHi[i]) << 32n) | BigInt(tx.checksumLo[i]))) throw new Error(`texture of patch ${i}: checksum mismatch`);
+    const rec = { width: tx.width[i], height: tx.height[i], imageBytes: tx.imageBytes[i] };
+    const t = decodeTexturePayload(td, d.triangles, d.q.length / 3, rec, libs.zstd);
+    ++textures;
+    imageBytes += t.image.length;
+    let u = 0;  // exact: a corner adds < 2^27, a patch has far fewer than 2^26 corners
+    for (let k = 0; k < t.cornerUV.length / 2; ++k)
+      u += (k % 1021 + 1) * (Math.round(t.cornerUV[2 * k] * 16 * t.width) + 3 * Math.round(t.cornerUV[2 * k + 1] * 16 * t.height));
+    uvsum += BigInt(u);
+  }
 }
+uvsum = BigInt.asUintN(64, uvsum);
 tsum = BigInt.asUintN(64, tsum);
 for (const [kind, k] of kinds)
   console.error(`${kind}: ${k.patches} patches, ${k.triangles} triangles, ${k.ms.toFixed(1)} ms CPU (${(k.triangles / k.ms / 1000).toFixed(2)} M triangles/s)`);
@@ -55,4 +72,5 @@ if (requireConnectivity && !kinds.has('v4-connectivity')) {
   console.error(`decode_check: ${file}: no payload has kPayloadConnectivity`);
   process.exit(1);
 }
-console.log(`patches ${p.count} triangles ${tris} vertices ${verts} qsum ${qsum} tsum ${tsum}`);
+console.log(`patches ${p.count} triangles ${tris} vertices ${verts} qsum ${qsum} tsum ${tsum}` +
+  (tx ? ` textures ${textures} imagebytes ${imageBytes} uvsum ${uvsum}` : ''));
