@@ -158,7 +158,7 @@ async function main() {
       t: now, frameMs: i > 0 ? dt : 0, updateMs, renderMs, drawn: st.drawnTriangles, patches: st.drawnPatches, backPatches: st.backPatches, cacheBytes: st.cacheBytes,
       cacheCap: st.cacheCap, bytesRead: st.bytesRead, err: st.maxScreenError, cutErr: st.cutErr, accumulating: mtAccumulating(mt), pending: st.loadsPending,
       budget: st.budgetTriangles, modelA: st.modelA, modelB: st.modelB, loads: st.loads, moves: st.refinements + st.coarsenings, requests: st.requests, fetchMs: st.fetchMs, decodeMs: st.decodeMs, evictions: st.evictions, givenUp: st.givenUp, triangles: st.triangles, still: path === 'orbit' ? i >= Math.floor(frames * 0.85) : null,
-      cacheTextureBytes: st.cacheTextureBytes, texturedPatches: st.texturedPatches, badTextures: st.badTextures,
+      textureMs: st.textureMs, cacheTextureBytes: st.cacheTextureBytes, texturedPatches: st.texturedPatches, badTextures: st.badTextures,
     });
     if (state.frames.length > 5000) state.frames.shift();
     if (i % 10 === 0) hud.textContent =

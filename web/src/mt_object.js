@@ -214,6 +214,14 @@ void main() {
     g.setIndex(new THREE.BufferAttribute(new Uint16Array([0, 1, 2]), 1));
     const group = new THREE.Group();
     for (const m of [this.material, this.backMaterial, this.doubleMaterial]) if (m) group.add(new THREE.Mesh(g, m));
+    // A textured file: the texture materials' program too (one texel stands in for an atlas).
+    let texel = null;
+    if (this.mt.hasTextures && !this.options.material) {
+      g.setAttribute('uv', new THREE.BufferAttribute(new Uint16Array(6), 2, true));
+      texel = new THREE.DataTexture(new Uint8Array([255, 255, 255, 255]), 1, 1);
+      texel.needsUpdate = true;
+      for (const side of [THREE.FrontSide, THREE.DoubleSide]) group.add(new THREE.Mesh(g, MTObject.textureMaterial(texel, side)));
+    }
     try {
       await p.renderer.compileAsync(group, p.camera, p.scene);
       // One draw of the stand-in into a 1x1 sRGB target (the programs of the screen and of the still
@@ -235,6 +243,10 @@ void main() {
       console.warn(`shader precompile: ${e.message}`);  // the first frame compiles them then
     }
     g.dispose();
+    if (texel) {
+      for (const m of group.children) if (m.material.map === texel) m.material.dispose();
+      texel.dispose();
+    }
   }
 
   // The coarsest cut, welded, as a ClosedSurface in object space (when normal cones may cull:
@@ -489,6 +501,7 @@ void main() {
     st.requests = this.server.requests;
     st.fetchMs = this.server.fetchMs;
     st.decodeMs = this.server.decodeMs;
+    st.textureMs = this.server.textureMs;
     this.stats = st;
     return st;
   }

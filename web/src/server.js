@@ -31,6 +31,7 @@ export class PatchServer {
     // the decoded results' wait between the worker and the page.
     this.fetchMs = 0;
     this.decodeMs = 0;
+    this.textureMs = 0;  // of decodeMs: the texture payloads
     this.geometryMs = 0;
     this.loadMsAvg = 0;
     this.warnings = [];
@@ -162,6 +163,7 @@ export class PatchServer {
     const j = this.jobs.get(msg.job);
     this.jobs.delete(msg.job);
     this.decodeMs += msg.busyMs || 0;
+    this.textureMs += msg.textureMs || 0;
     const tg = performance.now();
     for (const r of msg.results) {
       if (r.error) {

@@ -148,6 +148,7 @@ self.onmessage = async (e) => {
   }
   const t0 = performance.now();
   const results = [], transfer = [];
+  let textureMs = 0;  // of busyMs: the texture payloads (checksum, coordinates, split, image decode)
   for (const it of msg.items) {
     const data = new Uint8Array(it.buffer);
     const sum = h64Raw(data, 0n);
@@ -162,11 +163,13 @@ self.onmessage = async (e) => {
         throw new Error(`triangle count ${d.triangles.length / 3} differs from the index (${it.triangles})`);
       let r = toRender(d), textureError = null;
       if (it.texture) {
+        const tt = performance.now();
         try {
           r = await withTexture(it, d, r);
         } catch (err) {
           textureError = `texture of patch ${it.id} at byte offset ${it.texture.offset}: ${err.message}`;
         }
+        textureMs += performance.now() - tt;
       }
       r.bytes = renderBytes(r);
       results.push({ id: it.id, ...r, textureError });
@@ -178,5 +181,5 @@ self.onmessage = async (e) => {
       results.push({ id: it.id, error: `patch ${it.id} at byte offset ${it.offset}: ${err.message}` });
     }
   }
-  self.postMessage({ type: 'decoded', job: msg.job, results, busyMs: performance.now() - t0 }, transfer);
+  self.postMessage({ type: 'decoded', job: msg.job, results, busyMs: performance.now() - t0, textureMs }, transfer);
 };

@@ -288,7 +288,13 @@ await test('textured', async () => {
   const { page, log } = await open(`file=/data/x.mt&tol=${texTol}&fixed=3000000&bg=${texBg}&view=${texView}`);
   await converge(page);
   await page.waitForTimeout(200);
-  const st = await page.evaluate(() => ({ f: window.mtViewer.frames.at(-1), w: window.mtViewer.warnings }));
+  const st = await page.evaluate(() => {
+    const v = window.mtViewer, fr = v.frames;
+    let k = fr.length - 1;  // the first frame of the final still, loaded stretch
+    while (k > 0 && fr[k - 1].moves === 0 && fr[k - 1].pending === 0) --k;
+    // (performance.now() counts from the page's navigation)
+    return { f: fr.at(-1), w: v.warnings, first: v.firstImageMs, start: 0, conv: fr[k].t };
+  });
   const p = await page.evaluate((bg) => window.mtViewer.psnr('/data/x-mtrender.png', bg), texBg);
   const golden = path.join(here, 'golden', 'textured.png');
   let g = null;
@@ -308,8 +314,11 @@ await test('textured', async () => {
   if (!g) throw new Error(`no golden image: wrote ${golden}; check it and commit it`);
   check(!g.error, g.error);
   check(g.differing <= 0.02, `${(100 * g.differing).toFixed(2)}% of the pixels differ from the golden image (mean ${g.mean.toFixed(2)})`);
-  return `${st.f.patches} patches textured, ${st.f.triangles} triangles; PSNR against mtrender --color texture ${p.covered.toFixed(2)} dB ` +
-    `over ${p.coveredPixels} covered pixels (${p.all.toFixed(2)} dB over all); golden: ${(100 * g.differing).toFixed(3)}% pixels differ`;
+  const f = st.f;
+  return `${f.patches} patches textured, ${f.triangles} triangles; PSNR against mtrender --color texture ${p.covered.toFixed(2)} dB ` +
+    `over ${p.coveredPixels} covered pixels (${p.all.toFixed(2)} dB over all); golden: ${(100 * g.differing).toFixed(3)}% pixels differ; ` +
+    `${f.loads} loads, ${(f.bytesRead / 2 ** 20).toFixed(2)} MiB fetched in ${f.requests} requests, worker ${(f.decodeMs / f.loads).toFixed(2)} ms a patch ` +
+    `of which texture ${(f.textureMs / f.loads).toFixed(2)} ms, first image ${(st.first - st.start).toFixed(0)} ms, converged at ${(st.conv - st.start).toFixed(0)} ms`;
 });
 
 await test('texture-cache', async () => {
