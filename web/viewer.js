@@ -292,7 +292,7 @@ state.cacheAudit = () => {
     if (b > mt.mt.decodedBytes[id]) ++overBound;
     ready += b;
   }
-  return { usedBytes: cache.usedBytes, capBytes: cache.capBytes, peakBytes: cache.peakBytes, ready, loading, textures, texturedPatches,
+  return { usedBytes: cache.usedBytes, textureBytes: cache.textureBytes, capBytes: cache.capBytes, peakBytes: cache.peakBytes, ready, loading, textures, texturedPatches,
     mismatched, overBound, atlasOutsideBound, evictions: cache.evictions, textureBytesDecoded: mt.server.textureBytes };
 };
 // PSNR of the image against a PNG at `url` (mtrender's screenshot of the same view): over every

@@ -18,6 +18,7 @@ export class PatchCache {
     this.peakBytes = 0;
     this.entries = new Map();  // id -> {state, bytes, pins, last, data}
     this.onEvict = onEvict || (() => {});
+    this.textureBytes = 0;  // of usedBytes: the ready patches' atlases (RGBA8)
     this.evictions = 0;
     this.givenUp = 0;
     this.frame = 0;
@@ -54,18 +55,22 @@ export class PatchCache {
     if (!e) return;
     if (e.state === 'ready') this.onEvict(id, e);
     this.usedBytes -= e.bytes;
+    this.textureBytes -= e.textureBytes || 0;
     this.entries.delete(id);
     ++this.evictions;
   }
   /**
    * A reserved load arrived. `bytes`: what it actually takes (its arrays and, textured, its RGBA8
-   * atlas), at most the reserved bound; the entry holds that from now on.
+   * atlas), at most the reserved bound; the entry holds that from now on. `textureBytes`: the
+   * atlas's share of it.
    */
-  commit(id, data, bytes) {
+  commit(id, data, bytes, textureBytes = 0) {
     const e = this.entries.get(id);
     if (!e) return;
     e.state = 'ready';
     e.data = data;
+    e.textureBytes = textureBytes;
+    this.textureBytes += textureBytes;
     if (bytes !== undefined && bytes <= e.bytes) {
       this.usedBytes -= e.bytes - bytes;
       e.bytes = bytes;

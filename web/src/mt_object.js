@@ -488,14 +488,9 @@ void main() {
     st.bytesRead = this.mt.source.bytesFetched;
     st.badPatches = this.server.bad;
     st.badTextures = this.server.badTextures;
-    let texBytes = 0, textured = 0;  // the cache's atlases (RGBA8) and the textured patches drawn
-    for (const [, e] of this.cache.entries)
-      if (e.data && e.data.userData.mtTexture) {
-        const im = e.data.userData.mtTexture.texture.image;
-        texBytes += 4 * im.width * im.height;
-      }
+    let textured = 0;  // the textured patches drawn
     for (const [, m] of this.meshes) if (m.geometry.userData.mtTexture) ++textured;
-    st.cacheTextureBytes = texBytes;
+    st.cacheTextureBytes = this.cache.textureBytes;  // the cache's atlases (RGBA8)
     st.texturedPatches = textured;
     st.loadsPending = this.server.queue.length + this.server.inFlight;
     st.requests = this.server.requests;

@@ -178,8 +178,9 @@ export class PatchServer {
         this.warn(`${this.scene.path}: ${r.textureError}; the patch is drawn untextured`);
       }
       // The cache holds what the patch actually takes (its reservation was a bound).
-      this.cache.commit(r.id, this.opt.makeGeometry(r), r.bytes);
-      if (r.texture) this.textureBytes += 4 * r.texture.width * r.texture.height;
+      const atlas = r.texture ? 4 * r.texture.width * r.texture.height : 0;
+      this.cache.commit(r.id, this.opt.makeGeometry(r), r.bytes, atlas);
+      this.textureBytes += atlas;
       ++this.loads;
     }
     this.geometryMs += performance.now() - tg;

@@ -26,7 +26,7 @@
 //                 converged: every patch drawn with its atlas, the image within 35 dB PSNR (over
 //                 the pixels the model covers) of mtrender's headless image of the same view and
 //                 tolerance (--color texture), and against test/golden/textured.png as the torus;
-//   texture-cache x.mt on an orbit under a 6 MiB cache: every frame's cache bytes under the cap;
+//   texture-cache x.mt on an orbit under a 4 MiB cache: every frame's cache bytes under the cap;
 //                 at the end the cache recounted from what it holds (arrays + RGBA8 atlases) is
 //                 what it says it holds, entry by entry, and every entry within the bound its load
 //                 reserved (which the cut's byte budget counts, atlases included);
@@ -322,7 +322,7 @@ await test('textured', async () => {
 });
 
 await test('texture-cache', async () => {
-  const capMiB = 6, cap = capMiB * 2 ** 20;
+  const capMiB = 4, cap = capMiB * 2 ** 20;
   const { page } = await open(`file=/data/x.mt&tol=1&budget=50&cache=${capMiB}&path=orbit&frames=240`);
   await page.waitForFunction(() => window.mtViewer.done, null, { timeout: 240000, polling: 200 });
   const f = await page.evaluate(() => window.mtViewer.frames);
@@ -333,6 +333,7 @@ await test('texture-cache', async () => {
   check(a.mismatched === 0, `${a.mismatched} entries hold other bytes than their arrays and atlas take`);
   check(a.ready + a.loading === a.usedBytes, `the cache says ${a.usedBytes} bytes, its entries take ${a.ready} + ${a.loading} loading`);
   check(a.overBound === 0 && a.atlasOutsideBound === 0, `${a.overBound} entries over their reserved bound, ${a.atlasOutsideBound} atlases outside it`);
+  check(a.textures === a.textureBytes, `the cache counts ${a.textureBytes} atlas bytes, its atlases take ${a.textures}`);
   check(a.texturedPatches > 0 && a.textures > 0, 'no textured patch in the cache: the test tests nothing');
   check(f.at(-1).evictions > 0, 'nothing was evicted: the test tests nothing');
   const maxTex = Math.max(...f.map((x) => x.cacheTextureBytes));
