@@ -31,7 +31,7 @@ export class PatchServer {
     // the decoded results' wait between the worker and the page.
     this.fetchMs = 0;
     this.decodeMs = 0;
-    this.textureMs = 0;  // of decodeMs: the texture payloads
+    this.textureMs = 0;  // of decodeMs: the workers waiting for their batches' images (createImageBitmap)
     this.geometryMs = 0;
     this.loadMsAvg = 0;
     this.warnings = [];

@@ -90,26 +90,23 @@ function renderBytes(r) {
 }
 
 // The texture payload of item `it` over the decoded patch `d` (render arrays `r`): checksum, corner
-// coordinates, the vertices split per coordinate, the image decoded. Throws on any damage.
-async function withTexture(it, d, r) {
+// coordinates and the vertices split per coordinate now, then the image decoded (the promise: a
+// batch's images are decoded concurrently, createImageBitmap works off this thread). The promise
+// rejects on any damage with the message mt_file.cpp's readTexture gives.
+function withTexture(it, d, r) {
   const t = it.texture;
   const data = new Uint8Array(t.buffer);
   if (h64Raw(data, 0n) !== ((BigInt(t.checksumHi) << 32n) | BigInt(t.checksumLo)))
-    throw new Error(`checksum mismatch in payload at byte offset ${t.offset} (${data.length} bytes)`);
+    return Promise.reject(new Error(`texture of patch ${it.id} is damaged: checksum mismatch in payload at byte offset ${t.offset} (${data.length} bytes)`));
+  const where = (what) => new Error(`texture of patch ${it.id} at byte offset ${t.offset}: ${what}`);
   const n = d.q.length / 3;
-  const p = decodeTexturePayload(data, d.triangles, n, t, libs.zstd);
-  let bitmap;
+  let p, s;
   try {
-    bitmap = await createImageBitmap(new Blob([p.image], { type: p.imageFormat === 1 ? 'image/jpeg' : 'image/png' }),
-      { premultiplyAlpha: 'none', colorSpaceConversion: 'none' });
+    p = decodeTexturePayload(data, d.triangles, n, t, libs.zstd);
+    s = splitTexturedVertices(d.triangles, n, p.cornerUV);
   } catch (err) {
-    throw new Error(`the image does not decode (${err.message})`);
+    return Promise.reject(where(err.message));
   }
-  if (bitmap.width !== p.width || bitmap.height !== p.height) {
-    bitmap.close();
-    throw new Error(`the image is ${bitmap.width} x ${bitmap.height}, the payload says ${p.width} x ${p.height}`);
-  }
-  const s = splitTexturedVertices(d.triangles, n, p.cornerUV);
   const m = s.remap.length;
   const positions = new Float32Array(3 * m), normals = new Int8Array(3 * m), colors = r.colors ? new Uint8Array(4 * m) : null;
   for (let i = 0; i < m; ++i) {
@@ -118,7 +115,14 @@ async function withTexture(it, d, r) {
     if (colors) for (let a = 0; a < 4; ++a) colors[4 * i + a] = r.colors[4 * v + a];
   }
   const indices = m <= 65536 ? Uint16Array.from(s.triangles) : s.triangles;
-  return { positions, normals, colors, indices, uv: s.uv, texture: { image: bitmap, width: p.width, height: p.height } };
+  const blob = new Blob([p.image], { type: p.imageFormat === 1 ? 'image/jpeg' : 'image/png' });
+  return createImageBitmap(blob, { premultiplyAlpha: 'none', colorSpaceConversion: 'none' }).then((bitmap) => {
+    if (bitmap.width !== p.width || bitmap.height !== p.height) {
+      bitmap.close();
+      throw where(`the image is ${bitmap.width} x ${bitmap.height}, the payload says ${p.width} x ${p.height}`);
+    }
+    return { positions, normals, colors, indices, uv: s.uv, texture: { image: bitmap, width: p.width, height: p.height } };
+  }, (err) => { throw where(`the image does not decode (${err.message})`); });
 }
 
 self.onmessage = async (e) => {
@@ -147,8 +151,7 @@ self.onmessage = async (e) => {
     return;
   }
   const t0 = performance.now();
-  const results = [], transfer = [];
-  let textureMs = 0;  // of busyMs: the texture payloads (checksum, coordinates, split, image decode)
+  const results = [], transfer = [], textured = [];
   for (const it of msg.items) {
     const data = new Uint8Array(it.buffer);
     const sum = h64Raw(data, 0n);
@@ -161,25 +164,30 @@ self.onmessage = async (e) => {
       const d = decodePatch(data, cfg.codec, { bits: cfg.gridBits }, libs);
       if (d.triangles.length / 3 !== it.triangles)
         throw new Error(`triangle count ${d.triangles.length / 3} differs from the index (${it.triangles})`);
-      let r = toRender(d), textureError = null;
-      if (it.texture) {
-        const tt = performance.now();
-        try {
-          r = await withTexture(it, d, r);
-        } catch (err) {
-          textureError = `texture of patch ${it.id} at byte offset ${it.texture.offset}: ${err.message}`;
-        }
-        textureMs += performance.now() - tt;
-      }
-      r.bytes = renderBytes(r);
-      results.push({ id: it.id, ...r, textureError });
-      transfer.push(r.positions.buffer, r.normals.buffer, r.indices.buffer);
-      if (r.colors) transfer.push(r.colors.buffer);
-      if (r.uv) transfer.push(r.uv.buffer);
-      if (r.texture) transfer.push(r.texture.image);
+      const r = toRender(d);
+      results.push({ id: it.id, ...r, textureError: null });
+      if (it.texture) textured.push({ at: results.length - 1, job: withTexture(it, d, r) });
     } catch (err) {
       results.push({ id: it.id, error: `patch ${it.id} at byte offset ${it.offset}: ${err.message}` });
     }
+  }
+  // The textured patches: their images decoded together; a damaged texture leaves the patch as it
+  // was decoded (untextured) with `textureError`.
+  const tt = performance.now();
+  const done = await Promise.allSettled(textured.map((x) => x.job));
+  const textureMs = performance.now() - tt;  // of busyMs: waiting for the images
+  done.forEach((o, k) => {
+    const res = results[textured[k].at];
+    if (o.status === 'fulfilled') Object.assign(res, o.value);
+    else res.textureError = o.reason.message;
+  });
+  for (const r of results) {
+    if (r.error) continue;
+    r.bytes = renderBytes(r);
+    transfer.push(r.positions.buffer, r.normals.buffer, r.indices.buffer);
+    if (r.colors) transfer.push(r.colors.buffer);
+    if (r.uv) transfer.push(r.uv.buffer);
+    if (r.texture) transfer.push(r.texture.image);
   }
   self.postMessage({ type: 'decoded', job: msg.job, results, busyMs: performance.now() - t0, textureMs }, transfer);
 };

@@ -318,7 +318,7 @@ await test('textured', async () => {
   return `${f.patches} patches textured, ${f.triangles} triangles; PSNR against mtrender --color texture ${p.covered.toFixed(2)} dB ` +
     `over ${p.coveredPixels} covered pixels (${p.all.toFixed(2)} dB over all); golden: ${(100 * g.differing).toFixed(3)}% pixels differ; ` +
     `${f.loads} loads, ${(f.bytesRead / 2 ** 20).toFixed(2)} MiB fetched in ${f.requests} requests, worker ${(f.decodeMs / f.loads).toFixed(2)} ms a patch ` +
-    `of which texture ${(f.textureMs / f.loads).toFixed(2)} ms, first image ${(st.first - st.start).toFixed(0)} ms, converged at ${(st.conv - st.start).toFixed(0)} ms`;
+    `of which waiting for images ${(f.textureMs / f.loads).toFixed(2)} ms, first image ${(st.first - st.start).toFixed(0)} ms, converged at ${(st.conv - st.start).toFixed(0)} ms`;
 });
 
 await test('texture-cache', async () => {
@@ -375,7 +375,7 @@ await test('texture-corrupted', async () => {
   check(st.n > n0 + 3, `the page stopped drawing frames after the warnings (${n0} -> ${st.n})`);
   check(!log.some((m) => m.startsWith('pageerror')), `page error: ${log.find((m) => m.startsWith('pageerror'))}`);
   check(st.w.length > 0, 'no warning');
-  check(st.w.every((m) => /texture of patch (\d+) at byte offset \d+: checksum mismatch .*drawn untextured/.test(m) && damaged.has(Number(/texture of patch (\d+)/.exec(m)[1]))),
+  check(st.w.every((m) => /texture of patch (\d+) is damaged: checksum mismatch in payload at byte offset \d+ .*drawn untextured/.test(m) && damaged.has(Number(/texture of patch (\d+)/.exec(m)[1]))),
     `unexpected warning: ${st.w.find((m) => !/texture of patch/.test(m))}`);
   const untextured = st.drawn.filter((d) => !d.textured);
   check(untextured.length > 0 && untextured.every((d) => damaged.has(d.id) && d.triangles > 0), `drawn untextured: ${untextured.map((d) => d.id).join(',')}`);
