@@ -10,6 +10,7 @@
 #include "base/error.h"
 #include "texture/atlas_pack.h"
 #include "texture/bake.h"
+#include "texture/texel_raster.h"
 
 namespace mt::testing {
 
@@ -92,26 +93,14 @@ BoxTexture boxTexture(const double* pos, size_t nv, const uint32_t* tri, size_t 
   for (size_t t = 0; t < nt; ++t) {
     const double* P[3] = {&pos[3 * size_t(tri[3 * t])], &pos[3 * size_t(tri[3 * t + 1])], &pos[3 * size_t(tri[3 * t + 2])]};
     const double* C = &corner[6 * t];
-    const double det = (C[2] - C[0]) * (C[5] - C[1]) - (C[4] - C[0]) * (C[3] - C[1]);
-    if (std::fabs(det) < 1e-12) continue;
-    const int x0 = std::max(0, int(std::floor(std::min({C[0], C[2], C[4]})))), x1 = std::min(W - 1, int(std::ceil(std::max({C[0], C[2], C[4]}))));
-    const int y0 = std::max(0, int(std::floor(std::min({C[1], C[3], C[5]})))), y1 = std::min(H - 1, int(std::ceil(std::max({C[1], C[3], C[5]}))));
-    // Texel centres inside, or within half a texel of an edge (so thin triangles get their texels).
-    const double eps = 0.5 / std::max(1.0, std::sqrt(std::fabs(det)));
-    for (int y = y0; y <= y1; ++y)
-      for (int x = x0; x <= x1; ++x) {
-        const double px = x + 0.5, py = y + 0.5;
-        const double b1 = ((px - C[0]) * (C[5] - C[1]) - (C[4] - C[0]) * (py - C[1])) / det;
-        const double b2 = ((C[2] - C[0]) * (py - C[1]) - (px - C[0]) * (C[3] - C[1])) / det;
-        const double b0 = 1 - b1 - b2;
-        if (b0 < -eps || b1 < -eps || b2 < -eps) continue;
-        double p[3];
-        for (int a = 0; a < 3; ++a) p[a] = b0 * P[0][a] + b1 * P[1][a] + b2 * P[2][a];
-        uint8_t rgba[4];
-        field.colorAt(p, rgba);
-        std::memcpy(out.page.pixel(x, y), rgba, 3);
-        filled[size_t(y) * size_t(W) + size_t(x)] = 1;
-      }
+    tex::forEachTexel(tex::TexelTriangle(C), W, H, [&](int x, int y, const double* b) {
+      double p[3];
+      for (int a = 0; a < 3; ++a) p[a] = b[0] * P[0][a] + b[1] * P[1][a] + b[2] * P[2][a];
+      uint8_t rgba[4];
+      field.colorAt(p, rgba);
+      std::memcpy(out.page.pixel(x, y), rgba, 3);
+      filled[size_t(y) * size_t(W) + size_t(x)] = 1;
+    });
   }
   tex::fillGutter(out.page, filled, o.gutter + 1);
   out.cornerUV.resize(6 * nt);

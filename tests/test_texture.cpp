@@ -4,11 +4,15 @@
 
 #include <gmock/gmock.h>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
+#include <cstring>
 
 #include "base/error.h"
+#include "base/exit_code.h"
 #include <filesystem>
 #include <map>
 
@@ -22,6 +26,8 @@
 #include "test_support.h"
 #include "testing/textured_grid.h"
 #include "texture/bake.h"
+#include "texture/block_fill.h"
+#include "texture/chart_rotate.h"
 #include "texture/image_codec.h"
 #include "texture/tiled_image.h"
 
@@ -303,6 +309,159 @@ TEST(TextureReaders, BadReferencesAreClearErrors) {
   test::writeFile(dir.file("f.ply"), "ply\nformat ascii 1.0\ncomment TextureFile nothere.png\n" + head.substr(head.find("element")) +
                                          "3 0 1 2 6 0 0 1 0 0 1 0\n");
   EXPECT_THAT(errorOf(dir.file("f.ply")), AllOf(HasSubstr("nothere.png"), HasSubstr("line 3")));
+  // Through mtbuild: the same one-line message, exit 1 (invalid input), nothing under the output's
+  // name; a corrupt image the same.
+  test::writeFile(dir.file("junk.png"), "this is not an image at all");
+  test::writeFile(dir.file("j.ply"), "ply\nformat ascii 1.0\ncomment TextureFile junk.png\n" + head.substr(head.find("element")) +
+                                         "3 0 1 2 6 0 0 1 0 0 1 0\n");
+  for (const char* name : {"f", "j", "n", "r"}) {
+    test::CommandResult b = test::runTool("mtbuild", dir.file(std::string(name) + ".ply") + " -o " + dir.file(std::string(name) + ".mt") + " -q");
+    EXPECT_EQ(b.exitCode, kExitInvalidInput) << name << ": " << b.output;
+    EXPECT_THAT(b.output, HasSubstr(std::string(name) + ".ply")) << name;
+    EXPECT_FALSE(test::fileExists(dir.file(std::string(name) + ".mt"))) << name;
+  }
+  EXPECT_THAT(test::runTool("mtbuild", dir.file("j.ply") + " -o " + dir.file("j.mt")).output, HasSubstr("not a JPEG or PNG image"));
+}
+
+// ---- Baked atlases: the uncovered texels, the charts' frames --------------------------------------
+
+TEST(TextureAtlas, EmptyBlocksAreFilledFlatAndCoveredTexelsKept) {
+  // Two "charts" (a disc and a thin diagonal band) of a detailed picture over a 100 x 60 atlas
+  // (sides not multiples of 8: partial blocks at the right and bottom).
+  const int w = 100, h = 60;
+  RgbImage img = testPicture(w, h);
+  std::vector<uint8_t> filled(size_t(w) * h, 0);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const bool disc = (x - 25) * (x - 25) + (y - 30) * (y - 30) < 15 * 15, band = std::abs((x - 50) - y) < 2 && x >= 50;
+      filled[size_t(y) * w + x] = disc || band;
+      if (!(disc || band)) std::fill_n(img.pixel(x, y), 3, uint8_t(0));
+    }
+  const RgbImage before = img;
+  const std::vector<uint8_t> covered = filled;
+  tex::fillEmptyBlocks(img, filled);
+  size_t flatBlocks = 0;
+  for (size_t i = 0; i < filled.size(); ++i) {
+    EXPECT_EQ(filled[i], 1) << "texel " << i;
+    if (covered[i]) {
+      EXPECT_EQ(std::memcmp(&img.rgb[3 * i], &before.rgb[3 * i], 3), 0) << "covered texel " << i;
+    }
+  }
+  for (int by = 0; by < (h + 7) / 8; ++by)
+    for (int bx = 0; bx < (w + 7) / 8; ++bx) {
+      bool empty = true;
+      for (int y = 8 * by; y < std::min(h, 8 * by + 8); ++y)
+        for (int x = 8 * bx; x < std::min(w, 8 * bx + 8); ++x) empty = empty && !covered[size_t(y) * w + x];
+      // A block without covered texels is one colour, a picture's colour (none is black: red >= 20).
+      const uint8_t* first = img.pixel(8 * bx, 8 * by);
+      if (!empty) {
+        // The uncovered texels of a mixed block take one colour too: the block's covered mean.
+        const uint8_t* u = nullptr;
+        for (int y = 8 * by; y < std::min(h, 8 * by + 8); ++y)
+          for (int x = 8 * bx; x < std::min(w, 8 * bx + 8); ++x)
+            if (!covered[size_t(y) * w + x]) {
+              if (!u) u = img.pixel(x, y);
+              EXPECT_EQ(std::memcmp(u, img.pixel(x, y), 3), 0) << x << "," << y;
+            }
+        continue;
+      }
+      ++flatBlocks;
+      EXPECT_GE(first[0], 20) << "block " << bx << "," << by;
+      for (int y = 8 * by; y < std::min(h, 8 * by + 8); ++y)
+        for (int x = 8 * bx; x < std::min(w, 8 * bx + 8); ++x) EXPECT_EQ(std::memcmp(first, img.pixel(x, y), 3), 0) << x << "," << y;
+    }
+  EXPECT_GT(flatBlocks, 40u);
+  // So the JPEG is smaller than with the uncovered texels black (the steps at the charts' edges
+  // and the picture's colour inside mixed blocks cost bits).
+  EXPECT_LT(tex::encodeJpeg(img, 90).size(), tex::encodeJpeg(before, 90).size());
+  // An atlas without any covered texel is left as it is.
+  RgbImage blank(16, 16);
+  std::vector<uint8_t> none(256, 0);
+  tex::fillEmptyBlocks(blank, none);
+  EXPECT_EQ(none, std::vector<uint8_t>(256, 0));
+}
+
+TEST(TextureAtlas, ChartsTurnToTheirMinimumAreaBox) {
+  // A 10 x 2 rectangle's corners and inner points turned by 30 degrees: the box found is 10 x 2.
+  std::vector<double> xy;
+  const double a = M_PI / 6;
+  for (double x : {0.0, 3.0, 10.0})
+    for (double y : {0.0, 1.0, 2.0}) xy.push_back(x * std::cos(a) - y * std::sin(a)), xy.push_back(x * std::sin(a) + y * std::cos(a));
+  const tex::BoxFrame f = tex::minAreaBox(xy.data(), xy.size() / 2);
+  EXPECT_NEAR(f.area, 20.0, 1e-9);
+  EXPECT_NEAR(std::fabs(f.c * std::cos(a) + f.s * std::sin(a)) + std::fabs(-f.c * std::sin(a) + f.s * std::cos(a)), 1.0, 1e-9)
+      << "an axis along the rectangle's sides";
+  // Pseudo-random clouds: never larger than the unrotated box, every point inside the rectangle.
+  uint32_t seed = 12345;
+  auto rnd = [&] { return (seed = seed * 1664525u + 1013904223u) / 4294967296.0; };
+  for (int trial = 0; trial < 200; ++trial) {
+    std::vector<double> p(2 * (3 + trial % 17));
+    const double stretch = 1 + 9 * rnd(), turn = M_PI * rnd();
+    for (size_t i = 0; i < p.size(); i += 2) {
+      const double x = stretch * rnd(), y = rnd();
+      p[i] = x * std::cos(turn) - y * std::sin(turn), p[i + 1] = x * std::sin(turn) + y * std::cos(turn);
+    }
+    double lo[2] = {INFINITY, INFINITY}, hi[2] = {-INFINITY, -INFINITY};
+    for (size_t i = 0; i < p.size(); ++i) lo[i % 2] = std::min(lo[i % 2], p[i]), hi[i % 2] = std::max(hi[i % 2], p[i]);
+    const tex::BoxFrame b = tex::minAreaBox(p.data(), p.size() / 2);
+    EXPECT_LE(b.area, (hi[0] - lo[0]) * (hi[1] - lo[1]) * (1 + 1e-12)) << trial;
+    EXPECT_NEAR(b.c * b.c + b.s * b.s, 1.0, 1e-12);
+  }
+  // Axis-aligned points keep the identity frame.
+  const double square[8] = {0, 0, 1, 0, 1, 1, 0, 1};
+  const tex::BoxFrame id = tex::minAreaBox(square, 4);
+  EXPECT_EQ(id.c, 1.0);
+  EXPECT_EQ(id.s, 0.0);
+}
+
+TEST(TextureBake, DiagonalStripPacksTightAndEveryTexelIsFilled) {
+  // The finer surface: a 10 x 10 square in z = 0 over a smooth picture (u = x / 10, v = y / 10).
+  RgbImage picture(256, 256);
+  for (int y = 0; y < 256; ++y)
+    for (int x = 0; x < 256; ++x) {
+      uint8_t* p = picture.pixel(x, y);
+      p[0] = uint8_t(x), p[1] = uint8_t(255 - y), p[2] = 128;
+    }
+  const double fineP[12] = {0, 0, 0, 10, 0, 0, 10, 10, 0, 0, 10, 0};
+  const uint32_t fineT[6] = {0, 1, 2, 0, 2, 3};
+  const float fineUV[12] = {0, 0, 1, 0, 1, 1, 0, 0, 1, 1, 0, 1};
+  const uint32_t fineImage[2] = {0, 0};
+  tex::TexturedSurface fine;
+  fine.positions = fineP, fine.vertexCount = 4, fine.triangles = fineT, fine.triangleCount = 2;
+  fine.cornerUV = fineUV, fine.image = fineImage, fine.images = {&picture};
+  const tex::SurfaceIndex index(fine);
+  // The coarse patch: a strip 0.5 wide along the diagonal from (1, 1) to (9, 9), 16 quads.
+  std::vector<double> pos;
+  std::vector<uint32_t> tri;
+  const double n = 0.5 * std::sqrt(0.5);  // 0.5 along the strip's across direction (-1, 1) / sqrt 2
+  for (int i = 0; i <= 16; ++i) {
+    const double t = 1 + 8.0 * i / 16;
+    pos.insert(pos.end(), {t, t, 0.0, t - n, t + n, 0.0});
+    if (i < 16) tri.insert(tri.end(), {uint32_t(2 * i), uint32_t(2 * i + 2), uint32_t(2 * i + 3), uint32_t(2 * i), uint32_t(2 * i + 3), uint32_t(2 * i + 1)});
+  }
+  const double texel = 0.05;
+  const tex::BakeResult b = tex::bakeAtlas(pos.data(), pos.size() / 3, tri.data(), tri.size() / 3, index, texel, 0.0, 2048, 2, 10.0 / 256);
+  EXPECT_EQ(b.charts, 1u);
+  EXPECT_EQ(b.texelSize, texel);
+  // Its axis-aligned box is 8.35 x 8.35 units (167^2 texels); turned, 11.3 x 0.5 (about 226 x 10).
+  EXPECT_LT(double(b.image.width) * b.image.height, 0.2 * (8.35 / texel) * (8.35 / texel)) << b.image.width << " x " << b.image.height;
+  // The baked colours are the picture's at the same points; no texel is left black (the picture
+  // has blue 128 everywhere, so a black texel is one nothing filled).
+  for (size_t t = 0; t < tri.size() / 3; ++t) {
+    double u = 0, v = 0, x = 0, y = 0;
+    for (int k = 0; k < 3; ++k) {
+      u += b.cornerUV[6 * t + 2 * size_t(k)] / 3, v += b.cornerUV[6 * t + 2 * size_t(k) + 1] / 3;
+      x += pos[3 * tri[3 * t + size_t(k)]] / 3, y += pos[3 * tri[3 * t + size_t(k)] + 1] / 3;
+    }
+    uint8_t got[3], want[3];
+    tex::sampleBilinear(b.image, u, v, got);
+    tex::sampleBilinear(picture, x / 10, y / 10, want);
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(got[c], want[c], 3) << "triangle " << t << " channel " << c;
+  }
+  size_t black = 0;
+  for (int y = 0; y < b.image.height; ++y)
+    for (int x = 0; x < b.image.width; ++x) black += b.image.pixel(x, y)[2] == 0;
+  EXPECT_EQ(black, 0u);
 }
 
 // ---- Tiled images --------------------------------------------------------------------------------

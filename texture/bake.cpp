@@ -8,7 +8,10 @@
 
 #include "base/error.h"
 #include "texture/atlas_pack.h"
+#include "texture/block_fill.h"
+#include "texture/chart_rotate.h"
 #include "texture/charts.h"
+#include "texture/texel_raster.h"
 
 namespace mt::tex {
 
@@ -217,6 +220,7 @@ BakeResult bakeAtlas(const double* positions, size_t nv, const uint32_t* tri, si
                      double texelSize, double margin, int maxSide, int padding, double fineTexelSize) {
   BakeResult out;
   Charts charts = makeCharts(positions, nv, tri, nt);
+  rotateChartsToMinAreaBoxes(charts);  // tighter rectangles to pack
   out.charts = charts.count;
   // Chart boxes in world units.
   std::vector<double> box(4 * charts.count);
@@ -267,42 +271,30 @@ BakeResult bakeAtlas(const double* positions, size_t nv, const uint32_t* tri, si
       hi[a] = std::max({P[0][a], P[1][a], P[2][a]}) + grow;
     }
     fine.gather(lo, hi, candidates);
-    const int x0 = std::max(0, int(std::floor(std::min({C[0], C[2], C[4]})))), x1 = std::min(aw - 1, int(std::ceil(std::max({C[0], C[2], C[4]}))));
-    const int y0 = std::max(0, int(std::floor(std::min({C[1], C[3], C[5]})))), y1 = std::min(ah - 1, int(std::ceil(std::max({C[1], C[3], C[5]}))));
-    const double det = (C[2] - C[0]) * (C[5] - C[1]) - (C[4] - C[0]) * (C[3] - C[1]);
-    if (std::fabs(det) < 1e-12) continue;
-    for (int y = y0; y <= y1; ++y)
-      for (int x = x0; x <= x1; ++x) {
-        const double px = x + 0.5, py = y + 0.5;
-        const double b1 = ((px - C[0]) * (C[5] - C[1]) - (C[4] - C[0]) * (py - C[1])) / det;
-        const double b2 = ((C[2] - C[0]) * (py - C[1]) - (px - C[0]) * (C[3] - C[1])) / det;
-        const double b0 = 1 - b1 - b2;
-        // Texel centres inside, or within half a texel of an edge (the edge's texels).
-        const double eps = 0.5 / std::max(1.0, std::sqrt(std::fabs(det)));
-        if (b0 < -eps || b1 < -eps || b2 < -eps) continue;
-        // The mean of n x n samples over the texel's square (the plane of the triangle extended
-        // past its edges for the border texels' outer samples).
-        uint32_t acc[3] = {0, 0, 0}, found = 0;
-        for (int sy = 0; sy < n; ++sy)
-          for (int sx = 0; sx < n; ++sx) {
-            const double qx = x + (sx + 0.5) / n, qy = y + (sy + 0.5) / n;
-            const double q1 = ((qx - C[0]) * (C[5] - C[1]) - (C[4] - C[0]) * (qy - C[1])) / det;
-            const double q2 = ((C[2] - C[0]) * (qy - C[1]) - (qx - C[0]) * (C[3] - C[1])) / det;
-            const double q0 = 1 - q1 - q2;
-            double p[3];
-            for (int a = 0; a < 3; ++a) p[a] = q0 * P[0][a] + q1 * P[1][a] + q2 * P[2][a];
-            uint8_t rgb[3];
-            if (!fine.colorAt(p, candidates, rgb)) continue;
-            for (int c = 0; c < 3; ++c) acc[c] += rgb[c];
-            ++found;
-          }
-        if (!found) continue;
-        uint8_t* texel = out.image.pixel(x, y);
-        for (int c = 0; c < 3; ++c) texel[c] = uint8_t((acc[c] + found / 2) / found);
-        filled[size_t(y) * size_t(aw) + size_t(x)] = 1;
-      }
+    const TexelTriangle texels(C);
+    forEachTexel(texels, aw, ah, [&](int x, int y, const double*) {
+      // The mean of n x n samples over the texel's square (the plane of the triangle extended
+      // past its edges for the border texels' outer samples).
+      uint32_t acc[3] = {0, 0, 0}, found = 0;
+      for (int sy = 0; sy < n; ++sy)
+        for (int sx = 0; sx < n; ++sx) {
+          double q[3];
+          texels.barycentric(x + (sx + 0.5) / n, y + (sy + 0.5) / n, q);
+          double p[3];
+          for (int a = 0; a < 3; ++a) p[a] = q[0] * P[0][a] + q[1] * P[1][a] + q[2] * P[2][a];
+          uint8_t rgb[3];
+          if (!fine.colorAt(p, candidates, rgb)) continue;
+          for (int c = 0; c < 3; ++c) acc[c] += rgb[c];
+          ++found;
+        }
+      if (!found) return;
+      uint8_t* texel = out.image.pixel(x, y);
+      for (int c = 0; c < 3; ++c) texel[c] = uint8_t((acc[c] + found / 2) / found);
+      filled[size_t(y) * size_t(aw) + size_t(x)] = 1;
+    });
   }
   fillGutter(out.image, filled, padding + 1);
+  fillEmptyBlocks(out.image, filled);  // the texels between the charts, nearly free as JPEG
   out.cornerUV.resize(6 * nt);
   for (size_t t = 0; t < nt; ++t)
     for (int k = 0; k < 3; ++k) {
