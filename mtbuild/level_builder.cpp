@@ -1,6 +1,7 @@
 // The level loop's state machine (LevelBuilder, build.h): the level-0 store and the file's
 // header, the levels' regions, the commits in region order that grow the DAG (BMT sections 3.1,
 // 4), and the sink and the file at the end. Checkpoints: checkpoint.cpp.
+#include <algorithm>
 #include <cassert>
 #include <cinttypes>
 #include <csignal>
@@ -68,6 +69,19 @@ RegionSimplifier resolvedSimplifier(const BuildOptions& options, bool colors) {
 // (commitRegion).
 bool gains(uint64_t in, uint64_t out) { return out * 10 <= in * 9; }
 
+double largestMagnitude(const Box3& box) {
+  double m = 0;
+  for (int a = 0; a < 3; ++a) m = std::max({m, std::abs(box.lo[a]), std::abs(box.hi[a])});
+  return m;
+}
+
+// Spacing of float32 values at magnitude m: the finest detail a float32 input can hold there (0.5
+// at 6e6, so a float PLY of UTM metres has lost its centimetres before it is read).
+double float32Spacing(double m) {
+  const float f = float(m);
+  return double(std::nextafter(f, std::numeric_limits<float>::infinity())) - double(f);
+}
+
 }  // namespace
 
 void LevelBuilder::State::startFresh(bool storeInput) {
@@ -83,10 +97,21 @@ void LevelBuilder::State::startFresh(bool storeInput) {
   // 2. The global quantization grid (mt_format.h): shared vertices quantize identically.
   QuantizationGrid grid = QuantizationGrid::fromBounds(info.bounds.lo, info.bounds.hi, chooseGridStep(*store, resolvedSimplifier(options, info.layout.colors)));
   report.gridStep = grid.step;
+  const double magnitude = largestMagnitude(info.bounds);
   if (weldToGrid(grid)) {
     info = store->info();
     liveTriangles = info.triangles;
   }
+  // float32 positions coarser than the grid, and vertices merged: float rounding has put distinct
+  // points of the model on one position before the file was read (a float PLY of UTM metres with
+  // centimetre detail). Said even with --quiet: it is data lost, and double or text input keeps it.
+  // (Without merges the float values may well be exact, as a 0.5 m grid at 4e6 is: nothing said.)
+  if (!info.layout.doublePrecision && report.weldedVertices && float32Spacing(magnitude) > grid.step)
+    std::fprintf(stderr,
+                 "%s: warning: %s: float32 positions are only %.3g apart at coordinates up to %.9g, coarser than "
+                 "the grid step %.3g: the file cannot hold finer detail (the grid weld merged %" PRIu64
+                 " vertices and removed %" PRIu64 " triangles); write the positions as double to keep it\n",
+                 options.toolName.c_str(), input.c_str(), float32Spacing(magnitude), magnitude, grid.step, report.weldedVertices, report.weldedTriangles);
   // Every triangle degenerate (a repeated vertex, or all within one grid cell once welded): the
   // file would have no patch, which no reader accepts.
   if (store->info().triangles == 0)

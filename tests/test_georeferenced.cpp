@@ -139,6 +139,30 @@ TEST(Georeferenced, FloatPlyAtUtmCoordinatesKeepsWhatFloatCanHold) {
   const Grid g{150, 500000.0, 4000000.0, 80.0, 0.5};
   writeBinary(g, tmp.file("utm-float.ply"), false);
   expectFinestCutKeepsEverything(g, tmp.file("utm-float.ply"), true);
+  // Nothing was lost, so nothing is said, even though float32 is coarser than the grid there.
+  auto b = runTool("mtbuild", tmp.file("utm-float.ply") + " -o " + tmp.file("again.mt") + " -q");
+  ASSERT_EQ(b.exitCode, 0) << b.output;
+  EXPECT_EQ(b.output.find("warning"), std::string::npos) << b.output;
+}
+
+TEST(Georeferenced, FloatPlyThatLostTheCentimetresIsReportedNotSilentlyWelded) {
+  // The 1 cm grid at (6e6, 4e6) written as float32: its 40000 points fall on ~100 float positions
+  // 0.5 m apart. The build goes on with what the file holds, but says why most triangles vanished
+  // and what to do, with --quiet too.
+  TempDir tmp;
+  const Grid g{200, 6000000.0, 4000000.0, 123.25, 0.01};
+  writeBinary(g, tmp.file("cm-float.ply"), false);
+  auto b = runTool("mtbuild", tmp.file("cm-float.ply") + " -o " + tmp.file("cm.mt") + " -q");
+  ASSERT_EQ(b.exitCode, 0) << b.output;
+  EXPECT_NE(b.output.find("warning: " + tmp.file("cm-float.ply") + ": float32 positions are only 0.5 apart"),
+            std::string::npos)
+      << b.output;
+  EXPECT_NE(b.output.find("write the positions as double"), std::string::npos) << b.output;
+  // The same grid as double keeps its centimetres: no warning.
+  writeBinary(g, tmp.file("cm-double.ply"), true);
+  auto d = runTool("mtbuild", tmp.file("cm-double.ply") + " -o " + tmp.file("cm-double.mt") + " -q");
+  ASSERT_EQ(d.exitCode, 0) << d.output;
+  EXPECT_EQ(d.output.find("warning"), std::string::npos) << d.output;
 }
 
 TEST(Georeferenced, MtinfoPrintsTheHeaderDoublesExactly) {
