@@ -24,5 +24,6 @@ run "$bin/mtbuild" "$t/h.ply" -o "$t/h.mt" --threads 2
 # A textured scan (version 6; the textured tests, and web/test/golden/textured.png is of this file).
 run "$bin/mtgen" -o "$t/x.ply" --triangles 60k --holes 3 --seed 5 --texture charts
 run "$bin/mtbuild" "$t/x.ply" -o "$t/x.mt" --threads 2 --patch-triangles 500
+run "$bin/mtbuild" "$t/x.ply" -o "$t/x-draco.mt" --threads 2 --patch-triangles 500 --codec draco
 rm -f "$t/t.ply" "$t/c.ply" "$t/h.ply" "$t/x.ply" "$t"/x_tex*.jpg
 node "$src/web/test/browser.mjs" "$bin" "$t"

@@ -26,6 +26,7 @@
 //                 converged: every patch drawn with its atlas, the image within 35 dB PSNR (over
 //                 the pixels the model covers) of mtrender's headless image of the same view and
 //                 tolerance (--color texture), and against test/golden/textured.png as the torus;
+//   textured-draco  the same scan Draco-coded (x-draco.mt): the same image (the golden);
 //   texture-cache x.mt on an orbit under a 4 MiB cache: every frame's cache bytes under the cap;
 //                 at the end the cache recounted from what it holds (arrays + RGBA8 atlases) is
 //                 what it says it holds, entry by entry, and every entry within the bound its load
@@ -319,6 +320,23 @@ await test('textured', async () => {
     `over ${p.coveredPixels} covered pixels (${p.all.toFixed(2)} dB over all); golden: ${(100 * g.differing).toFixed(3)}% pixels differ; ` +
     `${f.loads} loads, ${(f.bytesRead / 2 ** 20).toFixed(2)} MiB fetched in ${f.requests} requests, worker ${(f.decodeMs / f.loads).toFixed(2)} ms a patch ` +
     `of which waiting for images ${(f.textureMs / f.loads).toFixed(2)} ms, first image ${(st.first - st.start).toFixed(0)} ms, converged at ${(st.conv - st.start).toFixed(0)} ms`;
+});
+
+await test('textured-draco', async () => {
+  // The same textured scan Draco-coded: the texture coordinates follow the order Draco's decoder
+  // gives the triangles; the image is the meshopt file's (test/golden/textured.png).
+  const { page, log } = await open(`file=/data/x-draco.mt&tol=${texTol}&fixed=3000000&bg=${texBg}&view=${texView}`);
+  await converge(page);
+  await page.waitForTimeout(200);
+  const st = await page.evaluate(() => ({ f: window.mtViewer.frames.at(-1), w: window.mtViewer.warnings }));
+  const g = await page.evaluate(() => window.mtViewer.compare('/web/test/golden/textured.png'));
+  await page.close();
+  check(st.w.length === 0, `warnings: ${st.w[0]}`);
+  check(!log.some((m) => m.startsWith('pageerror')), `page error: ${log.find((m) => m.startsWith('pageerror'))}`);
+  check(st.f.patches > 10 && st.f.texturedPatches === st.f.patches, `${st.f.texturedPatches} of ${st.f.patches} patches drawn textured`);
+  check(!g.error, g.error);
+  check(g.differing <= 0.02, `${(100 * g.differing).toFixed(2)}% of the pixels differ from the golden image (mean ${g.mean.toFixed(2)})`);
+  return `${st.f.patches} patches textured; golden: ${(100 * g.differing).toFixed(3)}% pixels differ, mean difference ${g.mean.toFixed(2)}`;
 });
 
 await test('texture-cache', async () => {
