@@ -25,6 +25,7 @@
 #include "patchstore/store_textures.h"
 #include "test_support.h"
 #include "testing/textured_grid.h"
+#include "texture/atlas_crop.h"
 #include "texture/bake.h"
 #include "texture/block_fill.h"
 #include "texture/chart_rotate.h"
@@ -379,6 +380,48 @@ TEST(TextureAtlas, EmptyBlocksAreFilledFlatAndCoveredTexelsKept) {
   std::vector<uint8_t> none(256, 0);
   tex::fillEmptyBlocks(blank, none);
   EXPECT_EQ(none, std::vector<uint8_t>(256, 0));
+}
+
+TEST(TextureAtlas, CropAtlasKeepsTheInputTexelsAndFillsBetweenTheCutOuts) {
+  // Three triangles of different sizes over one picture (red is 20 or 230 everywhere): their
+  // cut-outs are packed with room between them, which is filled (no red 0 left), and each cut-out
+  // keeps the picture's texels exactly.
+  struct Source : tex::TexelSource {
+    const RgbImage* img;
+    int width(uint32_t) const override { return img->width; }
+    int height(uint32_t) const override { return img->height; }
+    void flatColor(uint32_t, uint8_t rgb[3]) const override { rgb[0] = rgb[1] = rgb[2] = 7; }
+    void copyRect(uint32_t, int x0, int y0, int w, int h, uint8_t* out) const override {
+      for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x)
+          std::copy_n(img->pixel(std::clamp(x0 + x, 0, img->width - 1), std::clamp(y0 + y, 0, img->height - 1)), 3, &out[3 * (size_t(y) * w + x)]);
+    }
+  };
+  const RgbImage picture = testPicture(256, 256);
+  Source src;
+  src.img = &picture;
+  // Corners in texels (x right, y down), as (u, v) with v = 0 at the bottom.
+  const double tris[3][6] = {{10, 10, 40, 10, 10, 40}, {100, 120, 200, 120, 100, 130}, {30, 200, 37, 200, 30, 250}};
+  std::vector<float> uv;
+  for (const auto& t : tris)
+    for (int k = 0; k < 3; ++k) uv.push_back(float((t[2 * k] + 0.3) / 256)), uv.push_back(float(1 - (t[2 * k + 1] + 0.3) / 256));
+  const uint32_t idx[9] = {0, 1, 2, 3, 4, 5, 6, 7, 8}, mat[3] = {0, 0, 0};
+  const tex::CropResult r = tex::cropAtlas(idx, 3, 9, uv.data(), mat, src);
+  ASSERT_EQ(r.scale, 1);
+  size_t zero = 0;
+  for (int y = 0; y < r.image.height; ++y)
+    for (int x = 0; x < r.image.width; ++x) zero += r.image.pixel(x, y)[0] == 0;
+  EXPECT_EQ(zero, 0u) << r.image.width << " x " << r.image.height;
+  for (int t = 0; t < 3; ++t) {
+    // The texel at each corner's and at the centroid's atlas position is the picture's there.
+    double cu = 0, cv = 0, px = 0, py = 0;
+    for (int k = 0; k < 3; ++k) {
+      cu += r.cornerUV[6 * t + 2 * k] / 3.0, cv += r.cornerUV[6 * t + 2 * k + 1] / 3.0;
+      px += (tris[t][2 * k] + 0.3) / 3, py += (tris[t][2 * k + 1] + 0.3) / 3;  // (off the texels' borders)
+    }
+    const uint8_t* got = r.image.pixel(int(cu * r.image.width), int((1 - cv) * r.image.height));
+    EXPECT_EQ(std::memcmp(got, picture.pixel(int(px), int(py)), 3), 0) << "triangle " << t;
+  }
 }
 
 TEST(TextureAtlas, ChartsTurnToTheirMinimumAreaBox) {

@@ -17,6 +17,7 @@
 #include <numeric>
 
 #include "texture/atlas_pack.h"
+#include "texture/block_fill.h"
 
 namespace mt::tex {
 
@@ -184,13 +185,14 @@ CropResult cropAtlas(const uint32_t* triangles, size_t nt, size_t nv, const floa
   }
   out.scale = scale;
   out.image = RgbImage(aw, ah);
+  std::vector<uint8_t> filled(size_t(aw) * size_t(ah), 0);  // the texels the cut-outs cover
   std::vector<uint8_t> buf;
   for (size_t i = 0; i < live.size(); ++i) {
     const Rect& r = rects[live[i]];
     const PackedRect& p = packed[i];
     if (r.flat) {
       for (int y = 0; y < 4; ++y)
-        for (int x = 0; x < 4; ++x) std::copy_n(r.color, 3, out.image.pixel(p.x + x, p.y + y));
+        for (int x = 0; x < 4; ++x) std::copy_n(r.color, 3, out.image.pixel(p.x + x, p.y + y)), filled[size_t(p.y + y) * size_t(aw) + size_t(p.x + x)] = 1;
       continue;
     }
     const int w = r.x1 - r.x0, h = r.y1 - r.y0;
@@ -208,8 +210,11 @@ CropResult cropAtlas(const uint32_t* triangles, size_t nt, size_t nv, const floa
           }
         uint8_t* d = out.image.pixel(p.x + x, p.y + y);
         for (int c = 0; c < 3; ++c) d[c] = uint8_t((acc[c] + n / 2) / n);
+        filled[size_t(p.y + y) * size_t(aw) + size_t(p.x + x)] = 1;
       }
   }
+  // The texels between the cut-outs: flat per JPEG block, nearly free (block_fill.h).
+  fillEmptyBlocks(out.image, filled);
   // Corner coordinates over the atlas.
   out.cornerUV.resize(6 * nt);
   for (size_t t = 0; t < nt; ++t) {
