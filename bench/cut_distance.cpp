@@ -1,13 +1,13 @@
 // Exact surface distances between a cut and its input, without sampling noise: the quick
 // companion of bench/quality.sh (which uses MeshLab's Monte Carlo Hausdorff filter, the
 // independent reference). Samples of the mesh measured FROM: the centroids of an n x n split of
-// every triangle (area-weighted), n points along every edge (length-weighted) and every vertex a triangle uses
-// (unreferenced vertices are no part of the surface).
-// Distances are exact point-to-surface distances (mtbuild/surface_distance.h), so two runs on the
-// same files print the same digits and differences of a fraction of a percent between builds are
-// real. MeshLab's filter (bench/hausdorff.sh) takes all vertices, S samples on the edges and S on
-// the faces and averages over all of them; the first line's means blend the three parts the same
-// way (S from --samples, default 2 M), which tracks MeshLab's ratios between two cuts to ~0.3%.
+// every triangle (area-weighted), n points along every edge (length-weighted) and every vertex a
+// triangle uses (an unreferenced vertex is no part of the surface). Distances are exact
+// point-to-surface distances (mtbuild/surface_distance.h), so two runs on the same files print the
+// same digits and differences of a fraction of a percent between builds are real. MeshLab's
+// filter (bench/hausdorff.sh) takes all vertices, S samples on the edges and S on the faces and
+// averages over all of them; the first line's means blend the three parts the same way (S from
+// --samples, default 2 M), which tracks MeshLab's ratios between two cuts to ~0.3%.
 //
 // Usage: bench_cut_distance INPUT CUT [--split-cut N] [--split-input N] [--samples S]
 //                                      [--threads T] [--grid OX OY OZ STEP]

@@ -9,7 +9,6 @@
 #include <cfloat>
 #include <cmath>
 #include <cstring>
-#include <cstdlib>
 #include <vector>
 
 namespace mt {
@@ -872,6 +871,12 @@ size_t quadricSimplify(uint32_t* destination, double* destinationPositions, uint
   for (size_t i = 0; i < indexCount; ++i) assert(indices[i] < vertexCount);
   QuadricSimplifyStats total;
   const int passes = targetIndexCount < indexCount ? std::max(options.passes, 1) : 1;
+  if (passes == 1) {
+    const size_t count = simplifyOnce(destination, destinationPositions, moved, indices, indexCount, positions,
+                                      vertexCount, positionStride, locked, targetIndexCount, options, total);
+    if (stats) *stats = total;
+    return count;
+  }
   // Each pass reads the previous one's triangles, positions and colours (the quadrics, boundary
   // planes and colour quadrics are rebuilt from them) and writes the next; the last writes the
   // caller's buffers. A vertex unmoved by every pass keeps its input position bit for bit.
@@ -884,10 +889,8 @@ size_t quadricSimplify(uint32_t* destination, double* destinationPositions, uint
   for (int pass = 1; pass <= passes; ++pass) {
     const bool last = pass == passes;
     // The geometric interpolation: every pass removes about the same share of what it gets.
-    double share = double(pass) / passes;
-    if (const char* e = std::getenv("Q_SPLIT")) if (passes == 2) share = std::atof(e);  // EXPERIMENT
     const size_t target =
-        last ? targetIndexCount : 3 * size_t(std::llround(from * std::pow(to / from, share)));
+        last ? targetIndexCount : 3 * size_t(std::llround(from * std::pow(to / from, double(pass) / passes)));
     QuadricSimplifyOptions o = options;
     std::vector<uint8_t> nextColors;
     if (pass > 1 && options.colors) o.colors = colors.data();

@@ -7,7 +7,6 @@
 #include <algorithm>
 #include <cfloat>
 #include <cmath>
-#include <cstdlib>
 #include <string>
 
 #include "base/error.h"
@@ -195,7 +194,6 @@ int simplifyWithRules(Run& run, const double* positions, size_t vertexCount, con
   // Two runs of about sqrt(2) each per halving, the quadrics rebuilt between them: closer to the
   // input at equal size than one run (quadric_simplify.h, QuadricSimplifyOptions::passes).
   qo.passes = 2;
-  if (const char* e = std::getenv("Q_PASSES")) qo.passes = std::atoi(e);  // EXPERIMENT
   qo.gridStep = options.gridStep;
   for (int a = 0; a < 3; ++a) qo.gridOrigin[a] = options.gridOrigin[a];
   if (quadric && options.colors && options.colorWeight > 0) {
