@@ -1,12 +1,13 @@
 // Exact surface distances between a cut and its input, without sampling noise: the quick
 // companion of bench/quality.sh (which uses MeshLab's Monte Carlo Hausdorff filter, the
 // independent reference). Samples of the mesh measured FROM: the centroids of an n x n split of
-// every triangle (area-weighted), n points along every edge (length-weighted) and every vertex.
-// Distances are exact point-to-surface distances (mtbuild/surface_distance.h), so two runs on the
-// same files print the same digits and differences of a fraction of a percent between builds are
-// real. MeshLab's filter (bench/hausdorff.sh) takes all vertices, S samples on the edges and S on
-// the faces and averages over all of them; the first line's means blend the three parts the same
-// way (S from --samples, default 2 M), which tracks MeshLab's ratios between two cuts to ~0.3%.
+// every triangle (area-weighted), n points along every edge (length-weighted) and every vertex a
+// triangle uses (an unreferenced vertex is no part of the surface). Distances are exact
+// point-to-surface distances (mtbuild/surface_distance.h), so two runs on the same files print the
+// same digits and differences of a fraction of a percent between builds are real. MeshLab's
+// filter (bench/hausdorff.sh) takes all vertices, S samples on the edges and S on the faces and
+// averages over all of them; the first line's means blend the three parts the same way (S from
+// --samples, default 2 M), which tracks MeshLab's ratios between two cuts to ~0.3%.
 //
 // Usage: bench_cut_distance INPUT CUT [--split-cut N] [--split-input N] [--samples S]
 //                                      [--threads T] [--grid OX OY OZ STEP]
@@ -73,7 +74,7 @@ struct Stats {
   }
 };
 
-// Samples of `from` (n x n sub-triangle centroids per triangle, plus the vertices for the max)
+// Samples of `from` (n x n sub-triangle centroids per triangle, plus the vertices its triangles use)
 // against the surface of `to`, on `threads` threads (one grid each: queries are not thread-safe).
 Stats distances(const Mesh& from, const Mesh& to, int n, int threads) {
   const size_t nt = from.triangles.size() / 3, nv = from.positions.size() / 3;
@@ -86,6 +87,10 @@ Stats distances(const Mesh& from, const Mesh& to, int n, int threads) {
     }
   std::sort(edges.begin(), edges.end());
   edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
+  // Only vertices some triangle uses are samples of the surface: a PLY may list others (a scan's
+  // stray points, vertices the reader dropped a degenerate triangle of), which are no part of it.
+  std::vector<uint8_t> used(nv, 0);
+  for (uint32_t v : from.triangles) used[v] = 1;
   std::vector<Stats> part(static_cast<size_t>(threads));
   std::vector<std::thread> pool;
   for (int k = 0; k < threads; ++k)
@@ -113,6 +118,7 @@ Stats distances(const Mesh& from, const Mesh& to, int n, int threads) {
             }
       }
       for (size_t v = size_t(k); v < nv; v += size_t(threads)) {
+        if (!used[v]) continue;
         const double d = grid.distance(&from.positions[3 * v]);
         s.top(d, &from.positions[3 * v]), s.vertexSum += d, ++s.vertices;
       }
@@ -201,7 +207,10 @@ int main(int argc, char** argv) {
       TriangleGrid tg(input.positions.data(), input.positions.size() / 3, input.triangles.data(), input.triangles.size() / 3);
       double sum[2] = {0, 0};
       size_t count[2] = {0, 0};
+      std::vector<uint8_t> used(cut.positions.size() / 3, 0);
+      for (uint32_t v : cut.triangles) used[v] = 1;
       for (size_t v = 0; v < cut.positions.size() / 3; ++v) {
+        if (!used[v]) continue;
         const int on = std::binary_search(keys.begin(), keys.end(), key(&cut.positions[3 * v])) ? 1 : 0;
         sum[on] += tg.distance(&cut.positions[3 * v]), ++count[on];
       }

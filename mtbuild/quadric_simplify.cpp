@@ -842,19 +842,76 @@ size_t Simplifier::write(uint32_t* destination) const {
 
 }  // namespace
 
+namespace {
+
+// One run of the simplifier on (indices, positions) down to targetIndexCount.
+size_t simplifyOnce(uint32_t* destination, double* destinationPositions, uint8_t* moved, const uint32_t* indices,
+                    size_t indexCount, const double* positions, size_t vertexCount, size_t positionStride,
+                    const uint8_t* locked, size_t targetIndexCount, const QuadricSimplifyOptions& options,
+                    QuadricSimplifyStats& stats) {
+  Simplifier s(indices, indexCount, positions, vertexCount, positionStride, locked, options, destinationPositions,
+               moved);
+  s.run(targetIndexCount / 3);
+  stats.collapses += s.stats.collapses;
+  stats.rejected += s.stats.rejected;
+  stats.maxCost = std::max(stats.maxCost, s.stats.maxCost);
+  if (options.destinationColors) s.colors().write(options.destinationColors);
+  return s.write(destination);
+}
+
+}  // namespace
+
 size_t quadricSimplify(uint32_t* destination, double* destinationPositions, uint8_t* moved, const uint32_t* indices,
                        size_t indexCount, const double* positions, size_t vertexCount, size_t positionStride,
                        const uint8_t* locked, size_t targetIndexCount, const QuadricSimplifyOptions& options,
                        QuadricSimplifyStats* stats) {
   assert(indexCount % 3 == 0);
   assert(positionStride >= 3 * sizeof(double));
+  assert(options.passes >= 1);
   for (size_t i = 0; i < indexCount; ++i) assert(indices[i] < vertexCount);
-  Simplifier s(indices, indexCount, positions, vertexCount, positionStride, locked, options, destinationPositions,
-               moved);
-  s.run(targetIndexCount / 3);
-  if (stats) *stats = s.stats;
-  if (options.destinationColors) s.colors().write(options.destinationColors);
-  return s.write(destination);
+  QuadricSimplifyStats total;
+  const int passes = targetIndexCount < indexCount ? std::max(options.passes, 1) : 1;
+  if (passes == 1) {
+    const size_t count = simplifyOnce(destination, destinationPositions, moved, indices, indexCount, positions,
+                                      vertexCount, positionStride, locked, targetIndexCount, options, total);
+    if (stats) *stats = total;
+    return count;
+  }
+  // Each pass reads the previous one's triangles, positions and colours (the quadrics, boundary
+  // planes and colour quadrics are rebuilt from them) and writes the next; the last writes the
+  // caller's buffers. A vertex unmoved by every pass keeps its input position bit for bit.
+  std::vector<uint32_t> tris;
+  std::vector<double> pos;
+  std::vector<uint8_t> colors, passMoved;
+  if (moved) std::memset(moved, 0, vertexCount);
+  const double from = double(indexCount / 3), to = double(targetIndexCount / 3);
+  size_t count = indexCount;
+  for (int pass = 1; pass <= passes; ++pass) {
+    const bool last = pass == passes;
+    // The geometric interpolation: every pass removes about the same share of what it gets.
+    const size_t target =
+        last ? targetIndexCount : 3 * size_t(std::llround(from * std::pow(to / from, double(pass) / passes)));
+    QuadricSimplifyOptions o = options;
+    std::vector<uint8_t> nextColors;
+    if (pass > 1 && options.colors) o.colors = colors.data();
+    if (!last && options.colors) nextColors.resize(vertexCount * 4), o.destinationColors = nextColors.data();
+    std::vector<uint32_t> outTris(last ? 0 : count);
+    std::vector<double> outPos(last ? 0 : vertexCount * 3);
+    passMoved.resize(moved ? vertexCount : 0);
+    const uint32_t* in = pass == 1 ? indices : tris.data();
+    const double* inPos = pass == 1 ? positions : pos.data();
+    const size_t stride = pass == 1 ? positionStride : 3 * sizeof(double);
+    count = simplifyOnce(last ? destination : outTris.data(), last ? destinationPositions : outPos.data(),
+                         moved ? passMoved.data() : nullptr, in, count, inPos, vertexCount, stride, locked, target, o,
+                         total);
+    for (size_t v = 0; v < passMoved.size(); ++v) moved[v] |= passMoved[v];
+    if (!last) {
+      outTris.resize(count);
+      tris.swap(outTris), pos.swap(outPos), colors.swap(nextColors);
+    }
+  }
+  if (stats) *stats = total;
+  return count;
 }
 
 }  // namespace mt

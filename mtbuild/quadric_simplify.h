@@ -41,6 +41,15 @@ struct QuadricSimplifyOptions {
   const uint8_t* colors = nullptr;
   double colorScale = 0;
   uint8_t* destinationColors = nullptr;
+  // How many runs the reduction is split into, each to the geometric interpolation of the counts
+  // (2: the input's triangles -> sqrt(input x target) -> target), with the quadrics rebuilt from
+  // the current surface before each run. 1: one run on the input's quadrics. Two runs of about
+  // sqrt(2) each end closer to the input at a halving than one: a quadric summed over many
+  // collapses keeps the planes of faces already far from the surface that replaced them, and
+  // prices a collapse by them; rebuilt ones price it against the surface it really changes
+  // (docs/mtbuild.md, "Fifth pass"). Carrying the summed quadrics into the second run instead
+  // measured worse than rebuilding them.
+  int passes = 1;
 };
 
 struct QuadricSimplifyStats {
@@ -55,7 +64,7 @@ struct QuadricSimplifyStats {
 // destination: room for indexCount indices; receives the kept triangles (input vertex ids, in input
 // order). destinationPositions: 3 doubles per vertex; receives every vertex's position (a locked
 // or unmoved vertex: its input position bit for bit). moved (optional, 1 byte per vertex): set to
-// 1 for vertices whose position changed. Returns the number of indices written.
+// 1 for vertices whose position changed (in any pass). Returns the number of indices written.
 size_t quadricSimplify(uint32_t* destination, double* destinationPositions, uint8_t* moved, const uint32_t* indices,
                        size_t indexCount, const double* positions, size_t vertexCount, size_t positionStride,
                        const uint8_t* locked, size_t targetIndexCount, const QuadricSimplifyOptions& options,

@@ -463,41 +463,46 @@ TEST(QuadricSimplify, LocksTopologyBordersAndDeterminism) {
   for (size_t t = 0; t < r.g.triangleCount(); ++t) ASSERT_GT(normalZ(r.g.triangles, r.g.positions, t), 0);
   const size_t loops = borderLoops(r.g.triangles);
   ASSERT_EQ(loops, 4u);  // the rim and three holes
-  for (size_t div : {2, 8}) {
-    const size_t target = r.g.triangleCount() / div;
-    QuadricRun q = runQuadric(r, target);
-    EXPECT_LE(q.indices.size() / 3, target) << "div " << div;
-    EXPECT_GE(q.indices.size() / 3, target - 2) << "div " << div;  // a collapse removes 1 or 2
-    const size_t removed = r.g.triangleCount() - q.indices.size() / 3;
-    EXPECT_GE(q.stats.collapses, (removed + 1) / 2);  // an interior collapse removes 2, a border one 1
-    EXPECT_LE(q.stats.collapses, removed);
-    std::set<uint32_t> referenced(q.indices.begin(), q.indices.end());
-    for (uint32_t v = 0; v < r.g.vertexCount(); ++v)
-      if (r.locked[v]) {
-        EXPECT_TRUE(referenced.count(v)) << "locked vertex " << v << " removed";
-        EXPECT_EQ(q.moved[v], 0) << v;
-        for (int k = 0; k < 3; ++k) EXPECT_EQ(q.positions[v * 3 + k], r.g.positions[v * 3 + k]) << v;
-      }
-    EdgeStats e = edgeStats(q.indices);
-    EXPECT_EQ(e.nonManifoldEdges, 0u);
-    EXPECT_EQ(borderLoops(q.indices), loops) << "no hole closed, opened or merged; div " << div;
-    for (size_t t = 0; t < q.indices.size() / 3; ++t) ASSERT_GT(normalZ(q.indices, q.positions, t), 0) << "flip";
-    for (size_t t = 0; t < q.indices.size(); t += 3)
-      for (int k = 0; k < 3; ++k) {
-        uint32_t a = q.indices[t + k], b = q.indices[t + (k + 1) % 3];
-        if (r.locked[a] && r.locked[b]) {
-          EXPECT_TRUE(inputEdges.count({std::min(a, b), std::max(a, b)})) << "new chord " << a << "-" << b;
+  for (int passes : {1, 2}) {
+    for (size_t div : {2, 8}) {
+      SCOPED_TRACE(testing::Message() << "passes " << passes);
+      QuadricSimplifyOptions o;
+      o.passes = passes;
+      const size_t target = r.g.triangleCount() / div;
+      QuadricRun q = runQuadric(r, target, o);
+      EXPECT_LE(q.indices.size() / 3, target) << "div " << div;
+      EXPECT_GE(q.indices.size() / 3, target - 2) << "div " << div;  // a collapse removes 1 or 2
+      const size_t removed = r.g.triangleCount() - q.indices.size() / 3;
+      EXPECT_GE(q.stats.collapses, (removed + 1) / 2);  // an interior collapse removes 2, a border one 1
+      EXPECT_LE(q.stats.collapses, removed);
+      std::set<uint32_t> referenced(q.indices.begin(), q.indices.end());
+      for (uint32_t v = 0; v < r.g.vertexCount(); ++v)
+        if (r.locked[v]) {
+          EXPECT_TRUE(referenced.count(v)) << "locked vertex " << v << " removed";
+          EXPECT_EQ(q.moved[v], 0) << v;
+          for (int k = 0; k < 3; ++k) EXPECT_EQ(q.positions[v * 3 + k], r.g.positions[v * 3 + k]) << v;
         }
+      EdgeStats e = edgeStats(q.indices);
+      EXPECT_EQ(e.nonManifoldEdges, 0u);
+      EXPECT_EQ(borderLoops(q.indices), loops) << "no hole closed, opened or merged; div " << div;
+      for (size_t t = 0; t < q.indices.size() / 3; ++t) ASSERT_GT(normalZ(q.indices, q.positions, t), 0) << "flip";
+      for (size_t t = 0; t < q.indices.size(); t += 3)
+        for (int k = 0; k < 3; ++k) {
+          uint32_t a = q.indices[t + k], b = q.indices[t + (k + 1) % 3];
+          if (r.locked[a] && r.locked[b]) {
+            EXPECT_TRUE(inputEdges.count({std::min(a, b), std::max(a, b)})) << "new chord " << a << "-" << b;
+          }
+        }
+      std::set<std::array<uint32_t, 3>> faces;
+      for (size_t t = 0; t < q.indices.size(); t += 3) {
+        std::array<uint32_t, 3> f = {q.indices[t], q.indices[t + 1], q.indices[t + 2]};
+        std::sort(f.begin(), f.end());
+        EXPECT_TRUE(faces.insert(f).second) << "duplicate face";
       }
-    std::set<std::array<uint32_t, 3>> faces;
-    for (size_t t = 0; t < q.indices.size(); t += 3) {
-      std::array<uint32_t, 3> f = {q.indices[t], q.indices[t + 1], q.indices[t + 2]};
-      std::sort(f.begin(), f.end());
-      EXPECT_TRUE(faces.insert(f).second) << "duplicate face";
+      QuadricRun again = runQuadric(r, target, o);
+      EXPECT_EQ(again.indices, q.indices);
+      EXPECT_EQ(again.positions, q.positions);
     }
-    QuadricRun again = runQuadric(r, target);
-    EXPECT_EQ(again.indices, q.indices);
-    EXPECT_EQ(again.positions, q.positions);
   }
 }
 
@@ -636,14 +641,18 @@ TEST(QuadricSimplify, HoleRimsStayOnInputRimVertices) {
     return std::make_pair(v, edges);
   };
   const auto [inputRim, inputEdges] = borderVertices(r.g.triangles);
-  QuadricRun q = runQuadric(r, r.g.triangleCount() / 8, o);
-  const auto [rim, edges] = borderVertices(q.indices);
-  ASSERT_GT(edges, 0u);
-  EXPECT_LT(edges, inputEdges);  // the rims simplified
-  for (uint32_t v : rim) {
-    EXPECT_TRUE(inputRim.count(v)) << "vertex " << v << " is on a result boundary edge, not on the input's";
-    EXPECT_FALSE(q.moved[v]) << "rim vertex " << v << " moved";
-    for (int a = 0; a < 3; ++a) EXPECT_EQ(q.positions[v * 3 + a], r.g.positions[v * 3 + a]);
+  for (int passes : {1, 2}) {
+    SCOPED_TRACE(testing::Message() << "passes " << passes);
+    o.passes = passes;
+    QuadricRun q = runQuadric(r, r.g.triangleCount() / 8, o);
+    const auto [rim, edges] = borderVertices(q.indices);
+    ASSERT_GT(edges, 0u);
+    EXPECT_LT(edges, inputEdges);  // the rims simplified
+    for (uint32_t v : rim) {
+      EXPECT_TRUE(inputRim.count(v)) << "vertex " << v << " is on a result boundary edge, not on the input's";
+      EXPECT_FALSE(q.moved[v]) << "rim vertex " << v << " moved";
+      for (int a = 0; a < 3; ++a) EXPECT_EQ(q.positions[v * 3 + a], r.g.positions[v * 3 + a]);
+    }
   }
 }
 }  // namespace
@@ -701,6 +710,77 @@ TEST(QuadricSimplify, ThinFeaturesAreNotCutOff) {
   }
   EXPECT_GE(count / 3, tris.size() / 3 / 8 - 2);
   EXPECT_LT(worst, 0.5);
+}
+}  // namespace
+}  // namespace mt
+
+namespace mt {
+namespace {
+// A halving in two runs of about sqrt(2) each, the quadrics rebuilt from the once-simplified
+// surface in between (QuadricSimplifyOptions::passes = 2), ends closer to the input on average,
+// both ways, than one run on the input's quadrics: a summed quadric keeps pricing collapses by
+// planes of faces that earlier collapses already replaced. A noisy sphere cap (a scan's noise:
+// 0.1 spacings, from a fixed generator's raw output) on a grid of about the builder's step.
+// Measured (input vertices -> result, result centroids -> input): at a halving, one run 0.013955
+// / 0.012987, two 0.013197 / 0.012252; at an eighth, 0.041362 / 0.031820 against 0.040499 /
+// 0.030740.
+TEST(QuadricSimplify, TwoPassesWithRebuiltQuadricsEndCloser) {
+  const uint32_t n = 61;
+  const double R = 60, c[3] = {30, 30, -45};
+  std::mt19937 random(7);
+  std::vector<double> pos;
+  std::vector<uint32_t> tris;
+  for (uint32_t j = 0; j < n; ++j)
+    for (uint32_t i = 0; i < n; ++i) {
+      const double x = i + 0.3 * std::sin(1.7 * j), y = j + 0.3 * std::cos(2.3 * i);
+      const double noise = 0.1 * (double(random()) / 4294967295.0 - 0.5) * 2;
+      pos.insert(pos.end(), {x, y, c[2] + std::sqrt(R * R - (x - c[0]) * (x - c[0]) - (y - c[1]) * (y - c[1])) + noise});
+    }
+  for (uint32_t j = 0; j + 1 < n; ++j)
+    for (uint32_t i = 0; i + 1 < n; ++i) {
+      const uint32_t a = j * n + i, b = a + 1, cc = a + n, d = cc + 1;
+      tris.insert(tris.end(), {a, b, d, a, d, cc});
+    }
+  TriangleGrid input(pos.data(), n * n, tris.data(), tris.size() / 3);
+  struct Result {
+    size_t triangles;
+    double inToOut, outToIn;
+    QuadricSimplifyStats stats;
+  };
+  auto simplify = [&](int passes, size_t div) {
+    QuadricSimplifyOptions o;
+    o.passes = passes;
+    o.gridStep = 0.09;
+    o.gridOrigin[0] = -0.71, o.gridOrigin[1] = -0.93, o.gridOrigin[2] = -0.47;
+    std::vector<uint32_t> out(tris.size());
+    std::vector<double> outPos(pos.size());
+    std::vector<uint8_t> moved(n * n);
+    Result r;
+    out.resize(quadricSimplify(out.data(), outPos.data(), moved.data(), tris.data(), tris.size(), pos.data(), n * n,
+                               3 * sizeof(double), nullptr, tris.size() / div, o, &r.stats));
+    r.triangles = out.size() / 3;
+    TriangleGrid result(outPos.data(), n * n, out.data(), out.size() / 3);
+    r.inToOut = 0;
+    for (uint32_t v = 0; v < n * n; ++v) r.inToOut += result.distance(&pos[v * 3]);
+    r.inToOut /= n * n;
+    r.outToIn = 0;
+    for (size_t t = 0; t < out.size(); t += 3) {
+      double m[3];
+      for (int a = 0; a < 3; ++a) m[a] = (outPos[out[t] * 3 + a] + outPos[out[t + 1] * 3 + a] + outPos[out[t + 2] * 3 + a]) / 3;
+      r.outToIn += input.distance(m);
+    }
+    r.outToIn /= double(r.triangles);
+    return r;
+  };
+  for (size_t div : {2, 8}) {
+    const Result one = simplify(1, div), two = simplify(2, div);
+    const size_t target = tris.size() / 3 / div;
+    EXPECT_LE(two.triangles, target);
+    EXPECT_GE(two.triangles, target - 2);
+    EXPECT_EQ(one.triangles, two.triangles);
+    EXPECT_LT(two.inToOut, one.inToOut) << "div " << div;
+    EXPECT_LT(two.outToIn, one.outToIn) << "div " << div;
+  }
 }
 }  // namespace
 }  // namespace mt
