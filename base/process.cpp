@@ -1,9 +1,12 @@
 #include "base/process.h"
 
 #include <malloc.h>
+#include <sys/resource.h>
 #include <unistd.h>
 
 #include <cstdio>
+#include <cstdlib>
+#include <cstring>
 #include <fstream>
 #include <string>
 
@@ -29,6 +32,38 @@ uint64_t currentRssBytes() {
   int n = std::fscanf(f, "%llu %llu", &size, &resident);
   std::fclose(f);
   return n == 2 ? uint64_t(resident) * uint64_t(sysconf(_SC_PAGESIZE)) : 0;
+}
+
+CpuSeconds processCpuSeconds() {
+  rusage u{};
+  if (getrusage(RUSAGE_SELF, &u) != 0) return {};
+  CpuSeconds c;
+  c.user = double(u.ru_utime.tv_sec) + double(u.ru_utime.tv_usec) * 1e-6;
+  c.sys = double(u.ru_stime.tv_sec) + double(u.ru_stime.tv_usec) * 1e-6;
+  return c;
+}
+
+void reexecWithMallocHugePages(char** argv) {
+  const char* no = std::getenv("MT_NO_HUGEPAGES");
+  if (no && std::strcmp(no, "1") == 0) return;
+  // Once per run, whatever glibc makes of GLIBC_TUNABLES (2.36 rewrites the string in place).
+  if (std::getenv("MT_HUGEPAGES_REEXEC")) return;
+  const char* given = std::getenv("GLIBC_TUNABLES");
+  if (given && std::strstr(given, "glibc.malloc.hugetlb")) return;
+  const bool had = given != nullptr;
+  const std::string tunables = had ? given : "";  // setenv may free what getenv returned
+  // "always [madvise] never": the bracketed word is the mode in force.
+  std::ifstream thp("/sys/kernel/mm/transparent_hugepage/enabled");
+  std::string modes;
+  if (!std::getline(thp, modes) || modes.find("[never]") != std::string::npos) return;
+  std::string value = tunables.empty() ? std::string() : tunables + ":";
+  value += "glibc.malloc.hugetlb=1";
+  if (setenv("GLIBC_TUNABLES", value.c_str(), 1) != 0 || setenv("MT_HUGEPAGES_REEXEC", "1", 1) != 0) return;
+  execv("/proc/self/exe", argv);
+  unsetenv("MT_HUGEPAGES_REEXEC");
+  // The exec failed: run on without the tunable (and leave the variable as it was).
+  if (had) setenv("GLIBC_TUNABLES", tunables.c_str(), 1);
+  else unsetenv("GLIBC_TUNABLES");
 }
 
 }  // namespace mt

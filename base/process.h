@@ -17,4 +17,22 @@ void useStreamingAllocator();
 // Resident set size now (statm), in bytes.
 uint64_t currentRssBytes();
 
+// CPU time this process has used so far, all its threads (those that ended included): the
+// kernel's own accounting (getrusage RUSAGE_SELF). Differences of two readings say where a stage's
+// CPU went; user + sys is exact, the split between them is sampled at the scheduler tick.
+struct CpuSeconds {
+  double user = 0, sys = 0;
+};
+CpuSeconds processCpuSeconds();
+
+// glibc malloc on transparent huge pages. The tunable glibc.malloc.hugetlb=1 (glibc 2.35+) makes
+// malloc advise the kernel (MADV_HUGEPAGE) to back its heaps and large mappings with 2 MiB pages;
+// it is read only when a process starts, so this re-executes the process (/proc/self/exe, the
+// same argv) with it appended to GLIBC_TUNABLES (and MT_HUGEPAGES_REEXEC=1, so it happens once).
+// It returns, doing nothing, in the re-executed process, when GLIBC_TUNABLES already names
+// glibc.malloc.hugetlb (the user's own choice), when MT_NO_HUGEPAGES=1, when the kernel's
+// transparent huge pages are off ("never": the advice would change nothing), or when the exec
+// fails. Call first thing in main, before any thread starts.
+void reexecWithMallocHugePages(char** argv);
+
 }  // namespace mt

@@ -2,7 +2,8 @@
 # End-to-end build benchmark: runs mtbuild on a mesh (or a patch store made
 # by `mtstore ingest`, to time the level loop alone) and prints throughput in M input triangles/s
 # (end to end and for the level loop), CPU time (user+sys: the honest figure on a shared machine),
-# peak RSS against the cap, bytes per input triangle, and one line per level; then mtverify.
+# peak RSS against the cap, bytes per input triangle, the CPU of the ingest, and one line per level with its
+# CPU (user, sys); then mtverify.
 #   bench/build.sh INPUT [MEMORY=512M] [THREADS=2] [WORKDIR=out/bench-build] [-- extra mtbuild options]
 # INPUT defaults to a generated 53M-triangle mtgen scan with holes (WORKDIR/scan-53M.ply).
 # BIN=dir/bin picks the build dir; MTBUILD=path/to/mtbuild compares another binary (e.g. a baseline build dir) on the same input.
@@ -36,9 +37,21 @@ print(f"cpu         {user + sys_:7.1f} s (user {user:.1f} + sys {sys_:.1f})  {tr
 print(f"peak RSS    {rss / 2**20:7.1f} MiB (cap {sys.argv[6]})")
 print(f"file        {d['file_bytes']} bytes = {d['bytes_per_input_triangle']:.3f} bytes/input triangle "
       f"({d['file_bytes'] / max(d['stored_triangles'], 1):.3f} per stored), grid step {d['grid_step']:.4g}")
-print("level  regions  triangles in -> out       max error   seconds   M tri/s")
+# Where the CPU went (the build's own accounting, --stats-json): the ingest, each level, and the
+# rest of the run (the grid weld, the sink, the file's index).
+total_cpu = d["cpu_user_seconds"] + d["cpu_sys_seconds"]
+ingest_cpu = d["ingest_user_seconds"] + d["ingest_sys_seconds"]
+levels_cpu = sum(l["user_seconds"] + l["sys_seconds"] for l in d["levels"])
+def share(user, sys_):
+    return f"{user + sys_:7.1f} s cpu (user {user:.1f} + sys {sys_:.1f}, sys {100 * sys_ / max(user + sys_, 1e-9):4.1f}%)"
+print(f"ingest      {share(d['ingest_user_seconds'], d['ingest_sys_seconds'])}  {100 * ingest_cpu / max(total_cpu, 1e-9):4.1f}% of the run's")
+print(f"levels      {levels_cpu:7.1f} s cpu  {100 * levels_cpu / max(total_cpu, 1e-9):4.1f}% of the run's; "
+      f"other (grid weld, sink, file) {total_cpu - ingest_cpu - levels_cpu:.1f} s")
+print("level  regions  triangles in -> out       max error   seconds   M tri/s   cpu s  user s   sys s  sys %")
 for l in d["levels"]:
+    cpu = l["user_seconds"] + l["sys_seconds"]
     print(f"{l['level']:5d}  {l['regions']:7d}  {l['triangles_in']:12d} -> {l['triangles_out']:10d}  "
-          f"{l['max_error']:10.4g}  {l['seconds']:8.2f}  {l['triangles_in'] / max(l['seconds'], 1e-9) / 1e6:8.2f}")
+          f"{l['max_error']:10.4g}  {l['seconds']:8.2f}  {l['triangles_in'] / max(l['seconds'], 1e-9) / 1e6:8.2f}  "
+          f"{cpu:6.1f}  {l['user_seconds']:6.1f}  {l['sys_seconds']:6.1f}  {100 * l['sys_seconds'] / max(cpu, 1e-9):5.1f}")
 EOF
 "$bin/mtverify" "$out" --cuts 4 | tail -1

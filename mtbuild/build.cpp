@@ -34,7 +34,9 @@ std::string BuildReport::toJson() const {
     << (inputTriangles ? double(fileBytes) / double(inputTriangles) : 0) << ",\n  \"grid_step\": " << gridStep
     << ",\n  \"welded_vertices\": " << weldedVertices << ",\n  \"welded_triangles\": " << weldedTriangles
     << ",\n  \"ingest_seconds\": " << ingestSeconds << ",\n  \"build_seconds\": " << buildSeconds
-    << ",\n  \"total_seconds\": " << totalSeconds << ",\n  \"input_triangles_per_second\": "
+    << ",\n  \"total_seconds\": " << totalSeconds << ",\n  \"ingest_user_seconds\": " << ingestUserSeconds
+    << ",\n  \"ingest_sys_seconds\": " << ingestSysSeconds << ",\n  \"cpu_user_seconds\": " << cpuUserSeconds
+    << ",\n  \"cpu_sys_seconds\": " << cpuSysSeconds << ",\n  \"input_triangles_per_second\": "
     << (totalSeconds > 0 ? double(inputTriangles) / totalSeconds : 0) << ",\n  \"peak_rss_bytes\": " << peakRssBytes
     << ",\n  \"resumed_at_level\": " << resumedAtLevel << ",\n  \"peak_temp_bytes\": " << peakTempBytes
     << ",\n  \"checkpoint_bytes\": " << checkpointBytes << ",\n  \"level_loop_bytes\": " << levelLoopBytes
@@ -48,7 +50,8 @@ std::string BuildReport::toJson() const {
     const LevelReport& l = levels[i];
     s << (i ? "," : "") << "\n    {\"level\": " << l.level << ", \"regions\": " << l.regions << ", \"triangles_in\": "
       << l.trianglesIn << ", \"triangles_out\": " << l.trianglesOut << ", \"max_error\": " << l.maxError
-      << ", \"seconds\": " << l.seconds << "}";
+      << ", \"seconds\": " << l.seconds << ", \"user_seconds\": " << l.userSeconds << ", \"sys_seconds\": " << l.sysSeconds
+      << "}";
   }
   s << "\n  ]\n}\n";
   return s.str();

@@ -92,6 +92,9 @@ struct LevelReport {
   uint64_t trianglesIn = 0, trianglesOut = 0;
   double maxError = 0;
   double seconds = 0;
+  // The CPU the process used over the same span as `seconds` (every thread; mtcluster: rank 0's
+  // process), user and kernel: where the level's CPU went.
+  double userSeconds = 0, sysSeconds = 0;
 };
 
 struct BuildReport {
@@ -102,6 +105,11 @@ struct BuildReport {
   double gridStep = 0;
   uint64_t weldedVertices = 0, weldedTriangles = 0;  // by the grid weld (vertices closer than the grid step)
   double ingestSeconds = 0, buildSeconds = 0, totalSeconds = 0;
+  // CPU seconds (user, kernel): the ingest's (the span of ingestSeconds) and the whole run's (this
+  // process, from the start of the build to the file; the grid weld, the sink and the file's index
+  // are the part of it in neither the ingest nor a level; after --resume the ingest and the
+  // earlier levels are the stopped run's figures).
+  double ingestUserSeconds = 0, ingestSysSeconds = 0, cpuUserSeconds = 0, cpuSysSeconds = 0;
   uint64_t peakRssBytes = 0;
   uint32_t resumedAtLevel = 0;        // 0: built from the start; k: continued after level k
   uint64_t peakTempBytes = 0;         // largest OUT.work + OUT.mt.tmp seen (sampled in the level loop)

@@ -170,6 +170,8 @@ std::string LevelBuilder::State::checkpointBytes() const {
   w.put<uint64_t>(report.inputTriangles);
   w.put<double>(report.gridStep);
   w.put<double>(report.ingestSeconds);
+  w.put<double>(report.ingestUserSeconds);
+  w.put<double>(report.ingestSysSeconds);
   w.put<uint64_t>(report.peakTempBytes);
   putVector(w, report.levels);
   w.put<uint64_t>(XXH64(w.bytes().data(), w.bytes().size(), 0));
@@ -284,6 +286,8 @@ void LevelBuilder::State::restore(const std::string& bytes) {
   report.inputTriangles = r.get<uint64_t>();
   report.gridStep = r.get<double>();
   report.ingestSeconds = r.get<double>();
+  report.ingestUserSeconds = r.get<double>();
+  report.ingestSysSeconds = r.get<double>();
   report.peakTempBytes = r.get<uint64_t>();
   report.levels = getVector<LevelReport>(r);
   std::vector<format::TextureRecord> textures;

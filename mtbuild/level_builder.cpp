@@ -91,6 +91,9 @@ void LevelBuilder::State::startFresh(bool storeInput) {
   clearWorkDir(work);
   ingestLevelZero(storeInput);
   report.ingestSeconds = secondsSince(t0);
+  const CpuSeconds ingestCpu = processCpuSeconds();
+  report.ingestUserSeconds = ingestCpu.user - cpu0.user;
+  report.ingestSysSeconds = ingestCpu.sys - cpu0.sys;
   StoreInfo info = store->info();
   report.inputTriangles = info.triangles;
   liveTriangles = info.triangles;
@@ -262,6 +265,7 @@ LevelBuilder::LevelBuilder(const std::string& input, const std::string& output, 
     : s_(std::make_unique<State>()) {
   State& s = *s_;
   s.t0 = Clock::now();
+  s.cpu0 = processCpuSeconds();
   s.options = options;
   s.input = input;
   s.output = output;
@@ -409,6 +413,7 @@ bool LevelBuilder::beginLevel() {
     s.floorVertices.push_back(counts[r].second);
   }
   s.levelStart = Clock::now();
+  s.levelCpu0 = processCpuSeconds();
   s.lr = LevelReport{};
   s.lr.level = level + 1;
   s.lr.regions = uint32_t(s.regionIds.size());
@@ -551,6 +556,9 @@ void LevelBuilder::endLevel() {
   }
   s.lr.trianglesOut = s.outTriangles;
   s.lr.seconds = secondsSince(s.levelStart);
+  const CpuSeconds cpu = processCpuSeconds();
+  s.lr.userSeconds = cpu.user - s.levelCpu0.user;
+  s.lr.sysSeconds = cpu.sys - s.levelCpu0.sys;
   s.report.levels.push_back(s.lr);
   s.liveTriangles = s.outTriangles;
   ++s.builtLevels;
@@ -621,6 +629,9 @@ BuildReport LevelBuilder::finish() {
   fs::remove_all(s.work, ec);
   report.buildSeconds = secondsSince(s.buildStart);
   report.totalSeconds = secondsSince(s.t0);
+  const CpuSeconds cpu = processCpuSeconds();
+  report.cpuUserSeconds = cpu.user - s.cpu0.user;
+  report.cpuSysSeconds = cpu.sys - s.cpu0.sys;
   report.peakRssBytes = peakRssBytes();
   const unsigned threads = s.options.threads ? s.options.threads : std::max(1u, std::thread::hardware_concurrency());
   report.extraJson += ",\n  \"memory_plan\": " + toJson(planMemory(s.options.memoryBytes, threads));

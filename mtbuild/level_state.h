@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "base/file_lock.h"
+#include "base/process.h"
 #include "base/progress.h"
 #include "mtbuild/build.h"
 #include "mtbuild/dag_node.h"
@@ -31,7 +32,7 @@ inline double secondsSince(Clock::time_point t) { return std::chrono::duration<d
 // The checkpoint: a blob of the work store, committed with each level's write-backs.
 constexpr char kCheckpointBlob[] = "mtbuild.checkpoint";
 constexpr uint64_t kCheckpointMagic = 0x31544b43544d4dull;  // "MMTCKT1"
-constexpr uint32_t kCheckpointVersion = 4;  // 3: the input hash covers the whole file; 4: texture records
+constexpr uint32_t kCheckpointVersion = 5;  // 3: the input hash covers the whole file; 4: texture records; 5: CPU seconds
 
 // "key=value" lines: the input's identity and every option that changes the bytes (not --threads,
 // --memory or levelLoopBytes, which do not). Compared line by line so that a refused resume can
@@ -49,6 +50,7 @@ struct LevelBuilder::State {
   bool workCreated = false;  // the work directory was made by this run
   bool noted = false;        // stopNote() said what was kept
   Clock::time_point t0, buildStart;
+  CpuSeconds cpu0, levelCpu0;  // the process's CPU at t0 and at levelStart
   std::unique_ptr<PatchStore> store;
   PartitionSequence sequence;
   std::string sequenceBytes;

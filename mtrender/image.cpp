@@ -3,6 +3,7 @@
 #include <png.h>
 
 #include <cassert>
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -25,7 +26,11 @@ void writePng(const std::string& path, const Image& image) {
     std::remove(tmp.c_str());
     fail(path, std::string("cannot write PNG: ") + img.message);
   }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) fail(path, "cannot rename the PNG into place");
+  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
+    const int e = errno;
+    std::remove(tmp.c_str());  // nothing left under either name
+    fail(path, std::string("cannot rename the PNG into place: ") + std::strerror(e));
+  }
 }
 
 Image readPng(const std::string& path) {

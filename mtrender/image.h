@@ -13,7 +13,8 @@ struct Image {
   const uint8_t* pixel(int x, int y) const { return &rgba[(size_t(y) * width + x) * 4]; }
 };
 
-// Written under PATH.tmp and renamed. Throws mt::Error.
+// Written under a temporary name beside PATH (uniqueTempName) and renamed; throws mt::Error, and
+// then nothing is left under either name.
 void writePng(const std::string& path, const Image& image);
 Image readPng(const std::string& path);
 

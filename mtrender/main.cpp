@@ -257,7 +257,7 @@ void addDisplayOptions(CLI::App& app, CliOptions& o, CLI::Option*& recordOption)
       ->capture_default_str();
   app.add_flag("--cold", o.cold,
                "drop the MT files from the OS page cache first (posix_fadvise DONTNEED), for cold-start figures");
-  app.add_flag("--quiet", o.quiet, "no progress or warnings on stderr");
+  app.add_flag("-q,--quiet", o.quiet, "no progress or warnings on stderr");
   app.add_option("--max-frames", o.maxFrames, "viewer: close after this many frames (for tests; default: when closed)")
       ->check(mt::cli::countIn(1, 1'000'000'000));
   app.add_option("--screenshot", o.screenshotPath, "viewer: write the last frame to this PNG (.png) when closing");

@@ -878,5 +878,51 @@ TEST(GltfReader, BadTexturesGiveOneClearErrorNamingTheFileAndWhere) {
   EXPECT_FALSE(test::fileExists(dir.file("x.mt")));
 }
 
+// The copies a reader makes of embedded images (in $TMPDIR) go with it, and also when it is
+// refused while it opens: a broken image after a good one leaves neither copy behind.
+TEST(GltfReader, ABrokenImageLeavesNoCopyInTmpdir) {
+  TempDir dir;
+  const std::string tmpdir = dir.file("tmpdir");
+  std::filesystem::create_directory(tmpdir);
+  const char* was = std::getenv("TMPDIR");
+  const std::string saved = was ? was : "";
+  setenv("TMPDIR", tmpdir.c_str(), 1);
+  auto entries = [&] {
+    return size_t(std::distance(std::filesystem::directory_iterator(tmpdir), std::filesystem::directory_iterator()));
+  };
+  // Both images embedded: image 0 a PNG in a buffer view, image 1 a data URI.
+  Doc good = texturedDoc(dir);
+  good.j["images"][1] = {{"uri", "data:image/png;base64,iVBORw0KGgo="}};  // a PNG's 8 magic bytes
+  test::writeFile(dir.file("good.glb"), good.glb());
+  {
+    auto reader = openMesh(dir.file("good.glb"));
+    EXPECT_EQ(entries(), 2u) << "the reader copies both embedded images to $TMPDIR";
+  }
+  EXPECT_EQ(entries(), 0u);
+  struct Case {
+    const char* name;
+    std::function<void(Doc&)> damage;
+  } cases[] = {
+      {"second.glb", [](Doc& d) { d.j["images"][1] = {{"uri", "data:image/png;base64,AAAAAAAAAAA="}}; }},
+      {"first.glb", [](Doc& d) { d.bin[1] = 'X'; }},
+  };
+  for (const Case& c : cases) {
+    Doc d = good;
+    c.damage(d);
+    test::writeFile(dir.file(c.name), d.glb());
+    try {
+      openMesh(dir.file(c.name));
+      ADD_FAILURE() << c.name << ": opened";
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find("neither PNG nor JPEG"), std::string::npos) << e.what();
+    }
+    std::vector<std::string> left;
+    for (const auto& e : std::filesystem::directory_iterator(tmpdir)) left.push_back(e.path().string());
+    EXPECT_TRUE(left.empty()) << c.name << ": left " << ::testing::PrintToString(left);
+  }
+  if (was) setenv("TMPDIR", saved.c_str(), 1);
+  else unsetenv("TMPDIR");
+}
+
 }  // namespace
 }  // namespace mt

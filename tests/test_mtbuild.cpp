@@ -1,6 +1,7 @@
 // mtbuild end to end on small generated scans: determinism (threads, memory cap), the DAG's
 // invariants (monotone errors, nested spheres, every patch on one arc), holes still simplify.
 #include <gtest/gtest.h>
+#include <sys/resource.h>
 
 #include <algorithm>
 #include <array>
@@ -10,6 +11,8 @@
 #include <deque>
 #include <filesystem>
 #include <random>
+
+#include <nlohmann/json.hpp>
 
 #include "mtbuild/build.h"
 #include "mtfile/mt_file.h"
@@ -169,6 +172,47 @@ TEST(Mtbuild, AScanWithManyHolesReachesASmallCoarsestLevel) {
     if (arc.to == sink)
       for (uint32_t i = 0; i < arc.patchCount; ++i) top += mt->patches()[mt->patchRefs()[arc.firstPatchRef + i]].triangles;
   EXPECT_LE(top, mt->header().inputTriangles / 100) << "coarsest level has " << top << " triangles";
+}
+
+// --stats-json says where the CPU went: the ingest's and every level's user and kernel seconds,
+// and the whole run's. The kernel's count of the child's CPU (RUSAGE_CHILDREN: the shell and
+// mtbuild, reaped) bounds the run's total from above, which bounds the ingest's and the levels'
+// sum: a level reporting the CPU since the start, or since the ingest, would exceed it.
+double childCpuSeconds() {
+  rusage u{};
+  getrusage(RUSAGE_CHILDREN, &u);
+  return double(u.ru_utime.tv_sec) + double(u.ru_stime.tv_sec) + 1e-6 * double(u.ru_utime.tv_usec + u.ru_stime.tv_usec);
+}
+
+TEST(MtbuildStats, EveryLevelReportsWhereItsCpuWent) {
+  TempDir tmp;
+  std::string in = makeScan(tmp, "scan.ply", "--triangles 60k --holes 6 --seed 3");
+  const double before = childCpuSeconds();
+  build(in, tmp.file("s.mt"), "--patch-triangles 300 --threads 2 --stats-json " + tmp.file("s.json"));
+  const double outside = childCpuSeconds() - before;
+  const nlohmann::json d = nlohmann::json::parse(readFile(tmp.file("s.json")));
+  ASSERT_GE(d["levels"].size(), 3u) << d.dump(1);
+  const double total = d["cpu_user_seconds"].get<double>() + d["cpu_sys_seconds"].get<double>();
+  const double ingest = d["ingest_user_seconds"].get<double>() + d["ingest_sys_seconds"].get<double>();
+  EXPECT_GT(d["ingest_user_seconds"].get<double>() + d["ingest_sys_seconds"].get<double>(), 0) << "the ingest reads and sorts";
+  EXPECT_GE(d["ingest_sys_seconds"].get<double>(), 0);
+  double levels = 0;
+  for (const nlohmann::json& l : d["levels"]) {
+    ASSERT_TRUE(l.contains("user_seconds") && l.contains("sys_seconds")) << l.dump();
+    const double user = l["user_seconds"].get<double>(), sys = l["sys_seconds"].get<double>();
+    EXPECT_GE(user, 0) << l.dump();
+    EXPECT_GE(sys, 0) << l.dump();
+    EXPECT_GT(user + sys, 0) << "level " << l["level"] << " simplified " << l["triangles_in"] << " triangles without CPU";
+    // Two workers (TBB limited to two as well) over the level's wall time, and a little for the
+    // clock reads' order.
+    EXPECT_LE(user + sys, 2 * l["seconds"].get<double>() + 0.05) << l.dump();
+    levels += user + sys;
+  }
+  EXPECT_LE(ingest + levels, total + 1e-3) << "the parts exceed the whole: " << d.dump(1);
+  EXPECT_LE(total, outside + 1e-3) << "the build reports more CPU than the kernel counted for it";
+  // The run's CPU is mostly the ingest's and the levels': what lies between (the grid weld, the
+  // sink, the file's index) is smaller than the two.
+  EXPECT_GT(ingest + levels, 0.5 * total) << d.dump(1);
 }
 
 // mtverify: checksums, monotone errors, nested spheres, and random cuts welded by exact position

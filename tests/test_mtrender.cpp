@@ -70,6 +70,27 @@ struct SmallCache {
   }
 };
 
+// A PNG that cannot be renamed into place (the name is an existing directory) is an error naming
+// the file, and leaves no temporary file beside it.
+TEST(RenderImage, AFailedRenameLeavesNoTemporaryFile) {
+  TempDir dir;
+  std::filesystem::create_directory(dir.file("shot.png"));
+  Image img;
+  img.width = 4;
+  img.height = 3;
+  img.rgba.assign(4 * 3 * 4, 200);
+  try {
+    writePng(dir.file("shot.png"), img);
+    ADD_FAILURE() << "a PNG was renamed over a directory";
+  } catch (const mt::Error& e) {
+    EXPECT_NE(std::string(e.what()).find(dir.file("shot.png")), std::string::npos) << e.what();
+  }
+  for (const auto& e : std::filesystem::directory_iterator(dir.path()))
+    EXPECT_EQ(e.path().filename().string(), "shot.png") << "left behind: " << e.path();
+  writePng(dir.file("ok.png"), img);  // and where it can be, it is
+  EXPECT_EQ(readPng(dir.file("ok.png")).rgba, img.rgba);
+}
+
 TEST(PatchCache, HardCapAndFreeListOrder) {
   SmallCache c;
   EXPECT_EQ(c.cache.stats().slots, 8u);

@@ -30,6 +30,7 @@
 #include "texture/block_fill.h"
 #include "texture/chart_rotate.h"
 #include "texture/image_codec.h"
+#include "texture/obj_writer.h"
 #include "texture/tiled_image.h"
 
 namespace mt {
@@ -203,6 +204,37 @@ void writeSquareObj(const test::TempDir& dir, const std::string& extraFace = "")
                   "vt 0 0\nvt 0.5 0\nvt 0.5 0.5\nvt 0.6 0.6\nvt 1 1\nvt 0.6 1\n"
                   "usemtl A\nf 1/1 2/2 3/3\n"
                   "usemtl B\nf 1/4/1 3/5/1 4/6/1\n" + extraFace);
+}
+
+// writeTexturedObj writes each file under a temporary name: when a rename fails (the final name
+// is an existing directory) or any later step does, nothing is left under a temporary name, and
+// the files written before it are removed too.
+TEST(TextureObj, AFailedRenameLeavesNoTemporaryFile) {
+  const double positions[9] = {0, 0, 0, 1, 0, 0, 0, 1, 0};
+  const uint32_t triangles[3] = {0, 1, 2}, texture[1] = {0};
+  const float uv[6] = {0, 0, 1, 0, 0, 1};
+  const std::vector<RgbImage> textures = {testPicture(16, 16)};
+  tex::TexturedMeshView m;
+  m.positions = positions;
+  m.vertexCount = 3;
+  m.triangles = triangles;
+  m.triangleCount = 1;
+  m.cornerUV = uv;
+  m.triangleTexture = texture;
+  m.textures = &textures;
+  for (const char* blocked : {"cut.obj", "cut.mtl", "cut_0.png"}) {
+    test::TempDir dir;
+    std::filesystem::create_directory(dir.file(blocked));
+    EXPECT_THROW(tex::writeTexturedObj(dir.file("cut.obj"), m), Error) << blocked;
+    std::vector<std::string> left;
+    for (const auto& e : std::filesystem::directory_iterator(dir.path()))
+      if (e.path().filename() != blocked) left.push_back(e.path().filename().string());
+    EXPECT_TRUE(left.empty()) << blocked << " a directory: left " << ::testing::PrintToString(left);
+  }
+  test::TempDir dir;  // and the same mesh, unblocked, is written
+  tex::ObjWriteInfo info = tex::writeTexturedObj(dir.file("cut.obj"), m);
+  EXPECT_EQ(info.files.size(), 3u);
+  EXPECT_EQ(size_t(std::distance(std::filesystem::directory_iterator(dir.path()), std::filesystem::directory_iterator())), 3u);
 }
 
 TEST(TextureReaders, ObjCornersBecomeWedges) {

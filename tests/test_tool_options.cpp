@@ -255,6 +255,29 @@ TEST(ToolHelp, EveryOptionStatesItsRange) {
   }
 }
 
+// The tools that print progress lines all take -q, --quiet (mtserve's logs requests instead).
+TEST(ToolHelp, EveryToolThatPrintsProgressTakesDashQ) {
+  for (const char* tool : {"mtbuild", "mtgen", "mtverify", "mtrender", "mtexport tiles", "mtstore ingest", "mtstore export",
+                           "mtstore heal", "mtserve"}) {
+    auto r = runLimited(tool, "--help");
+    EXPECT_EQ(r.exitCode, 0) << tool << "\n" << r.output;
+    EXPECT_NE(r.output.find("-q,--quiet"), std::string::npos) << tool << "\n" << r.output;
+  }
+}
+
+// mtgen -q: the progress lines of a large output go, its summary line stays.
+TEST(MtgenOptions, QuietDropsTheProgressLines) {
+  TempDir dir;
+  auto loud = runLimited("mtgen", "-o " + dir.file("a.ply") + " --triangles 5.2M --threads 2", 600);
+  ASSERT_EQ(loud.exitCode, 0) << loud.output;
+  EXPECT_NE(loud.output.find("%  "), std::string::npos) << "no progress line above 5M triangles:\n" << loud.output;
+  auto quiet = runLimited("mtgen", "-o " + dir.file("b.ply") + " --triangles 5.2M --threads 2 -q", 600);
+  ASSERT_EQ(quiet.exitCode, 0) << quiet.output;
+  EXPECT_EQ(quiet.output.find("%  "), std::string::npos) << quiet.output;
+  EXPECT_NE(quiet.output.find("mtgen: wrote " + dir.file("b.ply")), std::string::npos) << quiet.output;
+  EXPECT_EQ(mt::test::runShell("cmp -s " + dir.file("a.ply") + " " + dir.file("b.ply")).exitCode, 0) << "-q changed the bytes";
+}
+
 // ---- mtrender -----------------------------------------------------------------------------------
 
 TEST_F(ToolOptions, MtrenderRefusesNonsenseOptions) {

@@ -28,17 +28,23 @@ struct WedgeHash {
   }
 };
 
-// Text written through Env in large appends.
+// Text written through Env in large appends, under a temporary name renamed over `path` by
+// finish(). Until that rename has succeeded, the destructor removes the temporary file: nothing
+// is left under either name when a write, the sync, the close or the rename fails.
 class TextOut {
  public:
   TextOut(Env* env, const std::string& path) : path_(path), tmp_(uniqueTempName(path)), file_(env->newWritableFile(tmp_)), env_(env) {}
   ~TextOut() {
+    if (renamed_) return;
     if (file_) {
       try {
         file_->close();
-        env_->removeFile(tmp_);
       } catch (...) {
       }
+    }
+    try {
+      env_->removeFile(tmp_);
+    } catch (...) {
     }
   }
   void put(const char* s, size_t n) {
@@ -52,6 +58,7 @@ class TextOut {
     file_->close();
     file_.reset();
     env_->renameFile(tmp_, path_);
+    renamed_ = true;
   }
 
  private:
@@ -62,6 +69,7 @@ class TextOut {
   std::string path_, tmp_, buf_;
   std::unique_ptr<WritableFile> file_;
   Env* env_;
+  bool renamed_ = false;
 };
 
 }  // namespace

@@ -124,7 +124,7 @@ struct BuildCli {
                      "--memory may\nchange). Without --resume the work of an earlier build is removed and the build starts over");
     app.add_option("--stats-json", statsJson,
                    cluster ? "Write build figures and per-rank busy time, bytes, efficiency as JSON"
-                           : "Write build figures (per level, throughput, peak RSS, sizes) as JSON");
+                           : "Write build figures (per level, throughput, CPU user/sys per level and of the ingest, peak RSS,\nsizes) as JSON");
     app.add_option("--task-times", taskTimes,
                    "Write one CSV line per region (level, region, triangles, load/simplify/commit seconds, bytes a\n"
                    "cluster would move): the input of the scaling model in docs/cluster.md");

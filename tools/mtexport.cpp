@@ -25,7 +25,7 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
   auto* tiles = app.add_subcommand("tiles", "Export a 3D Tiles 1.1 tileset");
   std::string input, dir;
-  bool noQuantize = false, modelFrame = false;
+  bool noQuantize = false, modelFrame = false, quiet = false;
   std::string codec = "draco";
   std::string crs;
   tiles->add_option("file", input, "The MT file")->required();
@@ -51,6 +51,7 @@ int main(int argc, char** argv) {
                   "Ignore any CRS: the root transform is a translation to the model's coordinates, taken as ECEF\n"
                   "(the default when the MT file has no CRS)")
       ->excludes(crsOption);
+  tiles->add_flag("-q,--quiet", quiet, "No progress lines on stderr");
   if (int code = mt::cli::parse(app, argc, argv, "mtexport"); code >= 0) return code;
   try {
     mt::requireRegularFile(input, "an MT file");
@@ -59,7 +60,7 @@ int main(int argc, char** argv) {
     o.meshopt = codec == "meshopt";
     o.draco = codec == "draco";
     o.quantize = !noQuantize;
-    o.progress = true;
+    o.progress = !quiet;
     o.crs = crs;
     o.modelFrame = modelFrame;
     mt::interop::TilesReport r = mt::interop::exportTiles(*reader, dir, o);

@@ -294,7 +294,8 @@ class TextOutput final : public MeshOutput {
 };
 
 // ---------------------------------------------------------------------------------------------
-// Progress on stderr: every ~5% for large outputs.
+// Progress on stderr: every ~5% for outputs of more than kProgressTriangles, unless -q.
+constexpr uint64_t kProgressTriangles = 5'000'000;
 
 class Progress {
  public:
@@ -648,6 +649,7 @@ struct Cli {
   std::string textureText;           // --texture: "", charts or fragmented
   mtgen::TextureOptions texture;
   std::string paintInput;  // --paint IN
+  bool quiet = false;      // -q: no progress lines
   CLI::Option* formatOption = nullptr;
 };
 
@@ -813,7 +815,7 @@ bool chooseFormat(Cli& c) {
 
 // Streams the mesh to the temporary name, renames it over the output and prints the summary line.
 // --texture: the pages are written first (each renamed when complete), then the mesh naming them.
-void writeMesh(const OutputSettings& settings, const ScanGenerator& generator, bool shuffle,
+void writeMesh(const OutputSettings& settings, const ScanGenerator& generator, bool shuffle, bool quiet,
                const mtgen::TextureOptions* texture = nullptr) {
   std::unique_ptr<MeshOutput> out;
   std::unique_ptr<mtgen::TextureAtlas> atlas;
@@ -834,7 +836,7 @@ void writeMesh(const OutputSettings& settings, const ScanGenerator& generator, b
     out = std::make_unique<TextOutput>(settings, generator.vertexCount(), generator.triangleCount());
   const uint64_t triangles = generator.triangleCount();
   const uint64_t vertices = out->wantsVertices() ? generator.vertexCount() : 0;
-  Progress progress(vertices + triangles, triangles, triangles > 5'000'000);
+  Progress progress(vertices + triangles, triangles, !quiet && triangles > kProgressTriangles);
   if (out->wantsVertices()) streamVertices(generator, settings, *out, progress);
   streamFaces(generator, shuffle, *out, progress, atlas.get());
   out->finish();
@@ -943,6 +945,9 @@ int run(int argc, char** argv) {
                  "Instead of generating: copy the mesh IN (PLY, OBJ, OFF, STL, glTF) to the output (binary PLY) with\n"
                  "the --colors field painted on its vertices (over IN's bounding box), e.g. to colour a scangen scan.\n"
                  "Holds IN's triangles in RAM (12 bytes each); IN's own colours are replaced. Not with --texture");
+  app.add_flag("-q,--quiet", c.quiet,
+               "No progress lines on stderr (printed for outputs of more than " + std::to_string(kProgressTriangles / 1000000) +
+                   "M triangles); the summary line stays");
   if (int code = mt::cli::parse(app, argc, argv, "mtgen: error"); code >= 0) return code;
   if (!checkSurface(c) || !chooseFormat(c)) return 1;
   // --paint copies IN with the colour field: it writes no texture coordinates nor pages, so a
@@ -963,7 +968,7 @@ int run(int argc, char** argv) {
     if (c.settings.colors) c.settings.colorField = colorFieldOf(generator);
     mt::checkOutputPath(c.settings.path, {});  // not a directory, and its folder exists
     armTemporary(c.settings);
-    writeMesh(c.settings, generator, c.shuffle, c.textureText.empty() ? nullptr : &c.texture);
+    writeMesh(c.settings, generator, c.shuffle, c.quiet, c.textureText.empty() ? nullptr : &c.texture);
   } catch (const std::exception& e) {
     return mt::reportError("mtgen", e);
   }

@@ -154,14 +154,6 @@ class GltfReader final : public MeshReader {
     planInstances();
     planMaterials();
   }
-  ~GltfReader() override {
-    for (const std::string& f : ownedFiles_) {
-      try {
-        env_->removeFile(f);
-      } catch (const Error&) {
-      }
-    }
-  }
 
   const MeshHeader& header() const override { return header_; }
 
@@ -691,8 +683,7 @@ class GltfReader final : public MeshReader {
       file = dir + "/" + base + "-image" + std::to_string(index) + ext;
       if (own) file = uniqueTempName(file) + ext;
       auto out = env_->newWritableFile(file);
-      ownedFiles_.push_back(file);
-      if (!own) ownedFiles_.pop_back();  // the scratch folder's owner removes it
+      if (own) ownedFiles_.paths.push_back(file);  // else the scratch folder's owner removes it
       std::vector<uint8_t> piece;
       for (uint64_t off = 0; off < size; off += piece.size()) {
         piece.resize(size_t(std::min<uint64_t>(1 << 20, size - off)));
@@ -981,7 +972,24 @@ class GltfReader final : public MeshReader {
   std::string path_;
   MeshOpenOptions options_;
   std::map<int64_t, std::string> imageFiles_;  // image index -> the file holding its bytes
-  std::vector<std::string> ownedFiles_;         // copies of embedded images removed with the reader
+  // The copies of embedded images made in $TMPDIR: removed with the reader, and when its
+  // constructor throws (e.g. at a later image with bad magic bytes), for then the members are
+  // destroyed but not the reader.
+  struct OwnedFiles {
+    std::vector<std::string> paths;
+    OwnedFiles() = default;
+    OwnedFiles(const OwnedFiles&) = delete;
+    OwnedFiles& operator=(const OwnedFiles&) = delete;
+    ~OwnedFiles() {
+      for (const std::string& f : paths) {
+        try {
+          Env::Default()->removeFile(f);
+        } catch (const Error&) {
+        }
+      }
+    }
+  };
+  OwnedFiles ownedFiles_;
   Env* env_ = nullptr;
   std::unique_ptr<RandomAccessFile> file_;
   uint64_t size_ = 0, jsonStart_ = 0, binStart_ = UINT64_MAX, binLength_ = 0;
