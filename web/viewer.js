@@ -241,10 +241,8 @@ state.cracks = (bgHex, maxArea = 400, inject = false) => {
     }
   return { crackPixels, components, surfacePixels: surface };
 };
-// The image against a PNG at `url`: the share of pixels whose RGB differs by more than `tol`
-// (sum of absolute differences), and the mean absolute difference per channel.
-state.compare = async (url, tol = 48) => {
-  const img = pixels();
+// The RGBA8 pixels of the PNG at `url`, or {error} when its size is not the image's `img`.
+async function referencePixels(url, img) {
   const ref = await new Promise((resolve, reject) => {
     const im = new Image();
     im.onload = () => resolve(im);
@@ -252,12 +250,19 @@ state.compare = async (url, tol = 48) => {
     im.src = url;
   });
   if (ref.width !== img.width || ref.height !== img.height) return { error: `size ${ref.width}x${ref.height} vs ${img.width}x${img.height}` };
-  const c2 = document.createElement('canvas');
-  c2.width = ref.width;
-  c2.height = ref.height;
-  const g = c2.getContext('2d');
+  const c = document.createElement('canvas');
+  c.width = ref.width;
+  c.height = ref.height;
+  const g = c.getContext('2d');
   g.drawImage(ref, 0, 0);
-  const r = g.getImageData(0, 0, ref.width, ref.height).data;
+  return g.getImageData(0, 0, ref.width, ref.height).data;
+}
+// The image against a PNG at `url`: the share of pixels whose RGB differs by more than `tol`
+// (sum of absolute differences), and the mean absolute difference per channel.
+state.compare = async (url, tol = 48) => {
+  const img = pixels();
+  const r = await referencePixels(url, img);
+  if (r.error) return r;
   let off = 0, sum = 0;
   const n = img.width * img.height;
   for (let i = 0; i < n; ++i) {
@@ -300,19 +305,8 @@ state.cacheAudit = () => {
 // background `bgHex` in both is background), as mtrender/image.h's psnr does.
 state.psnr = async (url, bgHex) => {
   const img = pixels();
-  const ref = await new Promise((resolve, reject) => {
-    const im = new Image();
-    im.onload = () => resolve(im);
-    im.onerror = () => reject(new Error(`cannot load ${url}`));
-    im.src = url;
-  });
-  if (ref.width !== img.width || ref.height !== img.height) return { error: `size ${ref.width}x${ref.height} vs ${img.width}x${img.height}` };
-  const c2 = document.createElement('canvas');
-  c2.width = ref.width;
-  c2.height = ref.height;
-  const g = c2.getContext('2d');
-  g.drawImage(ref, 0, 0);
-  const r = g.getImageData(0, 0, ref.width, ref.height).data;
+  const r = await referencePixels(url, img);
+  if (r.error) return r;
   const bg = [parseInt(bgHex.slice(0, 2), 16), parseInt(bgHex.slice(2, 4), 16), parseInt(bgHex.slice(4, 6), 16)];
   const isBg = (d, i) => Math.abs(d[4 * i] - bg[0]) <= 3 && Math.abs(d[4 * i + 1] - bg[1]) <= 3 && Math.abs(d[4 * i + 2] - bg[2]) <= 3;
   let all = 0, covered = 0, n = 0;
