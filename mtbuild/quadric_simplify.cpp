@@ -871,19 +871,13 @@ size_t quadricSimplify(uint32_t* destination, double* destinationPositions, uint
   for (size_t i = 0; i < indexCount; ++i) assert(indices[i] < vertexCount);
   QuadricSimplifyStats total;
   const int passes = targetIndexCount < indexCount ? std::max(options.passes, 1) : 1;
-  if (passes == 1) {
-    const size_t count = simplifyOnce(destination, destinationPositions, moved, indices, indexCount, positions,
-                                      vertexCount, positionStride, locked, targetIndexCount, options, total);
-    if (stats) *stats = total;
-    return count;
-  }
   // Each pass reads the previous one's triangles, positions and colours (the quadrics, boundary
   // planes and colour quadrics are rebuilt from them) and writes the next; the last writes the
-  // caller's buffers. A vertex unmoved by every pass keeps its input position bit for bit.
+  // caller's buffers. A vertex unmoved by every pass keeps its input position bit for bit. One
+  // pass is the first and the last: it reads the caller's input and writes the caller's buffers.
   std::vector<uint32_t> tris;
   std::vector<double> pos;
   std::vector<uint8_t> colors, passMoved;
-  if (moved) std::memset(moved, 0, vertexCount);
   const double from = double(indexCount / 3), to = double(targetIndexCount / 3);
   size_t count = indexCount;
   for (int pass = 1; pass <= passes; ++pass) {
@@ -897,14 +891,16 @@ size_t quadricSimplify(uint32_t* destination, double* destinationPositions, uint
     if (!last && options.colors) nextColors.resize(vertexCount * 4), o.destinationColors = nextColors.data();
     std::vector<uint32_t> outTris(last ? 0 : count);
     std::vector<double> outPos(last ? 0 : vertexCount * 3);
-    passMoved.resize(moved ? vertexCount : 0);
+    // The first pass writes the caller's moved flags (it clears them first); later ones add theirs.
+    if (pass > 1 && moved) passMoved.resize(vertexCount);
+    uint8_t* passMovedOut = pass == 1 ? moved : (moved ? passMoved.data() : nullptr);
     const uint32_t* in = pass == 1 ? indices : tris.data();
     const double* inPos = pass == 1 ? positions : pos.data();
     const size_t stride = pass == 1 ? positionStride : 3 * sizeof(double);
     count = simplifyOnce(last ? destination : outTris.data(), last ? destinationPositions : outPos.data(),
-                         moved ? passMoved.data() : nullptr, in, count, inPos, vertexCount, stride, locked, target, o,
-                         total);
-    for (size_t v = 0; v < passMoved.size(); ++v) moved[v] |= passMoved[v];
+                         passMovedOut, in, count, inPos, vertexCount, stride, locked, target, o, total);
+    if (pass > 1 && moved)
+      for (size_t v = 0; v < vertexCount; ++v) moved[v] |= passMoved[v];
     if (!last) {
       outTris.resize(count);
       tris.swap(outTris), pos.swap(outPos), colors.swap(nextColors);
