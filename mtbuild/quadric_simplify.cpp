@@ -263,6 +263,11 @@ constexpr double kFairQuality = 0.3;
 // length although its tip then ends far from the result; the input->cut maximum comes from
 // such spots. Where the old positions lie near the new faces (most collapses) the quadric's
 // cost stands. 0.5, measured against 0.15-2 and against adding the term (docs/mtbuild.md).
+// The same floor covers the other way, surface made far from the old one: away2_ also takes the
+// squared distance from the midpoint of each edge the collapse makes to the old faces around its
+// ends. An edge whose ends stay on the surface can span a concavity (a dimple, a groove) and run
+// off it along its length, which the ends' distances do not see; the cut->input maximum comes
+// from such spots (docs/mtbuild.md, "Sixth pass").
 constexpr double kAwayWeight = 0.5;
 
 class Simplifier {
@@ -332,9 +337,10 @@ class Simplifier {
   // the check's stamp, with usesS_ (usesR_) triangles there.
   std::vector<uint32_t> markS_, markR_, usesS_, usesR_;
   uint32_t stamp_ = 0;
-  double minQuality_ = 1;
-  double away2_ = 0;  // squared distance from the collapse's old positions to its new faces
-  // the worst quality of a face the checked collapse changes
+  double minQuality_ = 1;  // the worst quality of a face the checked collapse changes
+  // The squared distance from the collapse's old positions to its new faces, or from its new
+  // edges' midpoints to its old faces, whichever is larger (kAwayWeight).
+  double away2_ = 0;
 };
 
 Simplifier::Simplifier(const uint32_t* indices, size_t indexCount, const double* positions, size_t vertexCount,
@@ -660,7 +666,25 @@ Verdict Simplifier::check(const Candidate& c) {
       awayR = std::min(awayR, squaredPointTriangleDistance(&pos_[r * 3], n[0], n[1], n[2]));
       if (c.moves) awayS = std::min(awayS, squaredPointTriangleDistance(&pos_[s * 3], n[0], n[1], n[2]));
     }
-  away2_ = std::max(awayR == DBL_MAX ? 0 : awayR, awayS == DBL_MAX ? 0 : awayS);
+  // How far the edges the collapse makes (s's new edges: to r's neighbours, and to all of them
+  // when s moves) are from the old surface, by their midpoints against the old faces of s and r.
+  double edgeAway = 0;
+  auto edgeTo = [&](uint32_t a) {
+    double m[3];
+    for (int k = 0; k < 3; ++k) m[k] = 0.5 * (c.p[k] + pos_[a * 3 + k]);
+    double nearest = DBL_MAX;
+    for (int pass = 0; pass < 2; ++pass)
+      for (uint32_t t : pass == 0 ? tr_ : ts_)
+        nearest = std::min(nearest, squaredPointTriangleDistance(m, &pos_[tri_[t * 3] * 3], &pos_[tri_[t * 3 + 1] * 3],
+                                                                 &pos_[tri_[t * 3 + 2] * 3]));
+    edgeAway = std::max(edgeAway, nearest);
+  };
+  for (uint32_t a : nr_)
+    if (a != s && markS_[a] != stampS) edgeTo(a);
+  if (c.moves)
+    for (uint32_t a : ns_)
+      if (a != r) edgeTo(a);
+  away2_ = std::max({awayR == DBL_MAX ? 0 : awayR, awayS == DBL_MAX ? 0 : awayS, edgeAway});
   if (c.moves && options_.gridStep > 0) {
     const Cell k = cellOf(c.g);
     uint32_t n = cells_.count(k);
