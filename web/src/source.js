@@ -43,8 +43,15 @@ export class HttpSource {
    * script, before three.js and the modules load): the header and the file's last `tailBytes`.
    */
   static startEarly(url, tailBytes = kDefaultTailBytes, headerBytes = 256) {
-    const get = (range) => fetch(url, { headers: { Range: range } });
-    return { head: get(`bytes=0-${headerBytes - 1}`), tail: get(`bytes=-${tailBytes}`), tailBytes };
+    // A partial answer's body is read at once (`mtBody`), not when the opening gets to it.
+    const get = (range) => fetch(url, { headers: { Range: range } }).then((r) => {
+      if (r.status === 206) (r.mtBody = r.arrayBuffer()).catch(() => {});
+      return r;
+    });
+    const e = { head: get(`bytes=0-${headerBytes - 1}`), tail: get(`bytes=-${tailBytes}`), tailBytes };
+    e.head.catch(() => {});  // reported when the opening awaits them
+    e.tail.catch(() => {});
+    return e;
   }
   /**
    * Reads the last `tail` bytes and learns the file size from Content-Range. The read asks for the
@@ -63,7 +70,7 @@ export class HttpSource {
     const m = /(\d+)-(\d+)\/(\d+)\s*$/.exec(cr);
     if (!m) throw new Error(`${this.url}: no file size in the Content-Range header of a 206 answer ("${cr}")`);
     this.size = Number(m[3]);
-    const buf = await r.arrayBuffer();
+    const buf = await (r.mtBody || r.arrayBuffer());
     if (buf.byteLength !== Number(m[2]) - Number(m[1]) + 1 || Number(m[2]) !== this.size - 1 || buf.byteLength < Math.min(tail, this.size))
       throw new Error(`${this.url}: asked for ${range}, got ${buf.byteLength} bytes (Content-Range "${cr}")`);
     this.bytesFetched += buf.byteLength;
@@ -117,7 +124,7 @@ export class HttpSource {
     // A read that ends in the kept tail asks only for the bytes before it.
     const to = k && end > k.begin ? k.begin : end;
     if (!r) r = await this._fetch(`bytes=${begin}-${to - 1}`);
-    let b = await r.arrayBuffer();
+    let b = await (r.mtBody || r.arrayBuffer());
     if (b.byteLength > to - begin) b = b.slice(0, to - begin);  // the early header's request, asked before `end` was known
     if (b.byteLength !== to - begin)
       throw new Error(`${this.url}: asked for bytes ${begin}-${to - 1}, got ${b.byteLength} bytes`);
