@@ -13,6 +13,8 @@
 //   corrupted     a copy of the file with damaged payloads: warnings naming the patches, the page
 //                 keeps drawing frames;
 //   no-ranges     mtserve --no-ranges (200 instead of 206): the page shows the clear message;
+//   still-share   a still frame's chunk sized for stillShareLoading of the budget while loads are
+//                 pending, stillShare otherwise (synthetic chunk times);
 //   open-requests the opening by HTTP (HttpSource, tails of several sizes) gives FileSource's scene
 //                 with no byte read twice; the page's early requests (viewer.html) are the only
 //                 ones to its first image;
@@ -268,6 +270,31 @@ await test('open-requests', async () => {
     notes.push(`page${q}: 2 requests, ${st.reads.kept} reads from the tail`);
   }
   return notes.join('; ');
+});
+
+await test('still-share', async () => {
+  // A still frame's chunk while loads are pending is sized for stillShareLoading of the budget,
+  // otherwise for stillShare; the still cut's size (stillFullChunk) always for stillShare. Chunks
+  // of 10,000 triangles drawn in 10 ms (1000 a ms) under a 50 ms budget: 1000 x (0.35 x 50 - 2)
+  // = 15,500 while loading, 1000 x (0.7 x 50 - 2) = 33,000 (after doubling from 20,000) once idle.
+  const { page } = await open('file=/data/t.mt&tol=2&budget=50');
+  const r = await page.evaluate(() => {
+    const mt = window.mtViewer.mt, out = [];
+    let pending = true;
+    mt.server.idle = () => !pending;
+    mt.stillRate = { triangles: 0, ms: 0 };
+    mt.stillChunk = mt.stillFullChunk = 0;
+    for (const p of [true, true, true, false, false]) {
+      pending = p;
+      mt._measureChunk(10000, 10);
+      out.push([Math.round(mt.stillChunk), Math.round(mt.stillFullChunk)]);
+    }
+    return out;
+  });
+  await page.close();
+  const want = [[15500, 20000], [15500, 33000], [15500, 33000], [31000, 33000], [33000, 33000]];
+  check(JSON.stringify(r) === JSON.stringify(want), `chunks ${JSON.stringify(r)}, want ${JSON.stringify(want)}`);
+  return `chunk while loading 15,500, idle 33,000 triangles (at 1000 a ms)`;
 });
 
 await test('colours', async () => {
