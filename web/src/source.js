@@ -109,7 +109,7 @@ export class HttpSource {
         // The file is shorter than the tail read: the page's early header request is not needed.
         const head = this.early.head;
         this.early.head = null;
-        head.then((r) => r.body && r.body.cancel(), () => {});
+        head.then((r) => (r.mtBody || !r.body ? null : r.body.cancel())).catch(() => {});
       }
       return k.buf.slice(begin - k.begin, end - k.begin);
     }

@@ -259,8 +259,11 @@ await test('open-requests', async () => {
   // modules, are the opening's only requests up to the coarsest cut loaded (the 287 KiB file lies
   // in the tail: index and coarsest cut); with noearly the module makes the same two itself.
   for (const q of ['', '&noearly']) {
-    const { page } = await open(`file=/data/t.mt&tol=2${q}`);
+    const { page, log } = await open(`file=/data/t.mt&tol=2${q}`);
     await page.waitForFunction(() => window.mtViewer.firstImageMs !== null, null, { timeout: 60000 });
+    await page.waitForTimeout(300);  // an unused early request's answer settles
+    const errors = log.filter((m) => m.startsWith('pageerror') || /Uncaught|Unhandled/.test(m));
+    check(errors.length === 0, `page${q}: ${errors[0]}`);
     const st = await page.evaluate(() => ({ reads: window.mtViewer.openReads, early: !!window.mtEarly,
       files: performance.getEntriesByType('resource').filter((r) => r.name.endsWith('/data/t.mt') && r.startTime < window.mtViewer.openTimes.coarsest).length }));
     await page.close();
