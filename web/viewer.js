@@ -42,6 +42,7 @@ async function main() {
   const opening = MTObject.open(file, {
     precompile,
     pool: window.mtWorkerPool,
+    early: window.mtEarly && window.mtEarly.url === file ? window.mtEarly : undefined,
     pixelTolerance: Number(q.get('tol') || 1),
     budgetMs: Number(q.get('budget') || 50),
     fixedTriangles: Number(q.get('fixed') || 0),
@@ -52,6 +53,8 @@ async function main() {
     cacheBytes: Number(q.get('cache') || 256) * 2 ** 20,
     // twopass=T: back faces in a second pass up to T triangles a pixel (default 1/256; 0: one pass).
     twoPassPerPixel: q.has('twopass') ? Number(q.get('twopass')) : undefined,
+    // loadshare=S: the still frames' drawing share while loads are pending (MTObject.stillShareLoading).
+    stillShareLoading: q.has('loadshare') ? Number(q.get('loadshare')) : undefined,
     onWarning: (m) => {
       state.warnings.push(m);
       warnBox.textContent = `${state.warnings.length} damaged patch(es) ${/drawn untextured/.test(m) ? 'drawn untextured' : 'skipped'}: ${m}`;
@@ -122,7 +125,8 @@ async function main() {
   state.ready = true;
   state.fileSize = mt.mt.fileSize;
   state.crs = mt.mt.crs;  // the file's coordinate reference system ('' when it names none)
-  state.openBytes = mt.mt.source.bytesFetched;
+  state.openBytes = mt.mt.source.bytesFetched;  // header, DAG, index and the coarsest cut
+  state.openReads = mt.openReads;  // {requests, kept}: range requests to the coarsest cut, reads answered from the file's tail
   state.budgetMs = mt.extract.options.budgetMs;
   state.tolerance = mt.extract.options.pixelTolerance;
   let i = 0, fpsAvg = 0, last = performance.now();

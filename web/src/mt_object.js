@@ -23,13 +23,17 @@ export class MTObject extends THREE.Group {
    * @param {string} url
    * @param {{pixelTolerance?:number, budgetMs?:number, cacheBytes?:number, workers?:number,
    *          libs?:object, material?:THREE.Material, onWarning?:(msg:string)=>void, source?:object,
-   *          precompile?:{renderer:THREE.WebGLRenderer, scene:THREE.Scene, camera:THREE.Camera}}} [options]
+   *          precompile?:{renderer:THREE.WebGLRenderer, scene:THREE.Scene, camera:THREE.Camera},
+   *          early?:object, tailBytes?:number}} [options]
    * `precompile`: the materials' shaders are compiled for that renderer and scene (its lights)
    * while the coarsest cut loads, so the first frame does not wait for them.
    */
   static async open(url, options = {}) {
     const times = { start: performance.now() };  // the opening's milestones (performance.now(), ms)
-    const source = options.source || new HttpSource(url);
+    // `early`: the header and tail requests the page started before its modules loaded
+    // (viewer.html; HttpSource.startEarly); the tail's bytes answer the index read and the
+    // coarsest patches' reads when they lie in it.
+    const source = options.source || new HttpSource(url, { early: options.early, tailBytes: options.tailBytes });
     const libs = Object.assign(defaultLibUrls(), options.libs || {});
     // Workers the page started (viewer.html, before its modules load), or started here: they load
     // the decoders while the index is read.
@@ -110,7 +114,14 @@ export class MTObject extends THREE.Group {
     // cost here is mostly fixed (SwiftShader clears and presents 1280x720 whatever the cut), so that
     // model left the chunks at 1-6 k triangles and the still cut at 128 x its 1000-triangle floor.
     this.stillRate = { triangles: 0, ms: 0 };  // decayed sums over the chunks drawn
+    // The share of a still frame's budget its chunk may take: while the still view's patches still
+    // load, a smaller one, so that the drawing leaves the cores to the decoding workers (on a
+    // software renderer both compete for the same cores, and the cut at the tolerance waits for
+    // its loads, not for the images on the way).
+    this.stillShare = options.stillShare ?? 0.7;
+    this.stillShareLoading = options.stillShareLoading ?? 0.35;
     this.stillChunk = 0;  // triangles a still frame draws (0: not measured yet)
+    this.stillFullChunk = 0;  // the same at the full share (stillShare): the still cut's unit
     this.stillCount = 0;
     this.accum = null;  // {list: Mesh[], next, err}
     this.shownErr = 0;
@@ -196,6 +207,11 @@ void main() {
       poll();
     });
     if (this.openTimes) this.openTimes.coarsest = performance.now();
+    // The file's tail, kept since the opening, has served the index and the coarsest cut.
+    if (this.mt.source.release) {
+      this.openReads = { kept: this.mt.source.keptReads, requests: this.mt.source.requests };
+      this.mt.source.release();
+    }
     await compiling;
     if (this.openTimes) this.openTimes.compiled = performance.now();
     this.extract.pinStart();
@@ -384,7 +400,7 @@ void main() {
       // The next image may hold K chunks, or 4x the image on screen: the images drawn before the
       // one at the tolerance then cost at most a third of its drawing (1/4 + 1/16 + ...), and the
       // screen still improves in steps meanwhile.
-      this.extract.stillTriangles = Math.max(this.stillFrames * this.stillChunk, 4 * this.shownTriangles);
+      this.extract.stillTriangles = Math.max(this.stillFrames * this.stillFullChunk, 4 * this.shownTriangles);
       st = this.extract.update(this.frame, view, ahead);
       this.cutChanged = st.refinements + st.coarsenings > 0 || !this.accum;
     }
@@ -531,7 +547,7 @@ void main() {
         this.blitCamera = new THREE.OrthographicCamera(-1, 1, 1, -1, 0, 1);
       }
       const a = this.accum;
-      const budget = Math.max(this.extract.frameBudget, this.stillChunk, 1000);
+      const budget = Math.max(this.extract.frameBudget, this.server.idle() ? this.stillFullChunk : this.stillChunk, 1000);
       const chunk = new Set();
       while (a.next < a.list.length && (chunk.size === 0 || drawn + a.list[a.next].geometry.index.count / 3 <= budget)) {
         const m = a.list[a.next++];
@@ -584,15 +600,24 @@ void main() {
   }
 
   // A chunk of `triangles` took `ms` to draw (synchronised): the still chunk becomes what fits in
-  // the frame's drawing share (70% of the budget, less the update's deadline), from the decayed
-  // rate of the chunks so far, at most doubling a frame (a wrong rate costs one frame, not many).
+  // the frame's drawing share (stillShare of the budget, stillShareLoading while loads are pending,
+  // less the update's deadline), from the decayed rate of the chunks so far, at most doubling a
+  // frame (a wrong rate costs one frame, not many).
   _measureChunk(triangles, ms) {
     const r = this.stillRate;
     r.triangles = 0.7 * r.triangles + triangles;
     r.ms = 0.7 * r.ms + Math.max(ms, 0.1);
+    // The cut's size follows the full share (a smaller cut while loading would load less); the
+    // chunk drawn a frame, the share of the moment.
+    this.stillFullChunk = this._chunkFor(this.stillShare, triangles, this.stillFullChunk);
+    this.stillChunk = this._chunkFor(this.server.idle() ? this.stillShare : this.stillShareLoading, triangles, this.stillChunk);
+  }
+  // The still chunk for a share of the budget, from the measured rate (at most doubling).
+  _chunkFor(share, triangles, last) {
+    const r = this.stillRate;
     const extractMs = Math.min(2, this.extract.options.budgetMs / 20);
-    const fit = (r.triangles / r.ms) * (0.7 * this.extract.options.budgetMs - extractMs);
-    this.stillChunk = Math.max(1000, Math.min(fit, 2 * Math.max(triangles, this.stillChunk)));
+    const fit = (r.triangles / r.ms) * (share * this.extract.options.budgetMs - extractMs);
+    return Math.max(1000, Math.min(fit, 2 * Math.max(triangles, last)));
   }
 
   dispose() {

@@ -1,5 +1,5 @@
-// Opening an MT file from a byte source (source.js): footer, header, then the DAG and the index in
-// one range read, the footer checksum checked (XXH64 over header + index + metadata block), the
+// Opening an MT file from a byte source (source.js): footer and header at once, then the DAG and
+// the index in one range read (or none: an HTTP source's tail read usually holds them), the footer checksum checked (XXH64 over header + index + metadata block), the
 // records cross-checked and the metadata block read (format.js), the scene built (scene.js).
 // Payloads are read later, on demand.
 
@@ -24,18 +24,25 @@ export async function openMtFile(source) {
   // One suffix read gives the size and the footer; the header follows.
   const now = () => performance.now();
   const times = { begin: now() };  // the opening's steps (the bench's profile of the first image)
-  const tail = await source.openTail(kFooterSize);
+  const hashing = hasher();  // its wasm compiled while the reads are under way
+  // The header is read at the same time (it does not need the size). An HTTP source's tail read
+  // takes the file's last few MiB, which usually hold the whole index section (then the read
+  // below is answered from them) and the coarsest patches.
+  const [tailRead, headRead] = await Promise.allSettled([source.openTail(kFooterSize), source.read(0, kHeaderSize)]);
+  if (tailRead.status === 'rejected') throw tailRead.reason;
+  const tail = tailRead.value;
   times.tail = now();
   const size = source.size;
   if (size < kHeaderSize + kFooterSize)
     throw new MtError(source.path, `not an MT file: ${size} bytes is shorter than header + footer (truncated?)`);
-  const headerBuf = await source.read(0, kHeaderSize);
+  if (headRead.status === 'rejected') throw headRead.reason;
+  const headerBuf = headRead.value;
   const { header, footer } = readHeaderAndFooter(source.path, size, headerBuf, tail);
   const range = indexRange(source.path, size, header);
   times.header = now();
   const meta = await source.read(range.begin, range.end);
   times.read = now();
-  const { create64 } = await hasher();
+  const { create64 } = await hashing;
   const h = create64(0n);
   h.update(new Uint8Array(headerBuf));
   h.update(new Uint8Array(meta));

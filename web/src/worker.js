@@ -58,13 +58,15 @@ function toRender(d) {
   let nf = d.normals;
   if (!nf) {
     nf = new Float32Array(n * 3);
-    const t = d.triangles;
+    const t = d.triangles, p = positions;
     for (let k = 0; k < t.length; k += 3) {
       const a = 3 * t[k], b = 3 * t[k + 1], cc = 3 * t[k + 2];
-      const e1 = [positions[b] - positions[a], positions[b + 1] - positions[a + 1], positions[b + 2] - positions[a + 2]];
-      const e2 = [positions[cc] - positions[a], positions[cc + 1] - positions[a + 1], positions[cc + 2] - positions[a + 2]];
-      const fn = [e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]];
-      for (const v of [a, b, cc]) for (let x = 0; x < 3; ++x) nf[v + x] += fn[x];
+      const ux = p[b] - p[a], uy = p[b + 1] - p[a + 1], uz = p[b + 2] - p[a + 2];
+      const vx = p[cc] - p[a], vy = p[cc + 1] - p[a + 1], vz = p[cc + 2] - p[a + 2];
+      const fx = uy * vz - uz * vy, fy = uz * vx - ux * vz, fz = ux * vy - uy * vx;  // area-weighted face normal
+      nf[a] += fx, (nf[a + 1] += fy), (nf[a + 2] += fz);
+      nf[b] += fx, (nf[b + 1] += fy), (nf[b + 2] += fz);
+      nf[cc] += fx, (nf[cc + 1] += fy), (nf[cc + 2] += fz);
     }
   }
   const normals = new Int8Array(n * 3);

@@ -2,6 +2,9 @@
 //                    [--dump FRAMES.json] (the per-frame records of window.mtViewer.frames)
 //                    [--fixed N] (a fixed render budget of N triangles instead of the time model: raw draw cost)
 //                    [--query K=V&...] (more viewer.html parameters, e.g. side=front)
+//                    [--first-only] (stop at the first image: its time and steps)
+//                    [--web DIR] (serve this copy of web/ instead, e.g. main's, for interleaved comparisons;
+//                     it must have node_modules/)
 // The web viewer's figures on one MT file served by mtserve, in headless Chromium at 1280x720
 // (bench/web.sh runs it): time to the first image after page load, the share of frames within the
 // page's budget over a 600-frame orbit path, the cache against its cap, bytes fetched per frame and
@@ -24,8 +27,9 @@ const [binDir, file] = args;
 const frames = Number(opt('--frames', 600)), budget = Number(opt('--budget', 50)), tol = Number(opt('--tol', 1));
 const cacheMiB = Number(opt('--cache', 256)), shots = opt('--shots', ''), dump = opt('--dump', '');
 const fixed = Number(opt('--fixed', 0));
+const firstOnly = args.includes('--first-only');  // the first image's lines only (no path)
 const root = fs.mkdtempSync(path.join(os.tmpdir(), 'mtbench-'));
-fs.symlinkSync(path.resolve(here, '..'), path.join(root, 'web'));
+fs.symlinkSync(path.resolve(opt('--web', path.resolve(here, '..'))), path.join(root, 'web'));
 fs.symlinkSync(path.resolve(file), path.join(root, 'model.mt'));
 const srv = await new Promise((resolve, reject) => {
   const p = spawn(path.join(binDir, 'mtserve'), [root, '--port', '0', '-q'], { stdio: ['ignore', 'pipe', 'inherit'] });
@@ -35,7 +39,17 @@ const srv = await new Promise((resolve, reject) => {
   });
   p.on('exit', (c) => reject(new Error(`mtserve exited ${c}`)));
 });
-const browser = await chromium.launch({
+let browser = null;
+// The browser, mtserve and the served directory go on every way out (an error, a time-out, ^C).
+async function cleanup() {
+  if (browser) await browser.close().catch(() => {});
+  browser = null;
+  srv.proc.kill();
+  fs.rmSync(root, { recursive: true, force: true });
+}
+process.on('SIGINT', () => cleanup().then(() => process.exit(130)));
+try {
+browser = await chromium.launch({
   executablePath: '/usr/bin/chromium', headless: true,
   args: ['--no-sandbox', '--disable-gpu', '--disable-background-networking', '--disable-component-update', '--disable-sync',
     '--no-first-run', '--use-angle=swiftshader', '--enable-unsafe-swiftshader'],
@@ -70,11 +84,19 @@ const page = await browser.newPage({ viewport: { width: 1280, height: 720 } });
 page.on('pageerror', (e) => console.error('pageerror:', e.message));
 const q = `file=/model.mt&tol=${tol}&budget=${budget}&cache=${cacheMiB}&path=orbit&frames=${frames}` + (fixed ? `&fixed=${fixed}` : '') + (opt('--query', '') ? `&${opt('--query', '')}` : '');
 await page.goto(`${srv.base}/web/viewer.html?${q}`);
-const loadMs = await page.evaluate(() => performance.timing.loadEventEnd - performance.timing.navigationStart);
 await page.waitForFunction(() => window.mtViewer.firstImageMs !== null || window.mtViewer.error, null, { timeout: 60000 });
+const loadMs = await page.evaluate(() => performance.timing.loadEventEnd - performance.timing.navigationStart);
 if (shots) {
   await page.waitForTimeout(1500);
   await page.screenshot({ path: path.join(shots, 'web-viewer-moving.png') });
+}
+if (firstOnly) {
+  const s = await page.evaluate(() => ({ first: window.mtViewer.firstImageMs, fileSize: window.mtViewer.fileSize, openBytes: window.mtViewer.openBytes,
+    openTimes: window.mtViewer.openTimes, openReads: window.mtViewer.openReads, error: window.mtViewer.error,
+    fileRequests: performance.getEntriesByType('resource').filter((r) => r.name.endsWith('/model.mt') && r.startTime < window.mtViewer.firstImageMs).map((r) => [r.startTime, r.responseEnd]) }));
+  await cleanup();
+  reportFirst(s, loadMs);
+  process.exit(s.error ? 1 : 0);
 }
 const cpu0 = browserCpuMs(), wall0 = performance.now(), frame0 = await page.evaluate(() => window.mtViewer.frames.length);
 const load0 = loadavg();
@@ -92,10 +114,17 @@ if (shots) await page.screenshot({ path: path.join(shots, 'web-viewer-still.png'
 const raw = await page.evaluate(() => window.mtViewer.drawRate(3));
 const s = await page.evaluate(() => ({ frames: window.mtViewer.frames, first: window.mtViewer.firstImageMs, fileSize: window.mtViewer.fileSize,
   openBytes: window.mtViewer.openBytes, resources: performance.getEntriesByType('resource').map((r) => [r.name.replace(location.origin, ''), r.startTime, r.responseEnd, r.transferSize]).filter((r) => r[1] < window.mtViewer.firstImageMs),
-  nav: (({ responseEnd, domInteractive, domContentLoadedEventEnd }) => ({ responseEnd, domInteractive, domContentLoadedEventEnd }))(performance.getEntriesByType('navigation')[0]), openTimes: window.mtViewer.openTimes, moduleMs: window.mtViewer.moduleMs, error: window.mtViewer.error, warnings: window.mtViewer.warnings.length }));
-await browser.close();
-srv.proc.kill();
-fs.rmSync(root, { recursive: true, force: true });
+  nav: (({ responseEnd, domInteractive, domContentLoadedEventEnd }) => ({ responseEnd, domInteractive, domContentLoadedEventEnd }))(performance.getEntriesByType('navigation')[0]), openTimes: window.mtViewer.openTimes, openReads: window.mtViewer.openReads, error: window.mtViewer.error, warnings: window.mtViewer.warnings.length,
+  fileRequests: performance.getEntriesByType('resource').filter((r) => r.name.endsWith('/model.mt') && r.startTime < window.mtViewer.firstImageMs).map((r) => [r.startTime, r.responseEnd]) }));
+await cleanup();
+report(s, raw, stillFrom, loadMs, { cpu0, cpu1, wall0, wall1, frame0, frame1, load0, load1 });
+} catch (e) {
+  await cleanup();
+  console.error(`bench: ${e.message}`);
+  process.exit(1);
+}
+
+function report(s, raw, stillFrom, loadMs, { cpu0, cpu1, wall0, wall1, frame0, frame1, load0, load1 }) {
 if (s.error) {
   console.error(`bench: ${s.error}`);
   process.exit(1);
@@ -109,25 +138,7 @@ const cap = f[0].cacheCap, maxCache = Math.max(...f.map((x) => x.cacheBytes));
 const reach = f.find((x) => x.t >= stillFrom && x.err <= tol);
 const bytesPath = f[frames - 1].bytesRead;
 const mib = (b) => (b / 2 ** 20).toFixed(2);
-console.log(`file                      ${file} (${mib(s.fileSize)} MiB)`);
-console.log(`page load                 ${loadMs} ms (load event)`);
-console.log(`first image               ${s.first.toFixed(0)} ms after navigation start (header+DAG+index ${mib(s.openBytes)} MiB, coarsest cut loaded)`);
-if (s.openTimes) {
-  const o = s.openTimes, d = (a, b) => (o[b] - o[a]).toFixed(0);
-  console.log(`first image's steps       page script ${o.start.toFixed(0)} ms, header+DAG+index ${d('start', 'index')} ms, workers ready ${d('index', 'workers')} ms, ` +
-    `coarsest cut loaded ${d('workers', 'coarsest')} ms, shaders ${o.compiled ? d('coarsest', 'compiled') : '-'} ms, closed-surface test ${d(o.compiled ? 'compiled' : 'coarsest', 'surface')} ms, to the first frame ${d('surface', 'frame')} ms, ` +
-    `update ${d('frame', 'update')} ms, render calls ${d('update', 'render')} ms, drawing waited for ${d('render', 'drawn')} ms`);
-  if (process.env.BENCH_RESOURCES) {
-    console.log('  navigation', JSON.stringify(s.nav));
-    for (const r of s.resources) console.log(`  ${r[1].toFixed(0)}-${r[2].toFixed(0)} ms ${r[0]} (${r[3]} B)`);
-  }
-  if (o.worker) console.log(`  a decoding worker        module running ${o.worker.started.toFixed(0)} ms, decoders in ${o.worker.libs.toFixed(0)} ms, ready ${o.worker.ready.toFixed(0)} ms (page time)`);
-  if (o.file) {
-    const f = o.file, e = (a, b) => (f[b] - f[a]).toFixed(0);
-    console.log(`  the file's opening       begun ${f.begin.toFixed(0)} ms: footer ${e('begin', 'tail')} ms, header ${e('tail', 'header')} ms, DAG+index read ${e('header', 'read')} ms, ` +
-      `checksum ${e('read', 'hashed')} ms, records ${e('hashed', 'parsed')} ms, checks + DAG ${e('parsed', 'built')} ms`);
-  }
-}
+reportFirst(s, loadMs);
 console.log(`frames within ${budget} ms     ${(100 * within).toFixed(1)}% of ${ms.length} path frames (median ${ms[ms.length >> 1].toFixed(1)} ms, p95 ${ms[Math.floor(0.95 * ms.length)].toFixed(1)} ms, max ${ms.at(-1).toFixed(1)} ms)`);
 const med = (k) => pathFrames.map((x) => x[k]).sort((a, b) => a - b)[pathFrames.length >> 1];
 console.log(`browser CPU               ${((cpu1 - cpu0) / (frame1 - frame0)).toFixed(1)} ms a frame (all its processes, user + system) against ${((wall1 - wall0) / (frame1 - frame0)).toFixed(1)} ms of wall time a frame, over ${frame1 - frame0} frames; load average ${load0} before, ${load1} after (${os.cpus().length} cores)`);
@@ -172,3 +183,34 @@ console.log(`screen error after stop   ${reach ? `reached ${tol} px ${(reach.t -
     `page: cut updates ${secs(sum('updateMs'))} s, render calls ${secs(sum('renderMs'))} s over ${upto.length} frames`);
 }
 console.log(`damaged patches skipped   ${s.warnings}`);
+}
+
+// The first image's lines: its time after navigation start, its steps, the opening's reads.
+function reportFirst(s, loadMs) {
+if (s.error) {
+  console.error(`bench: ${s.error}`);
+  return;
+}
+const mib = (b) => (b / 2 ** 20).toFixed(2);
+console.log(`file                      ${file} (${mib(s.fileSize)} MiB)`);
+console.log(`page load                 ${loadMs} ms (load event)`);
+console.log(`first image               ${s.first.toFixed(0)} ms after navigation start (${mib(s.openBytes)} MiB read to it: header, DAG, index, coarsest cut)` +
+  (s.openReads ? `; ${s.openReads.requests} range requests to it, ${s.openReads.kept} reads answered from the file's tail` : ''));
+if (s.openTimes) {
+  const o = s.openTimes, d = (a, b) => (o[b] - o[a]).toFixed(0);
+  console.log(`first image's steps       page script ${o.start.toFixed(0)} ms, header+DAG+index ${d('start', 'index')} ms, workers ready ${d('index', 'workers')} ms, ` +
+    `coarsest cut loaded ${d('workers', 'coarsest')} ms, shaders ${o.compiled ? d('coarsest', 'compiled') : '-'} ms, closed-surface test ${d(o.compiled ? 'compiled' : 'coarsest', 'surface')} ms, to the first frame ${d('surface', 'frame')} ms, ` +
+    `update ${d('frame', 'update')} ms, render calls ${d('update', 'render')} ms, drawing waited for ${d('render', 'drawn')} ms`);
+  if (process.env.BENCH_RESOURCES && s.resources) {
+    console.log('  navigation', JSON.stringify(s.nav));
+    for (const r of s.resources) console.log(`  ${r[1].toFixed(0)}-${r[2].toFixed(0)} ms ${r[0]} (${r[3]} B)`);
+  }
+  if (s.fileRequests) console.log(`  the file's requests      ${s.fileRequests.map((r) => `${r[0].toFixed(0)}-${r[1].toFixed(0)}`).join(', ')} ms (sent-answered, page time)`);
+  if (o.worker) console.log(`  a decoding worker        module running ${o.worker.started.toFixed(0)} ms, decoders in ${o.worker.libs.toFixed(0)} ms, ready ${o.worker.ready.toFixed(0)} ms (page time)`);
+  if (o.file) {
+    const f = o.file, e = (a, b) => (f[b] - f[a]).toFixed(0);
+    console.log(`  the file's opening       begun ${f.begin.toFixed(0)} ms: tail and header ${e('begin', 'tail')} ms, header checked ${e('tail', 'header')} ms, DAG+index read ${e('header', 'read')} ms, ` +
+      `checksum ${e('read', 'hashed')} ms, records ${e('hashed', 'parsed')} ms, checks + DAG ${e('parsed', 'built')} ms`);
+  }
+}
+}

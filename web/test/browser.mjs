@@ -13,6 +13,11 @@
 //   corrupted     a copy of the file with damaged payloads: warnings naming the patches, the page
 //                 keeps drawing frames;
 //   no-ranges     mtserve --no-ranges (200 instead of 206): the page shows the clear message;
+//   still-share   a still frame's chunk sized for stillShareLoading of the budget while loads are
+//                 pending, stillShare otherwise (synthetic chunk times);
+//   open-requests the opening by HTTP (HttpSource, tails of several sizes) gives FileSource's scene
+//                 with no byte read twice; the page's early requests (viewer.html) are the only
+//                 ones to its first image;
 //   colours       a coloured scan (c.mt) converged: on a grid of pixels the colour on screen is the
 //                 stored per-vertex colour interpolated at the surface point a ray through the
 //                 pixel hits, unlit (as mtrender --color vertex draws it): >= 90% within 8 levels;
@@ -40,7 +45,7 @@ import os from 'node:os';
 import { spawn, spawnSync } from 'node:child_process';
 import { fileURLToPath } from 'node:url';
 import { chromium } from 'playwright-core';
-import { FileSource } from '../src/source.js';
+import { FileSource, HttpSource } from '../src/source.js';
 import { openMtFile } from '../src/mtfile.js';
 
 const here = path.dirname(fileURLToPath(import.meta.url));
@@ -219,6 +224,80 @@ await test('no-ranges', async () => {
   check(st.err && /instead of 206/.test(st.err) && /Range/.test(st.err), `no clear message: ${st.err}`);
   check(st.shown === 'block', 'the message is not shown on the page');
   return `"${st.err.slice(0, 90)}..."`;
+});
+
+await test('open-requests', async () => {
+  // The opening's reads by HTTP (HttpSource, in node against mtserve) give the scene FileSource
+  // gives, with no byte asked for twice, whatever the tail read's size: a tail shorter than the
+  // index section (the rest asked for once), one cutting it, one holding the whole file; payload
+  // reads inside the kept tail are its bytes and need no request.
+  const file = path.join(dataDir, 't.mt');
+  const want = await openMtFile(new FileSource(file, fs));
+  const size = fs.statSync(file).size, index = size - want.header.metaOffset;
+  const arrays = (sc) => JSON.stringify(['nodes', 'arcs', 'patches'].map((k) => Object.entries(sc[k]).map(([n, a]) => [n, ArrayBuffer.isView(a) ? Array.from(a) : a])));
+  const notes = [];
+  for (const [tailBytes, requests, bytes, kept] of [[32, 3, 32 + 256 + index - 32, 0], [Math.floor(index / 2), 3, 256 + index, 1], [2 * size, 2, 256 + size, 1]]) {
+    const src = new HttpSource(`${srv.base}/data/t.mt`, { tailBytes });
+    const sc = await openMtFile(src);
+    check(arrays(sc) === arrays(want), `tail ${tailBytes}: the scene differs from FileSource's`);
+    check(src.requests === requests && src.bytesFetched === bytes && src.keptReads === kept,
+      `tail ${tailBytes}: ${src.requests} requests, ${src.bytesFetched} bytes, ${src.keptReads} reads from the tail (want ${requests}, ${bytes}, ${kept})`);
+    notes.push(`tail ${tailBytes}: ${src.requests} requests, ${src.bytesFetched} bytes`);
+    // A payload in the tail, one straddling its start (when the tail begins inside the payloads).
+    const k = src.kept.begin, ids = [want.patches.count - 1];
+    for (let i = 0; i < want.patches.count; ++i) if (want.patches.offset[i] < k && want.patches.offset[i] + want.patches.size[i] > k) ids.push(i);
+    for (const i of ids) {
+      const a = want.patches.offset[i], b = a + want.patches.size[i];
+      const got = Buffer.from(await src.read(a, b)), ref = Buffer.alloc(b - a);
+      const fd = fs.openSync(file, 'r');
+      fs.readSync(fd, ref, 0, b - a, a);
+      fs.closeSync(fd);
+      check(got.equals(ref), `tail ${tailBytes}: payload ${i}'s bytes differ`);
+    }
+  }
+  // The page: the header and tail requests started by viewer.html's inline script, before the
+  // modules, are the opening's only requests up to the coarsest cut loaded (the 287 KiB file lies
+  // in the tail: index and coarsest cut); with noearly the module makes the same two itself.
+  for (const q of ['', '&noearly']) {
+    const { page, log } = await open(`file=/data/t.mt&tol=2${q}`);
+    await page.waitForFunction(() => window.mtViewer.firstImageMs !== null, null, { timeout: 60000 });
+    await page.waitForTimeout(300);  // an unused early request's answer settles
+    const errors = log.filter((m) => m.startsWith('pageerror') || /Uncaught|Unhandled/.test(m));
+    check(errors.length === 0, `page${q}: ${errors[0]}`);
+    const st = await page.evaluate(() => ({ reads: window.mtViewer.openReads, early: !!window.mtEarly,
+      files: performance.getEntriesByType('resource').filter((r) => r.name.endsWith('/data/t.mt') && r.startTime < window.mtViewer.openTimes.coarsest).length }));
+    await page.close();
+    check(st.early === !q, `window.mtEarly ${st.early ? 'set' : 'not set'} with "${q}"`);
+    check(st.reads && st.reads.requests === 2 && st.reads.kept > 0 && st.files === 2,
+      `page${q}: ${JSON.stringify(st.reads)} before the first image, ${st.files} requests for the file`);
+    notes.push(`page${q}: 2 requests, ${st.reads.kept} reads from the tail`);
+  }
+  return notes.join('; ');
+});
+
+await test('still-share', async () => {
+  // A still frame's chunk while loads are pending is sized for stillShareLoading of the budget,
+  // otherwise for stillShare; the still cut's size (stillFullChunk) always for stillShare. Chunks
+  // of 10,000 triangles drawn in 10 ms (1000 a ms) under a 50 ms budget: 1000 x (0.35 x 50 - 2)
+  // = 15,500 while loading, 1000 x (0.7 x 50 - 2) = 33,000 (after doubling from 20,000) once idle.
+  const { page } = await open('file=/data/t.mt&tol=2&budget=50');
+  const r = await page.evaluate(() => {
+    const mt = window.mtViewer.mt, out = [];
+    let pending = true;
+    mt.server.idle = () => !pending;
+    mt.stillRate = { triangles: 0, ms: 0 };
+    mt.stillChunk = mt.stillFullChunk = 0;
+    for (const p of [true, true, true, false, false]) {
+      pending = p;
+      mt._measureChunk(10000, 10);
+      out.push([Math.round(mt.stillChunk), Math.round(mt.stillFullChunk)]);
+    }
+    return out;
+  });
+  await page.close();
+  const want = [[15500, 20000], [15500, 33000], [15500, 33000], [31000, 33000], [33000, 33000]];
+  check(JSON.stringify(r) === JSON.stringify(want), `chunks ${JSON.stringify(r)}, want ${JSON.stringify(want)}`);
+  return `chunk while loading 15,500, idle 33,000 triangles (at 1000 a ms)`;
 });
 
 await test('colours', async () => {
