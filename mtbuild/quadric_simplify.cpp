@@ -818,7 +818,10 @@ void Simplifier::run(size_t targetTriangles) {
     if (!current(e) || !candidate(e.s(), e.r, e.allowMove(), c) || c.s != e.s() ||
         (!e.penalized() && float(c.cost) != e.cost())) {
       const uint32_t a = find(e.s()), b = find(e.r);
-      if (a != b && candidate(a, b, true, c)) {
+      // An end with no triangle left (a collapse can take a vertex's last ones, a small closed
+      // piece's, and leave it its own representative) has no edge to collapse, and an entry for
+      // it is never current(): recomputing it here would recompute it forever.
+      if (a != b && count_[a] && count_[b] && candidate(a, b, true, c)) {
         heap_.front() = entryOf(c, true);
         siftDown(heap_, 0);
       } else {

@@ -372,9 +372,8 @@ TEST(BuildSafety, EveryOptionIsCheckedAgainstItsRange) {
       {"--patch-triangles 0", "--patch-triangles 0: out of range (accepted 100 to 100000"},
       {"--patch-triangles 1", "--patch-triangles 1: out of range (accepted 100 to 100000"},
       {"--patch-triangles 100000000", "--patch-triangles 100000000: out of range (accepted 100 to 100000"},
-      {"--threads 0", "--threads 0: out of range (accepted 1 to 1024"},
-      {"--threads -1", "--threads -1: out of range (accepted 1 to 1024"},
-      {"--threads 100000", "--threads 100000: out of range (accepted 1 to 1024"},
+      {"--threads -1", "--threads -1: out of range (accepted 0 to 1024"},
+      {"--threads 100000", "--threads 100000: out of range (accepted 0 to 1024"},
   };
   for (const char* tool : {"mtbuild", "mtcluster"})
     for (const Case& c : cases) {

@@ -234,6 +234,13 @@ TEST(RealScans, QuadricSimplifierKeepsThePromises) {
     auto made = runTool("scangen", bases + "/ChineseDragon-10kv.off 2 " + dragon.path + " --holes 0.3");
     ASSERT_EQ(made.exitCode, 0) << made.output;
     meshes.push_back(dragon);
+    // A scanned machine part with many small holes: a collapse there can take the last triangles
+    // of both its ends, and the collapse loop once recomputed a heap entry for such an end forever
+    // (the build never finished, and ignored SIGTERM's safe point).
+    Mesh shark{"scangen mech-holes-shark 2 --holes 0.02", dir.file("shark.ply")};
+    made = runTool("scangen", bases + "/mech-holes-shark.off 2 " + shark.path + " --holes 0.02");
+    ASSERT_EQ(made.exitCode, 0) << made.output;
+    meshes.push_back(shark);
   }
   buildAndCheck(meshes, dir, "--simplifier quadric");
 }

@@ -71,7 +71,7 @@ struct BuildCli {
   int64_t threads = 0, patchTriangles = 0;  // signed, so that -1 is refused with the range, not wrapped
   int64_t textureQuality = 90;
   bool normals = false, noNormals = false, resume = false, quiet = false;
-  CLI::Option *threadsOption = nullptr, *patchTrianglesOption = nullptr;  // given explicitly: 0 is refused
+  CLI::Option *threadsOption = nullptr, *patchTrianglesOption = nullptr;  // given explicitly: --patch-triangles 0 is refused
 
   // `tool`: "mtbuild" or "mtcluster"; `cluster` adds what differs in the help.
   void add(CLI::App& app, bool cluster) {
@@ -89,7 +89,7 @@ struct BuildCli {
                        ", e.g. 512M, 4G (default 1G; accepted " + sizeText(kMinBuildMemory) + " to this machine's RAM, " +
                        sizeText(physicalRamBytes()) + ")");
     threadsOption = app.add_option("--threads", threads,
-                   std::string(cluster ? "Threads of a one-rank run" : "Worker threads") + " (default: all cores; 1 to " +
+                   std::string(cluster ? "Threads of a one-rank run" : "Worker threads") + " (default 0: all cores; 0 to " +
                        std::to_string(kMaxBuildThreads) + "); the output does not depend on it");
     app.add_option("--partition", partition, "V-partition: irregular (default; BMT 4.2.2) or regular (4.2.1)");
     patchTrianglesOption = app.add_option("--patch-triangles", patchTriangles,
@@ -158,9 +158,10 @@ struct BuildCli {
     o.levelLoopBytes = planMemory(o.memoryBytes, 1).levelLoop;  // the plan's share for the regions in flight
     const bool threadsGiven = threadsOption && threadsOption->count() > 0;
     const bool patchGiven = patchTrianglesOption && patchTrianglesOption->count() > 0;
-    if ((threadsGiven || threads != 0) && (threads < 1 || threads > kMaxBuildThreads))
-      throw Error("--threads " + std::to_string(threads) + ": out of range (accepted 1 to " + std::to_string(kMaxBuildThreads) +
-                  "; default all cores)");
+    // 0 is "all cores", as the default and as mtgen's --threads 0.
+    if (threadsGiven && (threads < 0 || threads > kMaxBuildThreads))
+      throw Error("--threads " + std::to_string(threads) + ": out of range (accepted 0 to " + std::to_string(kMaxBuildThreads) +
+                  "; 0, the default, is all cores)");
     o.threads = uint32_t(threads);
     if ((patchGiven || patchTriangles != 0) && (patchTriangles < kMinPatchTriangles || patchTriangles > kMaxPatchTriangles))
       throw Error("--patch-triangles " + std::to_string(patchTriangles) + ": out of range (accepted " +
