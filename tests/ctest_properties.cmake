@@ -5,10 +5,6 @@
 # timings of its own (Testing/Temporary/CTestCostData.txt), so without these the slowest tests
 # start wherever their executable is declared and, on 2 cores, can run alone at the end. The
 # figures are seconds of a Release run (docs/hardening.md, "Measured"); only the order matters.
-#
-# MT_NO_LEAK_CHECK (environment, a regular expression over test names; scripts/test.sh sets it in
-# its sanitizer stage): those tests run with ASan's leak detection off (detect_leaks=0 appended to
-# ASAN_OPTIONS, the last value of an option wins), in the same ctest run as the others.
 
 set(_mt_costs
   RealScans.ScanDerivedMeshesKeepThePromises 377
@@ -60,11 +56,3 @@ while(_i LESS _n)
   endif()
   math(EXPR _i "${_i} + 2")
 endwhile()
-
-if(NOT "$ENV{MT_NO_LEAK_CHECK}" STREQUAL "")
-  foreach(_t IN LISTS _mt_tests)
-    if(_t MATCHES "$ENV{MT_NO_LEAK_CHECK}")
-      set_tests_properties(${_t} PROPERTIES ENVIRONMENT_MODIFICATION "ASAN_OPTIONS=string_append::detect_leaks=0")
-    endif()
-  endforeach()
-endif()
