@@ -127,6 +127,8 @@ void lockBorderRing(std::vector<uint8_t>& lock, const uint8_t* locked, const std
 // alone (the whole flattened piece goes) or by exactly two other triangles; any other rule break
 // still triggers the retry. The error is measured on the result afterwards, the removal included.
 // Returns the number of triangles removed.
+}  // namespace
+
 size_t removeFlattenedPairs(std::vector<uint32_t>& out) {
   const size_t triangleCount = out.size() / 3;
   // Triangles keyed by their sorted corners; a pair is two equal keys with opposite orientation.
@@ -177,6 +179,8 @@ size_t removeFlattenedPairs(std::vector<uint32_t>& out) {
   out.resize(w);
   return removed;
 }
+
+namespace {
 
 // What the builder needs and neither simplifier promises for every input (the quadric one checks
 // the same per collapse, but inputs that are non-manifold already can defeat a local check):
