@@ -47,11 +47,12 @@ def share(user, sys_):
 print(f"ingest      {share(d['ingest_user_seconds'], d['ingest_sys_seconds'])}  {100 * ingest_cpu / max(total_cpu, 1e-9):4.1f}% of the run's")
 print(f"levels      {levels_cpu:7.1f} s cpu  {100 * levels_cpu / max(total_cpu, 1e-9):4.1f}% of the run's; "
       f"other (grid weld, sink, file) {total_cpu - ingest_cpu - levels_cpu:.1f} s")
-print("level  regions  triangles in -> out       max error   seconds   M tri/s   cpu s  user s   sys s  sys %")
+print("level  regions  triangles in -> out       max error   seconds   M tri/s   cpu s  user s   sys s  sys %  runs/region")
 for l in d["levels"]:
     cpu = l["user_seconds"] + l["sys_seconds"]
     print(f"{l['level']:5d}  {l['regions']:7d}  {l['triangles_in']:12d} -> {l['triangles_out']:10d}  "
           f"{l['max_error']:10.4g}  {l['seconds']:8.2f}  {l['triangles_in'] / max(l['seconds'], 1e-9) / 1e6:8.2f}  "
-          f"{cpu:6.1f}  {l['user_seconds']:6.1f}  {l['sys_seconds']:6.1f}  {100 * l['sys_seconds'] / max(cpu, 1e-9):5.1f}")
+          f"{cpu:6.1f}  {l['user_seconds']:6.1f}  {l['sys_seconds']:6.1f}  {100 * l['sys_seconds'] / max(cpu, 1e-9):5.1f}  "
+          f"{l.get('simplifier_runs', 0) / max(l['regions'], 1):11.2f}")
 EOF
 "$bin/mtverify" "$out" --cuts 4 | tail -1

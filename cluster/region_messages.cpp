@@ -149,6 +149,7 @@ std::string encodeResult(uint64_t index, const RegionResult& res) {
   w.put(res.coneAxis);
   w.put(res.coneCutoff);
   w.put(res.seconds);
+  w.put(res.simplifierRuns);
   return seal(w);
 }
 
@@ -180,6 +181,7 @@ RegionResult decodeResult(const std::string& bytes, uint64_t& index) {
   std::memcpy(res.coneAxis, r.getRaw(sizeof res.coneAxis), sizeof res.coneAxis);
   res.coneCutoff = r.get<float>();
   res.seconds = r.get<double>();
+  res.simplifierRuns = r.get<uint32_t>();
   if (!r.atEnd()) fail("result message", "trailing bytes at byte offset " + std::to_string(r.position()));
   return res;
 }

@@ -51,7 +51,7 @@ std::string BuildReport::toJson() const {
     s << (i ? "," : "") << "\n    {\"level\": " << l.level << ", \"regions\": " << l.regions << ", \"triangles_in\": "
       << l.trianglesIn << ", \"triangles_out\": " << l.trianglesOut << ", \"max_error\": " << l.maxError
       << ", \"seconds\": " << l.seconds << ", \"user_seconds\": " << l.userSeconds << ", \"sys_seconds\": " << l.sysSeconds
-      << "}";
+      << ", \"simplifier_runs\": " << l.simplifierRuns << "}";
   }
   s << "\n  ]\n}\n";
   return s.str();

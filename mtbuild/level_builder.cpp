@@ -530,6 +530,7 @@ void LevelBuilder::commitRegion(size_t i, RegionTask task, RegionResult result, 
   std::vector<PatchId> created = s.store->writeBack(task.mesh, result.replacement);
   for (PatchId id : created) s.producer[id] = node;
   s.lr.maxError = std::max(s.lr.maxError, double(rec.error));
+  s.lr.simplifierRuns += result.simplifierRuns;
   s.doneTriangles += in;
   s.outTriangles += out;
   s.progress->update(s.doneTriangles);

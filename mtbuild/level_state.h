@@ -32,7 +32,7 @@ inline double secondsSince(Clock::time_point t) { return std::chrono::duration<d
 // The checkpoint: a blob of the work store, committed with each level's write-backs.
 constexpr char kCheckpointBlob[] = "mtbuild.checkpoint";
 constexpr uint64_t kCheckpointMagic = 0x31544b43544d4dull;  // "MMTCKT1"
-constexpr uint32_t kCheckpointVersion = 5;  // 3: the input hash covers the whole file; 4: texture records; 5: CPU seconds
+constexpr uint32_t kCheckpointVersion = 6;  // 3: the input hash covers the whole file; 4: texture records; 5: CPU seconds; 6: simplifier runs
 
 // "key=value" lines: the input's identity and every option that changes the bytes (not --threads,
 // --memory or levelLoopBytes, which do not). Compared line by line so that a refused resume can

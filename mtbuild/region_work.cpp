@@ -123,10 +123,11 @@ static SimplifiedRegion settleRoot(SimplifiedRegion sr, const LoadedMesh& lm, Si
   const bool keptWhole = sr.triangleCount() == n;
   const bool overLimit = !firstRoot && limit > 0 && sr.error > limit;
   if ((!keptWhole && !overLimit) || so.targetTriangles >= n / 2 || n < 2) return sr;
-  const uint32_t attempts = sr.attempts;
+  uint32_t attempts = sr.attempts;  // every run counts (LevelReport::simplifierRuns)
   so.targetTriangles = n / 2;
   sr = simplifyRegion(lm, so);
   if (limit > 0 && sr.error > limit) {
+    attempts += sr.attempts;
     so.targetTriangles = n;  // no collapse: the region as it is
     sr = simplifyRegion(lm, so);
   }
@@ -163,6 +164,7 @@ RegionResult processRegion(const RegionTask& task, const RegionContext& ctx) {
   SimplifiedRegion sr = simplifyRegion(lm, so);
   if (task.root) sr = settleRoot(std::move(sr), lm, so, task, ctx);
   out.deviation = sr.error;
+  out.simplifierRuns = sr.attempts;
   out.colorDeviation = sr.colorError;
   ReplacementMesh& rep = out.replacement;
   rep.level = task.level;

@@ -90,4 +90,10 @@ SimplifiedRegion simplifyRegion(const double* positions, size_t vertexCount, con
 // them, replace options.colors).
 SimplifiedRegion simplifyRegion(const LoadedMesh& mesh, const SimplifyRegionOptions& options);
 
+// Removes from a triangle list (3 vertex ids each) every pair of triangles with the same corners and
+// opposite orientation whose three edges are each used by the pair alone or by exactly two other
+// triangles: a thin part collapsed flat (simplify_region.cpp). Keeps the order of the rest; returns
+// the number of triangles removed.
+size_t removeFlattenedPairs(std::vector<uint32_t>& triangles);
+
 }  // namespace mt

@@ -405,6 +405,29 @@ TEST(SimplifyRegion, NoNewEdgeBetweenLockedVertices) {
   }
 }
 
+// A fin collapsed flat: triangles 0-1-2 and 0-2-1 glued between a fan above and a fan below.
+// Both go, the rest keeps its order; a pair whose edge has a third triangle stays (removing it
+// would open a hole), as does a same-orientation duplicate.
+TEST(SimplifyRegion, FlattenedPairsAreRemovedWhereTheSurfaceCloses) {
+  // Above: 3-1-0, 3-2-1, 3-0-2 (a tetrahedron's cap over 0,1,2); below: 4-0-1, 4-1-2, 4-2-0.
+  const std::vector<uint32_t> cap = {3, 1, 0, 3, 2, 1, 3, 0, 2, 4, 0, 1, 4, 1, 2, 4, 2, 0};
+  std::vector<uint32_t> tris = {3, 1, 0, 0, 1, 2, 3, 2, 1, 3, 0, 2, 4, 0, 1, 0, 2, 1, 4, 1, 2, 4, 2, 0};
+  EXPECT_EQ(removeFlattenedPairs(tris), 2u);
+  EXPECT_EQ(tris, cap);
+  // Every edge of the pair used by 4 triangles, one edge (0-1) by a fifth: the pair stays.
+  std::vector<uint32_t> crowded = {0, 1, 2, 0, 2, 1, 3, 1, 0, 3, 2, 1, 3, 0, 2, 4, 0, 1, 4, 1, 2, 4, 2, 0, 5, 0, 1};
+  const std::vector<uint32_t> before = crowded;
+  EXPECT_EQ(removeFlattenedPairs(crowded), 0u);
+  EXPECT_EQ(crowded, before);
+  // The same orientation twice is no flattened pair.
+  std::vector<uint32_t> same = {0, 1, 2, 1, 2, 0};
+  EXPECT_EQ(removeFlattenedPairs(same), 0u);
+  // A lone double-sided triangle (its edges used by the pair alone) goes whole.
+  std::vector<uint32_t> lone = {0, 1, 2, 2, 1, 0};
+  EXPECT_EQ(removeFlattenedPairs(lone), 2u);
+  EXPECT_TRUE(lone.empty());
+}
+
 // The quadric simplifier on its own (mtbuild/quadric_simplify.h).
 struct QuadricRun {
   std::vector<uint32_t> indices;

@@ -207,6 +207,12 @@ TEST(MtbuildStats, EveryLevelReportsWhereItsCpuWent) {
     // clock reads' order.
     EXPECT_LE(user + sys, 2 * l["seconds"].get<double>() + 0.05) << l.dump();
     levels += user + sys;
+    // Every region runs the simplifier at least once, and at most 17 times (simplifyWithRules)
+    // per simplifyRegion call, of which the root's settleRoot makes up to three.
+    ASSERT_TRUE(l.contains("simplifier_runs")) << l.dump();
+    const uint64_t runs = l["simplifier_runs"].get<uint64_t>(), regions = l["regions"].get<uint64_t>();
+    EXPECT_GE(runs, regions) << l.dump();
+    EXPECT_LE(runs, 3 * 17 * regions) << l.dump();
   }
   EXPECT_LE(ingest + levels, total + 1e-3) << "the parts exceed the whole: " << d.dump(1);
   EXPECT_LE(total, outside + 1e-3) << "the build reports more CPU than the kernel counted for it";
