@@ -3,7 +3,8 @@
 # (web/src/extract.js, run in node by web/test/cut_nodes.mjs) is ExtractRender's (mtrender/extract.h,
 # printed by web_cut_nodes), node for node, both run to convergence. 6 files x 8 views x 2 tolerances
 # (x.mt textured, version 6). And the web decoder decodes every patch of the meshopt files to the C++
-# decoder's grid coordinates (and x.mt's texture coordinates and images to the C++ reader's).
+# decoder's grid coordinates (and x.mt's texture coordinates and images to the C++ reader's). And a
+# still view's one update asks for all the loads its tolerance needs (still_loads.mjs).
 # Usage: web_cut_compare.sh BIN_DIR SOURCE_DIR
 set -euo pipefail
 bin=$1 src=$2
@@ -62,6 +63,12 @@ done
 # The views differ: they must have moved the cuts to different node sets.
 nodes=$(awk '{print NF - 2}' "$t/cpp" | sort -n | uniq | wc -l)
 [[ $nodes -ge 2 ]] || { echo "web_cut_compare: every view gave the same cut size: the views test nothing" >&2; exit 1; }
+# A still view asks for every patch its tolerance needs in one update, levels below the cut
+# included (web/test/still_loads.mjs): its loads then overlap instead of coming a level a round.
+for f in a c d; do
+  node "$src/web/test/still_loads.mjs" "$t/$f.mt" "$t/views" 1 1280 720 >"$t/js" 2>"$t/jserr" || { cat "$t/js" "$t/jserr" >&2; fail=1; }
+  echo "$f.mt still loads: $(awk '{s += $6; a += $12} END {print s " patches needed over " NR " views, all asked at once"}' "$t/js")"
+done
 # The web decoder (range coder, position prediction, meshopt and zstd from npm, checksums) gives
 # the C++ decoder's grid coordinates on every patch of the meshopt files.
 for f in a c x; do

@@ -55,6 +55,12 @@ async function main() {
     twoPassPerPixel: q.has('twopass') ? Number(q.get('twopass')) : undefined,
     // loadshare=S: the still frames' drawing share while loads are pending (MTObject.stillShareLoading).
     stillShareLoading: q.has('loadshare') ? Number(q.get('loadshare')) : undefined,
+    // stillshare=S: the still frames' drawing share once nothing loads (MTObject.stillShare).
+    stillShare: q.has('stillshare') ? Number(q.get('stillshare')) : undefined,
+    // stillwait=MS: while a still view's patches load, a new image starts when the last one is this old (MTObject.stillWaitMs).
+    stillWaitMs: q.has('stillwait') ? Number(q.get('stillwait')) : undefined,
+    // workers=N: at most N decoding workers (default: one while the page starts, then two or cores - 1).
+    workers: q.has('workers') ? Number(q.get('workers')) : undefined,
     onWarning: (m) => {
       state.warnings.push(m);
       warnBox.textContent = `${state.warnings.length} damaged patch(es) ${/drawn untextured/.test(m) ? 'drawn untextured' : 'skipped'}: ${m}`;

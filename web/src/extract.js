@@ -367,7 +367,9 @@ export class ExtractRender {
     }
     this.consecutive = nextConsecutive;
     this.cache.touch(touched, frame);
-    reqs.sort((a, b) => (a.urgency !== b.urgency ? b.urgency - a.urgency : a.consecutive !== b.consecutive ? b.consecutive - a.consecutive : a.id - b.id));
+    // Among equal urgency and age, the order of the wants (the sort is stable): the traversals want
+    // the largest screen errors first.
+    reqs.sort((a, b) => (a.urgency !== b.urgency ? b.urgency - a.urgency : b.consecutive - a.consecutive));
     let loadBudget = this.options.loadBudget;
     if (!loadBudget) {
       const ms = this.server.meanLoadMs();
@@ -389,8 +391,7 @@ export class ExtractRender {
 
   /**
    * For a frame that leaves the cut as it is (it draws part of a still image): advances the render
-   * budget and asks for what the refinements of the cut beyond it would need, as if applied (the
-   * best first, two levels deep, within the scaled budget; up to twice it at prefetch priority).
+   * budget and asks for what the refinements of the cut beyond it would need (wantBelowCut).
    */
   requestAhead(frame, view) {
     const t0 = now();
@@ -398,29 +399,7 @@ export class ExtractRender {
     this.wanted.clear();
     const extractMs = this.options.extractMs > 0 ? this.options.extractMs : Math.min(2.0, this.options.budgetMs / 20);
     const budget = this.nextBudget(extractMs);
-    const tau = this.options.pixelTolerance * this.lodScale;
-    const { nodes, arcs, inArcs } = this.scene;
-    const heap = new Heap(true);
-    const depth = new Map();
-    for (let n = 0; n < nodes.count; ++n)
-      if (this.isRefineCandidate(n) && !this.badNode[n]) heap.push(this.screenError(n, view), n), depth.set(n, 0);
-    let triangles = this.visibleTriangles;
-    const seen = new Uint8Array(nodes.count);
-    while (!heap.empty()) {
-      const err = heap.topErr(), node = heap.topNode();
-      heap.pop();
-      if (err <= tau || seen[node]) continue;
-      seen[node] = 1;
-      const d = depth.get(node) || 0;
-      triangles += this.visibleDelta(node, true, view);
-      if (triangles > 2 * budget) break;
-      this.want(this.collectIn(node, this.scratch), d === 0 && triangles <= budget ? Urgency.Needed : Urgency.Prefetch);
-      if (d >= 1) continue;
-      for (let k = 0; k < nodes.inArcCount[node]; ++k) {
-        const p = arcs.from[inArcs[nodes.firstInArc[node] + k]];
-        if (!nodes.source[p] && !this.badNode[p]) heap.push(this.screenError(p, view), p), depth.set(p, d + 1);
-      }
-    }
+    this.wantBelowCut(view, this.options.pixelTolerance * this.lodScale, budget);
     this.submitRequests(frame, st);
     st.budgetTriangles = budget;
     st.modelA = this.time.a;
@@ -430,6 +409,38 @@ export class ExtractRender {
     st.lodScale = this.lodScale;
     st.extractMs = now() - t0;
     return st;
+  }
+
+  /**
+   * A still view's loads: the refinements beyond the cut, as if applied, the largest screen error
+   * first and as deep as they go, until the errors reach `tau` or the visible triangles `budget`
+   * (at Needed urgency; on to twice the budget at Prefetch). The cut itself refines one level per
+   * round of loads (a node refines only once its patches are resident), so asking for one level at
+   * a time made a still view wait for as many rounds of requests and decoding as the DAG has levels
+   * between the moving cut and the tolerance; asked for at once, the loads of every level overlap.
+   * The order of the wants is the order of the errors: submitRequests keeps it among equals, so the
+   * coarser refinements, which the cut needs first, load first.
+   */
+  wantBelowCut(view, tau, budget) {
+    const { nodes, arcs, inArcs } = this.scene;
+    const heap = new Heap(true);
+    for (let n = 0; n < nodes.count; ++n)
+      if (this.isRefineCandidate(n) && !this.badNode[n]) heap.push(this.screenError(n, view), n);
+    let triangles = this.visibleTriangles;
+    const seen = new Uint8Array(nodes.count);
+    while (!heap.empty()) {
+      const err = heap.topErr(), node = heap.topNode();
+      heap.pop();
+      if (err <= tau || seen[node]) continue;
+      seen[node] = 1;
+      triangles += this.visibleDelta(node, true, view);
+      if (triangles > 2 * budget) break;
+      this.want(this.collectIn(node, this.scratch), triangles <= budget ? Urgency.Needed : Urgency.Prefetch);
+      for (let k = 0; k < nodes.inArcCount[node]; ++k) {
+        const m = arcs.from[inArcs[nodes.firstInArc[node] + k]];
+        if (!nodes.source[m] && !this.badNode[m] && !seen[m]) heap.push(this.screenError(m, view), m);
+      }
+    }
   }
 
   newStats() {
@@ -477,7 +488,13 @@ export class ExtractRender {
     while (!p.refine.empty() && !this.isRefineCandidate(p.refine.topNode())) p.refine.pop();
     if (!p.refine.empty()) p.maxErr = Math.max(p.maxErr, p.refine.topErr());
     st.maxScreenError = p.maxErr;
-    if (this.cache && this.options.prefetch && !this.frozen && now() < p.deadline + (p.deadline - p.t0)) this.prefetch(p, predicted);
+    if (this.cache && this.options.prefetch && !this.frozen && now() < p.deadline + (p.deadline - p.t0)) {
+      // A still view (budgetScale > 1) asks for every level down to the tolerance at once, and
+      // nothing finer: the refinements below the tolerance that prefetch() asks for would only
+      // delay its image (it waits for the loads) and take the decoding workers' time.
+      if (this.budgetScale > 1) this.wantBelowCut(view, p.tau, p.budget);
+      else this.prefetch(p, predicted);
+    }
     this.submitRequests(frame, st);
     if (p.memoryFull) this.lodScale = Math.min(this.lodScale * 1.1, 64.0);
     else if (this.lodScale > 1 && this.cutBytes < 0.8 * p.pinLimit) this.lodScale = Math.max(1.0, this.lodScale * 0.97);

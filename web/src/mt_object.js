@@ -10,7 +10,7 @@ import * as THREE from 'three';
 import { HttpSource } from './source.js';
 import { openMtFile } from './mtfile.js';
 import { makeView, extrapolate } from './camera.js';
-import { ExtractRender, Urgency } from './extract.js';
+import { ExtractRender, TimeModel, Urgency } from './extract.js';
 import { PatchCache } from './cache.js';
 import { PatchServer } from './server.js';
 import { defaultLibUrls } from './libs.js';
@@ -109,17 +109,34 @@ export class MTObject extends THREE.Group {
     // an accumulation target, at most one frame's budget a frame; the screen keeps the last
     // complete image meanwhile. render() does this; update() + renderer.render() draws plainly.
     this.stillFrames = options.stillFrames ?? 128;
-    // The still image's chunks are sized by the rate at which they were measured to draw (each
-    // chunk's frame waits for its drawing), not by the moving frames' time model: a moving frame's
+    // The still image's chunks are sized by a time model of their own, fitted to the chunks drawn
+    // (each chunk's frame waits for its drawing), not by the moving frames' model: a moving frame's
     // cost here is mostly fixed (SwiftShader clears and presents 1280x720 whatever the cut), so that
     // model left the chunks at 1-6 k triangles and the still cut at 128 x its 1000-triangle floor.
-    this.stillRate = { triangles: 0, ms: 0 };  // decayed sums over the chunks drawn
+    // A chunk has a fixed cost too (its render pass, the sync, the scene's traversal): a rate
+    // (triangles / ms) taken over whole chunks counted it per triangle, and the chunks settled where
+    // the fixed cost was most of them (14 k triangles a frame while loads were pending).
+    // Until a chunk is measured, the still cut's unit and the first chunk are sized from this rate
+    // (triangles a millisecond): SwiftShader drew 2.5 M triangles/s at 1280x720 (docs/web.md), a GPU
+    // draws far more; the chunks' own times replace it from the first chunk drawn.
+    this.stillPriorRate = options.stillPriorRate ?? 1000;
+    this.stillModel = new TimeModel();
+    this.stillModel.a = 5;
+    this.stillModel.b = 1 / this.stillPriorRate;
     // The share of a still frame's budget its chunk may take: while the still view's patches still
     // load, a smaller one, so that the drawing leaves the cores to the decoding workers (on a
     // software renderer both compete for the same cores, and the cut at the tolerance waits for
     // its loads, not for the images on the way).
     this.stillShare = options.stillShare ?? 0.7;
     this.stillShareLoading = options.stillShareLoading ?? 0.35;
+    // While a still view's patches load, a new image (of the cut so far) starts only when the last
+    // image on screen, or the stop, is this old: on a fast link the cut at the tolerance is then
+    // drawn once, when its loads are done, instead of after a train of intermediate images whose
+    // drawing took the cores from the decoding workers (SwiftShader draws on the same cores); on a
+    // slow one the screen still improves every stillWaitMs.
+    this.stillWaitMs = options.stillWaitMs ?? 3000;
+    this.imageAt = 0;  // when the image on screen was shown (moving: every frame)
+    this.cutSettling = false;  // the last still update stopped at its deadline
     this.stillChunk = 0;  // triangles a still frame draws (0: not measured yet)
     this.stillFullChunk = 0;  // the same at the full share (stillShare): the still cut's unit
     this.stillCount = 0;
@@ -207,6 +224,7 @@ void main() {
       poll();
     });
     if (this.openTimes) this.openTimes.coarsest = performance.now();
+    this.server.grow();
     // The file's tail, kept since the opening, has served the index and the coarsest cut.
     if (this.mt.source.release) {
       this.openReads = { kept: this.mt.source.keptReads, requests: this.mt.source.requests };
@@ -400,9 +418,12 @@ void main() {
       // The next image may hold K chunks, or 4x the image on screen: the images drawn before the
       // one at the tolerance then cost at most a third of its drawing (1/4 + 1/16 + ...), and the
       // screen still improves in steps meanwhile.
-      this.extract.stillTriangles = Math.max(this.stillFrames * this.stillFullChunk, 4 * this.shownTriangles);
+      this.extract.stillTriangles = Math.max(this.stillFrames * (this.stillFullChunk || this._priorChunk(this.stillShare)), 4 * this.shownTriangles);
       st = this.extract.update(this.frame, view, ahead);
-      this.cutChanged = st.refinements + st.coarsenings > 0 || !this.accum;
+      // Kept until an image of the cut starts (one may wait for the loads).
+      this.cutChanged = this.cutChanged || st.refinements + st.coarsenings > 0 || !this.accum;
+      // The update stopped at its deadline: the cut has not reached what the resident patches allow.
+      this.cutSettling = st.interrupted;
     }
     // The error of the cut the update last chose (the image in progress is of it); the screen shows
     // `maxScreenError`, the last complete image's. Their gap is the drawing's share of a still view.
@@ -488,7 +509,11 @@ void main() {
         m.renderOrder = base + (f.renderOrder - minOrder);
       }
     }
-    if (this.progressiveNow && this.cutChanged && (!this.accum || this.accum.next >= this.accum.list.length)) {
+    if (!this.progressiveNow) this.imageAt = t;
+    // A still image starts once its cut is final (every load done, the update through), or when the
+    // image on screen is stillWaitMs old.
+    const startImage = (this.server.idle() && !this.cutSettling) || t - this.imageAt >= this.stillWaitMs;
+    if (this.progressiveNow && this.cutChanged && startImage && (!this.accum || this.accum.next >= this.accum.list.length)) {
       this.accum = { list: [...this.meshes.values(), ...this.backMeshes.values()].sort((x, y) => x.renderOrder - y.renderOrder), next: 0, err: st.maxScreenError, fresh: true, triangles: drawnTriangles };
       this.cutChanged = false;
     }
@@ -526,14 +551,14 @@ void main() {
     const t0 = performance.now();
     this.progressive = true;
     let drawn = 0;
-    if (!this.progressiveNow || !this.accum) {
+    if (!this.progressiveNow) {
       // Moving: the whole cut, straight to the screen.
       renderer.setRenderTarget(null);
       renderer.render(scene, camera);
       drawn = this.drawnTriangles;
       this.shownErr = this.stats ? this.stats.maxScreenError : 0;
       this.shownTriangles = this.drawnTriangles;
-    } else if (this.accum.next < this.accum.list.length) {
+    } else if (this.accum && this.accum.next < this.accum.list.length) {
       // Still, an image in progress: its next chunk into the accumulation target. The screen is
       // not touched, so the browser keeps showing the last image presented.
       const size = renderer.getDrawingBufferSize(new THREE.Vector2());
@@ -547,7 +572,8 @@ void main() {
         this.blitCamera = new THREE.OrthographicCamera(-1, 1, 1, -1, 0, 1);
       }
       const a = this.accum;
-      const budget = Math.max(this.extract.frameBudget, this.server.idle() ? this.stillFullChunk : this.stillChunk, 1000);
+      const share = this.server.idle() ? this.stillShare : this.stillShareLoading;
+      const budget = Math.max(this.extract.frameBudget, (this.server.idle() ? this.stillFullChunk : this.stillChunk) || this._priorChunk(share), 1000);
       const chunk = new Set();
       while (a.next < a.list.length && (chunk.size === 0 || drawn + a.list[a.next].geometry.index.count / 3 <= budget)) {
         const m = a.list[a.next++];
@@ -575,11 +601,13 @@ void main() {
       if (a.next >= a.list.length) {
         renderer.render(this.blitScene, this.blitCamera);  // the complete image, shown once
         this.blitted = true;
+        this.imageAt = performance.now();
         this.shownErr = a.err;
         this.shownTriangles = a.triangles;
       }
     }
-    // Still and complete: nothing to draw; the screen keeps the image.
+    // Still and complete, or waiting for the loads of the next image: nothing to draw; the screen
+    // keeps the image.
     // A still image's frames wait for their drawing: WebGL runs it later in the GPU process, so a
     // frame's measured time is that of an earlier frame's drawing, and the still state's chunks
     // (a 300 k-triangle chunk measured 10 ms, the frame after it 300 ms) let the fitted budget run
@@ -601,22 +629,34 @@ void main() {
 
   // A chunk of `triangles` took `ms` to draw (synchronised): the still chunk becomes what fits in
   // the frame's drawing share (stillShare of the budget, stillShareLoading while loads are pending,
-  // less the update's deadline), from the decayed rate of the chunks so far, at most doubling a
-  // frame (a wrong rate costs one frame, not many).
+  // less the update's deadline), from the time model of the chunks so far, at most doubling a
+  // frame (a wrong model costs one frame, not many).
   _measureChunk(triangles, ms) {
-    const r = this.stillRate;
-    r.triangles = 0.7 * r.triangles + triangles;
-    r.ms = 0.7 * r.ms + Math.max(ms, 0.1);
+    const m = this.stillModel;
+    m.add(triangles, Math.max(ms, 0.1));
+    // Chunks of one size teach the model no slope: it keeps the prior's and moves its intercept,
+    // which stops at 0 when the chunks draw faster than the prior slope allows. Then the slope is
+    // the chunks' own time per triangle (with the prior's, the final image's chunks stayed at the
+    // size the prior fitted in the share, whatever the share: 41 k triangles at 0.7 and at 0.9).
+    if (m.a === 0) {
+      let t = 0, y = 0;
+      for (const [x, ms2] of m.window) t += x, (y += ms2);
+      if (t > 0) m.b = Math.min(m.b, (y / t) * 1e-6);
+    }
     // The cut's size follows the full share (a smaller cut while loading would load less); the
     // chunk drawn a frame, the share of the moment.
     this.stillFullChunk = this._chunkFor(this.stillShare, triangles, this.stillFullChunk);
     this.stillChunk = this._chunkFor(this.server.idle() ? this.stillShare : this.stillShareLoading, triangles, this.stillChunk);
   }
+  // The still chunk for a share of the budget at the prior rate (before any chunk is measured).
+  _priorChunk(share) {
+    const extractMs = Math.min(2, this.extract.options.budgetMs / 20);
+    return Math.max(1000, this.stillPriorRate * (share * this.extract.options.budgetMs - extractMs));
+  }
   // The still chunk for a share of the budget, from the measured rate (at most doubling).
   _chunkFor(share, triangles, last) {
-    const r = this.stillRate;
     const extractMs = Math.min(2, this.extract.options.budgetMs / 20);
-    const fit = (r.triangles / r.ms) * (share * this.extract.options.budgetMs - extractMs);
+    const fit = this.stillModel.trianglesFor(share * this.extract.options.budgetMs - extractMs);
     return Math.max(1000, Math.min(fit, 2 * Math.max(triangles, last)));
   }
 

@@ -39,13 +39,17 @@ export function decodePatch(data, codec, grid, libs) {
   else if (codec === Codec.Draco) qRel = decodeDraco(data, h, libs, out);
   else bad(`unknown codec ${codec}`);
   const n = qRel.length / 3;
-  for (const i of out.triangles) if (i >= n) bad(`triangle index ${i} out of range`);
+  const t = out.triangles;
+  for (let i = 0; i < t.length; ++i) if (t[i] >= n) bad(`triangle index ${t[i]} out of range`);
   const limit = 2 ** grid.bits;
   const q = new Uint32Array(n * 3);
-  for (let i = 0; i < n * 3; ++i) {
-    const v = qRel[i] + h.qMin[i % 3];
-    if (v >= limit) bad('grid coordinate outside the grid');
-    q[i] = v;
+  const [m0, m1, m2] = h.qMin;
+  for (let i = 0; i < n * 3; i += 3) {
+    const x = qRel[i] + m0, y = qRel[i + 1] + m1, z = qRel[i + 2] + m2;
+    if (x >= limit || y >= limit || z >= limit) bad('grid coordinate outside the grid');
+    q[i] = x;
+    q[i + 1] = y;
+    q[i + 2] = z;
   }
   out.q = q;
   return out;

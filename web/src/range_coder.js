@@ -6,10 +6,12 @@ export const kCountedBitLimit = 30;
 const kRate = new Uint32Array(kCountedBitLimit + 1);
 for (let n = 0; n <= kCountedBitLimit; ++n) kRate[n] = Math.floor(65536 / (n + 2));
 
-/** CountedBit[] as two typed arrays: p (P(bit = 0) in 1/4096, from 2048) and n (updates, to 30). */
+/** CountedBit[] as two arrays: p (P(bit = 0) in 1/4096, from 2048) and n (updates, to 30). */
 export function countedBits(count) {
-  const p = new Uint16Array(count).fill(2048);
-  const n = new Uint8Array(count);
+  // Plain arrays of small integers: in Chromium a typed array's element costs more to reach, and
+  // a new typed array far more to make (the models are made afresh for every patch).
+  const p = [], n = [];
+  for (let i = 0; i < count; ++i) p.push(2048), n.push(0);
   return { p, n };
 }
 

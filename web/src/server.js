@@ -41,6 +41,11 @@ export class PatchServer {
     const h = scene.header;
     this.workers = opt.pool || PatchServer.spawnWorkers(opt.libs, opt.workers);
     const init = { type: 'init', libs: opt.libs, codec: h.codec, gridBits: h.gridBits, gridOrigin: h.gridOrigin, gridStep: h.gridStep, center: scene.center };
+    this.init = init;
+    // grow() takes the pool to this many workers once the first image is up: on two cores, one
+    // worker while the page starts (its modules and WebGL context want the other core), two for a
+    // still view's loads, while the page itself draws little.
+    this.maxWorkers = opt.workers || Math.max(2, this.workers.length);
     this.ready = Promise.all(this.workers.map((w) => {
       return new Promise((resolve, reject) => {
         w.onmessage = (e) => {
@@ -66,6 +71,19 @@ export class PatchServer {
       w.postMessage({ type: 'libs', libs });
       return w;
     });
+  }
+  /** Adds workers up to maxWorkers (their decoders load meanwhile; jobs posted wait for them). */
+  grow() {
+    const more = this.maxWorkers - this.workers.length;
+    if (more <= 0 || this.disposed) return;
+    for (const w of PatchServer.spawnWorkers(this.opt.libs, more)) {
+      w.onmessage = (ev) => {
+        if (ev.data.type === 'decoded') this.onDecoded(ev.data);
+        else if (ev.data.error) this.warn(ev.data.error);
+      };
+      w.postMessage(this.init);
+      this.workers.push(w);
+    }
   }
   meanLoadMs() { return this.loadMsAvg; }
   /** Replaces the pending requests ({id, urgency}[], in priority order). */
@@ -190,6 +208,7 @@ export class PatchServer {
     this.pump();
   }
   dispose() {
+    this.disposed = true;
     for (const w of this.workers) w.terminate();
   }
 }

@@ -49,6 +49,7 @@ async function init(msg) {
   libs = { zstd: (b, n) => zstdMod.decompress(b, new Uint8Array(n)), meshopt, draco };
 }
 
+let normalSums = null;
 function toRender(d) {
   const n = d.q.length / 3;
   const positions = new Float32Array(n * 3);
@@ -57,7 +58,9 @@ function toRender(d) {
     for (let a = 0; a < 3; ++a) positions[3 * i + a] = o[a] + s * d.q[3 * i + a] - c[a];
   let nf = d.normals;
   if (!nf) {
-    nf = new Float32Array(n * 3);
+    // The sums, in an array reused from patch to patch (typed arrays cost Chromium dearly to make).
+    if (!normalSums || normalSums.length < n * 3) normalSums = new Float32Array(Math.max(n * 3, 2 * (normalSums ? normalSums.length : 0)));
+    nf = normalSums.fill(0, 0, n * 3);
     const t = d.triangles, p = positions;
     for (let k = 0; k < t.length; k += 3) {
       const a = 3 * t[k], b = 3 * t[k + 1], cc = 3 * t[k + 2];
@@ -77,7 +80,7 @@ function toRender(d) {
     normals[3 * i + 1] = Math.round((y / l) * 127);
     normals[3 * i + 2] = Math.round((z / l) * 127);
   }
-  const indices = n <= 65536 ? Uint16Array.from(d.triangles) : d.triangles;
+  const indices = n <= 65536 ? new Uint16Array(d.triangles) : d.triangles;
   return { positions, normals, colors: d.colors, indices };
 }
 

@@ -194,7 +194,7 @@ if (s.error) {
 const mib = (b) => (b / 2 ** 20).toFixed(2);
 console.log(`file                      ${file} (${mib(s.fileSize)} MiB)`);
 console.log(`page load                 ${loadMs} ms (load event)`);
-console.log(`first image               ${s.first.toFixed(0)} ms after navigation start (${mib(s.openBytes)} MiB read to it: header, DAG, index, coarsest cut)` +
+console.log(`first image               ${s.first.toFixed(0)} ms after navigation start, ${(s.first - loadMs).toFixed(0)} ms after the load event (${mib(s.openBytes)} MiB read to it: header, DAG, index, coarsest cut)` +
   (s.openReads ? `; ${s.openReads.requests} range requests to it, ${s.openReads.kept} reads answered from the file's tail` : ''));
 if (s.openTimes) {
   const o = s.openTimes, d = (a, b) => (o[b] - o[a]).toFixed(0);
