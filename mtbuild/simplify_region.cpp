@@ -116,6 +116,8 @@ void lockBorderRing(std::vector<uint8_t>& lock, const uint8_t* locked, const std
     for (uint32_t v : ring) lock[v] = 1;
 }
 
+}  // namespace
+
 // Meshopt only. Rule (2) of findBrokenRules (no new edge used by 3+ triangles) made regions of
 // scan-derived meshes run meshopt 1.3-1.9 times on average (generated meshes: ~1.0), each retry a
 // whole run thrown away. The broken edges are interior and new, mostly shared by exactly four
@@ -127,8 +129,6 @@ void lockBorderRing(std::vector<uint8_t>& lock, const uint8_t* locked, const std
 // alone (the whole flattened piece goes) or by exactly two other triangles; any other rule break
 // still triggers the retry. The error is measured on the result afterwards, the removal included.
 // Returns the number of triangles removed.
-}  // namespace
-
 size_t removeFlattenedPairs(std::vector<uint32_t>& out) {
   const size_t triangleCount = out.size() / 3;
   // Triangles keyed by their sorted corners; a pair is two equal keys with opposite orientation.

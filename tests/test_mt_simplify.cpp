@@ -448,6 +448,30 @@ QuadricRun runQuadric(const Region& r, size_t targetTriangles, const QuadricSimp
   return q;
 }
 
+// The same on a mesh of no region (nothing locked), to `targetIndices` indices.
+QuadricRun runQuadric(const std::vector<double>& pos, const std::vector<uint32_t>& tris, size_t targetIndices,
+                      const QuadricSimplifyOptions& options) {
+  QuadricRun q;
+  q.indices.resize(tris.size());
+  q.positions.resize(pos.size());
+  q.moved.resize(pos.size() / 3);
+  size_t n = quadricSimplify(q.indices.data(), q.positions.data(), q.moved.data(), tris.data(), tris.size(), pos.data(),
+                             pos.size() / 3, 3 * sizeof(double), nullptr, targetIndices, options, &q.stats);
+  q.indices.resize(n);
+  return q;
+}
+
+// The triangles of an n x n vertex grid, two a cell (the height fields of the tests below).
+std::vector<uint32_t> gridTriangles(uint32_t n) {
+  std::vector<uint32_t> tris;
+  for (uint32_t j = 0; j + 1 < n; ++j)
+    for (uint32_t i = 0; i + 1 < n; ++i) {
+      const uint32_t a = j * n + i, b = a + 1, cc = a + n, d = cc + 1;
+      tris.insert(tris.end(), {a, b, d, a, d, cc});
+    }
+  return tris;
+}
+
 // z of the (unnormalized) normal of triangle t; the scan grid is a height field seen from +z.
 double normalZ(const std::vector<uint32_t>& tris, const std::vector<double>& pos, size_t t) {
   const double *a = &pos[tris[t * 3] * 3], *b = &pos[tris[t * 3 + 1] * 3], *c = &pos[tris[t * 3 + 2] * 3];
@@ -602,20 +626,14 @@ TEST(QuadricSimplify, MovedVerticesTakeTheBestGridCorner) {
       const double x = i + 0.3 * std::sin(1.7 * j), y = j + 0.3 * std::cos(2.3 * i);
       pos.insert(pos.end(), {x, y, c[2] + std::sqrt(R * R - (x - c[0]) * (x - c[0]) - (y - c[1]) * (y - c[1]))});
     }
-  for (uint32_t j = 0; j + 1 < n; ++j)
-    for (uint32_t i = 0; i + 1 < n; ++i) {
-      const uint32_t a = j * n + i, b = a + 1, cc = a + n, d = cc + 1;
-      tris.insert(tris.end(), {a, b, d, a, d, cc});
-    }
+  tris = gridTriangles(n);
   QuadricSimplifyOptions o;
   o.gridStep = 0.3;
   o.gridOrigin[0] = -0.71, o.gridOrigin[1] = -0.93, o.gridOrigin[2] = -0.47;
-  std::vector<uint32_t> out(tris.size());
-  std::vector<double> outPos(pos.size());
-  std::vector<uint8_t> moved(n * n);
-  const size_t count = quadricSimplify(out.data(), outPos.data(), moved.data(), tris.data(), tris.size(), pos.data(),
-                                       n * n, 3 * sizeof(double), nullptr, tris.size() / 4, o);
-  out.resize(count);
+  const QuadricRun q = runQuadric(pos, tris, tris.size() / 4, o);
+  const std::vector<uint32_t>& out = q.indices;
+  const std::vector<double>& outPos = q.positions;
+  const std::vector<uint8_t>& moved = q.moved;
   std::set<uint32_t> kept(out.begin(), out.end());
   double sum = 0;
   size_t movedCount = 0;
@@ -712,20 +730,14 @@ TEST(QuadricSimplify, ThinFeaturesAreNotCutOff) {
       }
       pos[v * 3 + 2] += H;
     }
-  for (uint32_t j = 0; j + 1 < n; ++j)
-    for (uint32_t i = 0; i + 1 < n; ++i) {
-      const uint32_t a = j * n + i, b = a + 1, cc = a + n, d = cc + 1;
-      tris.insert(tris.end(), {a, b, d, a, d, cc});
-    }
+  tris = gridTriangles(n);
   QuadricSimplifyOptions o;
   o.gridStep = 0.1;
   o.gridOrigin[0] = -0.71, o.gridOrigin[1] = -0.93, o.gridOrigin[2] = -0.47;
-  std::vector<uint32_t> out(tris.size());
-  std::vector<double> outPos(pos.size());
-  std::vector<uint8_t> moved(n * n);
-  const size_t count = quadricSimplify(out.data(), outPos.data(), moved.data(), tris.data(), tris.size(), pos.data(),
-                                       n * n, 3 * sizeof(double), nullptr, tris.size() / 8, o);
-  out.resize(count);
+  const QuadricRun q = runQuadric(pos, tris, tris.size() / 8, o);
+  const std::vector<uint32_t>& out = q.indices;
+  const std::vector<double>& outPos = q.positions;
+  const size_t count = out.size();
   TriangleGrid result(outPos.data(), n * n, out.data(), out.size() / 3);
   double worst = 0;
   for (uint32_t v = 0; v < n * n; ++v) {
@@ -760,11 +772,7 @@ TEST(QuadricSimplify, TwoPassesWithRebuiltQuadricsEndCloser) {
       const double noise = 0.1 * (double(random()) / 4294967295.0 - 0.5) * 2;
       pos.insert(pos.end(), {x, y, c[2] + std::sqrt(R * R - (x - c[0]) * (x - c[0]) - (y - c[1]) * (y - c[1])) + noise});
     }
-  for (uint32_t j = 0; j + 1 < n; ++j)
-    for (uint32_t i = 0; i + 1 < n; ++i) {
-      const uint32_t a = j * n + i, b = a + 1, cc = a + n, d = cc + 1;
-      tris.insert(tris.end(), {a, b, d, a, d, cc});
-    }
+  tris = gridTriangles(n);
   TriangleGrid input(pos.data(), n * n, tris.data(), tris.size() / 3);
   struct Result {
     size_t triangles;
@@ -776,12 +784,11 @@ TEST(QuadricSimplify, TwoPassesWithRebuiltQuadricsEndCloser) {
     o.passes = passes;
     o.gridStep = 0.09;
     o.gridOrigin[0] = -0.71, o.gridOrigin[1] = -0.93, o.gridOrigin[2] = -0.47;
-    std::vector<uint32_t> out(tris.size());
-    std::vector<double> outPos(pos.size());
-    std::vector<uint8_t> moved(n * n);
     Result r;
-    out.resize(quadricSimplify(out.data(), outPos.data(), moved.data(), tris.data(), tris.size(), pos.data(), n * n,
-                               3 * sizeof(double), nullptr, tris.size() / div, o, &r.stats));
+    const QuadricRun q = runQuadric(pos, tris, tris.size() / div, o);
+    r.stats = q.stats;
+    const std::vector<uint32_t>& out = q.indices;
+    const std::vector<double>& outPos = q.positions;
     r.triangles = out.size() / 3;
     TriangleGrid result(outPos.data(), n * n, out.data(), out.size() / 3);
     r.inToOut = 0;
@@ -833,21 +840,15 @@ TEST(QuadricSimplify, NewEdgesDoNotSpanDimples) {
         }
       pos.insert(pos.end(), {x, y, z});
     }
-  for (uint32_t j = 0; j + 1 < n; ++j)
-    for (uint32_t i = 0; i + 1 < n; ++i) {
-      const uint32_t a = j * n + i, b = a + 1, cc = a + n, d = cc + 1;
-      tris.insert(tris.end(), {a, b, d, a, d, cc});
-    }
+  tris = gridTriangles(n);
   QuadricSimplifyOptions o;
   o.passes = 2;
   o.gridStep = 0.09;
   o.gridOrigin[0] = -0.71, o.gridOrigin[1] = -0.93, o.gridOrigin[2] = -0.47;
-  std::vector<uint32_t> out(tris.size());
-  std::vector<double> outPos(pos.size());
-  std::vector<uint8_t> moved(n * n);
-  const size_t count = quadricSimplify(out.data(), outPos.data(), moved.data(), tris.data(), tris.size(), pos.data(),
-                                       n * n, 3 * sizeof(double), nullptr, tris.size() / 8, o);
-  out.resize(count);
+  const QuadricRun q = runQuadric(pos, tris, tris.size() / 8, o);
+  const std::vector<uint32_t>& out = q.indices;
+  const std::vector<double>& outPos = q.positions;
+  const size_t count = out.size();
   TriangleGrid input(pos.data(), n * n, tris.data(), tris.size() / 3);
   double worst = 0;
   for (size_t t = 0; t < out.size(); t += 3)
