@@ -8,8 +8,9 @@ for (let n = 0; n <= kCountedBitLimit; ++n) kRate[n] = Math.floor(65536 / (n + 2
 
 /** CountedBit[] as two arrays: p (P(bit = 0) in 1/4096, from 2048) and n (updates, to 30). */
 export function countedBits(count) {
-  // Plain arrays of small integers: in Chromium a typed array's element costs more to reach, and
-  // a new typed array far more to make (the models are made afresh for every patch).
+  // Plain arrays of small integers, not typed arrays: a new typed array costs Chromium far more to
+  // make (its buffer lives outside the JS heap). codec_meshopt.js keeps the version-4 models from
+  // patch to patch (pooledBits); the index-code models of version 3 are still made per patch.
   const p = [], n = [];
   for (let i = 0; i < count; ++i) p.push(2048), n.push(0);
   return { p, n };
