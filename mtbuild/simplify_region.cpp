@@ -131,26 +131,42 @@ void lockBorderRing(std::vector<uint8_t>& lock, const uint8_t* locked, const std
 // Returns the number of triangles removed.
 size_t removeFlattenedPairs(std::vector<uint32_t>& out) {
   const size_t triangleCount = out.size() / 3;
-  // Triangles keyed by their sorted corners; a pair is two equal keys with opposite orientation.
-  std::vector<std::pair<std::array<uint32_t, 3>, uint32_t>> keyed(triangleCount);
+  // Triangles keyed by their sorted corners, in an open-addressing table (most results have no
+  // pair at all, so one linear pass, not a sort of every triangle); a pair is a key held by exactly
+  // two triangles of opposite orientation.
+  struct Slot {
+    std::array<uint32_t, 3> key;
+    uint32_t first, second, count;
+  };
+  size_t capacity = 16;
+  while (capacity < 2 * triangleCount) capacity *= 2;
+  std::vector<Slot> table(capacity, Slot{{0, 0, 0}, 0, 0, 0});
   for (size_t t = 0; t < triangleCount; ++t) {
     std::array<uint32_t, 3> k = {out[t * 3], out[t * 3 + 1], out[t * 3 + 2]};
     std::sort(k.begin(), k.end());
-    keyed[t] = {k, uint32_t(t)};
+    size_t h = size_t((k[0] * 0x9E3779B97F4A7C15ull) ^ (k[1] * 0xC2B2AE3D27D4EB4Full) ^ (k[2] * 0x165667B19E3779F9ull));
+    for (h = (h >> 17) & (capacity - 1);; h = (h + 1) & (capacity - 1)) {
+      Slot& s = table[h];
+      if (s.count == 0) {
+        s = {k, uint32_t(t), 0, 1};
+        break;
+      }
+      if (s.key == k) {
+        if (++s.count == 2) s.second = uint32_t(t);
+        break;
+      }
+    }
   }
-  std::sort(keyed.begin(), keyed.end());
   auto orientation = [&](uint32_t t) {  // even (+1) or odd (-1) permutation of the sorted corners
     const uint32_t a = out[t * 3], b = out[t * 3 + 1], c = out[t * 3 + 2];
     return (a < b) + (b < c) + (c < a) == 2 ? 1 : -1;
   };
   std::vector<std::pair<uint32_t, uint32_t>> pairs;
-  for (size_t i = 0; i + 1 < keyed.size(); ++i)
-    if (keyed[i].first == keyed[i + 1].first && (i + 2 == keyed.size() || keyed[i + 2].first != keyed[i].first) &&
-        (i == 0 || keyed[i - 1].first != keyed[i].first) && orientation(keyed[i].second) != orientation(keyed[i + 1].second))
-      pairs.push_back({keyed[i].second, keyed[i + 1].second});
+  for (const Slot& s : table)
+    if (s.count == 2 && orientation(s.first) != orientation(s.second)) pairs.push_back({s.first, s.second});
   if (pairs.empty()) return 0;
   // Uses of the pairs' edges over the whole output.
-  std::vector<uint64_t> edges, all;
+  std::vector<uint64_t> edges;
   auto key = [](uint64_t a, uint64_t b) { return a < b ? a << 32 | b : b << 32 | a; };
   for (auto& p : pairs)
     for (int k = 0; k < 3; ++k) edges.push_back(key(out[p.first * 3 + k], out[p.first * 3 + (k + 1) % 3]));
@@ -159,8 +175,9 @@ size_t removeFlattenedPairs(std::vector<uint32_t>& out) {
   std::vector<uint32_t> uses(edges.size(), 0);
   for (size_t t = 0; t < triangleCount; ++t)
     for (int k = 0; k < 3; ++k) {
-      auto it = std::lower_bound(edges.begin(), edges.end(), key(out[t * 3 + k], out[t * 3 + (k + 1) % 3]));
-      if (it != edges.end() && *it == key(out[t * 3 + k], out[t * 3 + (k + 1) % 3])) ++uses[it - edges.begin()];
+      const uint64_t e = key(out[t * 3 + k], out[t * 3 + (k + 1) % 3]);
+      auto it = std::lower_bound(edges.begin(), edges.end(), e);
+      if (it != edges.end() && *it == e) ++uses[it - edges.begin()];
     }
   std::vector<uint8_t> drop(triangleCount, 0);
   for (auto& p : pairs) {
