@@ -46,6 +46,11 @@ async function main() {
     pixelTolerance: Number(q.get('tol') || 1),
     budgetMs: Number(q.get('budget') || 50),
     fixedTriangles: Number(q.get('fixed') || 0),
+    // ahead=0: no look-ahead loads while the camera moves; aheadbatch=N, aheadgate=S: their batch
+    // and frame-time gate (ExtractRender's loadAhead, aheadBatch, aheadGate).
+    loadAhead: q.get('ahead') !== '0',
+    aheadBatch: q.has('aheadbatch') ? Number(q.get('aheadbatch')) : undefined,
+    aheadGate: q.has('aheadgate') ? Number(q.get('aheadgate')) : undefined,
     // side=front: back faces always culled by the GL (measurement only: an open scan's inside
     // then shows the background through its holes); side=double: both sides in one pass
     // (THREE.DoubleSide, the viewer's drawing before the two passes; docs/web.md compares them).

@@ -7,7 +7,7 @@
 
 import { Heap } from './heap.js';
 
-export const Urgency = Object.freeze({ Prefetch: 0, Needed: 1, UrgentDown: 2, UrgentUp: 3 });
+export const Urgency = Object.freeze({ Ahead: -1, Prefetch: 0, Needed: 1, UrgentDown: 2, UrgentUp: 3 });
 const now = () => (typeof performance !== 'undefined' ? performance.now() : Date.now());
 
 /** frame ms ~= a + b * triangles, fitted online by least squares over the last 45 frames. */
@@ -48,6 +48,10 @@ export const defaultExtractOptions = () => ({
   fixedTriangles: 0,
   extractMs: 0,
   loadBudget: 0,
+  // A moving view's spare loading capacity fetches what the view would need still (below).
+  loadAhead: true,
+  aheadBatch: 32,  // at most this many look-ahead patches asked for at a time
+  aheadGate: 0.6,  // only after a frame within this share of the budget
   prefetch: true,
   cull: true,
   // Normal-cone culling within `cull` (mtrender's ExtractOptions::Cones): 'closed' only for a
@@ -72,6 +76,8 @@ export class ExtractRender {
     this.lodScale = 1;
     this.budgetScale = 1;
     this.stillTriangles = 0;  // a still view's cut may hold this many triangles (MTObject: K chunks at their measured rate)
+    this.aheadTriangles = 0;  // the same for a moving view's look-ahead (loadAheadOf; MTObject sets it)
+    this.aheadAllowed = 0;  // look-ahead requests this frame may submit
     this.frameBudget = 0;
     this.frozen = false;
     this.smoothBudget = 0;
@@ -359,7 +365,7 @@ export class ExtractRender {
       const s = this.cache.state(id);
       if (s === 'ready') { touched.push(id); continue; }
       if (s === 'bad') continue;
-      if (u !== Urgency.Prefetch) ++st.misses;
+      if (u > Urgency.Prefetch) ++st.misses;
       if (s === 'loading') continue;
       const c = (this.consecutive.get(id) || 0) + 1;
       nextConsecutive.set(id, c);
@@ -380,10 +386,12 @@ export class ExtractRender {
       if (this.budgetScale > 1) loadBudget = 512;
     }
     const out = [];
+    let ahead = 0;
     for (const r of reqs) {
       if (out.length >= loadBudget) break;
+      if (r.urgency === Urgency.Ahead && ++ahead > this.aheadAllowed) break;  // Ahead comes last
       out.push({ id: r.id, urgency: r.urgency });
-      if (r.urgency === Urgency.Prefetch) ++st.prefetches;
+      if (r.urgency <= Urgency.Prefetch) ++st.prefetches;
       else ++st.requests;
     }
     this.server.submit(out, frame);
@@ -421,7 +429,7 @@ export class ExtractRender {
    * The order of the wants is the order of the errors: submitRequests keeps it among equals, so the
    * coarser refinements, which the cut needs first, load first.
    */
-  wantBelowCut(view, tau, budget) {
+  wantBelowCut(view, tau, budget, urgency) {
     const { nodes, arcs, inArcs } = this.scene;
     const heap = new Heap(true);
     for (let n = 0; n < nodes.count; ++n)
@@ -435,12 +443,34 @@ export class ExtractRender {
       seen[node] = 1;
       triangles += this.visibleDelta(node, true, view);
       if (triangles > 2 * budget) break;
-      this.want(this.collectIn(node, this.scratch), triangles <= budget ? Urgency.Needed : Urgency.Prefetch);
+      this.want(this.collectIn(node, this.scratch), urgency ?? (triangles <= budget ? Urgency.Needed : Urgency.Prefetch));
       for (let k = 0; k < nodes.inArcCount[node]; ++k) {
         const m = arcs.from[inArcs[nodes.firstInArc[node] + k]];
         if (!nodes.source[m] && !this.badNode[m] && !seen[m]) heap.push(this.screenError(m, view), m);
       }
     }
+  }
+
+  /**
+   * A moving view's look-ahead: the loads a still view here would ask for (wantBelowCut, down to the
+   * tolerance, within `aheadTriangles`), at Urgency.Ahead, after every other request, one batch of
+   * at most `aheadBatch` patches at a time, only after a frame within `aheadGate` of its budget and
+   * while the cache is at most half full.
+   * The moving cut stays within the render budget, but when the camera stops, the patches its image
+   * needs are mostly in the cache: on a 53 M build a still view waited ~2 s for its ~1300 patches'
+   * loads after the stop. Decoding them while moving costs the frames some of the cores on a
+   * software renderer, hence one batch at a time and only while the frames have slack
+   * (docs/web.md, "Loading ahead").
+   */
+  loadAheadOf(view, tau) {
+    this.aheadAllowed = 0;
+    if (!this.options.loadAhead || !this.cache || this.aheadTriangles <= 0) return;
+    if (!(this.lastFrameMs > 0 && this.lastFrameMs <= this.options.aheadGate * this.options.budgetMs)) return;
+    if (this.server.aheadInFlight > 0) return;
+    // Nor into a cache half full: look-ahead loads would evict what prefetch brought for the path.
+    if (this.cache.usedBytes > 0.5 * this.cache.capBytes) return;
+    this.aheadAllowed = this.options.aheadBatch;
+    this.wantBelowCut(view, tau, this.aheadTriangles, Urgency.Ahead);
   }
 
   newStats() {
@@ -493,7 +523,10 @@ export class ExtractRender {
       // nothing finer: the refinements below the tolerance that prefetch() asks for would only
       // delay its image (it waits for the loads) and take the decoding workers' time.
       if (this.budgetScale > 1) this.wantBelowCut(view, p.tau, p.budget);
-      else this.prefetch(p, predicted);
+      else {
+        this.prefetch(p, predicted);
+        this.loadAheadOf(view, p.tau);
+      }
     }
     this.submitRequests(frame, st);
     if (p.memoryFull) this.lodScale = Math.min(this.lodScale * 1.1, 64.0);

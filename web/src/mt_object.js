@@ -24,9 +24,13 @@ export class MTObject extends THREE.Group {
    * @param {{pixelTolerance?:number, budgetMs?:number, cacheBytes?:number, workers?:number,
    *          libs?:object, material?:THREE.Material, onWarning?:(msg:string)=>void, source?:object,
    *          precompile?:{renderer:THREE.WebGLRenderer, scene:THREE.Scene, camera:THREE.Camera},
-   *          early?:object, tailBytes?:number}} [options]
+   *          early?:object, tailBytes?:number, loadAhead?:boolean, aheadBatch?:number,
+   *          aheadGate?:number}} [options]
    * `precompile`: the materials' shaders are compiled for that renderer and scene (its lights)
    * while the coarsest cut loads, so the first frame does not wait for them.
+   * `loadAhead` (default true): while the camera moves, batches of `aheadBatch` (32) of the patches
+   * the view would need once still are loaded after frames within `aheadGate` (0.6) of the budget
+   * (ExtractRender.loadAheadOf).
    */
   static async open(url, options = {}) {
     const times = { start: performance.now() };  // the opening's milestones (performance.now(), ms)
@@ -96,6 +100,9 @@ export class MTObject extends THREE.Group {
       pixelTolerance: options.pixelTolerance ?? 1,
       budgetMs: options.budgetMs ?? 50,  // mtrender's default: 20 fps, which a software renderer can hold
       fixedTriangles: options.fixedTriangles || 0,
+      loadAhead: options.loadAhead ?? true,
+      aheadBatch: options.aheadBatch ?? 32,
+      aheadGate: options.aheadGate ?? 0.6,
     });
     this.meshes = new Map();  // patch id -> Mesh (patches of the cut)
     this.backMeshes = new Map();  // patch id -> Mesh of its back faces (the back pass)
@@ -237,6 +244,19 @@ void main() {
     if (this.openTimes) this.openTimes.surface = performance.now();
   }
 
+  // The still image's accumulation target (w x h) and the full-screen quad that shows it.
+  _stillTarget(w, h) {
+    if (this.target) this.target.dispose();
+    this.target = new THREE.WebGLRenderTarget(w, h, { depthBuffer: true, colorSpace: THREE.SRGBColorSpace });
+    if (!this.blit) {
+      this.blit = new THREE.Mesh(new THREE.PlaneGeometry(2, 2), new THREE.MeshBasicMaterial({ depthTest: false, depthWrite: false, transparent: true }));
+      this.blitScene = new THREE.Scene();
+      this.blitScene.add(this.blit);
+      this.blitCamera = new THREE.OrthographicCamera(-1, 1, 1, -1, 0, 1);
+    }
+    this.blit.material.map = this.target.texture;  // the same program for any target of this kind
+  }
+
   // Compiles the shader programs of the materials the cut may be drawn with, for `scene`'s lights
   // and `renderer`'s output, with a one-triangle stand-in of a patch's attributes.
   async _precompile(p) {
@@ -258,24 +278,38 @@ void main() {
     }
     try {
       await p.renderer.compileAsync(group, p.camera, p.scene);
-      // One draw of the stand-in into a 1x1 sRGB target (the programs of the screen and of the still
-      // image's target), waited for: WebGL links programs lazily, at their first use, and that
-      // first use was the first frame's.
-      if (p.scene) {
-        const rt = new THREE.WebGLRenderTarget(1, 1, { colorSpace: THREE.SRGBColorSpace });
-        const prev = p.renderer.getRenderTarget();
-        p.scene.add(group);
-        p.renderer.setRenderTarget(rt);
-        p.renderer.render(p.scene, p.camera);
-        const gl = p.renderer.getContext();
-        gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, new Uint8Array(4));
-        p.renderer.setRenderTarget(prev);
-        p.scene.remove(group);
-        rt.dispose();
-      }
     } catch (e) {
       console.warn(`shader precompile: ${e.message}`);  // the first frame compiles them then
     }
+    // The still image's programs (three draws into a render target in linear sRGB, the screen in
+    // sRGB: a variant of each, and the blit one more) and SwiftShader's machine code for each
+    // pipeline (made at its first draw) took the first still image's first chunk and last frame
+    // ~0.15 s; made here they would delay the first image (~0.3 s): _warmStill, in the second frame.
+    for (const m of group.children) m.frustumCulled = false;  // they sit at the origin
+    this._warmUp = { group, g, texel };
+  }
+
+  // The second frame, before it draws (the start's frames are slow anyway; it adds ~0.4 s here):
+  // the stand-ins drawn into the still image's target, cleared transparent, and its blit to the
+  // screen, which leaves it as it was, so the first still image pays for neither. Then they go.
+  _warmStill(renderer, scene, camera) {
+    const { group, g, texel } = this._warmUp;
+    this._warmUp = null;
+    if (!this.target) this._stillTarget(1, 1);
+    const visible = this.visible, auto = renderer.autoClear, alpha = renderer.getClearAlpha();
+    this.visible = false;
+    scene.add(group);
+    renderer.setRenderTarget(this.target);
+    renderer.setClearAlpha(0);  // transparent: the blit below then leaves the screen as it is
+    renderer.clear();
+    renderer.setClearAlpha(alpha);
+    renderer.autoClear = false;
+    renderer.render(scene, camera);
+    scene.remove(group);
+    this.visible = visible;
+    renderer.setRenderTarget(null);
+    renderer.render(this.blitScene, this.blitCamera);
+    renderer.autoClear = auto;
     g.dispose();
     if (texel) {
       for (const m of group.children) if (m.material.map === texel) m.material.dispose();
@@ -409,6 +443,8 @@ void main() {
       this.accum = null;
       this.extract.budgetScale = 1;
       this.extract.stillTriangles = 0;
+      // The look-ahead's loads: what this view's first still image could hold.
+      this.extract.aheadTriangles = this.stillFrames * (this.stillFullChunk || this._priorChunk(this.stillShare));
       st = this.extract.update(this.frame, view, ahead);
     } else if (drawingImage) {
       st = this.extract.requestAhead(this.frame, view);  // the image being drawn keeps its cut
@@ -553,6 +589,7 @@ void main() {
     let drawn = 0;
     if (!this.progressiveNow) {
       // Moving: the whole cut, straight to the screen.
+      if (this._warmUp && this.frame >= 2) this._warmStill(renderer, scene, camera);
       renderer.setRenderTarget(null);
       renderer.render(scene, camera);
       drawn = this.drawnTriangles;
@@ -564,12 +601,7 @@ void main() {
       const size = renderer.getDrawingBufferSize(new THREE.Vector2());
       if (!this.target || this.target.width !== size.x || this.target.height !== size.y) {
         this.blitted = true;
-        if (this.target) this.target.dispose();
-        this.target = new THREE.WebGLRenderTarget(size.x, size.y, { depthBuffer: true, colorSpace: THREE.SRGBColorSpace });
-        this.blit = new THREE.Mesh(new THREE.PlaneGeometry(2, 2), new THREE.MeshBasicMaterial({ map: this.target.texture, depthTest: false, depthWrite: false, transparent: true }));
-        this.blitScene = new THREE.Scene();
-        this.blitScene.add(this.blit);
-        this.blitCamera = new THREE.OrthographicCamera(-1, 1, 1, -1, 0, 1);
+        this._stillTarget(size.x, size.y);
       }
       const a = this.accum;
       const share = this.server.idle() ? this.stillShare : this.stillShareLoading;

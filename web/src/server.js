@@ -19,6 +19,7 @@ export class PatchServer {
     this.opt = opt;
     this.queue = [];
     this.inFlight = 0;
+    this.aheadInFlight = 0;  // of inFlight: batches of look-ahead loads only (extract.js, Urgency.Ahead)
     this.maxInFlight = opt.inFlight || 12;
     this.loads = 0;
     this.bad = 0;
@@ -115,14 +116,15 @@ export class PatchServer {
       while (hi + 1 < near.length && gap(hi, hi + 1) <= 16384 && span() < 524288) ++hi;
       while (lo > 0 && gap(lo - 1, lo) <= 16384 && span() < 524288) --lo;
       const batch = [];
+      let ahead = true;
       for (let k = lo; k <= hi; ++k) {
         const id = near[k].id;
-        if (this.cache.reserve(id, this.scene.decodedBytes[id])) batch.push(id);
-        else if (id === head.id) return batch.length ? batch : null;  // no room: try again next frame
+        if (this.cache.reserve(id, this.scene.decodedBytes[id])) batch.push(id), (ahead = ahead && near[k].urgency < 0);
+        else if (id === head.id) return batch.length ? Object.assign(batch, { ahead }) : null;  // no room: try again next frame
       }
       const taken = new Set(batch);
       this.queue = this.queue.filter((r) => !taken.has(r.id));
-      if (batch.length) return batch;
+      if (batch.length) return Object.assign(batch, { ahead });
     }
     return null;
   }
@@ -135,6 +137,8 @@ export class PatchServer {
   }
   async load(batch) {
     ++this.inFlight;
+    const ahead = !!batch.ahead;
+    if (ahead) ++this.aheadInFlight;
     const p = this.scene.patches;
     const t0 = performance.now();
     const begin = p.offset[batch[0]];
@@ -146,6 +150,7 @@ export class PatchServer {
     } catch (e) {
       for (const id of batch) this.cache.cancel(id);
       --this.inFlight;
+      if (ahead) --this.aheadInFlight;
       if (e instanceof NoRangeError && this.opt.onFatal) this.opt.onFatal(e);
       else this.warn(`${this.scene.path}: reading patches ${batch.join(', ')}: ${e.message}`);
       return;
@@ -171,7 +176,7 @@ export class PatchServer {
       return it;
     });
     const job = this.nextJob++;
-    this.jobs.set(job, { t0, count: batch.length });
+    this.jobs.set(job, { t0, count: batch.length, ahead });
     const w = this.workers[this.nextWorker++ % this.workers.length];
     const transfer = [];
     for (const it of items) transfer.push(it.buffer), it.texture && transfer.push(it.texture.buffer);
@@ -205,6 +210,7 @@ export class PatchServer {
     const ms = (performance.now() - j.t0) / Math.max(1, j.count);
     this.loadMsAvg = this.loadMsAvg === 0 ? ms : 0.9 * this.loadMsAvg + 0.1 * ms;
     --this.inFlight;
+    if (j.ahead) --this.aheadInFlight;
     this.pump();
   }
   dispose() {
