@@ -144,8 +144,8 @@ size_t removeFlattenedPairs(std::vector<uint32_t>& out) {
   for (size_t t = 0; t < triangleCount; ++t) {
     std::array<uint32_t, 3> k = {out[t * 3], out[t * 3 + 1], out[t * 3 + 2]};
     std::sort(k.begin(), k.end());
-    size_t h = size_t((k[0] * 0x9E3779B97F4A7C15ull) ^ (k[1] * 0xC2B2AE3D27D4EB4Full) ^ (k[2] * 0x165667B19E3779F9ull));
-    for (h = (h >> 17) & (capacity - 1);; h = (h + 1) & (capacity - 1)) {
+    const uint64_t hash = (k[0] * 0x9E3779B97F4A7C15ull) ^ (k[1] * 0xC2B2AE3D27D4EB4Full) ^ (k[2] * 0x165667B19E3779F9ull);
+    for (size_t h = size_t(hash >> 17) & (capacity - 1);; h = (h + 1) & (capacity - 1)) {
       Slot& s = table[h];
       if (s.count == 0) {
         s = {k, uint32_t(t), 0, 1};

@@ -49,8 +49,8 @@ async function main() {
     // ahead=0: no look-ahead loads while the camera moves; aheadbatch=N, aheadgate=S: their batch
     // and frame-time gate (ExtractRender's loadAhead, aheadBatch, aheadGate).
     loadAhead: q.get('ahead') !== '0',
-    aheadBatch: q.has('aheadbatch') ? Number(q.get('aheadbatch')) : undefined,
-    aheadGate: q.has('aheadgate') ? Number(q.get('aheadgate')) : undefined,
+    aheadBatch: Number.isFinite(Number(q.get('aheadbatch'))) && q.has('aheadbatch') ? Number(q.get('aheadbatch')) : undefined,
+    aheadGate: Number.isFinite(Number(q.get('aheadgate'))) && q.has('aheadgate') ? Number(q.get('aheadgate')) : undefined,
     // side=front: back faces always culled by the GL (measurement only: an open scan's inside
     // then shows the background through its holes); side=double: both sides in one pass
     // (THREE.DoubleSide, the viewer's drawing before the two passes; docs/web.md compares them).

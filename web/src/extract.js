@@ -429,7 +429,7 @@ export class ExtractRender {
    * The order of the wants is the order of the errors: submitRequests keeps it among equals, so the
    * coarser refinements, which the cut needs first, load first.
    */
-  wantBelowCut(view, tau, budget, urgency) {
+  wantBelowCut(view, tau, budget, urgency, absentLimit = Infinity) {
     const { nodes, arcs, inArcs } = this.scene;
     const heap = new Heap(true);
     for (let n = 0; n < nodes.count; ++n)
@@ -443,7 +443,12 @@ export class ExtractRender {
       seen[node] = 1;
       triangles += this.visibleDelta(node, true, view);
       if (triangles > 2 * budget) break;
-      this.want(this.collectIn(node, this.scratch), urgency ?? (triangles <= budget ? Urgency.Needed : Urgency.Prefetch));
+      const ids = this.collectIn(node, this.scratch);
+      this.want(ids, urgency ?? (triangles <= budget ? Urgency.Needed : Urgency.Prefetch));
+      if (absentLimit < Infinity) {
+        for (const id of ids) if (this.wanted.get(id) === urgency && this.cache.state(id) === 'absent') --absentLimit;
+        if (absentLimit <= 0) break;
+      }
       for (let k = 0; k < nodes.inArcCount[node]; ++k) {
         const m = arcs.from[inArcs[nodes.firstInArc[node] + k]];
         if (!nodes.source[m] && !this.badNode[m] && !seen[m]) heap.push(this.screenError(m, view), m);
@@ -453,9 +458,10 @@ export class ExtractRender {
 
   /**
    * A moving view's look-ahead: the loads a still view here would ask for (wantBelowCut, down to the
-   * tolerance, within `aheadTriangles`), at Urgency.Ahead, after every other request, one batch of
-   * at most `aheadBatch` patches at a time, only after a frame within `aheadGate` of its budget and
-   * while the cache is at most half full.
+   * tolerance, as a still update with `aheadTriangles` for its budget), at Urgency.Ahead, after
+   * every other request, one batch of at most `aheadBatch` patches at a time (the walk stops at the
+   * first `aheadBatch` that are not resident), only after a frame within `aheadGate` of its budget.
+   * The cache's LRU order keeps what the cut and prefetch want over these: they are wanted last.
    * The moving cut stays within the render budget, but when the camera stops, the patches its image
    * needs are mostly in the cache: on a 53 M build a still view waited ~2 s for its ~1300 patches'
    * loads after the stop. Decoding them while moving costs the frames some of the cores on a
@@ -467,10 +473,8 @@ export class ExtractRender {
     if (!this.options.loadAhead || !this.cache || this.aheadTriangles <= 0) return;
     if (!(this.lastFrameMs > 0 && this.lastFrameMs <= this.options.aheadGate * this.options.budgetMs)) return;
     if (this.server.aheadInFlight > 0) return;
-    // Nor into a cache half full: look-ahead loads would evict what prefetch brought for the path.
-    if (this.cache.usedBytes > 0.5 * this.cache.capBytes) return;
     this.aheadAllowed = this.options.aheadBatch;
-    this.wantBelowCut(view, tau, this.aheadTriangles, Urgency.Ahead);
+    this.wantBelowCut(view, tau, this.aheadTriangles, Urgency.Ahead, this.options.aheadBatch);
   }
 
   newStats() {

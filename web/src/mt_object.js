@@ -291,30 +291,48 @@ void main() {
 
   // The second frame, before it draws (the start's frames are slow anyway; it adds ~0.4 s here):
   // the stand-ins drawn into the still image's target, cleared transparent, and its blit to the
-  // screen, which leaves it as it was, so the first still image pays for neither. Then they go.
+  // screen (the frame's own drawing then covers it), so the first still image pays for neither.
+  // The frame's time is not a drawing cost (`blitted`). The stand-ins' own texture materials stay
+  // until dispose(): disposing a material releases its programs, the target's variant with them.
   _warmStill(renderer, scene, camera) {
-    const { group, g, texel } = this._warmUp;
-    this._warmUp = null;
+    const { group } = this._warmUp;
+    this._warmUp.done = true;
+    this.blitted = true;
     if (!this.target) this._stillTarget(1, 1);
     const visible = this.visible, auto = renderer.autoClear, alpha = renderer.getClearAlpha();
     this.visible = false;
     scene.add(group);
-    renderer.setRenderTarget(this.target);
-    renderer.setClearAlpha(0);  // transparent: the blit below then leaves the screen as it is
-    renderer.clear();
-    renderer.setClearAlpha(alpha);
-    renderer.autoClear = false;
-    renderer.render(scene, camera);
-    scene.remove(group);
-    this.visible = visible;
-    renderer.setRenderTarget(null);
-    renderer.render(this.blitScene, this.blitCamera);
-    renderer.autoClear = auto;
-    g.dispose();
-    if (texel) {
-      for (const m of group.children) if (m.material.map === texel) m.material.dispose();
-      texel.dispose();
+    try {
+      renderer.setRenderTarget(this.target);
+      renderer.setClearAlpha(0);
+      renderer.clear();
+      renderer.setClearAlpha(alpha);
+      renderer.autoClear = false;
+      renderer.render(scene, camera);
+      renderer.setRenderTarget(null);
+      renderer.render(this.blitScene, this.blitCamera);
+    } finally {
+      renderer.setClearAlpha(alpha);
+      renderer.autoClear = auto;
+      renderer.setRenderTarget(null);
+      scene.remove(group);
+      this.visible = visible;
     }
+  }
+
+  // The stand-ins of the shader precompile (_warmStill) and the still image's target and quad.
+  _disposeStill() {
+    if (this._warmUp) {
+      const { group, g, texel } = this._warmUp;
+      g.dispose();
+      if (texel) {
+        for (const m of group.children) if (m.material.map === texel) m.material.dispose();
+        texel.dispose();
+      }
+      this._warmUp = null;
+    }
+    if (this.target) this.target.dispose(), (this.target = null);
+    if (this.blit) this.blit.geometry.dispose(), this.blit.material.dispose(), (this.blit = null);
   }
 
   // The coarsest cut, welded, as a ClosedSurface in object space (when normal cones may cull:
@@ -589,7 +607,7 @@ void main() {
     let drawn = 0;
     if (!this.progressiveNow) {
       // Moving: the whole cut, straight to the screen.
-      if (this._warmUp && this.frame >= 2) this._warmStill(renderer, scene, camera);
+      if (this._warmUp && !this._warmUp.done && this.frame >= 2) this._warmStill(renderer, scene, camera);
       renderer.setRenderTarget(null);
       renderer.render(scene, camera);
       drawn = this.drawnTriangles;
@@ -695,5 +713,6 @@ void main() {
   dispose() {
     this.server.dispose();
     for (const [, e] of this.cache.entries) if (e.data) MTObject.disposeGeometry(e.data);
+    this._disposeStill();
   }
 }

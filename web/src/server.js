@@ -19,7 +19,7 @@ export class PatchServer {
     this.opt = opt;
     this.queue = [];
     this.inFlight = 0;
-    this.aheadInFlight = 0;  // of inFlight: batches of look-ahead loads only (extract.js, Urgency.Ahead)
+    this.aheadInFlight = 0;  // of inFlight: batches with a look-ahead load (extract.js, Urgency.Ahead)
     this.maxInFlight = opt.inFlight || 12;
     this.loads = 0;
     this.bad = 0;
@@ -116,10 +116,10 @@ export class PatchServer {
       while (hi + 1 < near.length && gap(hi, hi + 1) <= 16384 && span() < 524288) ++hi;
       while (lo > 0 && gap(lo - 1, lo) <= 16384 && span() < 524288) --lo;
       const batch = [];
-      let ahead = true;
+      let ahead = false;  // any look-ahead request in it makes it the one look-ahead batch in flight
       for (let k = lo; k <= hi; ++k) {
         const id = near[k].id;
-        if (this.cache.reserve(id, this.scene.decodedBytes[id])) batch.push(id), (ahead = ahead && near[k].urgency < 0);
+        if (this.cache.reserve(id, this.scene.decodedBytes[id])) batch.push(id), (ahead = ahead || near[k].urgency < 0);
         else if (id === head.id) return batch.length ? Object.assign(batch, { ahead }) : null;  // no room: try again next frame
       }
       const taken = new Set(batch);
