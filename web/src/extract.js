@@ -77,7 +77,6 @@ export class ExtractRender {
     this.budgetScale = 1;
     this.stillTriangles = 0;  // a still view's cut may hold this many triangles (MTObject: K chunks at their measured rate)
     this.aheadTriangles = 0;  // the same for a moving view's look-ahead (loadAheadOf; MTObject sets it)
-    this.aheadAllowed = 0;  // look-ahead requests this frame may submit
     this.frameBudget = 0;
     this.frozen = false;
     this.smoothBudget = 0;
@@ -389,7 +388,7 @@ export class ExtractRender {
     let ahead = 0;
     for (const r of reqs) {
       if (out.length >= loadBudget) break;
-      if (r.urgency === Urgency.Ahead && ++ahead > this.aheadAllowed) break;  // Ahead comes last
+      if (r.urgency === Urgency.Ahead && ++ahead > this.options.aheadBatch) break;  // Ahead comes last
       out.push({ id: r.id, urgency: r.urgency });
       if (r.urgency <= Urgency.Prefetch) ++st.prefetches;
       else ++st.requests;
@@ -469,11 +468,9 @@ export class ExtractRender {
    * (docs/web.md, "Loading ahead").
    */
   loadAheadOf(view, tau) {
-    this.aheadAllowed = 0;
     if (!this.options.loadAhead || !this.cache || this.aheadTriangles <= 0) return;
     if (!(this.lastFrameMs > 0 && this.lastFrameMs <= this.options.aheadGate * this.options.budgetMs)) return;
     if (this.server.aheadInFlight > 0) return;
-    this.aheadAllowed = this.options.aheadBatch;
     this.wantBelowCut(view, tau, this.aheadTriangles, Urgency.Ahead, this.options.aheadBatch);
   }
 

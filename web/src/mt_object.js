@@ -299,24 +299,32 @@ void main() {
     this._warmUp.done = true;
     this.blitted = true;
     if (!this.target) this._stillTarget(1, 1);
-    const visible = this.visible, auto = renderer.autoClear, alpha = renderer.getClearAlpha();
+    const visible = this.visible, auto = renderer.autoClear;
     this.visible = false;
     scene.add(group);
     try {
       renderer.setRenderTarget(this.target);
-      renderer.setClearAlpha(0);
-      renderer.clear();
-      renderer.setClearAlpha(alpha);
+      MTObject.clearTransparent(renderer);
       renderer.autoClear = false;
       renderer.render(scene, camera);
       renderer.setRenderTarget(null);
       renderer.render(this.blitScene, this.blitCamera);
     } finally {
-      renderer.setClearAlpha(alpha);
       renderer.autoClear = auto;
       renderer.setRenderTarget(null);
       scene.remove(group);
       this.visible = visible;
+    }
+  }
+
+  // Clears the bound render target to transparent; the renderer's clear alpha stays as it was.
+  static clearTransparent(renderer) {
+    const alpha = renderer.getClearAlpha();
+    renderer.setClearAlpha(0);
+    try {
+      renderer.clear();
+    } finally {
+      renderer.setClearAlpha(alpha);
     }
   }
 
@@ -638,10 +646,7 @@ void main() {
       if (a.fresh) {
         // Cleared transparent: the blit draws the model over the screen's own clear, so the
         // background colour is converted exactly as a direct render's is.
-        const alpha = renderer.getClearAlpha();
-        renderer.setClearAlpha(0);
-        renderer.clear();
-        renderer.setClearAlpha(alpha);
+        MTObject.clearTransparent(renderer);
         a.fresh = false;
       }
       renderer.render(scene, camera);
