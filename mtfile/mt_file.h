@@ -113,6 +113,10 @@ class MtFileWriter {
 class MtFileReader {
  public:
   static std::unique_ptr<MtFileReader> open(const std::string& path, Env* env = Env::Default());
+  // The header alone, its magic and version checked and the footer's agreeing with it; the index
+  // is neither read nor checked (open() does that). For questions the header answers (the vertex
+  // flags) without reading a large file's whole index.
+  static format::FileHeader readHeader(const std::string& path, Env* env = Env::Default());
   ~MtFileReader();
 
   const std::string& path() const { return path_; }

@@ -45,9 +45,9 @@ ColorSupport colorSupportOf(const std::vector<std::string>& files) {
   ColorSupport s;
   s.hasColors = s.hasTextures = !files.empty();
   for (const std::string& f : files) {
-    auto reader = MtFileReader::open(f);
-    if (!(reader->header().vertexFlags & format::kHasColors)) s.hasColors = false;
-    if (!reader->hasTextures()) s.hasTextures = false;
+    const format::FileHeader h = MtFileReader::readHeader(f);
+    if (!(h.vertexFlags & format::kHasColors)) s.hasColors = false;
+    if (!(h.vertexFlags & format::kHasTextures) || h.patchCount == 0) s.hasTextures = false;
   }
   if (!files.empty()) s.fileName = files.size() == 1 ? files[0] : files[0] + " (and " + std::to_string(files.size() - 1) + " more)";
   return s;
