@@ -28,7 +28,12 @@ inline size_t slotOf(uint64_t hash, size_t slots) { return size_t((Wide(remix(ha
 // The patches on the arcs, in arc order then patchRefs order (a patch on two of the arcs twice):
 // the order assembleCut welds in and the edge counter names patches by.
 inline std::vector<uint32_t> cutPatchIds(const MtFileReader& r, const std::vector<uint32_t>& arcs) {
+  // Sized exactly first: the bounded-memory checks count 4 bytes per patch for this list, and a
+  // list grown by doubling holds up to twice that (three times while it moves).
+  size_t count = 0;
+  for (uint32_t a : arcs) count += r.arcs().at(a).patchCount;
   std::vector<uint32_t> patchIds;
+  patchIds.reserve(count);
   for (uint32_t a : arcs) {
     const format::ArcRecord& arc = r.arcs().at(a);
     for (uint32_t k = 0; k < arc.patchCount; ++k) patchIds.push_back(r.patchRefs()[arc.firstPatchRef + k]);
