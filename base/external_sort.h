@@ -19,6 +19,7 @@
 #include <tbb/task_group.h>
 
 #include <algorithm>
+#include <cassert>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -238,6 +239,74 @@ class RunMerger {
   LoserTree<Better> tree_;
 };
 
+// ---- Bounded fan-in
+// A merge reads every run at once, each through a read buffer of at least kMinReadBuffer and one
+// or two file descriptors (the reader's, and the one that gives the read part back): with the runs
+// a small budget makes of a large input it passed both the budget and the process's descriptor
+// limit (a billion triangles at --memory 256M: ~8600 pair runs of 8 MiB, "Too many open files").
+// So a sorter with more runs than mergeFanIn(its budget) first merges consecutive runs, that many
+// at a time, into longer runs, until few enough are left: one more pass over the data per factor
+// of the fan-in, and the same order (ties go to the lower run, and a merged run takes the place
+// of the consecutive runs it holds).
+constexpr size_t kMaxMergeFanIn = 128;
+inline size_t mergeFanIn(uint64_t bufferBytes) {
+  // Each run's reader and the merged run's writer get bufferBytes / (fanIn + 1), at least kMinReadBuffer.
+  const uint64_t buffers = bufferBytes / kMinReadBuffer;
+  return std::clamp<size_t>(size_t(buffers > 1 ? buffers - 1 : 0), 2, kMaxMergeFanIn);
+}
+
+// Merges runs[first, last) into one new run at `path` (readers and writer sharing bufferBytes),
+// calling seen(record, indexInNewRun) for each record, and removes the merged files. Returns the
+// new run's record count.
+template <class Record, class Less, class Seen>
+uint64_t mergeRunsInto(const std::vector<std::string>& runs, size_t first, size_t last, const std::string& path,
+                       uint64_t bufferBytes, Less less, Seen&& seen) {
+  const std::vector<std::string> group(runs.begin() + first, runs.begin() + last);
+  const size_t share = std::max<size_t>(kMinReadBuffer, size_t(bufferBytes / (group.size() + 1)));
+  RunMerger<Record, Less> merger;
+  merger.open(group, share, less);
+  TempWriter writer(path, share);
+  Record r;
+  uint64_t n = 0;
+  while (merger.next(r)) {
+    seen(r, n++);
+    writer.put(r);
+  }
+  writer.close();
+  merger.close();
+  for (const std::string& old : group) std::remove(old.c_str());
+  return n;
+}
+
+// One pass of the bounded fan-in (above): consecutive runs merged mergeFanIn(bufferBytes) at a
+// time into runs named prefix.mergeN (`made` counts them). seenMerged(outRun, record, index) sees
+// every record written to a merged run; keptRun(outRun, oldRun) is called for a run carried over
+// as it is (the last of a pass, alone in its group). If a merge fails, `runs` still names every
+// file left, so the caller's release() removes them.
+template <class Record, class Less, class SeenMerged, class KeptRun>
+void mergePass(std::vector<std::string>& runs, const std::string& prefix, size_t& made, uint64_t bufferBytes, Less less,
+               SeenMerged&& seenMerged, KeptRun&& keptRun) {
+  const size_t fanIn = mergeFanIn(bufferBytes);
+  std::vector<std::string> next;
+  try {
+    for (size_t first = 0; first < runs.size(); first += fanIn) {
+      const size_t last = std::min(runs.size(), first + fanIn), out = next.size();
+      if (last - first == 1) {
+        keptRun(out, first);
+        next.push_back(runs[first]);
+        continue;
+      }
+      next.push_back(prefix + ".merge" + std::to_string(made++));
+      mergeRunsInto<Record>(runs, first, last, next.back(), bufferBytes, less,
+                            [&](const Record& r, uint64_t i) { seenMerged(out, r, i); });
+    }
+  } catch (...) {
+    runs.insert(runs.end(), next.begin(), next.end());
+    throw;
+  }
+  runs.swap(next);
+}
+
 // The input side of a sorter that writes every full buffer as a run (ExternalSorter,
 // StableKeySorter): records are buffered up to `capacity`; a full buffer goes to the sorter's
 // writeRun (which must clear it) in the caller's thread or, with `background`, in a TBB task
@@ -349,6 +418,8 @@ class ExternalSorter {
       return;
     }
     input_.spillRest();
+    while (runs_.size() > mergeFanIn(budgetBytes_))
+      mergePass<Record>(runs_, prefix_, merged_, budgetBytes_, less_, [](size_t, const Record&, uint64_t) {}, [](size_t, size_t) {});
     // Each run gets an equal share of the budget as its read buffer.
     size_t perRun = std::max<size_t>(kMinReadBuffer, budgetBytes_ / (runs_.size() + 1));
     merger_.open(runs_, perRun, less_);
@@ -388,6 +459,7 @@ class ExternalSorter {
   Less less_;
   uint64_t budgetBytes_;
   std::vector<std::string> runs_;
+  size_t merged_ = 0;  // runs made by mergePass
   size_t memoryPos_ = 0;
   RunMerger<Record, Less> merger_;
   RunBuffer<Record> input_;  // last: its spill task uses the members above
@@ -434,6 +506,7 @@ class StableKeySorter {
     }
     input_.spillRest();
     std::vector<Record>().swap(tmp_);
+    reduce();
     size_t perRun = std::max<size_t>(kMinReadBuffer, capacity_ * 2 * sizeof(Record) / (runs_.size() + 1));
     merger_.open(runs_, std::min<size_t>(perRun, 4 << 20), Less{key_});
   }
@@ -526,6 +599,32 @@ class StableKeySorter {
     tmp_.resize(records.size());
     return radixSort(records.data(), tmp_.data(), records.size(), key_, keyBits_);
   }
+  // The bounded fan-in (mergePass), each merged run's length and kept keys taken as it is written.
+  void reduce() {
+    const uint64_t bufferBytes = capacity_ * 2 * sizeof(Record);
+    while (runs_.size() > mergeFanIn(bufferBytes)) {
+      std::vector<uint64_t> lengths;
+      std::vector<std::vector<uint64_t>> samples;
+      auto slot = [&](size_t out) {
+        if (lengths.size() <= out) lengths.resize(out + 1, 0), samples.resize(out + 1);
+      };
+      mergePass<Record>(runs_, prefix_, merged_, bufferBytes, Less{key_},
+                        [&](size_t out, const Record& r, uint64_t i) {
+                          slot(out);
+                          if (i % 4096 == 0) samples[out].push_back(key_(r));
+                          lengths[out] = i + 1;
+                        },
+                        [&](size_t out, size_t old) {
+                          slot(out);
+                          lengths[out] = runLength_[old];
+                          samples[out] = std::move(samples_[old]);
+                        });
+      lengths.resize(runs_.size(), 0);
+      samples.resize(runs_.size());
+      runLength_.swap(lengths);
+      samples_.swap(samples);
+    }
+  }
   // Sorts `records` and writes them as the next run (clears it).
   void writeRun(std::vector<Record>& records) {
     tmp_.resize(records.size());
@@ -549,6 +648,7 @@ class StableKeySorter {
   const Record* sorted_ = nullptr;
   size_t memoryPos_ = 0, memoryEnd_ = 0;
   std::vector<std::string> runs_;
+  size_t merged_ = 0;                          // runs made by reduce()
   std::vector<uint64_t> runLength_;            // records per run
   std::vector<std::vector<uint64_t>> samples_;  // every 4096th key of each run
   RunMerger<Record, Less> merger_;
@@ -625,6 +725,7 @@ class KeyGroupSorter {
       std::vector<Record>().swap(grouped_);
       std::vector<uint32_t>().swap(slot_);
       groups_.clear();
+      reduce();
     }
     rewind();
   }
@@ -691,6 +792,67 @@ class KeyGroupSorter {
     size_t run;
     bool operator<(const HeapEntry& o) const { return key != o.key ? key > o.key : run > o.run; }  // min-heap
   };
+
+  // The bounded fan-in (mergePass) for runs of groups: consecutive runs merged into one, a key's
+  // records from several runs gathered as nextGroup() gathers them (lower runs first, then put in
+  // Less order), so the groups read back are the same.
+  void reduce() {
+    const uint64_t bufferBytes = capacity_ * (8 + 4 + 2 * sizeof(Record));
+    const size_t fanIn = mergeFanIn(bufferBytes);
+    while (runs_.size() > fanIn) {
+      std::vector<std::string> next;
+      try {
+        for (size_t first = 0; first < runs_.size(); first += fanIn) {
+          const size_t last = std::min(runs_.size(), first + fanIn);
+          if (last - first == 1) {
+            next.push_back(runs_[first]);
+            continue;
+          }
+          next.push_back(prefix_ + ".merge" + std::to_string(merged_++));
+          mergeGroupsInto(first, last, next.back(), bufferBytes);
+        }
+      } catch (...) {
+        runs_.insert(runs_.end(), next.begin(), next.end());
+        throw;
+      }
+      runs_.swap(next);
+    }
+  }
+  void mergeGroupsInto(size_t first, size_t last, const std::string& path, uint64_t bufferBytes) {
+    const size_t n = last - first;
+    const size_t share = std::max<size_t>(kMinReadBuffer, size_t(bufferBytes / (n + 1)));
+    std::vector<std::unique_ptr<TempReader>> readers;
+    std::vector<Header> heads(n);
+    std::priority_queue<HeapEntry> heap;
+    for (size_t i = 0; i < n; ++i) {
+      readers.push_back(std::make_unique<TempReader>(runs_[first + i], share));
+      readers.back()->consumeAsRead();
+      if (readers.back()->get(heads[i])) heap.push({heads[i].key, i});
+    }
+    TempWriter writer(path, share);
+    std::vector<Record> group;
+    while (!heap.empty()) {
+      const uint64_t key = heap.top().key;
+      group.clear();
+      size_t sources = 0;
+      while (!heap.empty() && heap.top().key == key) {
+        const size_t i = heap.top().run;
+        heap.pop();
+        const size_t at = group.size();
+        group.resize(at + heads[i].count);
+        if (readers[i]->read(group.data() + at, heads[i].count * sizeof(Record)) != heads[i].count * sizeof(Record))
+          fail(runs_[first + i], "scratch run ends inside a group");
+        if (readers[i]->get(heads[i])) heap.push({heads[i].key, i});
+        ++sources;
+      }
+      if (sources > 1) sortTail(group.begin(), group.end());
+      writer.put(Header{key, group.size()});
+      writer.write(group.data(), group.size() * sizeof(Record));
+    }
+    writer.close();
+    readers.clear();
+    for (size_t i = first; i < last; ++i) std::remove(runs_[i].c_str());
+  }
 
   // Counting sort of (keys, recs) by key into grouped_ (stable), groups_ in ascending key order.
   void formGroups(const std::vector<uint64_t>& keys, const std::vector<Record>& recs) {
@@ -803,6 +965,7 @@ class KeyGroupSorter {
   size_t nextGroup_ = 0;
   uint64_t count_ = 0;
   std::vector<std::string> runs_;
+  size_t merged_ = 0;  // runs made by reduce()
   std::vector<std::unique_ptr<TempReader>> readers_;
   std::vector<Header> heads_;
   std::priority_queue<HeapEntry> heap_;

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cmath>
 #include <filesystem>
 #include <map>
@@ -700,11 +701,12 @@ TEST(ExternalSorter, BackgroundSpillGivesTheSameOrderThroughManyRuns) {
     ExternalSorter<Rec, Less> sorter(tmp.file(background ? "bg" : "fg"), 64 << 10, Less{}, background);
     for (const Rec& r : input) sorter.add(r);
     EXPECT_EQ(sorter.count(), input.size());
-    sorter.finish();
-    // 200000 records of 16 bytes through a 64 KiB budget: dozens of runs on disk.
+    // 200000 records of 16 bytes through a 64 KiB budget: dozens of runs on disk (then merged a
+    // few at a time before the last merge: the bounded fan-in).
     size_t runs = 0;
     for (auto& e : fs::directory_iterator(tmp.path())) runs += e.path().filename().string().rfind(background ? "bg.run" : "fg.run", 0) == 0;
     EXPECT_GT(runs, 40u) << (background ? "background" : "foreground");
+    sorter.finish();
     std::vector<Rec> got;
     Rec r;
     while (sorter.next(r)) got.push_back(r);
@@ -712,6 +714,130 @@ TEST(ExternalSorter, BackgroundSpillGivesTheSameOrderThroughManyRuns) {
     for (size_t i = 0; i < got.size(); ++i) {
       ASSERT_EQ(got[i].key, expected[i].key) << i;
       ASSERT_EQ(got[i].id, expected[i].id) << i;
+    }
+  }
+}
+
+// Descriptors this process has open now.
+size_t openDescriptors() {
+  size_t n = 0;
+  for (auto& e : fs::directory_iterator("/proc/self/fd")) n += !e.path().empty();
+  return n;
+}
+
+// The bounded fan-in (base/external_sort.h): hundreds of runs through a budget that gives a merge
+// room for only a few readers at a time are merged a few at a time first, into the same order,
+// with few files open while the result is read, and nothing left on disk after.
+TEST(ExternalSorter, ManyRunsMergeInBoundedFanInToTheSameOrder) {
+  TempDir tmp;
+  EXPECT_EQ(mergeFanIn(64 << 10), 3u);
+  EXPECT_EQ(mergeFanIn(1 << 30), kMaxMergeFanIn);
+  EXPECT_EQ(mergeFanIn(0), 2u);
+  struct Rec {
+    uint64_t key;
+    uint32_t id;
+    uint32_t pad;
+  };
+  std::mt19937_64 rng(11);
+  std::vector<Rec> input(300000);
+  for (uint32_t i = 0; i < input.size(); ++i) input[i] = {rng() % 3000, i, 0};  // many equal keys
+  std::vector<Rec> stable = input;
+  std::stable_sort(stable.begin(), stable.end(), [](const Rec& a, const Rec& b) { return a.key < b.key; });
+  auto countFiles = [&] {
+    size_t n = 0;
+    for (auto& e : fs::directory_iterator(tmp.path())) n += !e.path().empty();
+    return n;
+  };
+  const size_t before = openDescriptors();
+  {
+    // Comparison sorter, a total order: 300000 x 16 bytes through 48 KiB, ~100 runs, fan-in 2.
+    struct Less {
+      bool operator()(const Rec& a, const Rec& b) const { return a.key != b.key ? a.key < b.key : a.id < b.id; }
+    };
+    ExternalSorter<Rec, Less> sorter(tmp.file("cmp"), 48 << 10);
+    for (const Rec& r : input) sorter.add(r);
+    EXPECT_GT(countFiles(), 90u);
+    sorter.finish();
+    EXPECT_LE(countFiles(), mergeFanIn(48 << 10));
+    EXPECT_LE(openDescriptors(), before + 2 * mergeFanIn(48 << 10)) << "a reader and a hole-punching descriptor per run";
+    Rec r;
+    size_t i = 0;
+    while (sorter.next(r)) {
+      ASSERT_LT(i, stable.size());
+      ASSERT_EQ(r.key, stable[i].key) << i;
+      ASSERT_EQ(r.id, stable[i].id) << i;  // the total order is the stable one here
+      ++i;
+    }
+    EXPECT_EQ(i, stable.size());
+    EXPECT_EQ(countFiles(), 0u);
+  }
+  {
+    // Stable key sorter: equal keys keep their input order through the extra passes; read whole
+    // and in parts.
+    struct KeyOf {
+      uint64_t operator()(const Rec& r) const { return r.key; }
+    };
+    for (size_t parts : {size_t(0), size_t(3)}) {
+      StableKeySorter<Rec, KeyOf> sorter(tmp.file("key"), 96 << 10, KeyOf{}, 12);
+      for (const Rec& r : input) sorter.add(r);
+      EXPECT_GT(countFiles(), 90u);
+      sorter.finish();
+      EXPECT_LE(countFiles(), mergeFanIn(96 << 10));
+      std::vector<Rec> got(stable.size());
+      if (parts == 0) {
+        Rec r;
+        size_t i = 0;
+        while (sorter.next(r)) {
+          ASSERT_LT(i, got.size());
+          got[i++] = r;
+        }
+        EXPECT_EQ(i, got.size());
+      } else {
+        std::atomic<size_t> total{0};
+        sorter.mergeInParts(parts, [&](size_t, uint64_t first, const auto& nextRecord) {
+          Rec r;
+          uint64_t at = first;
+          while (nextRecord(r)) {
+            ASSERT_LT(at, got.size());
+            got[at++] = r;
+            ++total;
+          }
+        });
+        EXPECT_EQ(total.load(), got.size());
+      }
+      for (size_t i = 0; i < got.size(); ++i) {
+        ASSERT_EQ(got[i].key, stable[i].key) << i << " parts " << parts;
+        ASSERT_EQ(got[i].id, stable[i].id) << i << " parts " << parts;
+      }
+      EXPECT_EQ(countFiles(), 0u);
+    }
+  }
+  {
+    // Group sorter: every key's records, whole and in Less order, two passes over the groups.
+    struct ById {
+      bool operator()(const Rec& a, const Rec& b) const { return a.id < b.id; }
+    };
+    KeyGroupSorter<Rec, ById> sorter(tmp.file("grp"), 64 << 10, ById{});
+    std::vector<uint64_t> keys(input.size());
+    for (size_t i = 0; i < input.size(); ++i) keys[i] = input[i].key;
+    for (size_t at = 0; at < input.size(); at += 1000) sorter.addBatch(keys.data() + at, input.data() + at, std::min<size_t>(1000, input.size() - at));
+    EXPECT_GT(countFiles(), 90u);
+    sorter.finish();
+    EXPECT_LE(countFiles(), mergeFanIn(64 << 10));
+    for (int pass = 0; pass < 2; ++pass) {
+      if (pass) sorter.rewind(true);
+      uint64_t key;
+      std::vector<Rec> group;
+      size_t i = 0;
+      while (sorter.nextGroup(key, group)) {
+        for (const Rec& r : group) {
+          ASSERT_LT(i, stable.size());
+          ASSERT_EQ(key, stable[i].key) << i;
+          ASSERT_EQ(r.id, stable[i].id) << i;  // by key, then input order (= id order)
+          ++i;
+        }
+      }
+      EXPECT_EQ(i, stable.size()) << "pass " << pass;
     }
   }
 }
