@@ -19,7 +19,6 @@
 #include <tbb/task_group.h>
 
 #include <algorithm>
-#include <cassert>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -244,23 +243,23 @@ class RunMerger {
 // or two file descriptors (the reader's, and the one that gives the read part back): with the runs
 // a small budget makes of a large input it passed both the budget and the process's descriptor
 // limit (a billion triangles at --memory 256M: ~8600 pair runs of 8 MiB, "Too many open files").
-// So a sorter with more runs than mergeFanIn(its budget) first merges consecutive runs, that many
-// at a time, into longer runs, until few enough are left: one more pass over the data per factor
-// of the fan-in, and the same order (ties go to the lower run, and a merged run takes the place
-// of the consecutive runs it holds).
+// So a sorter with more runs than its fan-in first merges consecutive runs into longer ones, until
+// few enough are left (reduceRuns): the same order (ties go to the lower run, and a merged run
+// takes the place of the consecutive runs it holds), at the cost of rewriting the runs merged.
 constexpr size_t kMaxMergeFanIn = 128;
+// The fan-in `bufferBytes` of read buffers allow: each run's reader and the merged run's writer
+// get bufferBytes / (fanIn + 1), at least kMinReadBuffer (the writer at least 64 KiB, which
+// matters only for budgets of a few hundred KiB).
 inline size_t mergeFanIn(uint64_t bufferBytes) {
-  // Each run's reader and the merged run's writer get bufferBytes / (fanIn + 1), at least kMinReadBuffer.
   const uint64_t buffers = bufferBytes / kMinReadBuffer;
   return std::clamp<size_t>(size_t(buffers > 1 ? buffers - 1 : 0), 2, kMaxMergeFanIn);
 }
 
 // Merges runs[first, last) into one new run at `path` (readers and writer sharing bufferBytes),
-// calling seen(record, indexInNewRun) for each record, and removes the merged files. Returns the
-// new run's record count.
+// calling seen(record, indexInNewRun) for each record, and removes the merged files.
 template <class Record, class Less, class Seen>
-uint64_t mergeRunsInto(const std::vector<std::string>& runs, size_t first, size_t last, const std::string& path,
-                       uint64_t bufferBytes, Less less, Seen&& seen) {
+void mergeRunsInto(const std::vector<std::string>& runs, size_t first, size_t last, const std::string& path,
+                   uint64_t bufferBytes, Less less, Seen&& seen) {
   const std::vector<std::string> group(runs.begin() + first, runs.begin() + last);
   const size_t share = std::max<size_t>(kMinReadBuffer, size_t(bufferBytes / (group.size() + 1)));
   RunMerger<Record, Less> merger;
@@ -275,36 +274,49 @@ uint64_t mergeRunsInto(const std::vector<std::string>& runs, size_t first, size_
   writer.close();
   merger.close();
   for (const std::string& old : group) std::remove(old.c_str());
-  return n;
 }
 
-// One pass of the bounded fan-in (above): consecutive runs merged mergeFanIn(bufferBytes) at a
-// time into runs named prefix.mergeN (`made` counts them). seenMerged(outRun, record, index) sees
-// every record written to a merged run; keptRun(outRun, oldRun) is called for a run carried over
-// as it is (the last of a pass, alone in its group). If a merge fails, `runs` still names every
-// file left, so the caller's release() removes them.
-template <class Record, class Less, class SeenMerged, class KeptRun>
-void mergePass(std::vector<std::string>& runs, const std::string& prefix, size_t& made, uint64_t bufferBytes, Less less,
-               SeenMerged&& seenMerged, KeptRun&& keptRun) {
-  const size_t fanIn = mergeFanIn(bufferBytes);
-  std::vector<std::string> next;
-  try {
-    for (size_t first = 0; first < runs.size(); first += fanIn) {
-      const size_t last = std::min(runs.size(), first + fanIn), out = next.size();
-      if (last - first == 1) {
-        keptRun(out, first);
-        next.push_back(runs[first]);
-        continue;
-      }
-      next.push_back(prefix + ".merge" + std::to_string(made++));
-      mergeRunsInto<Record>(runs, first, last, next.back(), bufferBytes, less,
-                            [&](const Record& r, uint64_t i) { seenMerged(out, r, i); });
+// Merges consecutive runs until at most `fanIn` are left, rewriting as few as it can: while more
+// than fanIn^2 are left, every run (in groups of fanIn); then only the first groups, just enough
+// of them (a last smaller one) to bring the count to fanIn, the later runs kept as they are (at
+// fanIn + 1 runs, two are merged, not all). merge(first, last, path, outRun) writes
+// runs[first, last) as one run at `path`; keptRun(outRun, oldRun) is called for each run carried
+// over. The new runs are named prefix.mergeN (`made` counts them). If a merge fails, `runs` still
+// names every file left, so the caller's release() removes them. onPass() runs after each pass.
+template <class Merge, class KeptRun, class OnPass>
+void reduceRuns(std::vector<std::string>& runs, size_t fanIn, const std::string& prefix, size_t& made, Merge&& merge,
+                KeptRun&& keptRun, OnPass&& onPass) {
+  fanIn = std::max<size_t>(fanIn, 2);
+  while (runs.size() > fanIn) {
+    const size_t n = runs.size();
+    // Groups of fanIn from the start: all of them, or the fewest that remove n - fanIn runs (each
+    // group of g runs removes g - 1), the last one cut to what is still to remove.
+    size_t mergeRuns = n;
+    if (n <= fanIn * fanIn) {
+      const size_t remove = n - fanIn, groups = (remove + fanIn - 2) / (fanIn - 1);
+      mergeRuns = remove + groups;
     }
-  } catch (...) {
-    runs.insert(runs.end(), next.begin(), next.end());
-    throw;
+    std::vector<std::string> next;
+    try {
+      for (size_t first = 0; first < n;) {
+        const size_t out = next.size();
+        const size_t last = first < mergeRuns ? std::min(mergeRuns, first + fanIn) : first + 1;
+        if (last - first == 1) {
+          keptRun(out, first);
+          next.push_back(runs[first]);
+        } else {
+          next.push_back(prefix + ".merge" + std::to_string(made++));
+          merge(first, last, next.back(), out);
+        }
+        first = last;
+      }
+    } catch (...) {
+      runs.insert(runs.end(), next.begin(), next.end());
+      throw;
+    }
+    runs.swap(next);
+    onPass();
   }
-  runs.swap(next);
 }
 
 // The input side of a sorter that writes every full buffer as a run (ExternalSorter,
@@ -418,8 +430,12 @@ class ExternalSorter {
       return;
     }
     input_.spillRest();
-    while (runs_.size() > mergeFanIn(budgetBytes_))
-      mergePass<Record>(runs_, prefix_, merged_, budgetBytes_, less_, [](size_t, const Record&, uint64_t) {}, [](size_t, size_t) {});
+    reduceRuns(
+        runs_, mergeFanIn(budgetBytes_), prefix_, merged_,
+        [&](size_t first, size_t last, const std::string& path, size_t) {
+          mergeRunsInto<Record>(runs_, first, last, path, budgetBytes_, less_, [](const Record&, uint64_t) {});
+        },
+        [](size_t, size_t) {}, [] {});
     // Each run gets an equal share of the budget as its read buffer.
     size_t perRun = std::max<size_t>(kMinReadBuffer, budgetBytes_ / (runs_.size() + 1));
     merger_.open(runs_, perRun, less_);
@@ -459,7 +475,7 @@ class ExternalSorter {
   Less less_;
   uint64_t budgetBytes_;
   std::vector<std::string> runs_;
-  size_t merged_ = 0;  // runs made by mergePass
+  size_t merged_ = 0;  // runs made by reduceRuns
   size_t memoryPos_ = 0;
   RunMerger<Record, Less> merger_;
   RunBuffer<Record> input_;  // last: its spill task uses the members above
@@ -487,6 +503,7 @@ class StableKeySorter {
     runs_.clear();
     runLength_.clear();
     samples_.clear();
+    mergerOpen_ = false;
     std::vector<Record>().swap(tmp_);
     sorted_ = nullptr;
     memoryPos_ = memoryEnd_ = 0;
@@ -506,9 +523,6 @@ class StableKeySorter {
     }
     input_.spillRest();
     std::vector<Record>().swap(tmp_);
-    reduce();
-    size_t perRun = std::max<size_t>(kMinReadBuffer, capacity_ * 2 * sizeof(Record) / (runs_.size() + 1));
-    merger_.open(runs_, std::min<size_t>(perRun, 4 << 20), Less{key_});
   }
 
   bool next(Record& out) {
@@ -520,6 +534,7 @@ class StableKeySorter {
       out = sorted_[memoryPos_++];
       return true;
     }
+    if (!mergerOpen_) openMerger();
     if (!merger_.next(out)) {
       release();
       return false;
@@ -547,7 +562,9 @@ class StableKeySorter {
       release();
       return;
     }
-    merger_.close();
+    // Every part's merge reads every run: the runs reduced so that all parts together stay within
+    // the fan-in (descriptors and read buffers).
+    reduce(std::max<size_t>(2, mergeFanIn(capacity_ * 2 * sizeof(Record)) / parts));
     // Splitters: quantiles of the kept keys; a piece holds keys in [split[p-1], split[p]).
     std::vector<uint64_t> kept;
     for (auto& s : samples_) kept.insert(kept.end(), s.begin(), s.end());
@@ -599,31 +616,45 @@ class StableKeySorter {
     tmp_.resize(records.size());
     return radixSort(records.data(), tmp_.data(), records.size(), key_, keyBits_);
   }
-  // The bounded fan-in (mergePass), each merged run's length and kept keys taken as it is written.
-  void reduce() {
+  // The bounded fan-in (reduceRuns) down to `fanIn` runs, each merged run's length and kept keys
+  // taken as it is written.
+  void reduce(size_t fanIn) {
     const uint64_t bufferBytes = capacity_ * 2 * sizeof(Record);
-    while (runs_.size() > mergeFanIn(bufferBytes)) {
-      std::vector<uint64_t> lengths;
-      std::vector<std::vector<uint64_t>> samples;
-      auto slot = [&](size_t out) {
-        if (lengths.size() <= out) lengths.resize(out + 1, 0), samples.resize(out + 1);
-      };
-      mergePass<Record>(runs_, prefix_, merged_, bufferBytes, Less{key_},
-                        [&](size_t out, const Record& r, uint64_t i) {
-                          slot(out);
-                          if (i % 4096 == 0) samples[out].push_back(key_(r));
-                          lengths[out] = i + 1;
-                        },
-                        [&](size_t out, size_t old) {
-                          slot(out);
-                          lengths[out] = runLength_[old];
-                          samples[out] = std::move(samples_[old]);
-                        });
-      lengths.resize(runs_.size(), 0);
-      samples.resize(runs_.size());
-      runLength_.swap(lengths);
-      samples_.swap(samples);
-    }
+    std::vector<uint64_t> lengths;
+    std::vector<std::vector<uint64_t>> samples;
+    auto slot = [&](size_t out) {
+      if (lengths.size() <= out) lengths.resize(out + 1, 0), samples.resize(out + 1);
+    };
+    reduceRuns(
+        runs_, fanIn, prefix_, merged_,
+        [&](size_t first, size_t last, const std::string& path, size_t out) {
+          slot(out);
+          mergeRunsInto<Record>(runs_, first, last, path, bufferBytes, Less{key_}, [&](const Record& r, uint64_t i) {
+            if (i % 4096 == 0) samples[out].push_back(key_(r));
+            lengths[out] = i + 1;
+          });
+        },
+        [&](size_t out, size_t old) {
+          slot(out);
+          lengths[out] = runLength_[old];
+          samples[out] = std::move(samples_[old]);
+        },
+        [&] {
+          lengths.resize(runs_.size(), 0);
+          samples.resize(runs_.size());
+          runLength_.swap(lengths);
+          samples_.swap(samples);
+          lengths.clear();
+          samples.clear();
+        });
+  }
+  // The merge next() reads from, opened at its first call: mergeInParts() instead reduces the runs
+  // for its parallel merges.
+  void openMerger() {
+    reduce(mergeFanIn(capacity_ * 2 * sizeof(Record)));
+    size_t perRun = std::max<size_t>(kMinReadBuffer, capacity_ * 2 * sizeof(Record) / (runs_.size() + 1));
+    merger_.open(runs_, std::min<size_t>(perRun, 4 << 20), Less{key_});
+    mergerOpen_ = true;
   }
   // Sorts `records` and writes them as the next run (clears it).
   void writeRun(std::vector<Record>& records) {
@@ -649,6 +680,7 @@ class StableKeySorter {
   size_t memoryPos_ = 0, memoryEnd_ = 0;
   std::vector<std::string> runs_;
   size_t merged_ = 0;                          // runs made by reduce()
+  bool mergerOpen_ = false;                    // next() has opened merger_
   std::vector<uint64_t> runLength_;            // records per run
   std::vector<std::vector<uint64_t>> samples_;  // every 4096th key of each run
   RunMerger<Record, Less> merger_;
@@ -793,30 +825,15 @@ class KeyGroupSorter {
     bool operator<(const HeapEntry& o) const { return key != o.key ? key > o.key : run > o.run; }  // min-heap
   };
 
-  // The bounded fan-in (mergePass) for runs of groups: consecutive runs merged into one, a key's
+  // The bounded fan-in (reduceRuns) for runs of groups: consecutive runs merged into one, a key's
   // records from several runs gathered as nextGroup() gathers them (lower runs first, then put in
   // Less order), so the groups read back are the same.
   void reduce() {
     const uint64_t bufferBytes = capacity_ * (8 + 4 + 2 * sizeof(Record));
-    const size_t fanIn = mergeFanIn(bufferBytes);
-    while (runs_.size() > fanIn) {
-      std::vector<std::string> next;
-      try {
-        for (size_t first = 0; first < runs_.size(); first += fanIn) {
-          const size_t last = std::min(runs_.size(), first + fanIn);
-          if (last - first == 1) {
-            next.push_back(runs_[first]);
-            continue;
-          }
-          next.push_back(prefix_ + ".merge" + std::to_string(merged_++));
-          mergeGroupsInto(first, last, next.back(), bufferBytes);
-        }
-      } catch (...) {
-        runs_.insert(runs_.end(), next.begin(), next.end());
-        throw;
-      }
-      runs_.swap(next);
-    }
+    reduceRuns(
+        runs_, mergeFanIn(bufferBytes), prefix_, merged_,
+        [&](size_t first, size_t last, const std::string& path, size_t) { mergeGroupsInto(first, last, path, bufferBytes); },
+        [](size_t, size_t) {}, [] {});
   }
   void mergeGroupsInto(size_t first, size_t last, const std::string& path, uint64_t bufferBytes) {
     const size_t n = last - first;

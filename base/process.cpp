@@ -59,6 +59,15 @@ void reexecWithMallocHugePages(char** argv) {
   std::string value = tunables.empty() ? std::string() : tunables + ":";
   value += "glibc.malloc.hugetlb=1";
   if (setenv("GLIBC_TUNABLES", value.c_str(), 1) != 0 || setenv("MT_HUGEPAGES_REEXEC", "1", 1) != 0) return;
+  // The executable by its own path, so the process keeps its name ("exe" after an exec of
+  // /proc/self/exe: ps, top and pgrep -x lost it); /proc/self/exe when the link cannot be read
+  // or names a file no longer there.
+  char self[4096];
+  const ssize_t length = readlink("/proc/self/exe", self, sizeof self - 1);
+  if (length > 0) {
+    self[length] = 0;
+    execv(self, argv);
+  }
   execv("/proc/self/exe", argv);
   unsetenv("MT_HUGEPAGES_REEXEC");
   // The exec failed: run on without the tunable (and leave the variable as it was).

@@ -27,7 +27,7 @@ CpuSeconds processCpuSeconds();
 
 // glibc malloc on transparent huge pages. The tunable glibc.malloc.hugetlb=1 (glibc 2.35+) makes
 // malloc advise the kernel (MADV_HUGEPAGE) to back its heaps and large mappings with 2 MiB pages;
-// it is read only when a process starts, so this re-executes the process (/proc/self/exe, the
+// it is read only when a process starts, so this re-executes the process (its own executable, the
 // same argv) with it appended to GLIBC_TUNABLES (and MT_HUGEPAGES_REEXEC=1, so it happens once).
 // It returns, doing nothing, in the re-executed process, when GLIBC_TUNABLES already names
 // glibc.malloc.hugetlb (the user's own choice), when MT_NO_HUGEPAGES=1, when the kernel's

@@ -98,7 +98,7 @@ watchDisk "$work/disk.low" & watcher=$!
   --stats-json "$work/stats.json" -q > "$work/build.log" 2>&1 &
 builder=$!
 sleep 0.2
-bpid=$(pgrep -P "$builder" | head -1 || true)  # mtbuild (named "exe" once it re-executes itself)
+bpid=$(pgrep -P "$builder" | head -1 || true)  # mtbuild (whatever name it runs under)
 sampler=""
 if [[ -n "$bpid" ]]; then peakio "$bpid" "$work/build.io" & sampler=$!; fi
 wait "$builder" || { kill "$watcher"; cat "$work/build.log" >&2; exit 1; }

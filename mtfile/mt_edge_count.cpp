@@ -136,9 +136,12 @@ struct PatchEdges {
 // (of the index) it brings: what the k-d split weighs.
 struct PlanItem {
   std::array<uint32_t, 3> centre;
-  uint64_t triangles;
+  uint32_t triangles;  // a patch's, as its record has them
   uint32_t position;
 };
+// The bounded check's accounting (tools/mtverify.cpp, kCutBytesPerPatch = 32) counts a plan item
+// and the patch's id in the cut's list; the part members come after the items are gone.
+static_assert(sizeof(PlanItem) + sizeof(uint32_t) <= 32, "a patch's plan item and id fit what the budget counts");
 
 // Splits `box` (holding the items' centres) into `leaves` parts along the longest side of the
 // centres' extent, each cut at the weight (triangles) that gives both sides their share of the

@@ -520,12 +520,14 @@ int runHeadless(CliOptions o, const EngineOptions& eo, const DrawSettings& ds, C
 // first_frame_ms counts the re-execution too.
 Clock::time_point runStart() {
   constexpr const char* kVar = "MT_RENDER_START_NS";
-  if (const char* given = std::getenv(kVar)) {
-    const long long ns = std::atoll(given);
-    unsetenv(kVar);
-    if (ns > 0) return Clock::time_point(std::chrono::duration_cast<Clock::duration>(std::chrono::nanoseconds(ns)));
-  }
   const auto now = Clock::now();
+  if (const char* given = std::getenv(kVar)) {
+    // Only a value this run's own exec left (a stale one, inherited, is not a start).
+    const long long ns = std::atoll(given);
+    const auto start = Clock::time_point(std::chrono::duration_cast<Clock::duration>(std::chrono::nanoseconds(ns)));
+    unsetenv(kVar);
+    if (std::getenv("MT_HUGEPAGES_REEXEC") && ns > 0 && start <= now) return start;
+  }
   const long long ns = std::chrono::duration_cast<std::chrono::nanoseconds>(now.time_since_epoch()).count();
   setenv(kVar, std::to_string(ns).c_str(), 1);
   return now;

@@ -19,17 +19,18 @@ Scene::Scene(const std::vector<std::string>& paths) {
   // Every file opened first, so the arrays are sized once (a billion-triangle file has 1.2 M
   // patches and 624 k arcs: growing by doubling copied them and faulted their pages in again).
   std::vector<std::unique_ptr<MtFileReader>> opened;
-  size_t nodeTotal = 0, arcTotal = 0, patchTotal = 0;
+  size_t nodeTotal = 0, arcTotal = 0, refTotal = 0, patchTotal = 0;
   for (const std::string& path : paths) {
     opened.push_back(MtFileReader::open(path));
     nodeTotal += opened.back()->nodes().size();
     arcTotal += opened.back()->arcs().size();
+    refTotal += opened.back()->patchRefs().size();
     patchTotal += opened.back()->patches().size();
   }
   nodes_.reserve(nodeTotal);
   arcs_.reserve(arcTotal);
   inArcs_.reserve(arcTotal);
-  arcPatches_.reserve(patchTotal);
+  arcPatches_.reserve(refTotal);
   patches_.reserve(patchTotal);
   for (auto& reader : opened) {
     const std::string& path = reader->path();
