@@ -503,7 +503,6 @@ class StableKeySorter {
     runs_.clear();
     runLength_.clear();
     samples_.clear();
-    mergerOpen_ = false;
     std::vector<Record>().swap(tmp_);
     sorted_ = nullptr;
     memoryPos_ = memoryEnd_ = 0;
@@ -523,6 +522,11 @@ class StableKeySorter {
     }
     input_.spillRest();
     std::vector<Record>().swap(tmp_);
+    // Reduced and opened now, while the sorter's budget is its own (the caller may open other
+    // readers before its first next()); mergeInParts() reduces further if its parts need it.
+    reduce(mergeFanIn(capacity_ * 2 * sizeof(Record)));
+    size_t perRun = std::max<size_t>(kMinReadBuffer, capacity_ * 2 * sizeof(Record) / (runs_.size() + 1));
+    merger_.open(runs_, std::min<size_t>(perRun, 4 << 20), Less{key_});
   }
 
   bool next(Record& out) {
@@ -534,7 +538,6 @@ class StableKeySorter {
       out = sorted_[memoryPos_++];
       return true;
     }
-    if (!mergerOpen_) openMerger();
     if (!merger_.next(out)) {
       release();
       return false;
@@ -563,7 +566,8 @@ class StableKeySorter {
       return;
     }
     // Every part's merge reads every run: the runs reduced so that all parts together stay within
-    // the fan-in (descriptors and read buffers).
+    // the fan-in (descriptors and read buffers). finish()'s merger has read only the runs' heads.
+    merger_.close();
     reduce(std::max<size_t>(2, mergeFanIn(capacity_ * 2 * sizeof(Record)) / parts));
     // Splitters: quantiles of the kept keys; a piece holds keys in [split[p-1], split[p]).
     std::vector<uint64_t> kept;
@@ -648,14 +652,6 @@ class StableKeySorter {
           samples.clear();
         });
   }
-  // The merge next() reads from, opened at its first call: mergeInParts() instead reduces the runs
-  // for its parallel merges.
-  void openMerger() {
-    reduce(mergeFanIn(capacity_ * 2 * sizeof(Record)));
-    size_t perRun = std::max<size_t>(kMinReadBuffer, capacity_ * 2 * sizeof(Record) / (runs_.size() + 1));
-    merger_.open(runs_, std::min<size_t>(perRun, 4 << 20), Less{key_});
-    mergerOpen_ = true;
-  }
   // Sorts `records` and writes them as the next run (clears it).
   void writeRun(std::vector<Record>& records) {
     tmp_.resize(records.size());
@@ -680,7 +676,6 @@ class StableKeySorter {
   size_t memoryPos_ = 0, memoryEnd_ = 0;
   std::vector<std::string> runs_;
   size_t merged_ = 0;                          // runs made by reduce()
-  bool mergerOpen_ = false;                    // next() has opened merger_
   std::vector<uint64_t> runLength_;            // records per run
   std::vector<std::vector<uint64_t>> samples_;  // every 4096th key of each run
   RunMerger<Record, Less> merger_;
