@@ -41,7 +41,7 @@ export LSAN_OPTIONS="suppressions=$PWD/scripts/lsan.supp:print_suppressions=0"
 # Open MPI's plugins and Mesa's driver are unloaded before exit, so LeakSanitizer reports what they
 # keep with stacks it cannot name (no suppression can match them): the tests that start MPI ranks
 # or a GL context run with leak detection off, and with ASan and UBSan on as everywhere else.
-NO_LEAK_CHECK='^(Mtcluster\.|TexturedBuild\.(GpuSplits|RendersTheTexture|AutoChooses|ShadedDrawing)|BuildSafety\.Mtcluster|MtRenderViewer\.|RenderGpuCache\.|MtRender\.|RenderPolicies\.|ColourBuild\.RendersTheColours)'
+NO_LEAK_CHECK='^(Mtcluster\.|ExitCodes\.CorruptIndexIsThreeInMtrender|TexturedBuild\.(GpuSplits|RendersTheTexture|AutoChooses|ShadedDrawing)|BuildSafety\.Mtcluster|MtRenderViewer\.|RenderGpuCache\.|MtRender\.|RenderPolicies\.|ColourBuild\.RendersTheColours)'
 (cd build-asan && ctest --output-on-failure --timeout 900 -j "$(nproc)" -E "$SANITIZER_EXCLUDE|$NO_LEAK_CHECK")
 (cd build-asan && ASAN_OPTIONS="${ASAN_OPTIONS/detect_leaks=1/detect_leaks=0}" \
   ctest --output-on-failure --timeout 900 -j "$(nproc)" -R "$NO_LEAK_CHECK" -E "$SANITIZER_EXCLUDE")
