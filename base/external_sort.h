@@ -789,19 +789,7 @@ class KeyGroupSorter {
       return true;
     }
     if (heap_.empty()) return false;
-    key = heap_.top().key;
-    size_t sources = 0;
-    while (!heap_.empty() && heap_.top().key == key) {
-      size_t run = heap_.top().run;
-      heap_.pop();
-      size_t at = out.size();
-      out.resize(at + heads_[run].count);
-      if (readers_[run]->read(out.data() + at, heads_[run].count * sizeof(Record)) != heads_[run].count * sizeof(Record))
-        fail(runs_[run], "scratch run ends inside a group");
-      if (readers_[run]->get(heads_[run])) heap_.push({heads_[run].key, run});
-      ++sources;
-    }
-    if (sources > 1) sortTail(out.begin(), out.end());
+    key = gatherGroup(readers_, heads_, heap_, 0, out);
     return true;
   }
 
@@ -830,6 +818,26 @@ class KeyGroupSorter {
         [&](size_t first, size_t last, const std::string& path, size_t) { mergeGroupsInto(first, last, path, bufferBytes); },
         [](size_t, size_t) {}, [] {});
   }
+  // The smallest key's records from every run that has it (runs[first + i] read by readers[i]),
+  // appended to out: lower runs first, then put in Less order. Returns the key; heap non-empty.
+  uint64_t gatherGroup(std::vector<std::unique_ptr<TempReader>>& readers, std::vector<Header>& heads,
+                       std::priority_queue<HeapEntry>& heap, size_t first, std::vector<Record>& out) const {
+    const uint64_t key = heap.top().key;
+    const size_t from = out.size();
+    size_t sources = 0;
+    while (!heap.empty() && heap.top().key == key) {
+      const size_t i = heap.top().run;
+      heap.pop();
+      const size_t at = out.size();
+      out.resize(at + heads[i].count);
+      if (readers[i]->read(out.data() + at, heads[i].count * sizeof(Record)) != heads[i].count * sizeof(Record))
+        fail(runs_[first + i], "scratch run ends inside a group");
+      if (readers[i]->get(heads[i])) heap.push({heads[i].key, i});
+      ++sources;
+    }
+    if (sources > 1) sortTail(out.begin() + from, out.end());
+    return key;
+  }
   void mergeGroupsInto(size_t first, size_t last, const std::string& path, uint64_t bufferBytes) {
     const size_t n = last - first;
     const size_t share = std::max<size_t>(kMinReadBuffer, size_t(bufferBytes / (n + 1)));
@@ -844,20 +852,8 @@ class KeyGroupSorter {
     TempWriter writer(path, share);
     std::vector<Record> group;
     while (!heap.empty()) {
-      const uint64_t key = heap.top().key;
       group.clear();
-      size_t sources = 0;
-      while (!heap.empty() && heap.top().key == key) {
-        const size_t i = heap.top().run;
-        heap.pop();
-        const size_t at = group.size();
-        group.resize(at + heads[i].count);
-        if (readers[i]->read(group.data() + at, heads[i].count * sizeof(Record)) != heads[i].count * sizeof(Record))
-          fail(runs_[first + i], "scratch run ends inside a group");
-        if (readers[i]->get(heads[i])) heap.push({heads[i].key, i});
-        ++sources;
-      }
-      if (sources > 1) sortTail(group.begin(), group.end());
+      const uint64_t key = gatherGroup(readers, heads, heap, first, group);
       writer.put(Header{key, group.size()});
       writer.write(group.data(), group.size() * sizeof(Record));
     }
