@@ -151,6 +151,18 @@ export class MTObject extends THREE.Group {
     this.shownErr = 0;
     this.shownTriangles = 0;  // triangles of the image on screen
     this.blitted = false;  // the last render() made the still image's target or showed an image
+    // Every field an update or a render sets, made here: an object whose shape grows as the camera
+    // first stops deoptimises the code compiled for it (V8 recompiled update() five times then).
+    this.drawnPatches = 0;
+    this.cutErr = 0;
+    this.lastView = null;
+    this.twoPass = false;
+    this.cutChanged = false;
+    this.progressive = false;
+    this.progressiveNow = false;
+    this.syncPixel = null;
+    this.target = null;
+    this._warmUp = null;
   }
 
   /**
@@ -364,7 +376,7 @@ void main() {
   _geometry(r) {
     const g = new THREE.BufferGeometry();
     g.setAttribute('position', new THREE.BufferAttribute(r.positions, 3));
-    g.setAttribute('normal', new THREE.BufferAttribute(r.normals, 3, true));
+    g.setAttribute('normal', new THREE.BufferAttribute(r.normals, 4, true));
     if (r.colors) g.setAttribute('color', new THREE.BufferAttribute(r.colors, 4, true));
     g.setIndex(new THREE.BufferAttribute(r.indices, 1));
     if (r.texture && !this.options.material) {
@@ -463,6 +475,30 @@ void main() {
     if (this.stillCount === 0 && this.frame > 1)
       for (let k = 2; k <= 10; k += 2) ahead.push(makeView(extrapolate(prev, pose, k), width, height, this.mt.center, this.mt.radius));
     this.progressiveNow = this.progressive && this.stillCount >= 2 && this.stillFrames > 1;
+    // The cut's update, the meshes that draw it, the still image's start and the frame's figures:
+    // methods of their own, so that the branches a still view takes for the first time (and the
+    // fields it changes) deoptimise small functions, not one whose recompilation took V8 85-137 ms
+    // of a core each time, five times after the camera stopped (docs/web.md).
+    const st = this._updateCut(view, ahead);
+    this.lastView = view;
+    const drawnTriangles = this._syncMeshes(view, width, height);
+    if (!this.progressiveNow) this.imageAt = t;
+    // A still image starts once its cut is final (every load done, the update through), or when the
+    // image on screen is stillWaitMs old.
+    const startImage = (this.server.idle() && !this.cutSettling) || t - this.imageAt >= this.stillWaitMs;
+    if (this.progressiveNow && this.cutChanged && startImage && (!this.accum || this.accum.next >= this.accum.list.length)) {
+      this.accum = { list: [...this.meshes.values(), ...this.backMeshes.values()].sort((x, y) => x.renderOrder - y.renderOrder), next: 0, err: st.maxScreenError, fresh: true, triangles: drawnTriangles };
+      this.cutChanged = false;
+    }
+    this.drawnTriangles = drawnTriangles;
+    this._fillStats(st, drawnTriangles);
+    this.stats = st;
+    return st;
+  }
+
+  // The frame's cut update (update()): moving, the cut within the frame's budget; still, the image
+  // being drawn keeps its cut (only the look-ahead runs), else a still update towards the tolerance.
+  _updateCut(view, ahead) {
     let st;
     const drawingImage = this.progressiveNow && this.accum && this.accum.next < this.accum.list.length;
     if (!this.progressiveNow) {
@@ -491,7 +527,12 @@ void main() {
     // `maxScreenError`, the last complete image's. Their gap is the drawing's share of a still view.
     if (!drawingImage) this.cutErr = st.maxScreenError;
     st.cutErr = this.cutErr;
-    this.lastView = view;
+    return st;
+  }
+
+  // The meshes of the cut's visible patches (update()): made, ordered, given their materials, and
+  // those of patches no longer drawn removed. Returns the triangles drawn; this.drawnPatches the count.
+  _syncMeshes(view, width, height) {
     // The meshes: one per patch of the cut's visible arcs, drawn front to back (as mtrender does):
     // three sorts opaque meshes by renderOrder first, here the distance from the eye to the arc's
     // sphere, so nearer surfaces fill the depth buffer first and the fragments they hide (the back
@@ -571,17 +612,14 @@ void main() {
         m.renderOrder = base + (f.renderOrder - minOrder);
       }
     }
-    if (!this.progressiveNow) this.imageAt = t;
-    // A still image starts once its cut is final (every load done, the update through), or when the
-    // image on screen is stillWaitMs old.
-    const startImage = (this.server.idle() && !this.cutSettling) || t - this.imageAt >= this.stillWaitMs;
-    if (this.progressiveNow && this.cutChanged && startImage && (!this.accum || this.accum.next >= this.accum.list.length)) {
-      this.accum = { list: [...this.meshes.values(), ...this.backMeshes.values()].sort((x, y) => x.renderOrder - y.renderOrder), next: 0, err: st.maxScreenError, fresh: true, triangles: drawnTriangles };
-      this.cutChanged = false;
-    }
-    this.drawnTriangles = drawnTriangles;
+    this.drawnPatches = drawnPatches;
+    return drawnTriangles;
+  }
+
+  // The frame's figures (update()'s result).
+  _fillStats(st, drawnTriangles) {
     st.drawnTriangles = drawnTriangles;
-    st.drawnPatches = drawnPatches;
+    st.drawnPatches = this.drawnPatches;
     st.backPatches = this.backMeshes.size;
     st.cacheBytes = this.cache.usedBytes;
     st.cacheCap = this.cache.capBytes;
@@ -600,8 +638,6 @@ void main() {
     st.fetchMs = this.server.fetchMs;
     st.decodeMs = this.server.decodeMs;
     st.textureMs = this.server.textureMs;
-    this.stats = st;
-    return st;
   }
 
   /**
@@ -622,8 +658,12 @@ void main() {
       this.shownErr = this.stats ? this.stats.maxScreenError : 0;
       this.shownTriangles = this.drawnTriangles;
     } else if (this.accum && this.accum.next < this.accum.list.length) {
-      // Still, an image in progress: its next chunk into the accumulation target. The screen is
-      // not touched, so the browser keeps showing the last image presented.
+      // Still, an image in progress: its next chunk into the accumulation target, one a frame,
+      // sized to end the frame's drawing share (counted from the frame's start, the update's). Few
+      // large chunks draw faster than many small ones: each chunk is waited for, and SwiftShader's
+      // threads idle between them (a 1.25 M-triangle image took 530 ms in one draw, 596 ms in
+      // 80 k-triangle chunks one a frame, 644 ms in 40 k ones). The screen is not touched, so the
+      // browser keeps showing the last image presented.
       const size = renderer.getDrawingBufferSize(new THREE.Vector2());
       if (!this.target || this.target.width !== size.x || this.target.height !== size.y) {
         this.blitted = true;
@@ -631,28 +671,11 @@ void main() {
       }
       const a = this.accum;
       const share = this.server.idle() ? this.stillShare : this.stillShareLoading;
-      const budget = Math.max(this.extract.frameBudget, (this.server.idle() ? this.stillFullChunk : this.stillChunk) || this._priorChunk(share), 1000);
-      const chunk = new Set();
-      while (a.next < a.list.length && (chunk.size === 0 || drawn + a.list[a.next].geometry.index.count / 3 <= budget)) {
-        const m = a.list[a.next++];
-        chunk.add(m);
-        drawn += m.geometry.index.count / 3;
-      }
-      const visible = new Map();
-      for (const m of this.children) visible.set(m, m.visible), (m.visible = chunk.has(m));
-      const auto = renderer.autoClear;
-      renderer.autoClear = false;
-      renderer.setRenderTarget(this.target);
-      if (a.fresh) {
-        // Cleared transparent: the blit draws the model over the screen's own clear, so the
-        // background colour is converted exactly as a direct render's is.
-        MTObject.clearTransparent(renderer);
-        a.fresh = false;
-      }
-      renderer.render(scene, camera);
-      renderer.autoClear = auto;
-      for (const [m, v] of visible) m.visible = v;
-      renderer.setRenderTarget(null);
+      // What the still model fits in the time left, at most the frame's chunk (which grows at most
+      // twofold a frame: a wrong model costs one frame, not many).
+      const most = (this.server.idle() ? this.stillFullChunk : this.stillChunk) || this._priorChunk(share);
+      const left = (this.lastTime || t0) + share * this.extract.options.budgetMs - performance.now();
+      drawn = this._drawStillChunk(renderer, scene, camera, Math.max(1000, this.blitted ? most : Math.min(most, this.stillModel.trianglesFor(left))));
       if (a.next >= a.list.length) {
         renderer.render(this.blitScene, this.blitCamera);  // the complete image, shown once
         this.blitted = true;
@@ -662,16 +685,10 @@ void main() {
       }
     }
     // Still and complete, or waiting for the loads of the next image: nothing to draw; the screen
-    // keeps the image.
-    // A still image's frames wait for their drawing: WebGL runs it later in the GPU process, so a
-    // frame's measured time is that of an earlier frame's drawing, and the still state's chunks
-    // (a 300 k-triangle chunk measured 10 ms, the frame after it 300 ms) let the fitted budget run
-    // away. Moving frames draw a cut that changes slowly: the lag costs little there, and waiting
-    // would cost the overlap of the page's work with the browser's.
+    // keeps the image. A still frame that drew waits for its drawing (_sync), and its chunk's time
+    // teaches the still model (not when it also made the target or showed the image).
     if (this.progressiveNow && (drawn > 0 || this.blitted)) {
-      // gl.finish() does not wait in Chromium; reading one pixel back does.
-      const gl = renderer.getContext();
-      gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, this.syncPixel || (this.syncPixel = new Uint8Array(4)));
+      this._sync(renderer);
       if (!this.blitted && drawn > 0) this._measureChunk(drawn, performance.now() - t0);
     }
     this.drawnTriangles = drawn;
@@ -682,6 +699,44 @@ void main() {
     return drawn;
   }
 
+  // The still image's next chunk: meshes in its order up to `budget` triangles (at least one),
+  // drawn into the accumulation target (cleared transparent before the image's first chunk: the
+  // blit draws the model over the screen's own clear, so the background colour is converted
+  // exactly as a direct render's is). Returns the triangles drawn.
+  _drawStillChunk(renderer, scene, camera, budget) {
+    const a = this.accum;
+    const chunk = new Set();
+    let drawn = 0;
+    while (a.next < a.list.length && (chunk.size === 0 || drawn + a.list[a.next].geometry.index.count / 3 <= budget)) {
+      const m = a.list[a.next++];
+      chunk.add(m);
+      drawn += m.geometry.index.count / 3;
+    }
+    const visible = new Map();
+    for (const m of this.children) visible.set(m, m.visible), (m.visible = chunk.has(m));
+    const auto = renderer.autoClear;
+    renderer.autoClear = false;
+    renderer.setRenderTarget(this.target);
+    if (a.fresh) {
+      MTObject.clearTransparent(renderer);
+      a.fresh = false;
+    }
+    renderer.render(scene, camera);
+    renderer.autoClear = auto;
+    for (const [m, v] of visible) m.visible = v;
+    renderer.setRenderTarget(null);
+    return drawn;
+  }
+  // Waits for the drawing issued so far. A still image's chunks are waited for: WebGL runs them
+  // later in the GPU process, so a frame's measured time is that of an earlier frame's drawing, and
+  // the still state's chunks (a 300 k-triangle chunk measured 10 ms, the frame after it 300 ms) let
+  // the fitted budget run away. Moving frames draw a cut that changes slowly: the lag costs little
+  // there, and waiting would cost the overlap of the page's work with the browser's.
+  // gl.finish() does not wait in Chromium; reading one pixel back does.
+  _sync(renderer) {
+    const gl = renderer.getContext();
+    gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, this.syncPixel || (this.syncPixel = new Uint8Array(4)));
+  }
   // A chunk of `triangles` took `ms` to draw (synchronised): the still chunk becomes what fits in
   // the frame's drawing share (stillShare of the budget, stillShareLoading while loads are pending,
   // less the update's deadline), from the time model of the chunks so far, at most doubling a

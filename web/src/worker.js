@@ -72,13 +72,13 @@ function toRender(d) {
       nf[cc] += fx, (nf[cc + 1] += fy), (nf[cc + 2] += fz);
     }
   }
-  const normals = new Int8Array(n * 3);
+  const normals = new Int8Array(n * 4);
   for (let i = 0; i < n; ++i) {
     const x = nf[3 * i], y = nf[3 * i + 1], z = nf[3 * i + 2];
     const l = Math.sqrt(x * x + y * y + z * z) || 1;
-    normals[3 * i] = Math.round((x / l) * 127);
-    normals[3 * i + 1] = Math.round((y / l) * 127);
-    normals[3 * i + 2] = Math.round((z / l) * 127);
+    normals[4 * i] = Math.round((x / l) * 127);
+    normals[4 * i + 1] = Math.round((y / l) * 127);
+    normals[4 * i + 2] = Math.round((z / l) * 127);
   }
   const indices = n <= 65536 ? new Uint16Array(d.triangles) : d.triangles;
   return { positions, normals, colors: d.colors, indices };
@@ -113,10 +113,10 @@ function withTexture(it, d, r) {
     return Promise.reject(where(err.message));
   }
   const m = s.remap.length;
-  const positions = new Float32Array(3 * m), normals = new Int8Array(3 * m), colors = r.colors ? new Uint8Array(4 * m) : null;
+  const positions = new Float32Array(3 * m), normals = new Int8Array(4 * m), colors = r.colors ? new Uint8Array(4 * m) : null;
   for (let i = 0; i < m; ++i) {
     const v = s.remap[i];
-    for (let a = 0; a < 3; ++a) positions[3 * i + a] = r.positions[3 * v + a], (normals[3 * i + a] = r.normals[3 * v + a]);
+    for (let a = 0; a < 3; ++a) positions[3 * i + a] = r.positions[3 * v + a], (normals[4 * i + a] = r.normals[4 * v + a]);
     if (colors) for (let a = 0; a < 4; ++a) colors[4 * i + a] = r.colors[4 * v + a];
   }
   const indices = m <= 65536 ? Uint16Array.from(s.triangles) : s.triangles;
