@@ -5,7 +5,7 @@
 # against its cap, the bytes fetched per frame and in total against the file size, and the time the
 # screen error takes to reach the tolerance after the camera stops.
 #   bench/web.sh [FILE.mt] [--budget MS=50] [--tol PX=1] [--cache MIB=256] [--frames N=600] [--shots DIR]
-#                [--first-only] [--web DIR] [--query K=V&...] (web/test/bench.mjs lists all its options;
+#                [--first-only] [--threads] [--web DIR] [--query K=V&...] (web/test/bench.mjs lists all its options;
 #                --web DIR serves another copy of web/, e.g. `git archive main web`, for interleaved A/B runs)
 # FILE.mt defaults to a 53M-triangle mtgen build (WORKDIR=out/bench-web, made once:
 # mtgen --triangles 53M, mtbuild --threads 2 --memory 512M). BIN=dir/bin picks the build dir.

@@ -5,6 +5,9 @@
 //                    [--first-only] (stop at the first image: its time and steps)
 //                    [--web DIR] (serve this copy of web/ instead, e.g. main's, for interleaved comparisons;
 //                     it must have node_modules/)
+//                    [--threads] (each browser thread's CPU from the stop to the cut at the tolerance
+//                     with nothing loading, and from there to its image on screen; /proc sampled every
+//                     50 ms, which costs the machine a little CPU itself)
 // The web viewer's figures on one MT file served by mtserve, in headless Chromium at 1280x720
 // (bench/web.sh runs it): time to the first image after page load, the share of frames within the
 // page's budget over a 600-frame orbit path, the cache against its cap, bytes fetched per frame and
@@ -28,6 +31,7 @@ const frames = Number(opt('--frames', 600)), budget = Number(opt('--budget', 50)
 const cacheMiB = Number(opt('--cache', 256)), shots = opt('--shots', ''), dump = opt('--dump', '');
 const fixed = Number(opt('--fixed', 0));
 const firstOnly = args.includes('--first-only');  // the first image's lines only (no path)
+const threads = args.includes('--threads');
 const root = fs.mkdtempSync(path.join(os.tmpdir(), 'mtbench-'));
 fs.symlinkSync(path.resolve(opt('--web', path.resolve(here, '..'))), path.join(root, 'web'));
 fs.symlinkSync(path.resolve(file), path.join(root, 'model.mt'));
@@ -40,6 +44,7 @@ const srv = await new Promise((resolve, reject) => {
   p.on('exit', (c) => reject(new Error(`mtserve exited ${c}`)));
 });
 let browser = null;
+let threadWindows = null;  // --threads: prints the still stretch's CPU by thread
 // The browser, mtserve and the served directory go on every way out (an error, a time-out, ^C).
 async function cleanup() {
   if (browser) await browser.close().catch(() => {});
@@ -80,8 +85,53 @@ function browserCpuMs() {
   return sum;
 }
 const loadavg = () => fs.readFileSync('/proc/loadavg', 'utf8').split(' ').slice(0, 3).join(' ');
+// --threads: every 50 ms, the CPU (ms) of each thread of this process's descendants but mtserve,
+// keyed "process type:thread name" (Chromium's --type, thread names with their numbers dropped).
+const samples = [];
+function sampleThreads() {
+  const m = new Map();
+  for (const d of fs.readdirSync('/proc')) {
+    if (!/^\d+$/.test(d) || Number(d) === srv.proc.pid) continue;
+    let cmd, tasks;
+    try {
+      if (!isDescendant(Number(d))) continue;
+      cmd = fs.readFileSync(`/proc/${d}/cmdline`, 'utf8');
+      tasks = fs.readdirSync(`/proc/${d}/task`);
+    } catch { continue; }
+    const type = (/--type=([\w-]+)/.exec(cmd) || [, 'browser'])[1];
+    for (const t of tasks) {
+      try {
+        const st = fs.readFileSync(`/proc/${d}/task/${t}/stat`, 'utf8');
+        const name = st.slice(st.indexOf('(') + 1, st.lastIndexOf(')')).replace(/\d+$/, '');
+        const f = st.slice(st.lastIndexOf(')') + 2).split(' ');
+        const key = `${type}:${name}`;
+        m.set(key, (m.get(key) || 0) + (Number(f[11]) + Number(f[12])) * tick);
+      } catch { /* gone */ }
+    }
+  }
+  samples.push({ t: Date.now(), m });
+}
+function isDescendant(pid) {
+  for (let p = pid, n = 0; p > 1 && n < 64; ++n) {
+    const st = fs.readFileSync(`/proc/${p}/stat`, 'utf8');
+    p = Number(st.slice(st.lastIndexOf(')') + 2).split(' ')[1]);
+    if (p === process.pid) return true;
+  }
+  return false;
+}
+// The threads' CPU between two wall-clock times (ms since the epoch), largest first.
+function threadWindow(a, b, label) {
+  const at = (t) => samples.reduce((x, s) => (Math.abs(s.t - t) < Math.abs(x.t - t) ? s : x));
+  const A = at(a), B = at(b), d = [];
+  for (const [k, v] of B.m) if (v - (A.m.get(k) || 0) > 0) d.push([k, v - (A.m.get(k) || 0)]);
+  d.sort((x, y) => y[1] - x[1]);
+  const sum = d.reduce((acc, x) => acc + x[1], 0);
+  console.log(`threads, ${label.padEnd(16)} ${B.t - A.t} ms wall, ${sum.toFixed(0)} ms CPU (${(sum / Math.max(B.t - A.t, 1)).toFixed(2)} cores): ` +
+    d.slice(0, 8).map(([k, v]) => `${k} ${v.toFixed(0)}`).join(', '));
+}
 const page = await browser.newPage({ viewport: { width: 1280, height: 720 } });
 page.on('pageerror', (e) => console.error('pageerror:', e.message));
+const sampler = threads ? setInterval(sampleThreads, 50) : null;
 const q = `file=/model.mt&tol=${tol}&budget=${budget}&cache=${cacheMiB}&path=orbit&frames=${frames}` + (fixed ? `&fixed=${fixed}` : '') + (opt('--query', '') ? `&${opt('--query', '')}` : '');
 await page.goto(`${srv.base}/web/viewer.html?${q}`);
 await page.waitForFunction(() => window.mtViewer.firstImageMs !== null || window.mtViewer.error, null, { timeout: 60000 });
@@ -109,6 +159,19 @@ await page.waitForFunction((tol) => {
   const f = window.mtViewer.frames.at(-1);
   return f.err <= tol && f.pending === 0;
 }, tol, { timeout: 20000, polling: 50 }).catch(() => {});
+if (sampler) {
+  clearInterval(sampler);
+  sampleThreads();
+  const w = await page.evaluate((tol) => {
+    const f = window.mtViewer.frames, s = f.find((x) => x.still);
+    const loaded = f.find((x) => x.t >= s.t && x.cutErr <= tol && x.pending === 0), shown = f.find((x) => x.t >= s.t && x.err <= tol);
+    return { origin: performance.timeOrigin, still: s.t, loaded: loaded ? loaded.t : null, shown: shown ? shown.t : null };
+  }, tol);
+  threadWindows = () => {
+    if (w.loaded !== null) threadWindow(w.origin + w.still, w.origin + w.loaded, 'stop to loaded');
+    if (w.loaded !== null && w.shown !== null) threadWindow(w.origin + w.loaded, w.origin + w.shown, 'loaded to shown');
+  };
+}
 if (shots) await page.screenshot({ path: path.join(shots, 'web-viewer-still.png') });
 // The final cut drawn whole, three times, each waited for: SwiftShader's raw rate on it.
 const raw = await page.evaluate(() => window.mtViewer.drawRate(3));
@@ -183,6 +246,7 @@ console.log(`screen error after stop   ${reach ? `reached ${tol} px ${(reach.t -
     `page: cut updates ${secs(sum('updateMs'))} s, render calls ${secs(sum('renderMs'))} s over ${upto.length} frames`);
 }
 console.log(`damaged patches skipped   ${s.warnings}`);
+if (threadWindows) threadWindows();
 }
 
 // The first image's lines: its time after navigation start, its steps, the opening's reads.
