@@ -275,7 +275,8 @@ void main() {
     if (!p || !p.renderer || !p.renderer.compileAsync) return;
     const g = new THREE.BufferGeometry();
     g.setAttribute('position', new THREE.BufferAttribute(new Float32Array(9), 3));
-    g.setAttribute('normal', new THREE.BufferAttribute(new Int8Array(9), 3, true));
+    // Normals as _geometry makes them (four bytes): SwiftShader's pipelines are per vertex format.
+    g.setAttribute('normal', new THREE.BufferAttribute(new Int8Array(12), 4, true));
     if (this.mt.hasColors) g.setAttribute('color', new THREE.BufferAttribute(new Uint8Array(12), 4, true));
     g.setIndex(new THREE.BufferAttribute(new Uint16Array([0, 1, 2]), 1));
     const group = new THREE.Group();
