@@ -676,7 +676,8 @@ void main() {
       // twofold a frame: a wrong model costs one frame, not many).
       const most = (this.server.idle() ? this.stillFullChunk : this.stillChunk) || this._priorChunk(share);
       const left = (this.lastTime || t0) + share * this.extract.options.budgetMs - performance.now();
-      drawn = this._drawStillChunk(renderer, scene, camera, Math.max(1000, this.blitted ? most : Math.min(most, this.stillModel.trianglesFor(left))));
+      // Never less than a moving frame's budget (with fixedTriangles, the whole image in one frame).
+      drawn = this._drawStillChunk(renderer, scene, camera, Math.max(this.extract.frameBudget, 1000, this.blitted ? most : Math.min(most, this.stillModel.trianglesFor(left))));
       if (a.next >= a.list.length) {
         renderer.render(this.blitScene, this.blitCamera);  // the complete image, shown once
         this.blitted = true;

@@ -58,8 +58,9 @@ export function buildScene(header, idx) {
     nodes.outTriangles[n] = o;
     nodes.inTriangles[n] = i;
   }
-  // Decoded size of a patch in the renderer's layout (Scene::decodedBytesBound): 20 bytes a vertex,
-  // 12 a triangle; Draco may split non-manifold vertices, a quarter more.
+  // Decoded size of a patch in the renderer's layout (Scene::decodedBytesBound): 20 bytes a vertex
+  // (position 12, normal 4, colour 4), 12 a triangle; Draco may split non-manifold vertices, a
+  // quarter more.
   const decodedBytes = new Float64Array(rp.count);
   for (let p = 0; p < rp.count; ++p) {
     let v = rp.vertices[p];

@@ -191,7 +191,7 @@ export class PatchServer {
     // 512 KiB holds up to ~300 patches of a 53 M build: handed whole to the next worker in turn, a
     // still view's loads kept one worker decoding a large request while the other sat idle (the
     // workers used ~0.75 of the two cores while the loads ran).
-    const req = { left: 0, ahead };
+    const req = { left: 0, ahead, t0, count: items.length };
     for (let k = 0; k < items.length;) {
       let tris = 0;
       const part = [];
@@ -200,7 +200,7 @@ export class PatchServer {
       for (let i = 0; i < this.workers.length; ++i)
         if (this.workerReady[i] && (wi < 0 || this.workerTriangles[i] < this.workerTriangles[wi])) wi = i;
       const job = this.nextJob++;
-      this.jobs.set(job, { t0, count: part.length, req, worker: wi, triangles: tris });
+      this.jobs.set(job, { req, worker: wi, triangles: tris });
       this.workerTriangles[wi] += tris;
       ++req.left;
       const transfer = [];
@@ -234,9 +234,10 @@ export class PatchServer {
       ++this.loads;
     }
     this.geometryMs += performance.now() - tg;
-    const ms = (performance.now() - j.t0) / Math.max(1, j.count);
-    this.loadMsAvg = this.loadMsAvg === 0 ? ms : 0.9 * this.loadMsAvg + 0.1 * ms;
+    // The request is done when its last job is: its time per patch feeds the load budget.
     if (--j.req.left === 0) {
+      const ms = (performance.now() - j.req.t0) / Math.max(1, j.req.count);
+      this.loadMsAvg = this.loadMsAvg === 0 ? ms : 0.9 * this.loadMsAvg + 0.1 * ms;
       --this.inFlight;
       if (j.req.ahead) --this.aheadInFlight;
     }

@@ -157,8 +157,8 @@ export function splitTexturedVertices(triangles, vertexCount, cornerUV) {
 
 /**
  * The bound the cache reserves for a textured patch before it loads (Scene::decodedBytesBound's
- * texture part): every corner may become a vertex of its own (position 12, normal 3, colour 4,
- * coordinate 4 bytes: 24 with the padding), 12 index bytes a triangle, and the atlas decoded as
+ * texture part): every corner may become a vertex of its own (position 12, normal 4, colour 4,
+ * coordinate 4 bytes: 24), 12 index bytes a triangle, and the atlas decoded as
  * RGBA8. The cache holds the actual bytes once the patch is decoded.
  */
 export function texturedBytesBound(triangles, width, height) {

@@ -164,6 +164,7 @@ if (sampler) {
   sampleThreads();
   const w = await page.evaluate((tol) => {
     const f = window.mtViewer.frames, s = f.find((x) => x.still);
+    if (!s) return { origin: 0, still: 0, loaded: null, shown: null };
     const loaded = f.find((x) => x.t >= s.t && x.cutErr <= tol && x.pending === 0), shown = f.find((x) => x.t >= s.t && x.err <= tol);
     return { origin: performance.timeOrigin, still: s.t, loaded: loaded ? loaded.t : null, shown: shown ? shown.t : null };
   }, tol);

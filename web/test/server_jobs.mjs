@@ -1,11 +1,12 @@
 // node server_jobs.mjs: the PatchServer's decoding jobs (src/server.js), with stand-in workers and a
-// stand-in file. One range request of ~300 payloads (a still view's loads of a 53 M build come in
+// stand-in file. One range request of 300 payloads (a still view's loads of a 53 M build come in
 // requests like it) must reach the workers as jobs of at most PatchServer.kJobTriangles triangles
-// (a larger patch alone), each job posted to the ready worker with the fewest triangles waiting, so
-// the two workers' shares differ by at most one job; a worker whose decoders are not in yet (grown)
-// gets nothing until it says it is ready, and then the next job; when every job is answered, the
-// request is no longer in flight, every patch is in the cache and no worker has triangles waiting.
-// Exits 1 naming the first rule broken.
+// (a larger patch alone), each posted to the ready worker with the fewest triangles waiting
+// (replayed in posting order); a worker whose decoders are not in yet (grown) gets nothing until it
+// says it is ready, and then the next request's jobs; a request stays in flight (and its time per
+// patch untaken) until its last job is answered; a look-ahead request is counted in aheadInFlight
+// until then; when every job is answered, nothing is in flight, every patch is in the cache and no
+// worker has triangles waiting. Exits 1 naming the first rule broken.
 import { PatchServer } from '../src/server.js';
 import { PatchCache } from '../src/cache.js';
 
@@ -40,9 +41,10 @@ const scene = {
   source: { read: async (a, b) => new ArrayBuffer(b - a), bytesFetched: 0 },
 };
 
+let posts = 0;  // the order of every post, over all workers
 class StandInWorker {
   constructor() { this.posted = []; this.onmessage = null; }
-  postMessage(msg) { this.posted.push(msg); }
+  postMessage(msg) { this.posted.push(Object.assign(msg, { seq: posts++ })); }
   terminate() {}
   jobs() { return this.posted.filter((m) => m.type === 'decode'); }
 }
@@ -85,18 +87,38 @@ check(seen.size === 300, `${seen.size} patches posted, not 300`);
 check(pool.every((w) => w.jobs().length > 0), `the jobs went to one worker (${pool.map((w) => w.jobs().length).join(' / ')} jobs)`);
 check(Math.abs(load[0] - load[1]) <= largest, `the workers' shares ${load[0]} and ${load[1]} triangles differ by more than the largest job (${largest})`);
 check(server.workerTriangles[0] === load[0] && server.workerTriangles[1] === load[1], `waiting triangles ${server.workerTriangles} against posted ${load}`);
-
+// Replayed in posting order: each job went to a worker with no more triangles waiting than the other.
+{
+  const order = pool.flatMap((w, wi) => w.jobs().map((m) => ({ wi, seq: m.seq, t: m.items.reduce((a, it) => a + it.triangles, 0) }))).sort((a, b) => a.seq - b.seq);
+  const waiting = [0, 0];
+  for (const j of order) {
+    check(waiting[j.wi] <= waiting[1 - j.wi], `job ${j.seq} went to worker ${j.wi} with ${waiting[j.wi]} triangles waiting, the other had ${waiting[1 - j.wi]}`);
+    waiting[j.wi] += j.t;
+  }
+}
 // The grown worker ready: the next request's first job is its (it has nothing waiting).
 grown.onmessage({ data: { type: 'ready' } });
-server.submit(Array.from({ length: 20 }, (_, k) => ({ id: 300 + k, urgency: 1 })), 2);
+// (The two first workers have the first request's ~460 k triangles each waiting, it has none.)
+server.submit(Array.from({ length: 20 }, (_, k) => ({ id: 300 + k, urgency: -1 })), 2);  // look-ahead loads
 await settle();
-check(grown.jobs().length >= 1, 'the worker ready with nothing waiting got no job of the next request');
+check(grown.jobs().length >= 1 && pool.every((w) => w.jobs().every((m) => m.items.every((it) => it.id < 300))), 'the worker ready with nothing waiting did not get the next request\'s jobs');
 check(server.inFlight === 2, `${server.inFlight} requests in flight, not 2`);
+check(server.aheadInFlight === 1, `${server.aheadInFlight} look-ahead requests in flight, not 1`);
+
+// Every job of the request answered but its last: still in flight, its time not yet taken.
+const first = pool.flatMap((w) => w.jobs().map((m) => ({ w, m }))).sort((a, b) => a.m.seq - b.m.seq);
+const answer = ({ w, m }) => w.onmessage({ data: { type: 'decoded', job: m.job, busyMs: 1, results: m.items.map((it) => ({ id: it.id, bytes: 40 * it.triangles })) } });
+first.slice(0, -1).forEach(answer);
+check(server.inFlight === 2, `${server.inFlight} requests in flight with one job of the first unanswered and the second's waiting, not 2`);
+check(server.meanLoadMs() === 0, `the load time was taken before the request's last job (${server.meanLoadMs()} ms a patch)`);
 
 // Every job answered: nothing in flight or waiting, every patch in the cache.
+answer(first.at(-1));
+check(server.inFlight === 1 && server.meanLoadMs() > 0, `after the first request's last job: ${server.inFlight} in flight (not 1), load time ${server.meanLoadMs()} ms a patch`);
 for (const w of [...pool, grown])
   for (const m of w.jobs())
-    w.onmessage({ data: { type: 'decoded', job: m.job, busyMs: 1, results: m.items.map((it) => ({ id: it.id, bytes: 40 * it.triangles })) } });
+    if (m.seq > first.at(-1).m.seq) answer({ w, m });
+check(server.aheadInFlight === 0, `${server.aheadInFlight} look-ahead requests in flight after their jobs were answered`);
 check(server.inFlight === 0, `${server.inFlight} requests still in flight after every job was answered`);
 check(server.workerTriangles.every((t) => t === 0), `triangles still waiting: ${server.workerTriangles}`);
 check(server.loads === 320, `${server.loads} patches loaded, not 320`);
