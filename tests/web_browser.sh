@@ -21,6 +21,8 @@ run "$bin/mtbuild" "$t/c.ply" -o "$t/c.mt" --threads 2
 # The same kind of scan without colours (the back-faces test: the lit back pass).
 run "$bin/mtgen" -o "$t/h.ply" --triangles 60k --holes 10 --seed 3
 run "$bin/mtbuild" "$t/h.ply" -o "$t/h.mt" --threads 2
+# The same scan in small patches (the occlusion test: patches hidden behind others at a still view).
+run "$bin/mtbuild" "$t/h.ply" -o "$t/o.mt" --threads 2 --patch-triangles 300
 # A textured scan (version 6; the textured tests, and web/test/golden/textured.png is of this file).
 run "$bin/mtgen" -o "$t/x.ply" --triangles 60k --holes 3 --seed 5 --texture charts
 run "$bin/mtbuild" "$t/x.ply" -o "$t/x.mt" --threads 2 --patch-triangles 500

@@ -49,6 +49,7 @@ async function main() {
     // ahead=0: no look-ahead loads while the camera moves; aheadbatch=N, aheadgate=S: their batch
     // and frame-time gate (ExtractRender's loadAhead, aheadBatch, aheadGate).
     loadAhead: q.get('ahead') !== '0',
+    // occlusion=0: a still image draws every patch of its cut (no occlusion tests).
     aheadBatch: Number.isFinite(Number(q.get('aheadbatch'))) && q.has('aheadbatch') ? Number(q.get('aheadbatch')) : undefined,
     aheadGate: Number.isFinite(Number(q.get('aheadgate'))) && q.has('aheadgate') ? Number(q.get('aheadgate')) : undefined,
     // side=front: back faces always culled by the GL (measurement only: an open scan's inside
@@ -64,6 +65,12 @@ async function main() {
     stillShare: q.has('stillshare') ? Number(q.get('stillshare')) : undefined,
     // stillwait=MS: while a still view's patches load, a new image starts when the last one is this old (MTObject.stillWaitMs).
     stillWaitMs: q.has('stillwait') ? Number(q.get('stillwait')) : undefined,
+    // occlusion=0: a still image draws every patch of its cut (no occlusion tests, occlusion.js);
+    // occlahead=K: the patches tested after a chunk, K chunks' worth (MTObject.occlusionAhead);
+    // chunk=N: a still image's chunks of N triangles whatever they take (tests).
+    occlusion: q.get('occlusion') !== '0',
+    occlusionAhead: q.has('occlahead') ? Number(q.get('occlahead')) : undefined,
+    fixedStillChunk: Number(q.get('chunk') || 0),
     // workers=N: at most N decoding workers (default: one while the page starts, then two or cores - 1).
     workers: q.has('workers') ? Number(q.get('workers')) : undefined,
     onWarning: (m) => {
@@ -173,7 +180,7 @@ async function main() {
       t: now, frameMs: i > 0 ? dt : 0, updateMs, renderMs, drawn: st.drawnTriangles, patches: st.drawnPatches, backPatches: st.backPatches, cacheBytes: st.cacheBytes,
       cacheCap: st.cacheCap, bytesRead: st.bytesRead, err: st.maxScreenError, cutErr: st.cutErr, accumulating: mtAccumulating(mt), pending: st.loadsPending,
       budget: st.budgetTriangles, modelA: st.modelA, modelB: st.modelB, loads: st.loads, moves: st.refinements + st.coarsenings, requests: st.requests, fetchMs: st.fetchMs, decodeMs: st.decodeMs, evictions: st.evictions, givenUp: st.givenUp, triangles: st.triangles, still: path === 'orbit' ? i >= Math.floor(frames * 0.85) : null,
-      textureMs: st.textureMs, cacheTextureBytes: st.cacheTextureBytes, texturedPatches: st.texturedPatches, badTextures: st.badTextures,
+      hidden: st.hiddenTriangles, textureMs: st.textureMs, cacheTextureBytes: st.cacheTextureBytes, texturedPatches: st.texturedPatches, badTextures: st.badTextures,
     });
     if (state.frames.length > 5000) state.frames.shift();
     if (i % 10 === 0) hud.textContent =
@@ -396,4 +403,5 @@ state.backFaces = (bgHex) => {
   return { back, backBg, backDark, backFaces: state.mt.backFaces, twoPass: state.mt.twoPass };
 };
 state.png = () => state.canvas.toDataURL('image/png');
+state.pixels = pixels;
 main().catch((e) => showError(e.stack || e.message));

@@ -14,6 +14,7 @@ import { ExtractRender, TimeModel, Urgency } from './extract.js';
 import { PatchCache } from './cache.js';
 import { PatchServer } from './server.js';
 import { defaultLibUrls } from './libs.js';
+import { OcclusionTests } from './occlusion.js';
 
 export { Urgency };
 
@@ -142,6 +143,12 @@ export class MTObject extends THREE.Group {
     // drawing took the cores from the decoding workers (SwiftShader draws on the same cores); on a
     // slow one the screen still improves every stillWaitMs.
     this.stillWaitMs = options.stillWaitMs ?? 3000;
+    // A still image leaves out the patches hidden behind those drawn before them (occlusion.js):
+    // after each chunk the next ones are tested by their boxes against the depth drawn so far, up to
+    // `occlusionAhead` chunks' worth of triangles. `occlusion: false` draws every patch.
+    this.occlusion = options.occlusion === false ? null : new OcclusionTests();
+    this.occlusionAhead = options.occlusionAhead ?? 3;
+    this.fixedStillChunk = options.fixedStillChunk || 0;
     this.imageAt = 0;  // when the image on screen was shown (moving: every frame)
     this.cutSettling = false;  // the last still update stopped at its deadline
     this.stillChunk = 0;  // triangles a still frame draws (0: not measured yet)
@@ -353,6 +360,7 @@ void main() {
       this._warmUp = null;
     }
     if (this.target) this.target.dispose(), (this.target = null);
+    if (this.occlusion) this.occlusion.dispose();
     if (this.blit) this.blit.geometry.dispose(), this.blit.material.dispose(), (this.blit = null);
   }
 
@@ -488,7 +496,7 @@ void main() {
     // image on screen is stillWaitMs old.
     const startImage = (this.server.idle() && !this.cutSettling) || t - this.imageAt >= this.stillWaitMs;
     if (this.progressiveNow && this.cutChanged && startImage && (!this.accum || this.accum.next >= this.accum.list.length)) {
-      this.accum = { list: [...this.meshes.values(), ...this.backMeshes.values()].sort((x, y) => x.renderOrder - y.renderOrder), next: 0, err: st.maxScreenError, fresh: true, triangles: drawnTriangles };
+      this.accum = { list: [...this.meshes.values(), ...this.backMeshes.values()].sort((x, y) => x.renderOrder - y.renderOrder), next: 0, err: st.maxScreenError, fresh: true, triangles: drawnTriangles, hiddenTriangles: 0 };
       this.cutChanged = false;
     }
     this.drawnTriangles = drawnTriangles;
@@ -622,6 +630,7 @@ void main() {
     st.drawnTriangles = drawnTriangles;
     st.drawnPatches = this.drawnPatches;
     st.backPatches = this.backMeshes.size;
+    st.hiddenTriangles = this.accum ? this.accum.hiddenTriangles : 0;  // left out of the still image in progress or shown: occluded
     st.cacheBytes = this.cache.usedBytes;
     st.cacheCap = this.cache.capBytes;
     st.evictions = this.cache.evictions;
@@ -677,7 +686,9 @@ void main() {
       const most = (this.server.idle() ? this.stillFullChunk : this.stillChunk) || this._priorChunk(share);
       const left = (this.lastTime || t0) + share * this.extract.options.budgetMs - performance.now();
       // Never less than a moving frame's budget (with fixedTriangles, the whole image in one frame).
-      drawn = this._drawStillChunk(renderer, scene, camera, Math.max(this.extract.frameBudget, 1000, this.blitted ? most : Math.min(most, this.stillModel.trianglesFor(left))));
+      // `fixedStillChunk` (tests): that many triangles a chunk, whatever the time.
+      const chunk = this.fixedStillChunk || Math.max(this.extract.frameBudget, 1000, this.blitted ? most : Math.min(most, this.stillModel.trianglesFor(left)));
+      drawn = this._drawStillChunk(renderer, scene, camera, chunk);
       if (a.next >= a.list.length) {
         renderer.render(this.blitScene, this.blitCamera);  // the complete image, shown once
         this.blitted = true;
@@ -709,10 +720,19 @@ void main() {
     const a = this.accum;
     const chunk = new Set();
     let drawn = 0;
-    while (a.next < a.list.length && (chunk.size === 0 || drawn + a.list[a.next].geometry.index.count / 3 <= budget)) {
-      const m = a.list[a.next++];
+    if (a.fresh && this.occlusion) this.occlusion.reset();
+    while (a.next < a.list.length) {
+      const m = a.list[a.next];
+      const t = m.geometry.index.count / 3;
+      if (this.occlusion && this.occlusion.isHidden(m)) {
+        ++a.next;
+        a.hiddenTriangles += t;
+        continue;
+      }
+      if (chunk.size > 0 && drawn + t > budget) break;
+      ++a.next;
       chunk.add(m);
-      drawn += m.geometry.index.count / 3;
+      drawn += t;
     }
     const visible = new Map();
     for (const m of this.children) visible.set(m, m.visible), (m.visible = chunk.has(m));
@@ -726,6 +746,15 @@ void main() {
     renderer.render(scene, camera);
     renderer.autoClear = auto;
     for (const [m, v] of visible) m.visible = v;
+    // The patches the next frames may draw, tested against the depth drawn so far.
+    if (this.occlusion && a.next < a.list.length) {
+      const ahead = [];
+      for (let i = a.next, t = 0; i < a.list.length && t <= this.occlusionAhead * budget && ahead.length < 512; ++i) {
+        ahead.push(a.list[i]);
+        t += a.list[i].geometry.index.count / 3;
+      }
+      this.occlusion.issue(renderer, camera, ahead);
+    }
     renderer.setRenderTarget(null);
     return drawn;
   }

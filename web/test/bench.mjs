@@ -229,7 +229,8 @@ console.log(`screen error after stop   ${reach ? `reached ${tol} px ${(reach.t -
   const at = (pred) => { const x = st.find(pred); return x ? `${((x.t - stillFrom) / 1000).toFixed(2)} s` : 'never'; };
   const rawMs = [...raw.ms].sort((a, b) => a - b);
   console.log(`still milestones          cut chosen at ${tol} px ${at((x) => x.cutErr <= tol)}, and nothing loading ${at((x) => x.cutErr <= tol && x.pending === 0)}, on screen ${at((x) => x.err <= tol)}; ` +
-    `images shown ${st.filter((x, i) => i > 0 && x.err !== st[i - 1].err).length}, triangles drawn ${(st.filter((x) => !reach || x.t <= reach.t).reduce((a, x) => a + x.drawn, 0) / 1e6).toFixed(2)} M until then`);
+    `images shown ${st.filter((x, i) => i > 0 && x.err !== st[i - 1].err).length}, triangles drawn ${(st.filter((x) => !reach || x.t <= reach.t).reduce((a, x) => a + x.drawn, 0) / 1e6).toFixed(2)} M until then` +
+    (reach ? `; its image left out ${(reach.hidden / 1e6).toFixed(2)} M of the cut's ${(reach.triangles / 1e6).toFixed(2)} M triangles as hidden (occlusion tests)` : ''));
   console.log(`raw draw of the last cut  ${(raw.triangles / 1e6).toFixed(2)} M triangles in ${rawMs.map((x) => x.toFixed(0)).join(' / ')} ms = ${(raw.triangles / rawMs[1] / 1000).toFixed(2)} M triangles/s (median; one full draw, synchronised)`);
 }
 {

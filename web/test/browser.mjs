@@ -1,7 +1,7 @@
 // The web viewer in a real browser: Debian's chromium, headless, driven by playwright-core, WebGL
 // on SwiftShader, the MT files served by mtserve.
 //   node test/browser.mjs BIN_DIR DATA_DIR [--update-golden]
-// DATA_DIR holds t.mt, t-draco.mt, c.mt and h.mt (tests/web_browser.sh builds them). Tests:
+// DATA_DIR holds t.mt, t-draco.mt, c.mt, h.mt, o.mt (tests/web_browser.sh builds them). Tests:
 //   golden        a fixed view at a fixed tolerance, converged, against test/golden/torus.png
 //                 (at most 2% of the pixels differ by more than 48 in RGB);
 //   cracks        several views and tolerances, converged: no background pixel enclosed by the
@@ -27,6 +27,9 @@
 //                 draws them) nor black (the lit back pass has its light); with side=front
 //                 the same check fails (the check can fail). The closed torus (t.mt) seen from
 //                 outside is drawn single-sided (no back pass) and shows no back face.
+//   occlusion     still images drawn in chunks of 2000 triangles (h.mt, and the textured x.mt):
+//                 the patches the occlusion tests leave out are hidden, so the image is the same
+//                 pixel for pixel as the one drawn with every patch (occlusion off); some are left out.
 //   textured      a textured scan (x.mt, version 6: mtgen --texture charts) at a fixed view,
 //                 converged: every patch drawn with its atlas, the image within 35 dB PSNR (over
 //                 the pixels the model covers) of mtrender's headless image of the same view and
@@ -352,6 +355,45 @@ await test('back-faces', async () => {
 
 // ---- version 6: textures ----
 const texView = '0.5,-1.5,0.8,0,0,0', texTol = 1, texBg = '141414';
+
+await test('occlusion', async () => {
+  const notes = [];
+  for (const [file, view] of [['o', '0.4,-1.6,0.9,0,0,0'], ['o', '-1.3,0.8,0.5,0,0,0'], ['x', texView]]) {
+    const { page } = await open(`file=/data/${file}.mt&tol=1&fixed=3000000&chunk=2000&view=${view}`);
+    await converge(page);
+    const r = await page.evaluate(async () => {
+      const v = window.mtViewer, mt = v.mt;
+      // A new still image of the converged cut, drawn to the end: its pixels and what it left out.
+      const image = async () => {
+        mt.accum = null;
+        mt.cutChanged = true;
+        const t0 = performance.now(), f0 = v.frames.length;
+        await new Promise((res) => { const poll = () => (mt.imageAt > t0 ? res() : setTimeout(poll, 10)); poll(); });
+        const chunks = v.frames.slice(f0).filter((f) => f.drawn > 0).length;
+        return { px: v.pixels().data, hidden: mt.accum.hiddenTriangles, triangles: mt.accum.triangles, chunks };
+      };
+      const a = await image();
+      const occlusion = mt.occlusion;
+      mt.occlusion = null;
+      const b = await image();
+      mt.occlusion = occlusion;
+      let differ = 0, model = 0;
+      for (let i = 0; i < a.px.length; i += 4) {
+        if (a.px[i] !== b.px[i] || a.px[i + 1] !== b.px[i + 1] || a.px[i + 2] !== b.px[i + 2]) ++differ;
+        if (b.px[i] !== a.px[0] || b.px[i + 1] !== a.px[1] || b.px[i + 2] !== a.px[2]) ++model;
+      }
+      return { differ, model, hidden: a.hidden, hiddenOff: b.hidden, triangles: a.triangles, chunks: a.chunks };
+    });
+    await page.close();
+    check(r.chunks >= 4, `${file}.mt view ${view}: the image took ${r.chunks} chunks: the test tests nothing`);
+    check(r.model > 1000, `${file}.mt view ${view}: the image shows only ${r.model} pixels of the model`);
+    check(r.hiddenOff === 0, `${file}.mt: occlusion off left out ${r.hiddenOff} triangles`);
+    check(r.hidden > 0, `${file}.mt view ${view}: no patch of the ${r.triangles}-triangle cut was found hidden`);
+    check(r.differ === 0, `${file}.mt view ${view}: ${r.differ} pixels differ from the image with every patch drawn`);
+    notes.push(`${file}.mt ${r.hidden} of ${r.triangles} triangles left out, same image`);
+  }
+  return notes.join('; ');
+});
 await test('textured', async () => {
   // mtrender's image of the same view: headless, --color texture, the same size, tolerance and
   // background, converged (the camera still for 120 frames).
