@@ -305,6 +305,9 @@ void main() {
     // sRGB: a variant of each, and the blit one more) and SwiftShader's machine code for each
     // pipeline (made at its first draw) took the first still image's first chunk and last frame
     // ~0.15 s; made here they would delay the first image (~0.3 s): _warmStill, in the second frame.
+    // The occlusion tests' box too (its own material and vertex format; compiled at the first
+    // still chunk it cost that chunk ~60 ms of the page and ~60 ms of drawing).
+    if (this.occlusion) group.add(new THREE.Mesh(this.occlusion.geometry, this.occlusion.material));
     for (const m of group.children) m.frustumCulled = false;  // they sit at the origin
     this._warmUp = { group, g, texel };
   }
@@ -318,7 +321,10 @@ void main() {
     const { group } = this._warmUp;
     this._warmUp.done = true;
     this.blitted = true;
-    if (!this.target) this._stillTarget(1, 1);
+    // The target at the drawing buffer's size, as the first still image will want it (made then,
+    // its allocation and first clear took that image's first chunk ~30 ms).
+    const size = renderer.getDrawingBufferSize(new THREE.Vector2());
+    if (!this.target) this._stillTarget(size.x, size.y);
     const visible = this.visible, auto = renderer.autoClear;
     this.visible = false;
     scene.add(group);
@@ -658,7 +664,7 @@ void main() {
   render(renderer, scene, camera) {
     const t0 = performance.now();
     this.progressive = true;
-    let drawn = 0;
+    let drawn = 0, firstChunk = false;
     if (!this.progressiveNow) {
       // Moving: the whole cut, straight to the screen.
       if (this._warmUp && !this._warmUp.done && this.frame >= 2) this._warmStill(renderer, scene, camera);
@@ -680,6 +686,9 @@ void main() {
         this._stillTarget(size.x, size.y);
       }
       const a = this.accum;
+      // An image's first chunk also clears the target (and is often the first draw of many
+      // patches): its time does not teach the still model (it halved the next chunk).
+      firstChunk = a.fresh;
       const share = this.server.idle() ? this.stillShare : this.stillShareLoading;
       // What the still model fits in the time left, at most the frame's chunk (which grows at most
       // twofold a frame: a wrong model costs one frame, not many).
@@ -702,7 +711,7 @@ void main() {
     // teaches the still model (not when it also made the target or showed the image).
     if (this.progressiveNow && (drawn > 0 || this.blitted)) {
       this._sync(renderer);
-      if (!this.blitted && drawn > 0) this._measureChunk(drawn, performance.now() - t0);
+      if (!this.blitted && !firstChunk && drawn > 0) this._measureChunk(drawn, performance.now() - t0);
     }
     this.drawnTriangles = drawn;
     if (this.stats) {
