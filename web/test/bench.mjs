@@ -63,26 +63,35 @@ browser = await chromium.launch({
 // (renderer, GPU process with SwiftShader, ...). Over the path, against its wall time, it tells the
 // browser's own cost of a frame from time spent waiting for a core on a loaded machine.
 const tick = 1000 / 100;  // USER_HZ
-function browserCpuMs() {
-  const kids = new Map();
+// Every process's parent and CPU (ms), read once from /proc; descendants(procs) lists this
+// process's descendants but mtserve.
+function processes() {
+  const procs = new Map();
   for (const d of fs.readdirSync('/proc')) {
     if (!/^\d+$/.test(d)) continue;
     try {
       const st = fs.readFileSync(`/proc/${d}/stat`, 'utf8');
       const f = st.slice(st.lastIndexOf(')') + 2).split(' ');
-      kids.set(Number(d), { ppid: Number(f[1]), cpu: (Number(f[11]) + Number(f[12])) * tick });
+      procs.set(Number(d), { ppid: Number(f[1]), cpu: (Number(f[11]) + Number(f[12])) * tick });
     } catch { /* gone */ }
   }
-  let sum = 0;
-  for (const [pid, k] of kids) {
+  return procs;
+}
+function descendants(procs) {
+  const out = [];
+  for (const [pid, k] of procs) {
     if (pid === srv.proc.pid) continue;
-    for (let p = k.ppid, n = 0; p > 1 && n < 64; p = kids.get(p)?.ppid ?? 0, ++n)
+    for (let p = k.ppid, n = 0; p > 1 && n < 64; p = procs.get(p)?.ppid ?? 0, ++n)
       if (p === process.pid) {
-        sum += k.cpu;
+        out.push(pid);
         break;
       }
   }
-  return sum;
+  return out;
+}
+function browserCpuMs() {
+  const procs = processes();
+  return descendants(procs).reduce((sum, pid) => sum + procs.get(pid).cpu, 0);
 }
 const loadavg = () => fs.readFileSync('/proc/loadavg', 'utf8').split(' ').slice(0, 3).join(' ');
 // --threads: every 50 ms, the CPU (ms) of each thread of this process's descendants but mtserve,
@@ -90,11 +99,9 @@ const loadavg = () => fs.readFileSync('/proc/loadavg', 'utf8').split(' ').slice(
 const samples = [];
 function sampleThreads() {
   const m = new Map();
-  for (const d of fs.readdirSync('/proc')) {
-    if (!/^\d+$/.test(d) || Number(d) === srv.proc.pid) continue;
+  for (const d of descendants(processes())) {
     let cmd, tasks;
     try {
-      if (!isDescendant(Number(d))) continue;
       cmd = fs.readFileSync(`/proc/${d}/cmdline`, 'utf8');
       tasks = fs.readdirSync(`/proc/${d}/task`);
     } catch { continue; }
@@ -110,14 +117,6 @@ function sampleThreads() {
     }
   }
   samples.push({ t: Date.now(), m });
-}
-function isDescendant(pid) {
-  for (let p = pid, n = 0; p > 1 && n < 64; ++n) {
-    const st = fs.readFileSync(`/proc/${p}/stat`, 'utf8');
-    p = Number(st.slice(st.lastIndexOf(')') + 2).split(' ')[1]);
-    if (p === process.pid) return true;
-  }
-  return false;
 }
 // The threads' CPU between two wall-clock times (ms since the epoch), largest first.
 function threadWindow(a, b, label) {
