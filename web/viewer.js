@@ -3,7 +3,7 @@
 // mouse (three's OrbitControls); the HUD shows fps, triangles, cache (and its textures' share for a
 // textured file), loads and the screen error, and the file's coordinate reference system when its
 // metadata block names one.
-// `side=front` culls back faces, `side=double` draws both in one pass, `twopass=T` sets MTObject's twoPassPerPixel, `occlusion=0` turns a still image's occlusion tests off, `chunk=N` draws a still image in chunks of N triangles (measurements, tests). `plain` draws with renderer.render (no progressive still image). `capture` keeps the drawing buffer for reading the image back (the tests). `path` plays a recorded camera path frame by frame (the browser tests and bench/web.sh); the
+// `side=front` culls back faces, `side=double` draws both in one pass, `twopass=T` sets MTObject's twoPassPerPixel, `occlusion=0` turns a still image's occlusion tests off, `occlahead=K` tests K chunks ahead, `chunk=N` draws a still image in chunks of N triangles (measurements, tests). `plain` draws with renderer.render (no progressive still image). `capture` keeps the drawing buffer for reading the image back (the tests). `path` plays a recorded camera path frame by frame (the browser tests and bench/web.sh); the
 // per-frame figures are in window.mtViewer.frames.
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
@@ -49,7 +49,6 @@ async function main() {
     // ahead=0: no look-ahead loads while the camera moves; aheadbatch=N, aheadgate=S: their batch
     // and frame-time gate (ExtractRender's loadAhead, aheadBatch, aheadGate).
     loadAhead: q.get('ahead') !== '0',
-    // occlusion=0: a still image draws every patch of its cut (no occlusion tests).
     aheadBatch: Number.isFinite(Number(q.get('aheadbatch'))) && q.has('aheadbatch') ? Number(q.get('aheadbatch')) : undefined,
     aheadGate: Number.isFinite(Number(q.get('aheadgate'))) && q.has('aheadgate') ? Number(q.get('aheadgate')) : undefined,
     // side=front: back faces always culled by the GL (measurement only: an open scan's inside

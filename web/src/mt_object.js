@@ -146,7 +146,7 @@ export class MTObject extends THREE.Group {
     // A still image leaves out the patches hidden behind those drawn before them (occlusion.js):
     // after each chunk the next ones are tested by their boxes against the depth drawn so far, up to
     // `occlusionAhead` chunks' worth of triangles. `occlusion: false` draws every patch.
-    this.occlusion = options.occlusion === false ? null : new OcclusionTests();
+    this.occlusion = options.occlusion === false || options.material ? null : new OcclusionTests();
     this.occlusionAhead = options.occlusionAhead ?? 3;
     this.fixedStillChunk = options.fixedStillChunk || 0;
     this.imageAt = 0;  // when the image on screen was shown (moving: every frame)
@@ -681,11 +681,15 @@ void main() {
       // 80 k-triangle chunks one a frame, 644 ms in 40 k ones). The screen is not touched, so the
       // browser keeps showing the last image presented.
       const size = renderer.getDrawingBufferSize(new THREE.Vector2());
+      const a = this.accum;
       if (!this.target || this.target.width !== size.x || this.target.height !== size.y) {
         this.blitted = true;
         this._stillTarget(size.x, size.y);
+        // A new target holds nothing: the image starts again (its occlusion tests with it).
+        a.next = 0;
+        a.fresh = true;
+        a.hiddenTriangles = 0;
       }
-      const a = this.accum;
       // An image's first chunk also clears the target (and is often the first draw of many
       // patches): its time does not teach the still model (it halved the next chunk).
       firstChunk = a.fresh;
@@ -698,7 +702,9 @@ void main() {
       // `fixedStillChunk` (tests): that many triangles a chunk, whatever the time.
       const chunk = this.fixedStillChunk || Math.max(this.extract.frameBudget, 1000, this.blitted ? most : Math.min(most, this.stillModel.trianglesFor(left)));
       drawn = this._drawStillChunk(renderer, scene, camera, chunk);
+      if (this.stats) this.stats.hiddenTriangles = a.hiddenTriangles;
       if (a.next >= a.list.length) {
+        if (this.occlusion) this.occlusion.reset();
         renderer.render(this.blitScene, this.blitCamera);  // the complete image, shown once
         this.blitted = true;
         this.imageAt = performance.now();
@@ -755,10 +761,11 @@ void main() {
     renderer.render(scene, camera);
     renderer.autoClear = auto;
     for (const [m, v] of visible) m.visible = v;
-    // The patches the next frames may draw, tested against the depth drawn so far.
-    if (this.occlusion && a.next < a.list.length) {
+    // The patches the next frames may draw, tested against the depth drawn so far (a perspective
+    // camera, no clipping planes: occlusion.js).
+    if (this.occlusion && a.next < a.list.length && camera.isPerspectiveCamera && renderer.clippingPlanes.length === 0) {
       const ahead = [];
-      for (let i = a.next, t = 0; i < a.list.length && t <= this.occlusionAhead * budget && ahead.length < 512; ++i) {
+      for (let i = a.next, t = 0; i < a.list.length && t < this.occlusionAhead * budget && ahead.length < 512; ++i) {
         ahead.push(a.list[i]);
         t += a.list[i].geometry.index.count / 3;
       }

@@ -7,7 +7,9 @@
 // reaches the near plane is not tested). On an open scan (double-sided, holes) seen at a still
 // view, the patches wholly hidden (mostly the far side's) are a third to a half of the image's
 // triangles, and a software renderer still processes their vertices and rasterises them; on
-// SwiftShader leaving them out made a still image 10-25% faster to draw (docs/web.md).
+// SwiftShader leaving them out made the orbit's final still image of two 53 M builds 10-25% faster
+// to redraw (docs/web.md). The argument needs the patches' materials to test depth LessEqual and no
+// clipping planes: MTObject runs the tests only with its own materials and none set.
 // Results are read a frame later: WebGL makes a query's result available only after the page
 // returns to the browser, and a still frame waits for its drawing, so by then they are in. A
 // patch whose result is not in is drawn.
@@ -17,17 +19,16 @@ import * as THREE from 'three';
 export class OcclusionTests {
   constructor() {
     this.geometry = new THREE.BoxGeometry(1, 1, 1);
-    // Depth test only: no colour, no depth written, both sides (a box seen from its inside still
-    // covers the patch's pixels, and the near plane check below keeps the eye outside it).
-    this.material = new THREE.MeshBasicMaterial({ colorWrite: false, depthWrite: false, side: THREE.DoubleSide });
+    // Depth test only: no colour, no depth written (the patches' materials test LessEqual, as this
+    // one does). Front faces only: the near plane check below keeps the eye outside the box, so its
+    // front faces cover every pixel it covers, each nearer than the back face behind it.
+    this.material = new THREE.MeshBasicMaterial({ colorWrite: false, depthWrite: false });
     this.scene = new THREE.Scene();
     this.scene.matrixWorldAutoUpdate = false;
     this.proxies = [];  // box meshes, reused
     this.pending = new Map();  // patch mesh -> WebGLQuery
     this.free = [];  // queries read, reused
     this.gl = null;  // the context of the last tests
-    this.tested = 0;  // patches tested since reset()
-    this.hidden = 0;  // of those, found hidden
     this._corner = new THREE.Vector3();
     this._m = new THREE.Matrix4();
     this._c = new THREE.Vector3();
@@ -36,7 +37,8 @@ export class OcclusionTests {
   }
 
   // Tests each of `meshes` (not drawn yet; matrixWorld current) against the depth of the target
-  // bound now, with the renderer's camera. A mesh already tested is not tested again.
+  // bound now, seen by `camera` (a perspective one: MTObject tests nothing else). A mesh already
+  // tested is not tested again.
   issue(renderer, camera, meshes) {
     const gl = (this.gl = renderer.getContext());
     const view = camera.matrixWorldInverse;
@@ -52,7 +54,7 @@ export class OcclusionTests {
       bb.getSize(this._s);
       // Padded by 1% of its largest side on every side (the box's depth is interpolated over other
       // triangles than the patch's; a flat patch still gets a box with some depth).
-      const pad = 0.02 * Math.max(this._s.x, this._s.y, this._s.z) + 1e-6;
+      const pad = 0.02 * Math.max(this._s.x, this._s.y, this._s.z) + 1e-6;  // added to each extent: 1% a side
       this._s.addScalar(pad);
       let p = this.proxies[n];
       if (!p) {
@@ -76,20 +78,20 @@ export class OcclusionTests {
       if (clipped) continue;
       const q = this.free.pop() || gl.createQuery();
       p.userData.query = q;
-      p.userData.mesh = m;
       p.renderOrder = n;
       this.pending.set(m, q);
       this.scene.add(p);
       ++n;
     }
-    if (n === 0) return 0;
+    if (n === 0) return;
     const auto = renderer.autoClear;
     renderer.autoClear = false;
-    renderer.render(this.scene, camera);
-    renderer.autoClear = auto;
-    this.scene.clear();
-    this.tested += n;
-    return n;
+    try {
+      renderer.render(this.scene, camera);
+    } finally {
+      renderer.autoClear = auto;
+      this.scene.clear();
+    }
   }
 
   // True when `mesh` was tested and no sample of its box passed (it is hidden in the image); false
@@ -102,16 +104,14 @@ export class OcclusionTests {
     const hidden = !gl.getQueryParameter(q, gl.QUERY_RESULT);
     this.pending.delete(mesh);
     this.free.push(q);
-    if (hidden) ++this.hidden;
     return hidden;
   }
 
-  // A new image: the tests made against the last one's depth no longer hold.
+  // A new image (the tests made against the last one's depth no longer hold), or an image done
+  // (the patches tested are let go).
   reset() {
     for (const [, q] of this.pending) this.free.push(q);
     this.pending.clear();
-    this.tested = 0;
-    this.hidden = 0;
   }
 
   dispose() {
