@@ -7,7 +7,7 @@
 // reaches the near plane is not tested). On an open scan (double-sided, holes) seen at a still
 // view, the patches wholly hidden (mostly the far side's) are a third to a half of the image's
 // triangles, and a software renderer still processes their vertices and rasterises them; on
-// SwiftShader leaving them out made the orbit's final still image of two 53 M builds 10-25% faster
+// SwiftShader leaving them out made the orbit's final still image of two 53 M builds 9-25% faster
 // to redraw (docs/web.md). The argument needs the patches' materials to test depth LessEqual and no
 // clipping planes: MTObject runs the tests only with its own materials and none set.
 // Results are read a frame later: WebGL makes a query's result available only after the page
@@ -37,8 +37,8 @@ export class OcclusionTests {
   }
 
   // Tests each of `meshes` (not drawn yet; matrixWorld current) against the depth of the target
-  // bound now, seen by `camera` (a perspective one: MTObject tests nothing else). A mesh already
-  // tested is not tested again.
+  // bound now, seen by `camera` (a perspective one: MTObject tests nothing else). A mesh whose test
+  // is pending is not tested again; one whose result was read (visible) is, against more depth.
   issue(renderer, camera, meshes) {
     const gl = (this.gl = renderer.getContext());
     const view = camera.matrixWorldInverse;
