@@ -21,6 +21,7 @@ declare -A allowed=(
   [mtrender]="base texture mtfile"
   [interop]="base mtfile"
   [testing]="base texture mtfile patchstore/io patchstore vpartition mtbuild"
+  [web/wasm]="mtfile"
 )
 readers="mtinfo mtverify mtextract mtexport"
 reader_allowed="base texture mtfile patchstore/io interop tools"

@@ -70,12 +70,18 @@ for f in a c d; do
   echo "$f.mt still loads: $(awk '{s += $6; a += $12} END {print s " patches needed over " NR " views, all asked at once"}' "$t/js")"
 done
 # The web decoder (range coder, position prediction, meshopt and zstd from npm, checksums) gives
-# the C++ decoder's grid coordinates on every patch of the meshopt files.
+# the C++ decoder's grid coordinates on every patch of the meshopt files: its JavaScript port, and
+# with the C++ decoder compiled to WebAssembly (web/wasm/, built by CMake) in its place.
+wasm=$src/web/dist/mt_decode.wasm
+[[ -f $wasm ]] || { echo "web_cut_compare: $wasm is missing (cmake --build builds it, web/wasm/)" >&2; exit 1; }
 for f in a c x; do
   "$bin/web_cut_nodes" --decode "$t/$f.mt" >"$t/cpp"
-  node "$src/web/test/decode_check.mjs" "$t/$f.mt" --require-connectivity >"$t/js"
-  diff "$t/cpp" "$t/js" >&2 || { echo "DIFFERENT: $f.mt decoded patches" >&2; fail=1; }
-  echo "$f.mt decoded: $(cat "$t/js")"
+  for how in js wasm; do
+    opt=(); [[ $how == wasm ]] && opt=(--wasm "$wasm")
+    node "$src/web/test/decode_check.mjs" "$t/$f.mt" --require-connectivity "${opt[@]}" >"$t/js"
+    diff "$t/cpp" "$t/js" >&2 || { echo "DIFFERENT: $f.mt decoded patches ($how)" >&2; fail=1; }
+    echo "$f.mt decoded ($how): $(cat "$t/js")"
+  done
 done
 grep -q ' textures [1-9]' "$t/js" || { echo "web_cut_compare: x.mt: no texture decoded" >&2; fail=1; }
 echo "web_cut_compare: $compared (file, view, tolerance) cuts compared"

@@ -21,11 +21,13 @@ run "$bin/mtgen" -o "$t/g.ply" --triangles 60k --colors --density varying --seed
 run "$bin/mtbuild" "$t/g.ply" -o "$t/g.mt" --threads 2
 run "$bin/mtbuild" "$t/g.ply" -o "$t/g-crs.mt" --threads 2 --crs EPSG:32633
 fail=0
+wasm=$src/web/dist/mt_decode.wasm
+[[ -f $wasm ]] || { echo "web_format_check: $wasm is missing (cmake --build builds it, web/wasm/)" >&2; exit 1; }
 "$bin/web_cut_nodes" --decode "$t/g-crs.mt" >"$t/cpp"
 node "$src/web/test/decode_check.mjs" "$t/g-crs.mt" --require-connectivity >"$t/js"
 diff "$t/cpp" "$t/js" >&2 || { echo "DIFFERENT: g-crs.mt decoded patches" >&2; fail=1; }
 echo "g-crs.mt decoded: $(cat "$t/js")"
-node "$src/web/test/payload_check.mjs" "$src" "$t/g.mt" || fail=1
+node "$src/web/test/payload_check.mjs" "$src" "$t/g.mt" --wasm "$wasm" || fail=1
 mkdir "$t/variants"
 node "$src/web/test/metadata_check.mjs" "$t/g-crs.mt" EPSG:32633 "$t/g.mt" --dump "$t/variants" || fail=1
 # The C++ reader (mtinfo) agrees on every variant: opens it with the same crs, or refuses it.

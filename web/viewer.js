@@ -141,6 +141,7 @@ async function main() {
   };
   state.ready = true;
   state.fileSize = mt.mt.fileSize;
+  state.decoder = mt.server.decoder;  // 'wasm', or 'javascript' when web/dist/mt_decode.wasm did not load
   state.crs = mt.mt.crs;  // the file's coordinate reference system ('' when it names none)
   state.openBytes = mt.mt.source.bytesFetched;  // header, DAG, index and the coarsest cut
   state.openReads = mt.openReads;  // {requests, kept}: range requests to the coarsest cut, reads answered from the file's tail

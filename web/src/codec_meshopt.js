@@ -5,7 +5,8 @@
 // EdgeFifo, ConnectivityModel, decodeExplicit, decodeConnectivity: the version-4 connectivity
 // code), so that a change of the C++ decoder ports line by line. Byte layouts: mt_format.h.
 // `libs` brings the npm decoders: libs.zstd(bytes, rawSize) -> Uint8Array (fzstd) and libs.meshopt
-// (meshoptimizer's MeshoptDecoder, ready).
+// (meshoptimizer's MeshoptDecoder, ready); and libs.wasm (codec_wasm.js), when set, decodes the
+// version-4 stream in place of decodeConnectivity and decodeContextPositions.
 
 import {
   kPayloadHeaderSize, kPayloadNormals, kPayloadColors, kPayloadWide, kPayloadStrip, kPayloadRangePositions,
@@ -585,6 +586,13 @@ export function decodeMeshopt(data, h, libs, out) {
   if (h.flags & kPayloadConnectivity) {
     if (sizes[2] + 12 !== f.raw.length || sizes[0] !== 0 || sizes[1] !== h.triangleCount * 3)
       bad('stream sizes do not add up');
+    if (libs.wasm) {
+      // The same decoder in WebAssembly (codec_wasm.js).
+      const r = libs.wasm.decode(data.subarray(f.rangeBegin), h.triangleCount, n);
+      out.triangles = r.triangles;
+      decodeMeshoptAttributes(h, f.raw.subarray(12), sizes[2], libs, out);
+      return r.positions;
+    }
     out.triangles = decodeConnectivity(rc, h.triangleCount, n);
     decodeMeshoptAttributes(h, f.raw.subarray(12), sizes[2], libs, out);
     return decodeContextPositions(rc, out.triangles, n);

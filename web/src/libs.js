@@ -1,6 +1,7 @@
-// Where the worker finds the npm decoders. The defaults resolve inside this package's
-// node_modules next to src/ (the layout `npm ci` makes and mtserve/nginx serve); an application
-// that bundles or hosts them elsewhere passes its own URLs (MTObject.open's `libs` option).
+// Where the worker finds the npm decoders and our own WebAssembly one. The defaults resolve inside
+// this package: node_modules next to src/ (the layout `npm ci` makes and mtserve/nginx serve) and
+// dist/ (CMake builds web/wasm/ into it); an application that bundles or hosts them elsewhere
+// passes its own URLs (MTObject.open's `libs` option).
 export function defaultLibUrls() {
   const u = (p) => new URL(p, import.meta.url).href;
   return {
@@ -10,5 +11,7 @@ export function defaultLibUrls() {
     // Draco's decoder as the three package ships it (wasm + its Emscripten wrapper).
     dracoWrapper: u('../node_modules/three/examples/jsm/libs/draco/draco_wasm_wrapper.js'),
     dracoWasm: u('../node_modules/three/examples/jsm/libs/draco/draco_decoder.wasm'),
+    // Ours: the version-4 stream's decoder, built by CMake from the C++ (web/wasm/).
+    decoder: u('../dist/mt_decode.wasm'),
   };
 }

@@ -61,6 +61,8 @@ export class PatchServer {
             // When the worker's module ran, its decoders were in, and it was ready (page time, ms).
             const rel = (x) => x - performance.timeOrigin;
             this.workerTimes = { started: rel(e.data.startedAt), libs: rel(e.data.libsAt), ready: rel(e.data.readyAt) };
+            this.decoder = e.data.decoder;  // 'wasm', or 'javascript' (decoderNote says why)
+            this.decoderNote = e.data.decoderNote;
             if (e.data.error) reject(new Error(e.data.error));
             else resolve();
             w.onmessage = (ev) => this.onDecoded(ev.data);

@@ -8,6 +8,7 @@
 import { decodePatch } from './patch_codec.js';
 import { decodeTexturePayload, splitTexturedVertices } from './texture.js';
 import { defaultLibUrls } from './libs.js';
+import { loadWasmDecoder } from './codec_wasm.js';
 
 let libs = null, cfg = null, h64Raw = null;
 
@@ -16,14 +17,28 @@ let libs = null, cfg = null, h64Raw = null;
 let libsPromise = null;
 function loadLibs(urls) {
   if (!libsPromise)
-    libsPromise = Promise.all([import(urls.zstd), import(urls.meshopt), import(urls.xxhash)]).then(async ([zstdMod, meshoptMod, xxMod]) => {
+    libsPromise = Promise.all([import(urls.zstd), import(urls.meshopt), import(urls.xxhash), loadWasm(urls.decoder)]).then(async ([zstdMod, meshoptMod, xxMod, wasm]) => {
       const meshopt = meshoptMod.MeshoptDecoder;
       await meshopt.ready;
       const xx = await xxMod.default();
       libsAt = performance.timeOrigin + performance.now();
-      return { zstdMod, meshopt, xx };
+      return { zstdMod, meshopt, xx, wasm };
     });
   return libsPromise;
+}
+
+// The WebAssembly decoder (codec_wasm.js), or null: without it (a page served without the built
+// web/dist/mt_decode.wasm) the JavaScript port decodes, slower, and the worker says why once.
+let decoderNote = '';
+async function loadWasm(url) {
+  if (!url) return (decoderNote = 'no WebAssembly decoder given (libs.decoder)'), null;
+  try {
+    return await loadWasmDecoder(url);
+  } catch (err) {
+    decoderNote = `the WebAssembly decoder did not load (${err.message}); decoding in JavaScript, 2-3x slower (build it: cmake --build build)`;
+    console.warn(decoderNote);
+    return null;
+  }
 }
 
 // A page may start the workers before its modules load (viewer.html: `worker.js?preload`): they
@@ -35,7 +50,7 @@ if (new URL(self.location.href).searchParams.has('preload')) loadLibs(defaultLib
 let initPromise = null;
 async function init(msg) {
   cfg = msg;
-  const { zstdMod, meshopt, xx } = await loadLibs(msg.libs);
+  const { zstdMod, meshopt, xx, wasm } = await loadLibs(msg.libs);
   h64Raw = xx.h64Raw;
   let draco = null;
   if (msg.codec === 2) {
@@ -46,7 +61,7 @@ async function init(msg) {
       self.DracoDecoderModule({ wasmBinary, onModuleLoaded: (m) => resolve(m) });
     });
   }
-  libs = { zstd: (b, n) => zstdMod.decompress(b, new Uint8Array(n)), meshopt, draco };
+  libs = { zstd: (b, n) => zstdMod.decompress(b, new Uint8Array(n)), meshopt, draco, wasm };
 }
 
 let normalSums = null;
@@ -140,7 +155,8 @@ self.onmessage = async (e) => {
     try {
       initPromise = init(msg);
       await initPromise;
-      self.postMessage({ type: 'ready', startedAt, libsAt, readyAt: performance.timeOrigin + performance.now() });
+      self.postMessage({ type: 'ready', startedAt, libsAt, readyAt: performance.timeOrigin + performance.now(),
+        decoder: libs.wasm ? 'wasm' : 'javascript', decoderNote });
     } catch (err) {
       self.postMessage({ type: 'ready', error: `decoder set-up failed: ${err.message}` });
     }

@@ -140,7 +140,7 @@ if (shots) {
   await page.screenshot({ path: path.join(shots, 'web-viewer-moving.png') });
 }
 if (firstOnly) {
-  const s = await page.evaluate(() => ({ first: window.mtViewer.firstImageMs, fileSize: window.mtViewer.fileSize, openBytes: window.mtViewer.openBytes,
+  const s = await page.evaluate(() => ({ first: window.mtViewer.firstImageMs, fileSize: window.mtViewer.fileSize, decoder: window.mtViewer.decoder, openBytes: window.mtViewer.openBytes,
     openTimes: window.mtViewer.openTimes, openReads: window.mtViewer.openReads, error: window.mtViewer.error,
     fileRequests: performance.getEntriesByType('resource').filter((r) => r.name.endsWith('/model.mt') && r.startTime < window.mtViewer.firstImageMs).map((r) => [r.startTime, r.responseEnd]) }));
   await cleanup();
@@ -175,7 +175,7 @@ if (sampler) {
 if (shots) await page.screenshot({ path: path.join(shots, 'web-viewer-still.png') });
 // The final cut drawn whole, three times, each waited for: SwiftShader's raw rate on it.
 const raw = await page.evaluate(() => window.mtViewer.drawRate(3));
-const s = await page.evaluate(() => ({ frames: window.mtViewer.frames, first: window.mtViewer.firstImageMs, fileSize: window.mtViewer.fileSize,
+const s = await page.evaluate(() => ({ frames: window.mtViewer.frames, first: window.mtViewer.firstImageMs, fileSize: window.mtViewer.fileSize, decoder: window.mtViewer.decoder,
   openBytes: window.mtViewer.openBytes, resources: performance.getEntriesByType('resource').map((r) => [r.name.replace(location.origin, ''), r.startTime, r.responseEnd, r.transferSize]).filter((r) => r[1] < window.mtViewer.firstImageMs),
   nav: (({ responseEnd, domInteractive, domContentLoadedEventEnd }) => ({ responseEnd, domInteractive, domContentLoadedEventEnd }))(performance.getEntriesByType('navigation')[0]), openTimes: window.mtViewer.openTimes, openReads: window.mtViewer.openReads, error: window.mtViewer.error, warnings: window.mtViewer.warnings.length,
   fileRequests: performance.getEntriesByType('resource').filter((r) => r.name.endsWith('/model.mt') && r.startTime < window.mtViewer.firstImageMs).map((r) => [r.startTime, r.responseEnd]) }));
@@ -257,7 +257,7 @@ if (s.error) {
   return;
 }
 const mib = (b) => (b / 2 ** 20).toFixed(2);
-console.log(`file                      ${file} (${mib(s.fileSize)} MiB)`);
+console.log(`file                      ${file} (${mib(s.fileSize)} MiB); patches decoded in ${s.decoder}`);
 console.log(`page load                 ${loadMs} ms (load event)`);
 console.log(`first image               ${s.first.toFixed(0)} ms after navigation start, ${(s.first - loadMs).toFixed(0)} ms after the load event (${mib(s.openBytes)} MiB read to it: header, DAG, index, coarsest cut)` +
   (s.openReads ? `; ${s.openReads.requests} range requests to it, ${s.openReads.kept} reads answered from the file's tail` : ''));

@@ -3,7 +3,8 @@
 //   node test/browser.mjs BIN_DIR DATA_DIR [--update-golden]
 // DATA_DIR holds t.mt, t-draco.mt, c.mt, h.mt, o.mt (tests/web_browser.sh builds them). Tests:
 //   golden        a fixed view at a fixed tolerance, converged, against test/golden/torus.png
-//                 (at most 2% of the pixels differ by more than 48 in RGB);
+//                 (at most 2% of the pixels differ by more than 48 in RGB), its patches decoded by
+//                 the WebAssembly decoder (web/dist/mt_decode.wasm);
 //   cracks        several views and tolerances, converged: no background pixel enclosed by the
 //                 surface in a component under 400 pixels (the torus' own hole is far larger);
 //   draco         the same surface coded with Draco: decoded by Draco's wasm decoder, no crack;
@@ -133,10 +134,13 @@ await test('golden', async () => {
     return `wrote ${golden}`;
   }
   const r = await page.evaluate(() => window.mtViewer.compare('/web/test/golden/torus.png'));
+  // The patches were decoded by the WebAssembly decoder (web/dist/mt_decode.wasm, built by CMake).
+  const decoder = await page.evaluate(() => window.mtViewer.decoder);
   await page.close();
   check(!r.error, r.error);
+  check(decoder === 'wasm', `the patches were decoded in ${decoder}, not by web/dist/mt_decode.wasm`);
   check(r.differing <= 0.02, `${(100 * r.differing).toFixed(2)}% of the pixels differ from the golden image (mean ${r.mean.toFixed(2)})`);
-  return `${(100 * r.differing).toFixed(3)}% pixels differ, mean difference ${r.mean.toFixed(2)}`;
+  return `${(100 * r.differing).toFixed(3)}% pixels differ, mean difference ${r.mean.toFixed(2)}, decoded in ${decoder}`;
 });
 
 await test('cracks', async () => {

@@ -6,7 +6,9 @@
 // of the process, user + sys, ms: wall time means nothing on a shared machine). A textured file
 // (version 6) adds "textures N imagebytes B uvsum U" (texture.js's decoder; U as web_cut_nodes
 // --decode defines it); with --require-connectivity it fails when no payload has kPayloadConnectivity (the
-// file does not test the version-4 decoder).
+// file does not test the version-4 decoder). With --wasm PATH the version-4 streams are decoded by
+// the WebAssembly decoder at PATH (codec_wasm.js; web/dist/mt_decode.wasm) instead of the
+// JavaScript port.
 import fs from 'node:fs';
 import { decompress } from 'fzstd';
 import { MeshoptDecoder } from 'meshoptimizer/decoder';
@@ -14,15 +16,18 @@ import { FileSource } from '../src/source.js';
 import { openMtFile, hasher } from '../src/mtfile.js';
 import { decodePatch } from '../src/patch_codec.js';
 import { decodeTexturePayload } from '../src/texture.js';
+import { loadWasmDecoder } from '../src/codec_wasm.js';
 
 const file = process.argv[2];
 const requireConnectivity = process.argv.includes('--require-connectivity');
+const wasmAt = process.argv.indexOf('--wasm');
+const wasm = wasmAt > 0 ? await loadWasmDecoder(fs.readFileSync(process.argv[wasmAt + 1])) : null;
 const kinds = new Map();  // kind -> { patches, triangles, ms }
 const kindOf = (flags) => (flags & 0x80 ? 'v4-connectivity' : flags & 0x20 ? 'v3-range-indices' : flags & 0x10 ? 'v2-range-positions' : 'v1');
 await MeshoptDecoder.ready;
 const { h64Raw } = await hasher();
 const scene = await openMtFile(new FileSource(file, fs));
-const libs = { zstd: (b, n) => decompress(b, new Uint8Array(n)), meshopt: MeshoptDecoder, draco: null };
+const libs = { zstd: (b, n) => decompress(b, new Uint8Array(n)), meshopt: MeshoptDecoder, draco: null, wasm };
 const p = scene.patches;
 let tris = 0, verts = 0, qsum = 0n, tsum = 0n, textures = 0, imageBytes = 0, uvsum = 0n;
 const tx = scene.textures;
@@ -67,7 +72,7 @@ for (let i = 0; i < p.count; ++i) {
 uvsum = BigInt.asUintN(64, uvsum);
 tsum = BigInt.asUintN(64, tsum);
 for (const [kind, k] of kinds)
-  console.error(`${kind}: ${k.patches} patches, ${k.triangles} triangles, ${k.ms.toFixed(1)} ms CPU (${(k.triangles / k.ms / 1000).toFixed(2)} M triangles/s)`);
+  console.error(`${kind}${wasm && kind === 'v4-connectivity' ? ' (wasm)' : ''}: ${k.patches} patches, ${k.triangles} triangles, ${k.ms.toFixed(1)} ms CPU (${(k.triangles / k.ms / 1000).toFixed(2)} M triangles/s)`);
 if (requireConnectivity && !kinds.has('v4-connectivity')) {
   console.error(`decode_check: ${file}: no payload has kPayloadConnectivity`);
   process.exit(1);

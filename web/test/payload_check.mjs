@@ -6,6 +6,9 @@
 //  2. With FILE.mt (a meshopt file built by the current mtbuild): every version-4 payload
 //     (kPayloadConnectivity) among the first ones, truncated at several lengths or with a byte
 //     changed, throws BadPayload or decodes to valid indices; never another exception, never a hang.
+//     With --wasm PATH, each variant is decoded by the WebAssembly decoder (codec_wasm.js) too: it
+//     must refuse the same variants, each with a message of the C++ decoder (no other trap), and
+//     decode the others to the same triangles and coordinates.
 import fs from 'node:fs';
 import path from 'node:path';
 import { decompress } from 'fzstd';
@@ -13,15 +16,18 @@ import { MeshoptDecoder } from 'meshoptimizer/decoder';
 import { FileSource } from '../src/source.js';
 import { openMtFile } from '../src/mtfile.js';
 import { decodePatch, BadPayload } from '../src/patch_codec.js';
+import { loadWasmDecoder } from '../src/codec_wasm.js';
 import { Codec, kPayloadConnectivity, kPayloadRangePositions, kPayloadRangeIndices, kPayloadPositionContexts } from '../src/format.js';
 
-const [src, file] = process.argv.slice(2);
+const wasmAt = process.argv.indexOf('--wasm');
+const [src, file] = process.argv.slice(2).filter((a, i) => wasmAt < 0 || (i + 2 !== wasmAt && i + 2 !== wasmAt + 1));
 if (!src) {
-  console.error('usage: node payload_check.mjs SOURCE_DIR [FILE.mt]');
+  console.error('usage: node payload_check.mjs SOURCE_DIR [FILE.mt] [--wasm PATH]');
   process.exit(2);
 }
 await MeshoptDecoder.ready;
 const libs = { zstd: (b, n) => decompress(b, new Uint8Array(n)), meshopt: MeshoptDecoder, draco: null };
+const wasmLibs = wasmAt > 0 ? { ...libs, wasm: await loadWasmDecoder(fs.readFileSync(process.argv[wasmAt + 1])) } : null;
 let failures = 0;
 const fail = (what) => { console.error(`payload_check: FAILED: ${what}`); ++failures; };
 
@@ -92,7 +98,7 @@ if (file) {
   if (scene.header.codec !== Codec.Meshopt) throw new Error(`${file}: not a meshopt file`);
   const grid = { bits: scene.header.gridBits };
   const pr = scene.patches;
-  let payloads = 0, trials = 0, threw = 0;
+  let payloads = 0, trials = 0, threw = 0, wasmAgreed = 0;
   const t0 = performance.now();
   for (let i = 0; i < pr.count && payloads < 6; ++i) {
     const data = new Uint8Array(await scene.source.read(pr.offset[i], pr.offset[i] + pr.size[i]));
@@ -110,19 +116,34 @@ if (file) {
       }
     for (const v of variants) {
       ++trials;
+      let d = null;
       try {
-        const d = decodePatch(v, Codec.Meshopt, grid, libs);
+        d = decodePatch(v, Codec.Meshopt, grid, libs);
         const nv = d.q.length / 3;
         for (const idx of d.triangles) if (!(idx < nv)) { fail(`patch ${i}: a damaged payload decoded to index ${idx} of ${nv}`); break; }
       } catch (e) {
         if (e instanceof BadPayload) ++threw;
         else fail(`patch ${i}: a damaged payload threw ${e.name}: ${e.message}`);
       }
+      if (!wasmLibs) continue;
+      let w = null;
+      try {
+        w = decodePatch(v, Codec.Meshopt, grid, wasmLibs);
+      } catch (e) {
+        if (!(e instanceof BadPayload)) fail(`patch ${i}: the wasm decoder threw ${e.name}: ${e.message}`);
+        // A trap that is not bad()'s (an access out of bounds) is a fault of the decoder.
+        else if (e.message.includes('the decoder trapped')) fail(`patch ${i}: ${e.message}`);
+      }
+      const same = (a, b) => a.length === b.length && a.every((x, k) => x === b[k]);
+      if (!d !== !w) fail(`patch ${i}: a damaged payload ${d ? 'decodes in JavaScript, is refused' : 'is refused in JavaScript, decodes'} in wasm`);
+      else if (d && !(same(d.triangles, w.triangles) && same(d.q, w.q))) fail(`patch ${i}: a damaged payload decodes to other triangles in wasm`);
+      else ++wasmAgreed;
     }
   }
   if (payloads === 0) fail(`${file}: no version-4 payload with 50 triangles or more`);
   console.log(`damaged version-4 payloads: ${payloads} payloads, ${trials} variants, ${threw} refused as BadPayload, ` +
     `the rest decoded to valid indices (${(performance.now() - t0).toFixed(0)} ms)`);
   if (threw === 0) fail('no damaged variant was refused: the checks test nothing');
+  if (wasmLibs) console.log(`the wasm decoder agrees with the JavaScript one on ${wasmAgreed} of ${trials} variants`);
 }
 process.exit(failures ? 1 : 0);
