@@ -79,6 +79,7 @@ export class ExtractRender {
     this.aheadTriangles = 0;  // the same for a moving view's look-ahead (loadAheadOf; MTObject sets it)
     this.frameBudget = 0;
     this.frozen = false;
+    this.cutVersion = 0;  // counts the cut's changes (an arc added or removed)
     this.smoothBudget = 0;
     this.slackFrames = 0;
     this.frameMsAvg = 0;
@@ -139,10 +140,12 @@ export class ExtractRender {
   isRefineCandidate(n) { return this.inS[n] && !this.scene.nodes.source[n] && this.succIn[n] === 0; }
   isCoarsenCandidate(n) { return !this.inS[n] && !this.scene.nodes.sink[n] && this.predOut[n] === 0; }
   addCutArc(a) {
+    ++this.cutVersion;
     this.cutPos[a] = this.cutArcs.length;
     this.cutArcs.push(a);
   }
   removeCutArc(a) {
+    ++this.cutVersion;
     const pos = this.cutPos[a];
     const last = this.cutArcs[this.cutArcs.length - 1];
     this.cutArcs[pos] = last;

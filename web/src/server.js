@@ -172,18 +172,19 @@ export class PatchServer {
     ++this.requests;
     this.fetchMs += performance.now() - t0;
     const tx = this.scene.textures;
+    // Each item's payload (and texture payload) by its place in the file; a job gets one copy of
+    // the bytes its items span (one array buffer a job, not one a patch: ~1000 small copies cost
+    // the page's thread ~70 ms of a still view's loads).
     const items = batch.map((id) => {
       const it = {
-        id, offset: p.offset[id], triangles: p.triangles[id], checksumLo: p.checksumLo[id], checksumHi: p.checksumHi[id],
-        buffer: buf.slice(p.offset[id] - begin, p.offset[id] - begin + p.size[id]),
+        id, offset: p.offset[id], size: p.size[id], triangles: p.triangles[id], checksumLo: p.checksumLo[id], checksumHi: p.checksumHi[id],
       };
       // The texture payload read with it (mt_format.h: it follows the patch's payload), checked and
       // decoded by the worker as well.
       if (tx && tx.size[id]) {
         it.texture = {
-          offset: tx.offset[id], width: tx.width[id], height: tx.height[id], imageBytes: tx.imageBytes[id],
+          offset: tx.offset[id], size: tx.size[id], width: tx.width[id], height: tx.height[id], imageBytes: tx.imageBytes[id],
           checksumLo: tx.checksumLo[id], checksumHi: tx.checksumHi[id],
-          buffer: buf.slice(tx.offset[id] - begin, tx.offset[id] - begin + tx.size[id]),
         };
       }
       return it;
@@ -205,9 +206,10 @@ export class PatchServer {
       this.jobs.set(job, { req, worker: wi, triangles: tris });
       this.workerTriangles[wi] += tris;
       ++req.left;
-      const transfer = [];
-      for (const it of part) transfer.push(it.buffer), it.texture && transfer.push(it.texture.buffer);
-      this.workers[wi].postMessage({ type: 'decode', job, items: part }, transfer);
+      // The job's bytes: from its first payload to its last item's end; `base` is their file offset.
+      const base = part[0].offset, jobEnd = Math.max(...part.map((it) => this.scene.loadEnd[it.id]));
+      const bytes = buf.slice(base - begin, jobEnd - begin);
+      this.workers[wi].postMessage({ type: 'decode', job, items: part, bytes, base }, [bytes]);
     }
   }
   onDecoded(msg) {

@@ -27,15 +27,16 @@ function loadLibs(urls) {
   return libsPromise;
 }
 
-// The WebAssembly decoder (codec_wasm.js), or null: without it (a page served without the built
-// web/dist/mt_decode.wasm) the JavaScript port decodes, slower, and the worker says why once.
+// The WebAssembly decoder (codec_wasm.js), or null: without it (no URL given, or a page served
+// without the built web/dist/mt_decode.wasm) the JavaScript port decodes, slower; each worker says
+// why in the console once, and the page's PatchServer.decoderNote holds it.
 let decoderNote = '';
 async function loadWasm(url) {
-  if (!url) return (decoderNote = 'no WebAssembly decoder given (libs.decoder)'), null;
   try {
+    if (!url) throw new Error('no URL given (libs.decoder)');
     return await loadWasmDecoder(url);
   } catch (err) {
-    decoderNote = `the WebAssembly decoder did not load (${err.message}); decoding in JavaScript, 2-3x slower (build it: cmake --build build)`;
+    decoderNote = `the WebAssembly decoder did not load (${err.message}): decoding in JavaScript, slower (cmake --build builds web/dist/mt_decode.wasm)`;
     console.warn(decoderNote);
     return null;
   }
@@ -109,13 +110,12 @@ function renderBytes(r) {
   return b;
 }
 
-// The texture payload of item `it` over the decoded patch `d` (render arrays `r`): checksum, corner
+// The texture payload `data` of item `it` over the decoded patch `d` (render arrays `r`): checksum, corner
 // coordinates and the vertices split per coordinate now, then the image decoded (the promise: a
 // batch's images are decoded concurrently, createImageBitmap works off this thread). The promise
 // rejects on any damage with the message mt_file.cpp's readTexture gives.
-function withTexture(it, d, r) {
+function withTexture(it, data, d, r) {
   const t = it.texture;
-  const data = new Uint8Array(t.buffer);
   if (h64Raw(data, 0n) !== ((BigInt(t.checksumHi) << 32n) | BigInt(t.checksumLo)))
     return Promise.reject(new Error(`texture of patch ${it.id} is damaged: checksum mismatch in payload at byte offset ${t.offset} (${data.length} bytes)`));
   const where = (what) => new Error(`texture of patch ${it.id} at byte offset ${t.offset}: ${what}`);
@@ -173,8 +173,10 @@ self.onmessage = async (e) => {
   }
   const t0 = performance.now();
   const results = [], transfer = [], textured = [];
+  // The job's payloads lie in msg.bytes, which starts at file offset msg.base.
+  const at = (x) => new Uint8Array(msg.bytes, x.offset - msg.base, x.size);
   for (const it of msg.items) {
-    const data = new Uint8Array(it.buffer);
+    const data = at(it);
     const sum = h64Raw(data, 0n);
     const want = (BigInt(it.checksumHi) << 32n) | BigInt(it.checksumLo);
     if (sum !== want) {
@@ -187,7 +189,7 @@ self.onmessage = async (e) => {
         throw new Error(`triangle count ${d.triangles.length / 3} differs from the index (${it.triangles})`);
       const r = toRender(d);
       results.push({ id: it.id, ...r, textureError: null });
-      if (it.texture) textured.push({ at: results.length - 1, job: withTexture(it, d, r) });
+      if (it.texture) textured.push({ at: results.length - 1, job: withTexture(it, at(it.texture), d, r) });
     } catch (err) {
       results.push({ id: it.id, error: `patch ${it.id} at byte offset ${it.offset}: ${err.message}` });
     }

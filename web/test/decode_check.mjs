@@ -73,6 +73,12 @@ uvsum = BigInt.asUintN(64, uvsum);
 tsum = BigInt.asUintN(64, tsum);
 for (const [kind, k] of kinds)
   console.error(`${kind}${wasm && kind === 'v4-connectivity' ? ' (wasm)' : ''}: ${k.patches} patches, ${k.triangles} triangles, ${k.ms.toFixed(1)} ms CPU (${(k.triangles / k.ms / 1000).toFixed(2)} M triangles/s)`);
+// With --wasm, the module decoded every version-4 stream (not the JavaScript port).
+const v4 = kinds.has('v4-connectivity') ? kinds.get('v4-connectivity').patches : 0;
+if (wasm && wasm.decodes !== v4) {
+  console.error(`decode_check: ${file}: the wasm decoder decoded ${wasm.decodes} streams of ${v4} version-4 payloads`);
+  process.exit(1);
+}
 if (requireConnectivity && !kinds.has('v4-connectivity')) {
   console.error(`decode_check: ${file}: no payload has kPayloadConnectivity`);
   process.exit(1);

@@ -38,13 +38,14 @@ const scene = {
   loadEnd: offset.map((o, i) => o + size[i]),
   decodedBytes: triangles.map((t) => 40 * t),
   textures: null,
-  source: { read: async (a, b) => new ArrayBuffer(b - a), bytesFetched: 0 },
+  // The file's byte at offset o is o % 251: a job's bytes show where they were cut from.
+  source: { read: async (a, b) => Uint8Array.from({ length: b - a }, (_, k) => (a + k) % 251).buffer, bytesFetched: 0 },
 };
 
 let posts = 0;  // the order of every post, over all workers
 class StandInWorker {
   constructor() { this.posted = []; this.onmessage = null; }
-  postMessage(msg) { this.posted.push(Object.assign(msg, { seq: posts++ })); }
+  postMessage(msg, transfer = []) { this.posted.push(Object.assign(msg, { seq: posts++, transfer })); }
   terminate() {}
   jobs() { return this.posted.filter((m) => m.type === 'decode'); }
 }
@@ -76,10 +77,15 @@ for (const [wi, w] of pool.entries()) {
     largest = Math.max(largest, t);
     load[wi] += t;
     check(m.items.length === 1 || t <= PatchServer.kJobTriangles, `a job of ${m.items.length} patches and ${t} triangles (most ${PatchServer.kJobTriangles})`);
+    check(m.transfer.length === 1 && m.transfer[0] === m.bytes, 'a job\'s bytes are not transferred to its worker');
     for (const it of m.items) {
       check(!seen.has(it.id), `patch ${it.id} posted twice`);
       seen.add(it.id);
-      check(it.buffer.byteLength === size[it.id], `patch ${it.id}: ${it.buffer.byteLength} bytes posted, its payload is ${size[it.id]}`);
+      // Its payload lies in the job's bytes (one copy a job, starting at file offset m.base).
+      check(it.offset === offset[it.id] && it.size === size[it.id], `patch ${it.id}: posted at ${it.offset}, ${it.size} bytes; its payload is at ${offset[it.id]}, ${size[it.id]} bytes`);
+      check(it.offset >= m.base && it.offset - m.base + it.size <= m.bytes.byteLength, `patch ${it.id}: its payload is outside its job's bytes`);
+      const b = new Uint8Array(m.bytes, it.offset - m.base, it.size);
+      check(b[0] === it.offset % 251 && b[it.size - 1] === (it.offset + it.size - 1) % 251, `patch ${it.id}: the bytes posted for it are not its payload's`);
     }
   }
 }

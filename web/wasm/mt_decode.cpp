@@ -41,6 +41,8 @@ struct Arena {
   size_t blockSize = 0, used = 0, spilled = 0;
   Spill* spills = nullptr;
 
+  // Empties the arena. A larger block is made before the old one goes: if it cannot be had, the
+  // old one stays and what does not fit spills again.
   void reset() {
     size_t wanted = used + spilled;
     for (Spill* s = spills; s;) {
@@ -49,23 +51,26 @@ struct Arena {
       s = next;
     }
     spills = nullptr;
-    if (wanted > blockSize) {
-      std::free(block);
-      blockSize = wanted + wanted / 2;
-      block = static_cast<unsigned char*>(std::malloc(blockSize));
-      if (!block) __builtin_trap();
-    }
     used = spilled = 0;
+    if (wanted > blockSize && wanted < SIZE_MAX / 3) {
+      size_t size = wanted + wanted / 2;
+      if (auto* b = static_cast<unsigned char*>(std::malloc(size))) {
+        std::free(block);
+        block = b;
+        blockSize = size;
+      }
+    }
   }
   void* allocate(size_t n) {
+    if (n > SIZE_MAX / 2) __builtin_trap();
     n = (std::max<size_t>(n, 1) + 15) & ~size_t(15);  // never null, 16-byte aligned
-    if (used + n <= blockSize) {
+    if (n <= blockSize - used) {
       void* p = block + used;
       used += n;
       return p;
     }
     Spill* s = static_cast<Spill*>(std::malloc(sizeof(Spill) + n));
-    if (!s) __builtin_trap();
+    if (!s) __builtin_trap();  // no memory: the page sees a trap that is not bad()'s
     s->next = spills;
     spills = s;
     spilled += n;
@@ -103,6 +108,7 @@ namespace mt::codec_detail {
 extern "C" {
 
 __attribute__((export_name("mt_input"))) uint8_t* mtInput(uint32_t size) {
+  state = nullptr;
   arena.reset();
   state = new State;
   state->input.resize(size);
@@ -112,6 +118,10 @@ __attribute__((export_name("mt_input"))) uint8_t* mtInput(uint32_t size) {
 __attribute__((export_name("mt_decode"))) uint32_t mtDecode(uint32_t triangleCount, uint32_t vertexCount) {
   using namespace mt::codec_detail;
   std::vector<uint8_t>& in = state->input;
+  // The counts the decoders size their arrays by, bounded as the C++ reader bounds them (a patch
+  // has at most kMaxPayloadTriangles triangles, each brings at most three new vertices).
+  if (triangleCount > mt::format::kMaxPayloadTriangles || uint64_t(vertexCount) > 3 * uint64_t(triangleCount))
+    bad("counts out of range for a patch");
   RangeDecoder rc(in.data(), in.data() + in.size());
   decodeConnectivity(rc, triangleCount, vertexCount, state->triangles);
   decodeContextPositions(rc, state->triangles, vertexCount, state->positions);
@@ -120,7 +130,7 @@ __attribute__((export_name("mt_decode"))) uint32_t mtDecode(uint32_t triangleCou
 
 __attribute__((export_name("mt_triangles"))) const uint32_t* mtTriangles() { return state->triangles.data(); }
 __attribute__((export_name("mt_positions"))) const uint32_t* mtPositions() { return state->positions.data(); }
-__attribute__((export_name("mt_error"))) const char* mtError() { return state->error.data(); }
-__attribute__((export_name("mt_error_size"))) uint32_t mtErrorSize() { return uint32_t(state->error.size()); }
+__attribute__((export_name("mt_error"))) const char* mtError() { return state ? state->error.data() : nullptr; }
+__attribute__((export_name("mt_error_size"))) uint32_t mtErrorSize() { return state ? uint32_t(state->error.size()) : 0; }
 
 }  // extern "C"
