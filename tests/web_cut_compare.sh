@@ -63,11 +63,12 @@ done
 # The views differ: they must have moved the cuts to different node sets.
 nodes=$(awk '{print NF - 2}' "$t/cpp" | sort -n | uniq | wc -l)
 [[ $nodes -ge 2 ]] || { echo "web_cut_compare: every view gave the same cut size: the views test nothing" >&2; exit 1; }
-# A still view asks for every patch its tolerance needs in one update, levels below the cut
-# included (web/test/still_loads.mjs): its loads then overlap instead of coming a level a round.
+# A still view asks in one update for the patches of the cut its tolerance ends with, however many
+# levels below the cut, and for no others: it refines through the levels between without loading
+# them (web/test/still_loads.mjs), and settles on the converged cut.
 for f in a c d; do
   node "$src/web/test/still_loads.mjs" "$t/$f.mt" "$t/views" 1 1280 720 >"$t/js" 2>"$t/jserr" || { cat "$t/js" "$t/jserr" >&2; fail=1; }
-  echo "$f.mt still loads: $(awk '{s += $6; a += $12} END {print s " patches needed over " NR " views, all asked at once"}' "$t/js")"
+  echo "$f.mt still loads: $(awk '/target.s cut holds/ {s += $7; v += 1} /all loads:/ {u += $7} END {print s " patches needed over " v " views, all asked at once; settled in " u " updates in all"}' "$t/js")"
 done
 # The web decoder (range coder, position prediction, meshopt and zstd from npm, checksums) gives
 # the C++ decoder's grid coordinates on every patch of the meshopt files: its JavaScript port, and

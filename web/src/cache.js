@@ -22,6 +22,7 @@ export class PatchCache {
     this.evictions = 0;
     this.givenUp = 0;
     this.frame = 0;
+    this.generation = 0;  // counts patches ready, bad, evicted, cancelled or refused room (ExtractRender.stillRepeats)
   }
   state(id) {
     const e = this.entries.get(id);
@@ -42,6 +43,7 @@ export class PatchCache {
       }
       if (this.usedBytes + bytes > this.capBytes) {
         ++this.givenUp;
+        ++this.generation;  // asked for again later: not a state to skip an update on
         return false;
       }
     }
@@ -53,7 +55,7 @@ export class PatchCache {
   evict(id) {
     const e = this.entries.get(id);
     if (!e) return;
-    if (e.state === 'ready') this.onEvict(id, e);
+    if (e.state === 'ready') this.onEvict(id, e), ++this.generation;
     this.usedBytes -= e.bytes;
     this.textureBytes -= e.textureBytes || 0;
     this.entries.delete(id);
@@ -69,6 +71,7 @@ export class PatchCache {
     if (!e) return;
     e.state = 'ready';
     e.data = data;
+    ++this.generation;
     e.textureBytes = textureBytes;
     this.textureBytes += textureBytes;
     if (bytes !== undefined && bytes <= e.bytes) {
@@ -81,6 +84,7 @@ export class PatchCache {
     const e = this.entries.get(id) || { pins: 0, last: 0 };
     if (e.bytes) this.usedBytes -= e.bytes;
     this.entries.set(id, { state: 'bad', bytes: 0, pins: 0, last: e.last, data: null });
+    ++this.generation;
   }
   /** A reserved load failed for now (network): forget it. */
   cancel(id) {
@@ -88,6 +92,7 @@ export class PatchCache {
     if (!e || e.state !== 'loading') return;
     this.usedBytes -= e.bytes;
     this.entries.delete(id);
+    ++this.generation;
   }
   /** Pins every patch of `ids` when all are ready (a move is applied atomically); false otherwise. */
   pinAll(ids) {

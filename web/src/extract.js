@@ -3,7 +3,9 @@
 // (tests/web_cut_compare checks it). Read extract.h's header comment for the design; the names
 // here are the C++ ones. What differs: the place-holder count of PatchCache is replaced by bytes
 // (the browser's cache is byte-capped, cache.js), so the memory limit of the cut is
-// memoryFraction * cap in decoded bytes rather than in place holders.
+// memoryFraction * cap in decoded bytes rather than in place holders. And a still view's loads: it
+// asks at once for the patches of the cut it converges to (wantBelowCut) and refines through the
+// levels between without loading them (refineThrough); the cut it settles on is the same.
 
 import { Heap } from './heap.js';
 
@@ -91,6 +93,8 @@ export class ExtractRender {
     this.coneEye = null;
     this.coneFlag = false;
     this.coneHeld = false;
+    this.stillKey = null;  // stillRepeats: what the last still update ran with
+    this.stillStats = null;
   }
 
   /** The file's coarsest cut as a ClosedSurface (closed_surface.js), once it is decoded. */
@@ -259,11 +263,17 @@ export class ExtractRender {
   }
 
   tryRefine(n) {
-    const { nodes, arcs, inArcs } = this.scene;
     const inP = this.collectIn(n, this.scratch);
     if (this.cache && !this.cache.pinAll(inP)) return false;
+    if (this.cache) this.cache.unpinAll(this.collectOut(n, this.scratch2));
+    this.moveDown(n);
+    return true;
+  }
+  // Refines n in the cut's structure and counts (the patches' pins are the caller's).
+  moveDown(n) {
+    const { nodes, arcs, inArcs } = this.scene;
+    const inP = this.collectIn(n, this.scratch), inBytes = this.bytesOf(inP), inCount = inP.length;
     const outP = this.collectOut(n, this.scratch2);
-    if (this.cache) this.cache.unpinAll(outP);
     this.inS[n] = 0;
     for (let k = 0; k < nodes.arcCount[n]; ++k) {
       const a = nodes.firstArc[n] + k;
@@ -276,16 +286,21 @@ export class ExtractRender {
       this.addCutArc(a);
     }
     this.triangles += nodes.inTriangles[n] - nodes.outTriangles[n];
-    this.cutPatchCount += inP.length - outP.length;
-    this.cutBytes += this.bytesOf(inP) - this.bytesOf(outP);
-    return true;
+    this.cutPatchCount += inCount - outP.length;
+    this.cutBytes += inBytes - this.bytesOf(outP);
   }
   tryCoarsen(n) {
-    const { nodes, arcs, inArcs } = this.scene;
     const outP = this.collectOut(n, this.scratch);
     if (this.cache && !this.cache.pinAll(outP)) return false;
+    if (this.cache) this.cache.unpinAll(this.collectIn(n, this.scratch2));
+    this.moveUp(n);
+    return true;
+  }
+  // Coarsens n in the cut's structure and counts (the patches' pins are the caller's).
+  moveUp(n) {
+    const { nodes, arcs, inArcs } = this.scene;
+    const outP = this.collectOut(n, this.scratch), outBytes = this.bytesOf(outP), outCount = outP.length;
     const inP = this.collectIn(n, this.scratch2);
-    if (this.cache) this.cache.unpinAll(inP);
     this.inS[n] = 1;
     for (let k = 0; k < nodes.inArcCount[n]; ++k) {
       const a = inArcs[nodes.firstInArc[n] + k];
@@ -298,9 +313,8 @@ export class ExtractRender {
       this.addCutArc(a);
     }
     this.triangles += nodes.outTriangles[n] - nodes.inTriangles[n];
-    this.cutPatchCount += outP.length - inP.length;
-    this.cutBytes += this.bytesOf(outP) - this.bytesOf(inP);
-    return true;
+    this.cutPatchCount += outCount - inP.length;
+    this.cutBytes += outBytes - this.bytesOf(inP);
   }
   visibleDelta(n, refine, view) {
     const { nodes, arcs, inArcs } = this.scene;
@@ -409,8 +423,11 @@ export class ExtractRender {
     this.wanted.clear();
     const extractMs = this.options.extractMs > 0 ? this.options.extractMs : Math.min(2.0, this.options.budgetMs / 20);
     const budget = this.nextBudget(extractMs);
-    this.wantBelowCut(view, this.options.pixelTolerance * this.lodScale, budget);
-    this.submitRequests(frame, st);
+    if (!this.cache || !this.stillRepeats('ahead', view, budget)) {
+      this.wantBelowCut(view, this.options.pixelTolerance * this.lodScale, budget);
+      this.submitRequests(frame, st);
+      if (this.cache) this.stillRecord('ahead', view, budget, this.options.pixelTolerance * this.lodScale);
+    }
     st.budgetTriangles = budget;
     st.modelA = this.time.a;
     st.modelB = this.time.b * 1e6;
@@ -422,40 +439,169 @@ export class ExtractRender {
   }
 
   /**
-   * A still view's loads: the refinements beyond the cut, as if applied, the largest screen error
-   * first and as deep as they go, until the errors reach `tau` or the visible triangles `budget`
-   * (at Needed urgency; on to twice the budget at Prefetch). The cut itself refines one level per
-   * round of loads (a node refines only once its patches are resident), so asking for one level at
-   * a time made a still view wait for as many rounds of requests and decoding as the DAG has levels
-   * between the moving cut and the tolerance; asked for at once, the loads of every level overlap.
-   * The order of the wants is the order of the errors: submitRequests keeps it among equals, so the
-   * coarser refinements, which the cut needs first, load first.
+   * The refinements a still view's cut goes on to, as if every patch were resident:
+   * refineWithinBudget's walk replayed without applying it. A node refines once every node it
+   * refines into has (the refinement candidate's rule), the largest screen error first, until the
+   * errors reach `tau`; the visible triangles count against `budget` and the cut's decoded bytes
+   * against `pinLimit`. Returns {order, urgency}: the nodes in the order they refine, Needed while
+   * within both limits, then Prefetch on to twice the budget.
    */
-  wantBelowCut(view, tau, budget, urgency, absentLimit = Infinity) {
+  simulateBelowCut(view, tau, budget, pinLimit = Infinity) {
     const { nodes, arcs, inArcs } = this.scene;
     const heap = new Heap(true);
     for (let n = 0; n < nodes.count; ++n)
       if (this.isRefineCandidate(n) && !this.badNode[n]) heap.push(this.screenError(n, view), n);
-    let triangles = this.visibleTriangles;
-    const seen = new Uint8Array(nodes.count);
+    // A node's successors still in S once the refinements so far are applied (succIn, simulated).
+    const left = new Map();
+    let triangles = this.visibleTriangles, bytes = this.cutBytes, needed = true;
+    const order = [], urgency = [];
     while (!heap.empty()) {
       const err = heap.topErr(), node = heap.topNode();
       heap.pop();
-      if (err <= tau || seen[node]) continue;
-      seen[node] = 1;
+      if (err <= tau) break;
       triangles += this.visibleDelta(node, true, view);
       if (triangles > 2 * budget) break;
-      const ids = this.collectIn(node, this.scratch);
-      this.want(ids, urgency ?? (triangles <= budget ? Urgency.Needed : Urgency.Prefetch));
-      if (absentLimit < Infinity) {
-        for (const id of ids) if (this.wanted.get(id) === urgency && this.cache.state(id) === 'absent') --absentLimit;
-        if (absentLimit <= 0) break;
-      }
+      // The memory rule of refineWithinBudget: the cut's bytes and the node's new patches.
+      const inBytes = this.bytesOf(this.collectIn(node, this.scratch));
+      needed = needed && triangles <= budget && bytes + inBytes <= pinLimit;
+      bytes += inBytes - this.bytesOf(this.collectOut(node, this.scratch));
+      order.push(node);
+      urgency.push(needed ? Urgency.Needed : Urgency.Prefetch);
       for (let k = 0; k < nodes.inArcCount[node]; ++k) {
         const m = arcs.from[inArcs[nodes.firstInArc[node] + k]];
-        if (!nodes.source[m] && !this.badNode[m] && !seen[m]) heap.push(this.screenError(m, view), m);
+        if (nodes.source[m] || this.badNode[m]) continue;
+        const l = (left.has(m) ? left.get(m) : this.succIn[m]) - 1;
+        left.set(m, l);
+        if (l === 0) heap.push(this.screenError(m, view), m);
       }
     }
+    return { order, urgency };
+  }
+
+  /**
+   * Asks for the patches a simulated refinement (simulateBelowCut) ends with, and no others: the
+   * arcs into its nodes from nodes it leaves in S, each at its node's urgency (or at `urgency`),
+   * in the order the nodes refine (submitRequests keeps it among equals: the coarser refinements
+   * first). An arc between two Needed nodes is only passed through: refineThrough applies both
+   * refinements in one update, so the arc is never drawn and its patches need not be loaded. (An
+   * arc between two Prefetch nodes is left out too: those nodes refine only once the budget lets
+   * them into the Needed walk, whose final arcs are then asked for.) `absentLimit`: stop after that many patches not in the cache (the look-ahead's batch).
+   */
+  wantFinal(sim, urgency, absentLimit = Infinity) {
+    const { nodes, arcs, inArcs, arcPatches } = this.scene;
+    const refinedAt = new Map();
+    for (let i = 0; i < sim.order.length; ++i) refinedAt.set(sim.order[i], sim.urgency[i]);
+    for (let i = 0; i < sim.order.length; ++i) {
+      const n = sim.order[i], u = urgency ?? sim.urgency[i];
+      for (let k = 0; k < nodes.inArcCount[n]; ++k) {
+        const a = inArcs[nodes.firstInArc[n] + k];
+        if (refinedAt.get(arcs.from[a]) === sim.urgency[i]) continue;
+        for (let q = 0; q < arcs.patchCount[a]; ++q) {
+          const id = arcPatches[arcs.firstPatch[a] + q];
+          const w = this.wanted.get(id);
+          if (w === undefined || u > w) this.wanted.set(id, u);
+          if (absentLimit < Infinity && this.cache.state(id) === 'absent' && this.wanted.get(id) === u) --absentLimit;
+        }
+        if (absentLimit <= 0) return;
+      }
+    }
+  }
+
+  /**
+   * A still view's loads (MTObject sets budgetScale > 1 once the camera stops; its image is drawn
+   * over many frames): the patches of the cut the tolerance or the budget stops at, however many
+   * levels below the cut it lies, asked for at once (Needed; on to twice the budget at Prefetch).
+   * Asked for a level at a time, as the cut refines, a still view waited for as many rounds of
+   * requests and decoding as the DAG has levels between the moving cut and the tolerance; and the
+   * levels on the way, drawn by no image, were about half of its decoding (docs/web.md).
+   */
+  wantBelowCut(view, tau, budget, urgency, absentLimit = Infinity) {
+    const pinLimit = this.cache ? this.options.memoryFraction * this.cache.capBytes : Infinity;
+    const sim = this.simulateBelowCut(view, tau, budget, pinLimit);
+    this.wantFinal(sim, urgency, absentLimit);
+    return sim;
+  }
+
+  /**
+   * A still update's refinements through the levels it does not draw (wantBelowCut loads only the
+   * arcs the simulated refinement ends with): the largest subset X of the simulation's Needed
+   * nodes that can be refined now, applied at once. A node is in X when every successor it has in
+   * S is in X (the candidate rule) and every arc into it from a node outside X, which the cut keeps,
+   * has its patches ready; dropping a node from X drops its predecessors in X and the successors in
+   * X whose arc from it is not ready, until nothing changes. Only the arcs X ends with are pinned;
+   * those it passes through are added to the cut and removed again before anything is drawn. A
+   * final arc whose patch is damaged marks its node bad, as refineOrRequest does. Returns whether
+   * it marked one.
+   */
+  refineThrough(p, sim) {
+    let marked = false;
+    const { nodes, arcs, inArcs, arcPatches } = this.scene;
+    const inX = new Set();
+    for (let i = 0; i < sim.order.length && sim.urgency[i] === Urgency.Needed; ++i) inX.add(sim.order[i]);
+    const arcState = (a) => {
+      let ready = true;
+      for (let q = 0; q < arcs.patchCount[a]; ++q) {
+        const s = this.cache.state(arcPatches[arcs.firstPatch[a] + q]);
+        if (s === 'bad') return 'bad';
+        if (s !== 'ready') ready = false;
+      }
+      return ready ? 'ready' : 'absent';
+    };
+    const drop = [];
+    for (const n of inX) {
+      for (let k = 0; k < nodes.inArcCount[n]; ++k) {
+        const a = inArcs[nodes.firstInArc[n] + k];
+        if (inX.has(arcs.from[a])) continue;
+        const s = arcState(a);
+        if (s === 'bad' && !(this.badNode[n] & 1)) this.badNode[n] |= 1, marked = true;
+        if (s !== 'ready') {
+          drop.push(n);
+          break;
+        }
+      }
+    }
+    while (drop.length) {
+      const n = drop.pop();
+      if (!inX.delete(n)) continue;
+      for (let k = 0; k < nodes.inArcCount[n]; ++k) {
+        const m = arcs.from[inArcs[nodes.firstInArc[n] + k]];
+        if (inX.has(m)) drop.push(m);  // n stays in S: m is no candidate
+      }
+      for (let k = 0; k < nodes.arcCount[n]; ++k) {
+        const a = nodes.firstArc[n] + k, t = arcs.to[a];
+        if (inX.has(t) && arcState(a) !== 'ready') drop.push(t);  // the cut keeps n -> t
+      }
+    }
+    if (inX.size === 0) return marked;
+    const order = sim.order.filter((n) => inX.has(n));
+    let bytes = this.cutBytes;
+    const pin = [], unpin = [];
+    for (const n of order) {
+      for (let k = 0; k < nodes.inArcCount[n]; ++k) {
+        const a = inArcs[nodes.firstInArc[n] + k];
+        if (!inX.has(arcs.from[a])) for (let q = 0; q < arcs.patchCount[a]; ++q) pin.push(arcPatches[arcs.firstPatch[a] + q]);
+      }
+      for (let k = 0; k < nodes.arcCount[n]; ++k) {
+        const a = nodes.firstArc[n] + k;
+        if (!this.inS[arcs.to[a]]) for (let q = 0; q < arcs.patchCount[a]; ++q) unpin.push(arcPatches[arcs.firstPatch[a] + q]);
+      }
+      bytes += this.bytesOf(this.collectIn(n, this.scratch)) - this.bytesOf(this.collectOut(n, this.scratch));
+    }
+    if (bytes > p.pinLimit) {
+      p.memoryFull = true;
+      return marked;
+    }
+    const pinned = this.cache.pinAll(pin);
+    console.assert(pinned, 'refineThrough: a final arc is not ready');
+    this.cache.unpinAll(unpin);
+    for (const n of order) {
+      console.assert(this.isRefineCandidate(n), 'refineThrough: a node refined before its successors');
+      this.visibleTriangles += this.visibleDelta(n, true, p.view);
+      this.moveDown(n);
+      ++p.st.refinements;
+    }
+    for (const n of order) this.pushAround(p, n);
+    return marked;
   }
 
   /**
@@ -481,8 +627,27 @@ export class ExtractRender {
     return {
       extractMs: 0, triangles: 0, patches: 0, drawnPatches: 0, drawnTriangles: 0, misses: 0, requests: 0,
       prefetches: 0, refinements: 0, coarsenings: 0, maxScreenError: 0, budgetTriangles: 0, lodScale: 1,
-      memoryFull: false, interrupted: false, modelA: 0, modelB: 0,
+      memoryFull: false, interrupted: false, modelA: 0, modelB: 0, repeated: false,
     };
+  }
+
+  /**
+   * Whether a still update (`kind`: 'update' or 'ahead', requestAhead's) would repeat the last one,
+   * which it may then skip: no patch arrived, left the cache or was refused room since, and the
+   * view, the cut, the tolerance and the budget (within 1%) are those it ran with. A still view's loads take
+   * 50-60 frames, most of which change none of it, and each update walks every node.
+   */
+  stillRepeats(kind, view, budget) {
+    const k = this.stillKey;
+    return k !== null && k.kind === kind && k.generation === this.cache.generation && k.cutVersion === this.cutVersion &&
+      k.tau === this.options.pixelTolerance * this.lodScale && Math.abs(k.budget - budget) <= 0.01 * k.budget && k.ppu === view.pixelsPerUnit &&
+      k.eye[0] === view.eye[0] && k.eye[1] === view.eye[1] && k.eye[2] === view.eye[2] &&
+      k.planes.every((x, i) => x === view.planes[i >> 2][i & 3]);
+  }
+  // `tau`: the tolerance the update ran with (its end may have moved lodScale: the next must run).
+  stillRecord(kind, view, budget, tau) {
+    this.stillKey = { kind, generation: this.cache.generation, cutVersion: this.cutVersion, tau, budget,
+      ppu: view.pixelsPerUnit, eye: view.eye.slice(), planes: view.planes.flat() };
   }
 
   /**
@@ -492,11 +657,13 @@ export class ExtractRender {
   update(frame, view, predicted) {
     const st = this.newStats();
     const t0 = now();
-    this.wanted.clear();
     const extractMs = this.options.extractMs > 0 ? this.options.extractMs : Math.min(2.0, this.options.budgetMs / 20);
     const p = {
       view, st, t0, deadline: t0 + extractMs, tau: this.options.pixelTolerance * this.lodScale, budget: 0, pinLimit: 0,
       refine: new Heap(true), coarse: new Heap(false), maxErr: 0, ops: 0, urgentLeft: 4, memoryFull: false,
+      // A still view with a cache (budgetScale > 1): its loads come from wantBelowCut, and
+      // refineThrough refines through the levels whose patches are not loaded.
+      still: this.budgetScale > 1 && this.cache !== null && !this.frozen, unrefined: [],
     };
     p.timeUp = () => {
       if ((++p.ops & 7) !== 0) return false;
@@ -505,6 +672,9 @@ export class ExtractRender {
       return true;
     };
     p.budget = this.nextBudget(extractMs);
+    if (p.still && this.stillStats && !this.stillStats.interrupted && this.stillRepeats('update', view, p.budget))
+      return Object.assign({}, this.stillStats, { refinements: 0, coarsenings: 0, requests: 0, prefetches: 0, extractMs: now() - t0, repeated: true });
+    this.wanted.clear();
     st.budgetTriangles = p.budget;
     st.modelA = this.time.a;
     st.modelB = this.time.b * 1e6;
@@ -517,20 +687,27 @@ export class ExtractRender {
       // within one frame's budget, so its cut need not shrink when the budget does (extract.cpp).
       if (this.budgetScale === 1) this.coarsenOverBudget(p);
       this.refineWithinBudget(p);
+      if (p.still) {
+        // Whatever the deadline: a still frame's image stays on screen meanwhile, and without this
+        // walk the still view would ask for nothing. It asks for the final arcs down to the
+        // tolerance and nothing finer: the refinements below the tolerance that prefetch() asks
+        // for would only delay its image (it waits for the loads) and take the workers' time.
+        // A damaged final patch marks its node bad: the walk then stops above it, whose arcs become
+        // final (and are loaded); walked again at once, so that this update asks for them.
+        let sim = this.simulateBelowCut(view, p.tau, p.budget, p.pinLimit);
+        for (let pass = 0; pass < 4 && this.refineThrough(p, sim); ++pass) sim = this.simulateBelowCut(view, p.tau, p.budget, p.pinLimit);
+        this.wantFinal(sim);
+        for (let i = 0; i < p.unrefined.length; i += 2)
+          if (this.isRefineCandidate(p.unrefined[i])) p.maxErr = Math.max(p.maxErr, p.unrefined[i + 1]);
+      }
       this.coarsenFarBelow(p);
     }
     while (!p.refine.empty() && !this.isRefineCandidate(p.refine.topNode())) p.refine.pop();
     if (!p.refine.empty()) p.maxErr = Math.max(p.maxErr, p.refine.topErr());
     st.maxScreenError = p.maxErr;
-    if (this.cache && this.options.prefetch && !this.frozen && now() < p.deadline + (p.deadline - p.t0)) {
-      // A still view (budgetScale > 1) asks for every level down to the tolerance at once, and
-      // nothing finer: the refinements below the tolerance that prefetch() asks for would only
-      // delay its image (it waits for the loads) and take the decoding workers' time.
-      if (this.budgetScale > 1) this.wantBelowCut(view, p.tau, p.budget);
-      else {
-        this.prefetch(p, predicted);
-        this.loadAheadOf(view, p.tau);
-      }
+    if (this.cache && this.options.prefetch && !this.frozen && !p.still && now() < p.deadline + (p.deadline - p.t0)) {
+      this.prefetch(p, predicted);
+      this.loadAheadOf(view, p.tau);
     }
     this.submitRequests(frame, st);
     if (p.memoryFull) this.lodScale = Math.min(this.lodScale * 1.1, 64.0);
@@ -540,6 +717,9 @@ export class ExtractRender {
     st.triangles = this.triangles;
     st.patches = this.cutPatchCount;
     st.extractMs = now() - t0;
+    // A copy: the caller may change the figures it is given (MTObject sets maxScreenError).
+    if (p.still) this.stillRecord('update', view, p.budget, p.tau), (this.stillStats = Object.assign({}, st));
+    else this.stillKey = null;
     return st;
   }
 
@@ -577,9 +757,72 @@ export class ExtractRender {
       this.pushAround(p, node);
       return;
     }
+    // Over the budget: through the levels above whose patches are not loaded, if need be.
+    if (u === Urgency.UrgentUp && this.cache && this.coarsenThrough(p, node)) return;
     const ids = this.collectOut(node, this.scratch);
     if (this.patchesBad(ids)) this.badNode[node] |= 2;
     else this.want(ids, u);
+  }
+  /**
+   * Coarsens `node`, whose out-arcs' patches are not ready, together with the nodes above it that
+   * it takes to end on arcs whose patches are: refineThrough loads only the cut a still view ends
+   * with, so when the camera moves on, the levels it passed through are not in the cache, and a
+   * frame over its budget must not wait for them (nor draw the still cut meanwhile). The set Y
+   * starts as {node}; a node in Y adds its predecessors not in S (a node joins S after them), and
+   * an arc from Y to a node outside it whose patches are not ready adds that node, until every arc
+   * Y ends with is ready (the coarsest cut's are: pinned from the start). Y is applied finer nodes
+   * first; only the arcs it ends with are pinned. Returns false (nothing done) when it would have
+   * to coarsen a sink.
+   */
+  coarsenThrough(p, node) {
+    const { nodes, arcs, inArcs, arcPatches } = this.scene;
+    const ready = (a) => {
+      for (let q = 0; q < arcs.patchCount[a]; ++q) if (this.cache.state(arcPatches[arcs.firstPatch[a] + q]) !== 'ready') return false;
+      return true;
+    };
+    const inY = new Set([node]), work = [node];
+    while (work.length) {
+      const y = work.pop();
+      for (let k = 0; k < nodes.inArcCount[y]; ++k) {
+        const m = arcs.from[inArcs[nodes.firstInArc[y] + k]];
+        if (!this.inS[m] && !inY.has(m)) inY.add(m), work.push(m);
+      }
+      for (let k = 0; k < nodes.arcCount[y]; ++k) {
+        const a = nodes.firstArc[y] + k, t = arcs.to[a];
+        if (inY.has(t) || ready(a)) continue;
+        if (nodes.sink[t]) return false;
+        inY.add(t), work.push(t);
+      }
+    }
+    const pin = [], unpin = [];
+    for (const y of inY) {
+      for (let k = 0; k < nodes.arcCount[y]; ++k) {
+        const a = nodes.firstArc[y] + k;
+        if (!inY.has(arcs.to[a])) for (let q = 0; q < arcs.patchCount[a]; ++q) pin.push(arcPatches[arcs.firstPatch[a] + q]);
+      }
+      for (let k = 0; k < nodes.inArcCount[y]; ++k) {
+        const a = inArcs[nodes.firstInArc[y] + k];
+        if (this.inS[arcs.from[a]]) for (let q = 0; q < arcs.patchCount[a]; ++q) unpin.push(arcPatches[arcs.firstPatch[a] + q]);
+      }
+    }
+    const pinned = this.cache.pinAll(pin);
+    console.assert(pinned, 'coarsenThrough: a final arc is not ready');
+    this.cache.unpinAll(unpin);
+    // Finer nodes first: a node joins S once all its predecessors are in it.
+    const order = [...inY].filter((y) => this.predOut[y] === 0);
+    for (let i = 0; i < order.length; ++i) {
+      const y = order[i];
+      this.visibleTriangles += this.visibleDelta(y, false, p.view);
+      this.moveUp(y);
+      ++p.st.coarsenings;
+      for (let k = 0; k < nodes.arcCount[y]; ++k) {
+        const t = arcs.to[nodes.firstArc[y] + k];
+        if (inY.has(t) && this.predOut[t] === 0 && !this.inS[t]) order.push(t);
+      }
+    }
+    console.assert(order.length === inY.size, 'coarsenThrough: a node of Y was not coarsened');
+    for (const y of order) this.pushAround(p, y);
+    return true;
   }
   coarsenOverBudget(p) {
     while (this.visibleTriangles > p.budget && !p.st.interrupted) {
@@ -629,6 +872,11 @@ export class ExtractRender {
       this.visibleTriangles += dv;
       ++p.st.refinements;
       this.pushAround(p, node);
+      return;
+    }
+    if (p.still) {
+      // Its loads are wantBelowCut's, and refineThrough may yet refine it this update.
+      p.unrefined.push(node, err);
       return;
     }
     const ids = this.collectIn(node, this.scratch);

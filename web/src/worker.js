@@ -68,7 +68,11 @@ async function init(msg) {
 let normalSums = null;
 function toRender(d) {
   const n = d.q.length / 3;
-  const positions = new Float32Array(n * 3);
+  // One array buffer holds the patch's arrays (positions, normals, then indices): a third of the
+  // buffers to make here, to transfer, and for the page's collector to sweep once they go.
+  const wide = n > 65536, t = d.triangles;
+  const buffer = new ArrayBuffer(16 * n + t.length * (wide ? 4 : 2));
+  const positions = new Float32Array(buffer, 0, 3 * n);
   const o = cfg.gridOrigin, s = cfg.gridStep, c = cfg.center;
   for (let i = 0; i < n; ++i)
     for (let a = 0; a < 3; ++a) positions[3 * i + a] = o[a] + s * d.q[3 * i + a] - c[a];
@@ -77,7 +81,7 @@ function toRender(d) {
     // The sums, in an array reused from patch to patch (typed arrays cost Chromium dearly to make).
     if (!normalSums || normalSums.length < n * 3) normalSums = new Float32Array(Math.max(n * 3, 2 * (normalSums ? normalSums.length : 0)));
     nf = normalSums.fill(0, 0, n * 3);
-    const t = d.triangles, p = positions;
+    const p = positions;
     for (let k = 0; k < t.length; k += 3) {
       const a = 3 * t[k], b = 3 * t[k + 1], cc = 3 * t[k + 2];
       const ux = p[b] - p[a], uy = p[b + 1] - p[a + 1], uz = p[b + 2] - p[a + 2];
@@ -88,7 +92,7 @@ function toRender(d) {
       nf[cc] += fx, (nf[cc + 1] += fy), (nf[cc + 2] += fz);
     }
   }
-  const normals = new Int8Array(n * 4);
+  const normals = new Int8Array(buffer, 12 * n, 4 * n);
   for (let i = 0; i < n; ++i) {
     const x = nf[3 * i], y = nf[3 * i + 1], z = nf[3 * i + 2];
     const l = Math.sqrt(x * x + y * y + z * z) || 1;
@@ -96,7 +100,8 @@ function toRender(d) {
     normals[4 * i + 1] = Math.round((y / l) * 127);
     normals[4 * i + 2] = Math.round((z / l) * 127);
   }
-  const indices = n <= 65536 ? new Uint16Array(d.triangles) : d.triangles;
+  const indices = wide ? new Uint32Array(buffer, 16 * n, t.length) : new Uint16Array(buffer, 16 * n, t.length);
+  indices.set(t);
   return { positions, normals, colors: d.colors, indices };
 }
 
@@ -204,12 +209,12 @@ self.onmessage = async (e) => {
     if (o.status === 'fulfilled') Object.assign(res, o.value);
     else res.textureError = o.reason.message;
   });
+  const sent = new Set();
   for (const r of results) {
     if (r.error) continue;
     r.bytes = renderBytes(r);
-    transfer.push(r.positions.buffer, r.normals.buffer, r.indices.buffer);
-    if (r.colors) transfer.push(r.colors.buffer);
-    if (r.uv) transfer.push(r.uv.buffer);
+    // Each buffer once (a patch's arrays may share one: toRender).
+    for (const a of [r.positions, r.normals, r.indices, r.colors, r.uv]) if (a && !sent.has(a.buffer)) sent.add(a.buffer), transfer.push(a.buffer);
     if (r.texture) transfer.push(r.texture.image);
   }
   self.postMessage({ type: 'decoded', job: msg.job, results, busyMs: performance.now() - t0, textureMs }, transfer);

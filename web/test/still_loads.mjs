@@ -1,15 +1,19 @@
 // node still_loads.mjs FILE.mt VIEWS TOLERANCE WIDTH HEIGHT: a still view asks for its loads at
-// once. For each view: the cut converged with every patch resident (as cut_nodes.mjs) gives the
-// nodes the tolerance refines; then, from the coarsest cut with nothing else resident, ONE update of
-// a still view (budgetScale > 1, as MTObject sets it once the camera stops) must ask for the patches
-// of every one of those nodes, however many levels below the coarsest cut they lie (the cut itself
-// can refine only one level per round of loads). One update of a moving view asks for fewer (the
-// next level and its prefetch) in some view, or the views test nothing. And a moving update's
-// look-ahead (ExtractRender.loadAheadOf): after a frame within its gate, with no look-ahead batch in
-// flight, it adds at most aheadBatch requests at Urgency.Ahead, after all others, each a patch the
-// tolerance needs (in some view at least one); after a slow frame, or with a batch in flight, none.
-// Prints one line a view; exits 1 when a still update misses a patch the tolerance needs or the
-// look-ahead breaks one of those rules.
+// once, and only for the cut it ends with. For each view: the cut converged with every patch
+// resident (as cut_nodes.mjs) is the target; its arcs that are not in the coarsest cut are the
+// patches the view needs. Then, from the coarsest cut with nothing else resident:
+// - ONE update of a still view (budgetScale > 1, as MTObject sets it once the camera stops) must ask
+//   for every one of those patches and for no other (the levels between are refined through,
+//   never loaded); one update of a moving view asks for fewer in some view, or the views test
+//   nothing;
+// - still updates whose requests are loaded between them (all, or only every other one of each
+//   list) must reach the target's node set, having loaded only its patches, with exactly the cut's
+//   patches pinned; with one of those patches damaged, they must stop with it out of the cut;
+// - a moving update's look-ahead (ExtractRender.loadAheadOf): after a frame within its gate, with
+//   no look-ahead batch in flight, it adds at most aheadBatch requests at Urgency.Ahead, after all
+//   others, each a patch the view needs (in some view at least one); after a slow frame, or with a
+//   batch in flight, none.
+// Prints a few lines a view; exits 1 when any of this fails.
 import fs from 'node:fs';
 import { FileSource } from '../src/source.js';
 import { openMtFile } from '../src/mtfile.js';
@@ -45,24 +49,29 @@ try {
       const st = all.update(frame, view, null);
       if (st.refinements === 0 && st.coarsenings === 0) break;
     }
-    const needed = new Set();
-    for (let n = 0; n < nodes.count; ++n) {
-      if (nodes.sink[n] || all.inS[n]) continue;
-      for (let q = 0; q < nodes.inArcCount[n]; ++q) {
-        const a = inArcs[nodes.firstInArc[n] + q];
-        for (let p = 0; p < arcs.patchCount[a]; ++p) needed.add(arcPatches[arcs.firstPatch[a] + p]);
-      }
-    }
+    const patchesOf = (arcList) => {
+      const out = new Set();
+      for (const a of arcList) for (let p = 0; p < arcs.patchCount[a]; ++p) out.add(arcPatches[arcs.firstPatch[a] + p]);
+      return out;
+    };
+    const startPatches = new Set(all.startPatches);
+    const finalCut = patchesOf(all.cutArcs);
+    const needed = new Set([...finalCut].filter((id) => !startPatches.has(id)));
+    const target = all.nodeSet().join(' ');
     // One update from the coarsest cut, its patches resident and nothing else.
     // ahead: {frameMs, inFlight}: a moving update after a frame of frameMs, with that many look-ahead
     // batches in flight (the still image's triangles as MTObject would allow); returns the list.
-    const ask = (still, ahead) => {
+    const fresh = () => {
       const server = new RecordingServer();
       const cache = new PatchCache(2 ** 40, () => {});
       const er = new ExtractRender(scene, cache, server, Object.assign({}, options, { aheadBatch: 16 }));
       er.start();
       for (const id of er.startPatches) cache.reserve(id, 1), cache.commit(id, {}, 1);
       er.pinStart();
+      return { server, cache, er };
+    };
+    const ask = (still, ahead) => {
+      const { server, er } = fresh();
       if (still) er.budgetScale = 128;
       if (ahead) {
         er.aheadTriangles = 2 ** 40;
@@ -70,15 +79,97 @@ try {
         server.aheadInFlight = ahead.inFlight;
       }
       er.update(1, view, null);
-      return server.last;
+      return Object.assign(server.last, { wanted: er.wanted });
     };
-    const asked = (still) => new Set(ask(still, null).map((x) => x.id));
+    // What one update wants (its requests are these, at most its load budget of them).
+    const asked = (still) => new Set([...ask(still, null).wanted.keys()].filter((id) => !startPatches.has(id)));
     const still = asked(true), moving = asked(false);
+    // Still updates with the loads they ask for arriving between them: `keep(i)` says which of a
+    // request list's items arrive; `damaged` is loaded as bad.
+    const settle = (keep, damaged) => {
+      const { server, cache, er } = fresh();
+      er.budgetScale = 128;
+      const loaded = new Set();
+      let rounds = 0;
+      for (; rounds < 500; ++rounds) {
+        const st = er.update(rounds + 1, view, null);
+        const list = server.last.filter((x) => cache.state(x.id) === 'absent');
+        if (list.length === 0 && st.refinements + st.coarsenings === 0) break;
+        list.forEach((x, i) => {
+          if (!keep(i)) return;
+          loaded.add(x.id);
+          cache.reserve(x.id, 1);
+          if (x.id === damaged) cache.markBad(x.id);
+          else cache.commit(x.id, {}, 1);
+        });
+      }
+      // Settled, an update repeats the last (ExtractRender.stillRepeats) with its figures, whatever
+      // the caller did to those it was given (MTObject sets maxScreenError); one after an arrival
+      // does not repeat.
+      er.stillKey = null;
+      const again = er.update(rounds + 2, view, null), againErr = again.maxScreenError;
+      again.maxScreenError = -1;
+      const arrival = er.update(rounds + 3, view, null);
+      let other = scene.patches.count - 1;
+      while (other >= 0 && cache.state(other) !== 'absent') --other;
+      if (other >= 0) cache.reserve(other, 1), cache.commit(other, {}, 1);
+      const after = er.update(rounds + 4, view, null);
+      const cut = patchesOf(er.cutArcs);
+      const pinned = [...cache.entries].filter(([, e]) => e.pins > 0).map(([id]) => id);
+      const problems = [];
+      // Nothing loaded that neither the target's cut nor the cut settled on holds (the levels
+      // between are refined through).
+      const extra = [...loaded].filter((id) => !needed.has(id) && !cut.has(id));
+      if (extra.length) problems.push(`loaded ${extra.length} patches no final cut holds (${extra.slice(0, 4).join(', ')})`);
+      if (rounds >= 500) problems.push('did not settle in 500 updates');
+      if (again.repeated || !arrival.repeated || arrival.maxScreenError !== againErr) problems.push('a settled still update was not skipped, or gave another error');
+      if (after.repeated && other >= 0) problems.push('a still update after a patch arrived was skipped');
+      if (pinned.length !== cut.size || pinned.some((id) => !cut.has(id) || cache.entries.get(id).pins !== 1))
+        problems.push(`${pinned.length} patches pinned, the cut holds ${cut.size}, not each pinned once`);
+      for (const id of cut) if (cache.state(id) !== 'ready') problems.push(`the cut holds patch ${id}, ${cache.state(id)}`);
+      return { er, cache, loaded, rounds, problems };
+    };
+    const problems = [];
+    for (const [name, keep] of [['all loads', () => true], ['every other load', (i) => i % 2 === 0]]) {
+      const r = settle(keep, -1);
+      if (r.er.nodeSet().join(' ') !== target) r.problems.push('the cut it settles on is not the target');
+      if (r.loaded.size !== needed.size) r.problems.push(`loaded ${r.loaded.size} of the ${needed.size} patches needed`);
+      console.log(`view ${k}: still updates, ${name}: ${r.rounds} updates, ${r.loaded.size} patches loaded, ${r.problems.length ? 'FAILED' : 'target reached'}`);
+      for (const pr of r.problems) problems.push(`${name}: ${pr}`);
+    }
+    {
+      // The camera moves on: a moving update over its budget coarsens through the levels the
+      // still view never loaded (ExtractRender.coarsenThrough), with no load arriving.
+      const r = settle(() => true, -1), er = r.er;
+      const budget = Math.max(20000, 2 * all.startPatches.reduce((t, id) => t + scene.patches.triangles[id], 0));
+      er.budgetScale = 1;
+      er.options.fixedTriangles = budget;
+      let updates = 0, st = null;
+      const before = er.visibleTriangles;
+      for (; updates < 3; ++updates) {
+        st = er.update(1000 + updates, view, null);
+        if (er.visibleTriangles <= budget) break;
+      }
+      const cut = patchesOf(er.cutArcs);
+      const pinned = [...r.cache.entries].filter(([, e]) => e.pins > 0).map(([id]) => id);
+      console.log(`view ${k}: moving on with a budget of ${budget}: ${before} -> ${er.visibleTriangles} visible triangles in ${updates + 1} update(s), ${st.coarsenings} coarsenings`);
+      if (er.visibleTriangles > budget) problems.push(`moving on: ${er.visibleTriangles} visible triangles after 3 updates with no loads, over the budget of ${budget}`);
+      if (pinned.length !== cut.size || pinned.some((id) => !cut.has(id) || r.cache.entries.get(id).pins !== 1)) problems.push(`moving on: ${pinned.length} patches pinned, the cut holds ${cut.size}`);
+      for (const id of cut) if (r.cache.state(id) !== 'ready') problems.push(`moving on: the cut holds patch ${id}, ${r.cache.state(id)}`);
+    }
+    if (needed.size) {
+      // The last patch the view needs, in id order, is damaged: the cut settles without it.
+      const damaged = Math.max(...needed);
+      const r = settle(() => true, damaged);
+      const badNodes = r.er.badNode.reduce((s, b) => s + (b ? 1 : 0), 0);
+      console.log(`view ${k}: still updates, patch ${damaged} damaged: ${r.rounds} updates, ${badNodes} node(s) marked bad`);
+      if (!badNodes) r.problems.push('no node marked bad');
+      for (const pr of r.problems) problems.push(`patch ${damaged} damaged: ${pr}`);
+    }
     // The look-ahead: with slack, after every other request, at most 16, each needed.
     const withAhead = ask(false, { frameMs: 10, inFlight: 0 });
     const aheadIds = withAhead.filter((x) => x.urgency === Urgency.Ahead).map((x) => x.id);
     const firstAhead = withAhead.findIndex((x) => x.urgency === Urgency.Ahead);
-    const problems = [];
     if (aheadIds.length > 16) problems.push(`${aheadIds.length} look-ahead requests, more than the batch of 16`);
     if (firstAhead >= 0 && withAhead.slice(firstAhead).some((x) => x.urgency !== Urgency.Ahead)) problems.push('a request after the look-ahead ones');
     const unneeded = aheadIds.filter((id) => !needed.has(id));
@@ -89,15 +180,13 @@ try {
     if (busy) problems.push(`${busy} look-ahead requests with a look-ahead batch in flight`);
     if (aheadIds.length) ++aheadSeen;
     console.log(`view ${k}: look-ahead asks for ${aheadIds.length} (none after a slow frame: ${!slow}, none while one is in flight: ${!busy})`);
-    for (const pr of problems) console.error(`still_loads: view ${k}: ${pr}`), (failed = 1);
-    let missing = 0;
-    for (const id of needed) if (!still.has(id)) ++missing;
+    const missing = [...needed].filter((id) => !still.has(id)).length;
+    const unwanted = [...still].filter((id) => !needed.has(id)).length;
     if (needed.size > 0 && moving.size < still.size) ++deeper;
-    console.log(`view ${k}: the tolerance refines ${needed.size} patches; one still update asks for ${still.size} (missing ${missing}), one moving update ${moving.size}`);
-    if (missing > 0) {
-      console.error(`still_loads: view ${k}: a still update left ${missing} of ${needed.size} needed patches unasked`);
-      failed = 1;
-    }
+    console.log(`view ${k}: the target's cut holds ${needed.size} patches not in the coarsest; one still update asks for ${still.size} (missing ${missing}, others ${unwanted}), one moving update ${moving.size}`);
+    if (missing > 0) problems.push(`a still update left ${missing} of ${needed.size} needed patches unasked`);
+    if (unwanted > 0) problems.push(`a still update asked for ${unwanted} patches the target's cut does not hold`);
+    for (const pr of problems) console.error(`still_loads: view ${k}: ${pr}`), (failed = 1);
   });
   if (aheadSeen === 0) {
     console.error('still_loads: in no view did a moving update ask for look-ahead loads: the views test nothing');
