@@ -485,7 +485,8 @@ export class ExtractRender {
    * first). An arc between two Needed nodes is only passed through: refineThrough applies both
    * refinements in one update, so the arc is never drawn and its patches need not be loaded. (An
    * arc between two Prefetch nodes is left out too: those nodes refine only once the budget lets
-   * them into the Needed walk, whose final arcs are then asked for.) `absentLimit`: stop after that many patches not in the cache (the look-ahead's batch).
+   * them into the Needed walk, whose final arcs are then asked for.) `absentLimit`: stop after
+   * that many patches not in the cache (the look-ahead's batch).
    */
   wantFinal(sim, urgency, absentLimit = Infinity) {
     const { nodes, arcs, inArcs, arcPatches } = this.scene;
@@ -633,9 +634,10 @@ export class ExtractRender {
 
   /**
    * Whether a still update (`kind`: 'update' or 'ahead', requestAhead's) would repeat the last one,
-   * which it may then skip: no patch arrived, left the cache or was refused room since, and the
-   * view, the cut, the tolerance and the budget (within 1%) are those it ran with. A still view's loads take
-   * 50-60 frames, most of which change none of it, and each update walks every node.
+   * which it may then skip: no patch arrived, left the cache, was cancelled or was refused room
+   * since, and the view, the cut, the tolerance and the budget (within 1%) are those it ran with.
+   * A still view's loads take 50-60 frames, many of which change none of it, and each update walks
+   * every node.
    */
   stillRepeats(kind, view, budget) {
     const k = this.stillKey;
