@@ -9,6 +9,11 @@
 // - still updates whose requests are loaded between them (all, or only every other one of each
 //   list) must reach the target's node set, having loaded only its patches, with exactly the cut's
 //   patches pinned; with one of those patches damaged, they must stop with it out of the cut;
+//   settled, an update repeats the last (ExtractRender.stillRepeats) and keeps its figures, one
+//   after an arrival does not;
+// - moving on from the settled still view with a budget and no load arriving, the cut coarsens
+//   through the levels never loaded (ExtractRender.coarsenThrough) to within the budget in at most
+//   3 updates, with exactly its patches pinned;
 // - a moving update's look-ahead (ExtractRender.loadAheadOf): after a frame within its gate, with
 //   no look-ahead batch in flight, it adds at most aheadBatch requests at Urgency.Ahead, after all
 //   others, each a patch the view needs (in some view at least one); after a slow frame, or with a
