@@ -125,21 +125,32 @@ export class ExtractRender {
 
   collectIn(n, out) {
     out.length = 0;
-    const { nodes, arcs, inArcs, arcPatches } = this.scene;
-    for (let k = 0; k < nodes.inArcCount[n]; ++k) {
-      const a = inArcs[nodes.firstInArc[n] + k];
-      for (let p = 0; p < arcs.patchCount[a]; ++p) out.push(arcPatches[arcs.firstPatch[a] + p]);
-    }
+    const { nodes, inArcs } = this.scene;
+    for (let k = 0; k < nodes.inArcCount[n]; ++k) this.pushArc(inArcs[nodes.firstInArc[n] + k], out);
     return out;
   }
   collectOut(n, out) {
     out.length = 0;
-    const { nodes, arcs, arcPatches } = this.scene;
-    for (let k = 0; k < nodes.arcCount[n]; ++k) {
-      const a = nodes.firstArc[n] + k;
-      for (let p = 0; p < arcs.patchCount[a]; ++p) out.push(arcPatches[arcs.firstPatch[a] + p]);
-    }
+    const { nodes } = this.scene;
+    for (let k = 0; k < nodes.arcCount[n]; ++k) this.pushArc(nodes.firstArc[n] + k, out);
     return out;
+  }
+  /** Appends arc a's patches to `out` (returned). */
+  pushArc(a, out) {
+    const { arcs, arcPatches } = this.scene;
+    for (let q = 0; q < arcs.patchCount[a]; ++q) out.push(arcPatches[arcs.firstPatch[a] + q]);
+    return out;
+  }
+  /** 'ready' when every patch of arc a is, 'bad' when one is damaged, else 'absent'. */
+  arcState(a) {
+    const { arcs, arcPatches } = this.scene;
+    let ready = true;
+    for (let q = 0; q < arcs.patchCount[a]; ++q) {
+      const s = this.cache.state(arcPatches[arcs.firstPatch[a] + q]);
+      if (s === 'bad') return 'bad';
+      if (s !== 'ready') ready = false;
+    }
+    return ready ? 'ready' : 'absent';
   }
   isRefineCandidate(n) { return this.inS[n] && !this.scene.nodes.source[n] && this.succIn[n] === 0; }
   isCoarsenCandidate(n) { return !this.inS[n] && !this.scene.nodes.sink[n] && this.predOut[n] === 0; }
@@ -194,7 +205,7 @@ export class ExtractRender {
         this.addCutArc(a);
         this.triangles += arcs.triangles[a];
         this.cutPatchCount += arcs.patchCount[a];
-        for (let p = 0; p < arcs.patchCount[a]; ++p) start.push(this.scene.arcPatches[arcs.firstPatch[a] + p]);
+        this.pushArc(a, start);
       }
     }
     this.cutBytes = this.bytesOf(start);
@@ -489,7 +500,7 @@ export class ExtractRender {
    * that many patches not in the cache (the look-ahead's batch).
    */
   wantFinal(sim, urgency, absentLimit = Infinity) {
-    const { nodes, arcs, inArcs, arcPatches } = this.scene;
+    const { nodes, arcs, inArcs } = this.scene;
     const refinedAt = new Map();
     for (let i = 0; i < sim.order.length; ++i) refinedAt.set(sim.order[i], sim.urgency[i]);
     for (let i = 0; i < sim.order.length; ++i) {
@@ -497,12 +508,12 @@ export class ExtractRender {
       for (let k = 0; k < nodes.inArcCount[n]; ++k) {
         const a = inArcs[nodes.firstInArc[n] + k];
         if (refinedAt.get(arcs.from[a]) === sim.urgency[i]) continue;
-        for (let q = 0; q < arcs.patchCount[a]; ++q) {
-          const id = arcPatches[arcs.firstPatch[a] + q];
-          const w = this.wanted.get(id);
-          if (w === undefined || u > w) this.wanted.set(id, u);
-          if (absentLimit < Infinity && this.cache.state(id) === 'absent' && this.wanted.get(id) === u) --absentLimit;
-        }
+        const ids = this.scratch2;
+        ids.length = 0;
+        this.pushArc(a, ids);
+        this.want(ids, u);
+        if (absentLimit === Infinity) continue;
+        for (const id of ids) if (this.cache.state(id) === 'absent' && this.wanted.get(id) === u) --absentLimit;
         if (absentLimit <= 0) return;
       }
     }
@@ -520,7 +531,6 @@ export class ExtractRender {
     const pinLimit = this.cache ? this.options.memoryFraction * this.cache.capBytes : Infinity;
     const sim = this.simulateBelowCut(view, tau, budget, pinLimit);
     this.wantFinal(sim, urgency, absentLimit);
-    return sim;
   }
 
   /**
@@ -536,24 +546,15 @@ export class ExtractRender {
    */
   refineThrough(p, sim) {
     let marked = false;
-    const { nodes, arcs, inArcs, arcPatches } = this.scene;
+    const { nodes, arcs, inArcs } = this.scene;
     const inX = new Set();
     for (let i = 0; i < sim.order.length && sim.urgency[i] === Urgency.Needed; ++i) inX.add(sim.order[i]);
-    const arcState = (a) => {
-      let ready = true;
-      for (let q = 0; q < arcs.patchCount[a]; ++q) {
-        const s = this.cache.state(arcPatches[arcs.firstPatch[a] + q]);
-        if (s === 'bad') return 'bad';
-        if (s !== 'ready') ready = false;
-      }
-      return ready ? 'ready' : 'absent';
-    };
     const drop = [];
     for (const n of inX) {
       for (let k = 0; k < nodes.inArcCount[n]; ++k) {
         const a = inArcs[nodes.firstInArc[n] + k];
         if (inX.has(arcs.from[a])) continue;
-        const s = arcState(a);
+        const s = this.arcState(a);
         if (s === 'bad' && !(this.badNode[n] & 1)) this.badNode[n] |= 1, marked = true;
         if (s !== 'ready') {
           drop.push(n);
@@ -570,7 +571,7 @@ export class ExtractRender {
       }
       for (let k = 0; k < nodes.arcCount[n]; ++k) {
         const a = nodes.firstArc[n] + k, t = arcs.to[a];
-        if (inX.has(t) && arcState(a) !== 'ready') drop.push(t);  // the cut keeps n -> t
+        if (inX.has(t) && this.arcState(a) !== 'ready') drop.push(t);  // the cut keeps n -> t
       }
     }
     if (inX.size === 0) return marked;
@@ -580,11 +581,11 @@ export class ExtractRender {
     for (const n of order) {
       for (let k = 0; k < nodes.inArcCount[n]; ++k) {
         const a = inArcs[nodes.firstInArc[n] + k];
-        if (!inX.has(arcs.from[a])) for (let q = 0; q < arcs.patchCount[a]; ++q) pin.push(arcPatches[arcs.firstPatch[a] + q]);
+        if (!inX.has(arcs.from[a])) this.pushArc(a, pin);
       }
       for (let k = 0; k < nodes.arcCount[n]; ++k) {
         const a = nodes.firstArc[n] + k;
-        if (!this.inS[arcs.to[a]]) for (let q = 0; q < arcs.patchCount[a]; ++q) unpin.push(arcPatches[arcs.firstPatch[a] + q]);
+        if (!this.inS[arcs.to[a]]) this.pushArc(a, unpin);
       }
       bytes += this.bytesOf(this.collectIn(n, this.scratch)) - this.bytesOf(this.collectOut(n, this.scratch));
     }
@@ -777,11 +778,7 @@ export class ExtractRender {
    * to coarsen a sink.
    */
   coarsenThrough(p, node) {
-    const { nodes, arcs, inArcs, arcPatches } = this.scene;
-    const ready = (a) => {
-      for (let q = 0; q < arcs.patchCount[a]; ++q) if (this.cache.state(arcPatches[arcs.firstPatch[a] + q]) !== 'ready') return false;
-      return true;
-    };
+    const { nodes, arcs, inArcs } = this.scene;
     const inY = new Set([node]), work = [node];
     while (work.length) {
       const y = work.pop();
@@ -791,7 +788,7 @@ export class ExtractRender {
       }
       for (let k = 0; k < nodes.arcCount[y]; ++k) {
         const a = nodes.firstArc[y] + k, t = arcs.to[a];
-        if (inY.has(t) || ready(a)) continue;
+        if (inY.has(t) || this.arcState(a) === 'ready') continue;
         if (nodes.sink[t]) return false;
         inY.add(t), work.push(t);
       }
@@ -800,11 +797,11 @@ export class ExtractRender {
     for (const y of inY) {
       for (let k = 0; k < nodes.arcCount[y]; ++k) {
         const a = nodes.firstArc[y] + k;
-        if (!inY.has(arcs.to[a])) for (let q = 0; q < arcs.patchCount[a]; ++q) pin.push(arcPatches[arcs.firstPatch[a] + q]);
+        if (!inY.has(arcs.to[a])) this.pushArc(a, pin);
       }
       for (let k = 0; k < nodes.inArcCount[y]; ++k) {
         const a = inArcs[nodes.firstInArc[y] + k];
-        if (this.inS[arcs.from[a]]) for (let q = 0; q < arcs.patchCount[a]; ++q) unpin.push(arcPatches[arcs.firstPatch[a] + q]);
+        if (this.inS[arcs.from[a]]) this.pushArc(a, unpin);
       }
     }
     const pinned = this.cache.pinAll(pin);
