@@ -950,9 +950,20 @@ class KeyGroupSorter {
     formGroups(keys, recs);
     std::string path = prefix_ + ".run" + std::to_string(runs_.size());
     TempWriter writer(path, 4 << 20);
-    for (const Group& g : groups_) {
-      writer.put(Header{g.key, g.count});
-      writer.write(grouped_.data() + g.begin, g.count * sizeof(Record));
+    // A header and the records' span per group, handed to the writer 512 groups at a time (no copy
+    // into its buffer through the page cache).
+    constexpr size_t kGroups = 512;
+    Header headers[kGroups];
+    struct iovec pieces[2 * kGroups];
+    for (size_t g0 = 0; g0 < groups_.size(); g0 += kGroups) {
+      const size_t n = std::min(kGroups, groups_.size() - g0);
+      for (size_t i = 0; i < n; ++i) {
+        const Group& g = groups_[g0 + i];
+        headers[i] = Header{g.key, g.count};
+        pieces[2 * i] = {&headers[i], sizeof(Header)};
+        pieces[2 * i + 1] = {grouped_.data() + g.begin, g.count * sizeof(Record)};
+      }
+      writer.writeGather(pieces, 2 * n);
     }
     writer.close();
     runs_.push_back(path);

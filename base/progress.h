@@ -17,8 +17,11 @@ class Progress {
       : enabled_(enabled), task_(std::move(task)), total_(total), unit_(unit), tty_(isatty(2)),
         start_(Clock::now()), last_(start_) {}
 
+  // Cheap enough to call per element: the clock is read once `done` has moved on by 1/4096 of the
+  // total since the last reading (a clock read per vertex was 3% of a pass over 27 M of them).
   void update(uint64_t done) {
-    if (!enabled_) return;
+    if (!enabled_ || done < nextCheck_) return;
+    nextCheck_ = done + total_ / 4096;
     auto now = Clock::now();
     if (std::chrono::duration<double>(now - last_).count() < (tty_ ? 0.5 : 5.0)) return;
     last_ = now;
@@ -54,6 +57,7 @@ class Progress {
   const char* unit_;
   bool tty_;
   Clock::time_point start_, last_;
+  uint64_t nextCheck_ = 0;
 };
 
 }  // namespace mt

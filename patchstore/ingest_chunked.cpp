@@ -6,6 +6,7 @@
 // the cell keys. The vertex records and the faces are read in place from a binary PLY.
 #include <malloc.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_pipeline.h>
 
 #include <array>
 #include <functional>
@@ -626,8 +627,13 @@ void gatherPatch(PatchWork& w, uint32_t k, const ParsedInput& in, PatchSorter<Fu
 }
 
 // Stage 6: one geometry block per patch; shared vertices -> (vertex, patch, local) and cross
-// edges to the boundary stage's sorters. Patches are gathered from the sorted streams in batches,
-// built in parallel, and written in patch order, so the store does not depend on the thread count.
+// edges to the boundary stage's sorters. A pipeline, as the resident path's (pipelineGroups):
+// batches of patches gathered from the sorted streams in patch order (one thread), built in
+// parallel, and written in patch order (one thread), the three at once. Gathering and writing are
+// mostly the sorters' merge and the store's appends; done in turn with the building (gather 64,
+// build 64, write 64) they left a core idle most of the stage. The store does not depend on the
+// thread count. At most `tokens` batches are in flight: with kPatches = 16 and four tokens, the
+// 64 patches the stage held before.
 template <bool Full>
 void chunkedPatches(IngestContext& ctx, const ParsedInput& in, FaceGroups& groups, PatchSorter<Full>& byPatch,
                     PatchStageOutput& out) {
@@ -641,20 +647,31 @@ void chunkedPatches(IngestContext& ctx, const ParsedInput& in, FaceGroups& group
   VertexData<Full> d;
   bool have = byPatch.next(d);
   uint64_t facesDone = 0;
-  constexpr uint32_t kPatches = 64;
-  std::vector<PatchWork> work;
+  constexpr uint32_t kPatches = 16;
+  constexpr size_t kTokens = 4;
   std::vector<FaceRec> faces;
-  for (uint32_t k0 = 0; k0 < P; k0 += kPatches) {
-    const uint32_t k1 = std::min(P, k0 + kPatches);
-    work.assign(k1 - k0, PatchWork());
-    for (uint32_t k = k0; k < k1; ++k) {
-      PatchWork& w = work[k - k0];
+  uint32_t next = 0;
+  auto gather = [&](tbb::flow_control& fc) -> std::vector<PatchWork>* {
+    if (next == P) {
+      fc.stop();
+      return nullptr;
+    }
+    auto work = std::make_unique<std::vector<PatchWork>>(std::min(P - next, kPatches));
+    for (PatchWork& w : *work) {
+      const uint32_t k = next++;
       w.p.id = k;
       w.p.cell = out.patchKey[k];
       gatherPatch<Full>(w, k, in, byPatch, d, have, groups, faces, ctx.scratch);
     }
-    tbb::parallel_for(size_t(0), work.size(), [&](size_t i) { buildPatch(work[i], ctx.impl.layout, ctx.scratch); });
-    for (PatchWork& w : work) {
+    return work.release();
+  };
+  auto build = [&](std::vector<PatchWork>* work) {
+    for (PatchWork& w : *work) buildPatch(w, ctx.impl.layout, ctx.scratch);
+    return work;
+  };
+  auto write = [&](std::vector<PatchWork>* batch) {
+    std::unique_ptr<std::vector<PatchWork>> owned(batch);
+    for (PatchWork& w : *batch) {
       const Patch& p = w.p;
       ctx.report.duplicateTriangles += w.duplicates;
       ctx.report.nonManifoldEdges += w.nonManifold;
@@ -668,7 +685,11 @@ void chunkedPatches(IngestContext& ctx, const ParsedInput& in, FaceGroups& group
       facesDone += p.triangleCount();
     }
     progress.update(facesDone);
-  }
+  };
+  using Batch = std::vector<PatchWork>*;
+  tbb::parallel_pipeline(kTokens, tbb::make_filter<void, Batch>(tbb::filter_mode::serial_in_order, gather) &
+                                      tbb::make_filter<Batch, Batch>(tbb::filter_mode::parallel, build) &
+                                      tbb::make_filter<Batch, void>(tbb::filter_mode::serial_in_order, write));
   uint64_t key;
   if (have || groups.nextGroup(key, faces) || facesDone != in.faces)
     fail(ctx.scratch, "internal: a vertex or a face of the sorted streams is in no patch");
