@@ -632,8 +632,10 @@ void gatherPatch(PatchWork& w, uint32_t k, const ParsedInput& in, PatchSorter<Fu
 // parallel, and written in patch order (one thread), the three at once. Gathering and writing are
 // mostly the sorters' merge and the store's appends; done in turn with the building (gather 64,
 // build 64, write 64) they left a core idle most of the stage. The store does not depend on the
-// thread count. At most `tokens` batches are in flight: with kPatches = 16 and four tokens, the
-// 64 patches the stage held before.
+// thread count. At most kTokens batches are in flight (16 patches each: the 64 patches the stage
+// held before), in a ring of kTokens slots: batch i takes slot i % kTokens, which batch i - kTokens
+// has left (it was written, and gave its token back, before batch i could start). The ring owns
+// them, so a failure anywhere in the pipeline leaves nothing behind.
 template <bool Full>
 void chunkedPatches(IngestContext& ctx, const ParsedInput& in, FaceGroups& groups, PatchSorter<Full>& byPatch,
                     PatchStageOutput& out) {
@@ -651,26 +653,29 @@ void chunkedPatches(IngestContext& ctx, const ParsedInput& in, FaceGroups& group
   constexpr size_t kTokens = 4;
   std::vector<FaceRec> faces;
   uint32_t next = 0;
+  uint64_t batches = 0;
+  std::vector<std::vector<PatchWork>> ring(kTokens);
   auto gather = [&](tbb::flow_control& fc) -> std::vector<PatchWork>* {
     if (next == P) {
       fc.stop();
       return nullptr;
     }
-    auto work = std::make_unique<std::vector<PatchWork>>(std::min(P - next, kPatches));
+    std::vector<PatchWork>* work = &ring[batches++ % kTokens];
+    assert(work->empty());
+    work->resize(std::min(P - next, kPatches));
     for (PatchWork& w : *work) {
       const uint32_t k = next++;
       w.p.id = k;
       w.p.cell = out.patchKey[k];
       gatherPatch<Full>(w, k, in, byPatch, d, have, groups, faces, ctx.scratch);
     }
-    return work.release();
+    return work;
   };
   auto build = [&](std::vector<PatchWork>* work) {
     for (PatchWork& w : *work) buildPatch(w, ctx.impl.layout, ctx.scratch);
     return work;
   };
   auto write = [&](std::vector<PatchWork>* batch) {
-    std::unique_ptr<std::vector<PatchWork>> owned(batch);
     for (PatchWork& w : *batch) {
       const Patch& p = w.p;
       ctx.report.duplicateTriangles += w.duplicates;
@@ -684,6 +689,7 @@ void chunkedPatches(IngestContext& ctx, const ParsedInput& in, FaceGroups& group
       ctx.impl.patches[p.id] = rec;
       facesDone += p.triangleCount();
     }
+    batch->clear();
     progress.update(facesDone);
   };
   using Batch = std::vector<PatchWork>*;
