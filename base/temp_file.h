@@ -138,6 +138,10 @@ class TempWriter {
     }
     if (used_ > 0) writeAllAt(fd_, buffer_.data(), used_, fileBytes_, path_), fileBytes_ += used_, used_ = 0;
     while (n > 0) {
+      if (v->iov_len == 0) {  // nothing to write (pwritev of empty pieces alone returns 0)
+        --n, ++v;
+        continue;
+      }
       const ssize_t got = ::pwritev(fd_, v, int(std::min<size_t>(n, IOV_MAX)), off_t(fileBytes_));
       if (got < 0 && errno == EINTR) continue;
       if (got <= 0) fail(path_, std::string("cannot write scratch file (disk full?): ") + std::strerror(got < 0 ? errno : ENOSPC));

@@ -632,10 +632,11 @@ void gatherPatch(PatchWork& w, uint32_t k, const ParsedInput& in, PatchSorter<Fu
 // parallel, and written in patch order (one thread), the three at once. Gathering and writing are
 // mostly the sorters' merge and the store's appends; done in turn with the building (gather 64,
 // build 64, write 64) they left a core idle most of the stage. The store does not depend on the
-// thread count. At most kTokens batches are in flight (16 patches each: the 64 patches the stage
-// held before), in a ring of kTokens slots: batch i takes slot i % kTokens, which batch i - kTokens
-// has left (it was written, and gave its token back, before batch i could start). The ring owns
-// them, so a failure anywhere in the pipeline leaves nothing behind.
+// thread count. At most `tokens` batches are in flight (the threads and two more, of 64 / tokens
+// patches each: the 64 patches the stage held before; 4 of 16 on two cores), in a ring of `tokens`
+// slots: batch i takes slot i % tokens, which batch i - tokens has left (writes are serial and in
+// order, and batch i cannot start before a finished write gives a token back). The ring owns the
+// batches, so a failure anywhere in the pipeline leaves nothing behind.
 template <bool Full>
 void chunkedPatches(IngestContext& ctx, const ParsedInput& in, FaceGroups& groups, PatchSorter<Full>& byPatch,
                     PatchStageOutput& out) {
@@ -649,20 +650,20 @@ void chunkedPatches(IngestContext& ctx, const ParsedInput& in, FaceGroups& group
   VertexData<Full> d;
   bool have = byPatch.next(d);
   uint64_t facesDone = 0;
-  constexpr uint32_t kPatches = 16;
-  constexpr size_t kTokens = 4;
+  const size_t tokens = size_t(std::max(2, tbb::this_task_arena::max_concurrency())) + 2;
+  const uint32_t perBatch = uint32_t(std::max<size_t>(1, 64 / tokens));
   std::vector<FaceRec> faces;
   uint32_t next = 0;
   uint64_t batches = 0;
-  std::vector<std::vector<PatchWork>> ring(kTokens);
+  std::vector<std::vector<PatchWork>> ring(tokens);
   auto gather = [&](tbb::flow_control& fc) -> std::vector<PatchWork>* {
     if (next == P) {
       fc.stop();
       return nullptr;
     }
-    std::vector<PatchWork>* work = &ring[batches++ % kTokens];
+    std::vector<PatchWork>* work = &ring[batches++ % tokens];
     assert(work->empty());
-    work->resize(std::min(P - next, kPatches));
+    work->resize(std::min(P - next, perBatch));
     for (PatchWork& w : *work) {
       const uint32_t k = next++;
       w.p.id = k;
@@ -693,7 +694,7 @@ void chunkedPatches(IngestContext& ctx, const ParsedInput& in, FaceGroups& group
     progress.update(facesDone);
   };
   using Batch = std::vector<PatchWork>*;
-  tbb::parallel_pipeline(kTokens, tbb::make_filter<void, Batch>(tbb::filter_mode::serial_in_order, gather) &
+  tbb::parallel_pipeline(tokens, tbb::make_filter<void, Batch>(tbb::filter_mode::serial_in_order, gather) &
                                       tbb::make_filter<Batch, Batch>(tbb::filter_mode::parallel, build) &
                                       tbb::make_filter<Batch, void>(tbb::filter_mode::serial_in_order, write));
   uint64_t key;

@@ -756,6 +756,10 @@ TEST(TempWriter, EveryMixOfWritesAndPiecesGivesTheBytesInOrder) {
         w.writeGather(pieces.data(), pieces.size());
       }
     }
+    // Pieces that are all empty, after buffered bytes: nothing written, no error.
+    w.write(take(3), 3);
+    std::vector<struct iovec> empty(3, {source.data(), 0});
+    w.writeGather(empty.data(), empty.size());
     EXPECT_EQ(w.bytes(), expected.size());
     w.close();
   }
