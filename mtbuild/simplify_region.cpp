@@ -298,10 +298,17 @@ int simplifyWithRules(Run& run, const double* positions, size_t vertexCount, con
       runMeshopt(run, vertexCount, triangles, indexCount, lock, targetIndexCount);
       removeFlattenedPairs(run.out);
     }
-    if (!findBrokenRules(run.out, lock, used, locked, adjacency, kept, bad)) return attempt + 1;
-    if (attempt == 16) {
-      // Rare (seen on inputs that are non-manifold already): keep the region as it is. An
-      // unsimplified region is always a valid fragment; the level above simplifies it.
+    const bool broken = findBrokenRules(run.out, lock, used, locked, adjacency, kept, bad);
+    // A region that had triangles keeps some: a closed component alone in its region (a
+    // tetrahedron, a speck of scan debris) can collapse to nothing below any target, and an empty
+    // fragment would leave its node without patches, without an arc to the sink and with an
+    // unbounded error (no surface to measure against) that every node above it inherits.
+    const bool vanished = run.out.empty() && indexCount > 0;
+    if (!broken && !vanished) return attempt + 1;
+    if (attempt == 16 || vanished) {
+      // Rare (seen on inputs that are non-manifold already, and on closed components that
+      // vanish): keep the region as it is. An unsimplified region is always a valid fragment; the
+      // level above simplifies it.
       run.out.assign(triangles, triangles + indexCount);
       run.moved.assign(run.moved.size(), 0);
       run.positions.assign(positions, positions + run.positions.size());

@@ -307,13 +307,17 @@ TEST(Mtbuild, ARootLevelThatGainsNothingIsNotAdded) {
 }
 
 TEST(Mtbuild, TinyInputsBuildFilesThatVerify) {
-  // One triangle, three collinear vertices, two triangles: each region must keep a triangle, or
-  // its node has no arc to the sink and mtverify rejects the file.
+  // One triangle, three collinear vertices, two triangles, a tetrahedron, an open pyramid: each
+  // region must keep a triangle, or its node has no arc to the sink and mtverify rejects the file.
   TempDir tmp;
   const std::vector<std::pair<std::string, std::string>> meshes = {
       {"one", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n"},
       {"collinear", "OFF\n3 1 0\n0 0 0\n1 0 0\n2 0 0\n3 0 1 2\n"},
-      {"two", "OFF\n4 2 0\n0 0 0\n1 0 0\n0 1 0\n1 1 0\n3 0 1 2\n3 1 3 2\n"}};
+      {"two", "OFF\n4 2 0\n0 0 0\n1 0 0\n0 1 0\n1 1 0\n3 0 1 2\n3 1 3 2\n"},
+      // Closed (a tetrahedron) and open (a square pyramid without its base): the simplifier
+      // collapses each to nothing; the region must be kept instead.
+      {"tetrahedron", "OFF\n4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 1 2 3\n3 2 0 3\n"},
+      {"pyramid", "OFF\n5 4 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n0.5 0.5 1\n3 0 1 4\n3 1 2 4\n3 2 3 4\n3 3 0 4\n"}};
   for (const auto& [name, text] : meshes) {
     writeFile(tmp.file(name + ".off"), text);
     auto b = runTool("mtbuild", tmp.file(name + ".off") + " -o " + tmp.file(name + ".mt") + " -q");
