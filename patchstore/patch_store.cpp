@@ -238,6 +238,13 @@ StoreInfo PatchStore::info() const {
     s.minPatchTriangles = std::min(s.minPatchTriangles, rec.meta.triangles);
     s.maxPatchTriangles = std::max(s.maxPatchTriangles, rec.meta.triangles);
     s.liveBytes += rec.geometry.size + rec.boundary.size + 2 * sizeof(BlockHeader);
+    // Healing passes move and add vertices (a filled hole's fairing bulges past the input's box,
+    // smoothing shifts borders): the box holds every live patch's, so that the MT grid built from
+    // it contains every vertex. An unhealed store's patches lie within the input's box already.
+    for (int a = 0; a < 3; ++a) {
+      s.bounds.lo[a] = std::min(s.bounds.lo[a], rec.meta.bounds.lo[a]);
+      s.bounds.hi[a] = std::max(s.bounds.hi[a], rec.meta.bounds.hi[a]);
+    }
   }
   s.meanPatchTriangles = s.patches ? double(s.triangles) / double(s.patches) : 0;
   for (const std::string& name : impl_->env->listDir(dir_))

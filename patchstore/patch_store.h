@@ -180,7 +180,7 @@ struct StoreInfo {
   uint32_t minPatchTriangles = 0, maxPatchTriangles = 0;
   double meanPatchTriangles = 0;
   VertexLayout layout;
-  Box3 bounds;
+  Box3 bounds;  // the input's at ingest, grown to contain every live patch's (healed vertices too)
   IngestReport ingest;
 };
 

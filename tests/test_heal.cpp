@@ -478,6 +478,49 @@ TEST(Heal, FillHolesMatchesWholeMeshCgalIncludingHolesAcrossPatches) {
   EXPECT_EQ(heal::fillHoles(*store, maxEdges, options()).get("filled"), 0u);
 }
 
+// An open tube along z (no caps): its two end holes, filled and faired, bulge past z = 0 and
+// z = height, outside the input's box. The store's box must grow to hold them, or the MT grid
+// built from it has no cell for the caps' vertices.
+TEST(Heal, FilledHolesOutsideTheInputsBoxGrowTheStoresBoxAndBuild) {
+  TempDir tmp;
+  Mesh m;
+  const int rings = 12, sides = 24;
+  const double height = 1.0;
+  for (int i = 0; i <= rings; ++i)
+    for (int j = 0; j < sides; ++j) {
+      double a = 2 * M_PI * j / sides;
+      m.add(std::cos(a), std::sin(a), height * i / rings);
+    }
+  for (int i = 0; i < rings; ++i)
+    for (int j = 0; j < sides; ++j) {
+      uint32_t a = uint32_t(i * sides + j), b = uint32_t(i * sides + (j + 1) % sides);
+      m.tri(a, b, b + sides);
+      m.tri(a, b + sides, a + sides);
+    }
+  writePly(m, tmp.file("tube.ply"));
+  ASSERT_EQ(test::runTool("mtstore", "ingest " + tmp.file("tube.ply") + " -o " + tmp.file("s") + " --patch-triangles 100 -q").exitCode, 0);
+  Box3 input = PatchStore::open(tmp.file("s"))->info().bounds;
+  auto heal = test::runTool("mtstore", "heal " + tmp.file("s") + " --fill-holes 100 -q");
+  ASSERT_EQ(heal.exitCode, 0) << heal.output;
+  EXPECT_NE(heal.output.find("fill-holes: holes 2, filled 2"), std::string::npos) << heal.output;
+  auto store = PatchStore::open(tmp.file("s"));
+  Mesh after = exported(*store, tmp.file("after.ply"));
+  Box3 box = store->info().bounds;
+  double zMin = 0, zMax = 0;
+  for (size_t i = 0; i < after.positions.size(); i += 3) {
+    zMin = std::min(zMin, after.positions[i + 2]), zMax = std::max(zMax, after.positions[i + 2]);
+    for (int a = 0; a < 3; ++a) {
+      ASSERT_GE(after.positions[i + a], box.lo[a]) << "vertex " << i / 3 << " axis " << a;
+      ASSERT_LE(after.positions[i + a], box.hi[a]) << "vertex " << i / 3 << " axis " << a;
+    }
+  }
+  ASSERT_TRUE(zMin < input.lo[2] || zMax > input.hi[2]) << "the faired caps stay within the tube's box: no test";
+  auto build = test::runTool("mtbuild", tmp.file("s") + " -o " + tmp.file("tube.mt") + " -q");
+  ASSERT_EQ(build.exitCode, 0) << build.output;
+  auto verify = test::runTool("mtverify", tmp.file("tube.mt"));
+  EXPECT_EQ(verify.exitCode, 0) << verify.output;
+}
+
 // ---------------------------------------------------------------------------------------------
 
 void referenceTaubin(Mesh& m, int iterations, double lambda, double mu) {
