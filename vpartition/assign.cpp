@@ -394,11 +394,15 @@ void joinLonelyCells(PieceList& sorted, const std::vector<size_t>& lonely, doubl
 }
 
 // A piece to cut: its longest axis and the histogram of its centroids along it.
+// A piece to cut, and the histogram bin of each of its sampled centroids (one byte each, not a
+// histogram: at a billion triangles nearly every piece is cut, from ~26 samples each, and 235 k
+// histograms of kBins counters took 240 MiB, over the ingest's memory cap).
 struct Cut {
   int axis;
   float lo, width;
-  std::vector<uint32_t> histogram;
+  std::vector<uint8_t> bins;
 };
+static_assert(kBins <= 256, "a bin index must fit Cut::bins' byte");
 
 // Step 3's candidates: the unjoined pieces above the slab limit, with an empty histogram.
 std::unordered_map<uint64_t, Cut> oversizedPieces(const PieceList& sorted, const KeyMap& remap, uint32_t target,
@@ -413,12 +417,12 @@ std::unordered_map<uint64_t, Cut> oversizedPieces(const PieceList& sorted, const
     for (int a = 1; a < 3; ++a)
       if (p.hi[a] - p.lo[a] > p.hi[axis] - p.lo[axis]) axis = a;
     if (!(p.hi[axis] > p.lo[axis])) continue;
-    cuts[key] = {axis, p.lo[axis], (p.hi[axis] - p.lo[axis]) / kBins, std::vector<uint32_t>(kBins, 0)};
+    cuts[key] = {axis, p.lo[axis], (p.hi[axis] - p.lo[axis]) / kBins, {}};
   }
   return cuts;
 }
 
-// The second pass over the sample: each cut piece's histogram (joined keys count as their piece).
+// The second pass over the sample: each cut piece's bins (joined keys count as their piece).
 void fillHistograms(std::unordered_map<uint64_t, Cut>& cuts, const vp::CentroidSample& sample,
                     const std::vector<uint64_t>& crossKeys, const KeyMap& remap) {
   for (size_t i = 0; i < crossKeys.size(); ++i) {
@@ -430,17 +434,19 @@ void fillHistograms(std::unordered_map<uint64_t, Cut>& cuts, const vp::CentroidS
     if (it == cuts.end()) continue;
     Cut& cut = it->second;
     int bin = int(std::clamp((c[cut.axis] - cut.lo) / cut.width, 0.0f, float(kBins - 1)));
-    ++cut.histogram[bin];
+    cut.bins.push_back(uint8_t(bin));
   }
 }
 
 // The slab walls of a cut into `slabs` pieces, at quantiles of its histogram (ascending, at
 // most slabs - 1 of them).
 std::vector<float> slabBounds(const Cut& cut, uint32_t slabs, uint64_t total) {
+  uint32_t histogram[kBins] = {};
+  for (uint8_t b : cut.bins) ++histogram[b];
   std::vector<float> bounds;
   uint64_t run = 0;
   for (int b = 0; b < kBins && bounds.size() + 1 < slabs; ++b) {
-    run += cut.histogram[b];
+    run += histogram[b];
     if (run * slabs >= total * (bounds.size() + 1)) bounds.push_back(cut.lo + cut.width * float(b + 1));
   }
   assert(bounds.size() < slabs);
@@ -487,8 +493,7 @@ void VPartitionAssigner::mergeSlivers(const vp::CentroidSample& sample) {
   if (cuts.empty()) return;
   fillHistograms(cuts, sample, crossKeys, remap_);
   for (auto& [key, cut] : cuts) {
-    uint64_t total = 0;
-    for (uint32_t h : cut.histogram) total += h;
+    const uint64_t total = cut.bins.size();
     uint32_t slabs = uint32_t(std::clamp<double>(std::floor((double(total) * w + target / 2) / target), 1, 255));
     if (sampled_) slabs = std::max<uint32_t>(slabs, 2);
     if (slabs < 2) continue;
