@@ -128,8 +128,13 @@ void lockBorderRing(std::vector<uint8_t>& lock, const uint8_t* locked, const std
 // around it. Pairs are removed only where that holds: each edge of the pair is used by the pair
 // alone (the whole flattened piece goes) or by exactly two other triangles; any other rule break
 // still triggers the retry. The error is measured on the result afterwards, the removal included.
-// Returns the number of triangles removed.
-size_t removeFlattenedPairs(std::vector<uint32_t>& out) {
+// A pair whose removal would leave a vertex of `keep` without a triangle stays: a double-sided
+// triangle the input already has (scan debris, or a sliver the grid weld folded) at a locked
+// vertex would otherwise be removed from every run, the vertex vanish each time (rule 1), and the
+// region be run 17 times and kept whole, at every level (a 5.7 M scan-derived elephant: 33
+// regions so, the level loop 2.5x as long, the root level refused). Returns the number of
+// triangles removed.
+size_t removeFlattenedPairs(std::vector<uint32_t>& out, const uint8_t* keep) {
   const size_t triangleCount = out.size() / 3;
   // Triangles keyed by their sorted corners, in an open-addressing table (most results have no
   // pair at all, so one linear pass, not a sort of every triangle); a pair is a key held by exactly
@@ -179,14 +184,26 @@ size_t removeFlattenedPairs(std::vector<uint32_t>& out) {
       auto it = std::lower_bound(edges.begin(), edges.end(), e);
       if (it != edges.end() && *it == e) ++uses[it - edges.begin()];
     }
+  // Triangles per vertex of `keep`, for the pairs' corners only (counted down as pairs go).
+  std::vector<uint32_t> fanSize;
+  if (keep) {
+    uint32_t maxId = 0;
+    for (uint32_t v : out) maxId = std::max(maxId, v);
+    fanSize.assign(size_t(maxId) + 1, 0);
+    for (uint32_t v : out) fanSize[v] += keep[v] != 0;
+  }
   std::vector<uint8_t> drop(triangleCount, 0);
   for (auto& p : pairs) {
     bool ok = true;
     for (int k = 0; k < 3; ++k) {
       uint32_t u = uses[std::lower_bound(edges.begin(), edges.end(), key(out[p.first * 3 + k], out[p.first * 3 + (k + 1) % 3])) - edges.begin()];
       ok &= u == 2 || u == 4;
+      if (keep && keep[out[p.first * 3 + k]]) ok &= fanSize[out[p.first * 3 + k]] > 2;
     }
-    if (ok) drop[p.first] = drop[p.second] = 1;
+    if (!ok) continue;
+    drop[p.first] = drop[p.second] = 1;
+    if (keep)
+      for (int k = 0; k < 3; ++k) fanSize[out[p.first * 3 + k]] -= keep[out[p.first * 3 + k]] ? 2 : 0;
   }
   size_t w = 0;
   for (size_t t = 0; t < triangleCount; ++t)
@@ -296,7 +313,7 @@ int simplifyWithRules(Run& run, const double* positions, size_t vertexCount, con
       run.out.resize(n);
     } else {
       runMeshopt(run, vertexCount, triangles, indexCount, lock, targetIndexCount);
-      removeFlattenedPairs(run.out);
+      removeFlattenedPairs(run.out, lock.data());
     }
     const bool broken = findBrokenRules(run.out, lock, used, locked, adjacency, kept, bad);
     // A region that had triangles keeps some: a closed component alone in its region (a

@@ -426,6 +426,40 @@ TEST(SimplifyRegion, FlattenedPairsAreRemovedWhereTheSurfaceCloses) {
   std::vector<uint32_t> lone = {0, 1, 2, 2, 1, 0};
   EXPECT_EQ(removeFlattenedPairs(lone), 2u);
   EXPECT_TRUE(lone.empty());
+  // ...unless a vertex that must keep a triangle has no other: then it stays.
+  const uint8_t keep1[3] = {0, 1, 0};
+  std::vector<uint32_t> kept = {0, 1, 2, 2, 1, 0};
+  EXPECT_EQ(removeFlattenedPairs(kept, keep1), 0u);
+  EXPECT_EQ(kept.size(), 6u);
+  // The fin between the fans: every corner has fan triangles besides the pair, so it goes even
+  // when all of them must keep one.
+  const uint8_t keepAll[5] = {1, 1, 1, 1, 1};
+  std::vector<uint32_t> fin = {3, 1, 0, 0, 1, 2, 3, 2, 1, 3, 0, 2, 4, 0, 1, 0, 2, 1, 4, 1, 2, 4, 2, 0};
+  EXPECT_EQ(removeFlattenedPairs(fin, keepAll), 2u);
+  EXPECT_EQ(fin, cap);
+}
+
+// A double-sided triangle in the input (scan debris, or a sliver the grid weld folded) whose
+// corners are locked: the pair must not be removed from the result (its locked corners would
+// vanish on every run, and the region be kept whole after 17 runs).
+TEST(SimplifyRegion, InputDoubleSidedTriangleAtLockedVerticesStillSimplifies) {
+  Region r = makeRegion(0);
+  const uint32_t base = r.g.vertexCount();
+  for (int k = 0; k < 3; ++k) {
+    const double p[3] = {40.0 + 3 * k, 40.0 + 2 * (k == 2), 5.0};  // above the surface, apart from it
+    r.g.positions.insert(r.g.positions.end(), p, p + 3);
+    r.locked.push_back(1);
+  }
+  r.g.triangles.insert(r.g.triangles.end(), {base, base + 1, base + 2, base + 2, base + 1, base});
+  SimplifyRegionOptions opt;
+  opt.targetTriangles = r.g.triangleCount() / 2;
+  opt.simplifier = RegionSimplifier::Meshopt;
+  SimplifiedRegion s = simplifyRegion(r.g.positions.data(), r.g.vertexCount(), r.g.triangles.data(),
+                                      r.g.triangleCount(), r.locked.data(), opt);
+  EXPECT_EQ(s.attempts, 1u);
+  EXPECT_LE(s.triangleCount(), opt.targetTriangles * 11 / 10);
+  std::set<uint32_t> kept(s.origin.begin(), s.origin.end());
+  for (uint32_t v = base; v < base + 3; ++v) EXPECT_TRUE(kept.count(v)) << v;
 }
 
 // The quadric simplifier on its own (mtbuild/quadric_simplify.h).
