@@ -126,12 +126,17 @@ Prepared prepare(const PatchInput& in, const QuantizationGrid& grid, const Patch
   constexpr double kCoherentIndexBytes = 1.3;
   std::vector<uint32_t> remap(in.vertexCount);
   codec_detail::setMeshoptVersions();  // the index codec version is process-wide state: set before the first encode
+  // The index code is what the coherence test below and payload coding A (patch_codec_meshopt.cpp)
+  // read; a simplified patch uses neither (unless coded as a strip, which has its own code).
+  const bool indexCode = !options.simplified || options.strips;
   auto orderBy = [&](const uint32_t* tri) {
     size_t used = meshopt_optimizeVertexFetchRemap(remap.data(), tri, indexCount, in.vertexCount);
     out.indices.resize(indexCount);
     meshopt_remapIndexBuffer(out.indices.data(), tri, indexCount, remap.data());
-    out.indexCode.resize(meshopt_encodeIndexBufferBound(indexCount, used));
-    out.indexCode.resize(meshopt_encodeIndexBuffer(out.indexCode.data(), out.indexCode.size(), out.indices.data(), indexCount));
+    if (indexCode) {
+      out.indexCode.resize(meshopt_encodeIndexBufferBound(indexCount, used));
+      out.indexCode.resize(meshopt_encodeIndexBuffer(out.indexCode.data(), out.indexCode.size(), out.indices.data(), indexCount));
+    }
     return used;
   };
   size_t used = 0;
