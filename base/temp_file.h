@@ -113,7 +113,7 @@ class TempWriter {
     // from the caller's memory (a sorted run, whole: one copy fewer, and no buffer pages touched:
     // the copy and its page faults were a third of the chunked ingest's vertex stage).
     if (!direct_ && size >= buffer_.capacity()) {
-      if (used_ > 0) writeAllAt(fd_, buffer_.data(), used_, fileBytes_, path_), fileBytes_ += used_, used_ = 0;
+      flushBuffer();
       writeAllAt(fd_, p, size, fileBytes_, path_);
       fileBytes_ += size;
       return;
@@ -136,7 +136,7 @@ class TempWriter {
       for (size_t i = 0; i < n; ++i) write(v[i].iov_base, v[i].iov_len);
       return;
     }
-    if (used_ > 0) writeAllAt(fd_, buffer_.data(), used_, fileBytes_, path_), fileBytes_ += used_, used_ = 0;
+    flushBuffer();
     while (n > 0) {
       if (v->iov_len == 0) {  // nothing to write (pwritev of empty pieces alone returns 0)
         --n, ++v;
@@ -167,12 +167,8 @@ class TempWriter {
   void close() {
     if (fd_ < 0) return;
     flushBlocks();
-    if (used_ > 0) {
-      if (direct_) ::fcntl(fd_, F_SETFL, ::fcntl(fd_, F_GETFL) & ~O_DIRECT);
-      writeAllAt(fd_, buffer_.data(), used_, fileBytes_, path_);
-      fileBytes_ += used_;
-      used_ = 0;
-    }
+    if (used_ > 0 && direct_) ::fcntl(fd_, F_SETFL, ::fcntl(fd_, F_GETFL) & ~O_DIRECT);
+    flushBuffer();
     const int fd = fd_;
     fd_ = -1;
     if (::close(fd) != 0) fail(path_, std::string("cannot write scratch file: ") + std::strerror(errno));
@@ -181,6 +177,13 @@ class TempWriter {
   const std::string& path() const { return path_; }
 
  private:
+  // Writes everything buffered (through the page cache: no alignment needed).
+  void flushBuffer() {
+    if (used_ == 0) return;
+    writeAllAt(fd_, buffer_.data(), used_, fileBytes_, path_);
+    fileBytes_ += used_;
+    used_ = 0;
+  }
   // Writes the buffer's whole aligned blocks; the rest moves to the front.
   void flushBlocks() {
     const size_t whole = used_ / kDirectAlign * kDirectAlign;
