@@ -213,19 +213,30 @@ PatchVertices patchVertices(const Region& r, const RegionEdit& e, const std::vec
   pv.used.assign(nv, 0);
   pv.verts.resize(np);
   pv.localPairs.resize(np);
+  // Per patch in turn, the edit vertices its triangles use (1), those placed already (2); cleared
+  // after each patch, so the work is the patch's, not the region's (a scan of every edit vertex per
+  // patch made grid weld groups of 32 patches quadratic).
+  std::vector<uint8_t> mine(nv, 0);
+  std::vector<uint32_t> usedBy;
   for (size_t k = 0; k < np; ++k) {
-    std::vector<uint8_t> mine(nv, 0);
+    usedBy.clear();
     for (uint32_t t : pv.tris[k])
-      for (int c = 0; c < 3; ++c) mine[e.triangles[3 * t + c]] = 1;
+      for (int c = 0; c < 3; ++c) {
+        const uint32_t v = e.triangles[3 * t + c];
+        if (!mine[v]) mine[v] = 1, usedBy.push_back(v);
+      }
     for (uint32_t u : r.unifiedOf[k]) {
       uint32_t v = newOf[u];
-      if (v != kNoVertex && mine[v]) {
+      if (v != kNoVertex && mine[v] == 1) {
         pv.verts[k].push_back(v);
-        mine[v] = 0;
+        mine[v] = 2;
       }
     }
-    for (uint32_t v = 0; v < nv; ++v)
-      if (mine[v]) pv.verts[k].push_back(v);
+    std::sort(usedBy.begin(), usedBy.end());
+    for (uint32_t v : usedBy) {
+      if (mine[v] == 1) pv.verts[k].push_back(v);
+      mine[v] = 0;
+    }
     for (uint32_t l = 0; l < pv.verts[k].size(); ++l) {
       pv.holders.push_back({pv.verts[k][l], uint32_t(k)});
       pv.localPairs[k].push_back({pv.verts[k][l], l});
@@ -242,16 +253,27 @@ PatchVertices patchVertices(const Region& r, const RegionEdit& e, const std::vec
 std::vector<Patch> editedPatches(const PatchStore& store, const Region& r, const RegionEdit& e, const PatchVertices& pv) {
   const bool normals = store.layout().normals, colors = store.layout().colors;
   std::vector<Patch> out(r.patches.size());
+  // Edit vertex -> local index in the patch being written (a binary search per corner was half of
+  // the grid weld's time on scans with many close vertices); reset after each patch.
+  std::vector<uint32_t> localOf(e.vertexCount(), kNoVertex);
   for (size_t k = 0; k < out.size(); ++k) {
     Patch& p = out[k];
     p.id = r.patches[k];
-    for (uint32_t v : pv.verts[k]) {
+    for (uint32_t l = 0; l < pv.verts[k].size(); ++l) {
+      const uint32_t v = pv.verts[k][l];
+      localOf[v] = l;
       p.positions.insert(p.positions.end(), &e.positions[3 * v], &e.positions[3 * v] + 3);
       if (normals) p.normals.insert(p.normals.end(), &e.normals[3 * v], &e.normals[3 * v] + 3);
       if (colors) p.colors.insert(p.colors.end(), &e.colors[4 * v], &e.colors[4 * v] + 4);
     }
+    p.triangles.reserve(3 * pv.tris[k].size());
     for (uint32_t t : pv.tris[k])
-      for (int c = 0; c < 3; ++c) p.triangles.push_back(pv.localIn(k, e.triangles[3 * t + c]));
+      for (int c = 0; c < 3; ++c) {
+        const uint32_t l = localOf[e.triangles[3 * t + c]];
+        assert(l != kNoVertex && "patch k holds every corner of its triangles");
+        p.triangles.push_back(l);
+      }
+    for (uint32_t v : pv.verts[k]) localOf[v] = kNoVertex;
     if (store.layout().texcoords) {
       if (e.cornerUV.size() != 6 * e.trianglePatch.size() || e.triangleMaterial.size() != e.trianglePatch.size())
         fail(store.dir(), "heal: an edit lost its texture coordinates (internal error)");
