@@ -38,8 +38,8 @@ using cut_internal::cutPatchIds;
 namespace {
 
 // One use of a grid point (pass 1), with its normal and colour when the file has either; without
-// them a use is 24 bytes instead of 40, and so is a welded vertex: the sorts of a billion-triangle
-// cut write ~22 GB less scratch.
+// them a use is 24 bytes instead of 40, and so is a welded vertex: the finest cut of a
+// billion-triangle file peaked at 19,895 MiB of scratch and output instead of 27,530.
 template <bool kAttributes>
 struct Use {
   uint32_t q[3];
