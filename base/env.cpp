@@ -5,10 +5,14 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cassert>
 #include <cerrno>
 #include <cstring>
+#include <exception>
+#include <system_error>
+#include <thread>
 
 namespace mt {
 
@@ -231,6 +235,45 @@ class FaultyRandomAccessFile : public RandomAccessFile {
 };
 
 }  // namespace
+
+void readRanges(const RandomAccessFile& file, const std::vector<FileRange>& ranges, uint64_t parallelFrom) {
+  constexpr size_t kChunk = size_t(1) << 20;
+  constexpr unsigned kReaders = 8;
+  uint64_t total = 0;
+  for (const FileRange& r : ranges) total += r.bytes;
+  if (total < parallelFrom) {
+    for (const FileRange& r : ranges)
+      if (r.bytes) file.read(r.offset, r.bytes, r.to);
+    return;
+  }
+  std::vector<FileRange> chunks;
+  for (const FileRange& r : ranges)
+    for (size_t at = 0; at < r.bytes; at += kChunk)
+      chunks.push_back({r.offset + at, std::min(kChunk, r.bytes - at), static_cast<char*>(r.to) + at});
+  std::sort(chunks.begin(), chunks.end(), [](const FileRange& a, const FileRange& b) { return a.offset < b.offset; });
+  std::vector<std::exception_ptr> errors(chunks.size());
+  std::atomic<size_t> next{0};
+  auto work = [&] {
+    for (size_t c; (c = next.fetch_add(1)) < chunks.size();) {
+      try {
+        file.read(chunks[c].offset, chunks[c].bytes, chunks[c].to);
+      } catch (...) {
+        errors[c] = std::current_exception();
+      }
+    }
+  };
+  std::vector<std::thread> threads;
+  const unsigned n = unsigned(std::min<size_t>(kReaders, chunks.size()));
+  try {
+    for (unsigned t = 1; t < n; ++t) threads.emplace_back(work);
+  } catch (const std::system_error&) {
+    // No more threads to be had: the ones started and this one read everything.
+  }
+  work();
+  for (auto& t : threads) t.join();
+  for (const auto& e : errors)
+    if (e) std::rethrow_exception(e);
+}
 
 namespace {
 std::atomic<Env*> gDefaultOverride{nullptr};

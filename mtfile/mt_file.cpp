@@ -384,21 +384,15 @@ void MtFileReader::readIndex(const Footer& f) {
     failCorrupt(path, "index section is " + std::to_string(metaSize) + " bytes, header describes " +
                    std::to_string(expect - h.metaOffset) + " (truncated or damaged)");
 
-  // Each section is read straight into its array, in file order, the checksum running over the
-  // arrays as they fill: one pass over the bytes (a billion-triangle file's index is ~78 MB, and
-  // a staging copy of it cost as much as the reading). Nothing read is trusted, or kept, unless
-  // the checksum matches (open() throws, and the reader goes with its arrays).
-  XXH64_state_t* sum = XXH64_createState();
-  if (!sum) throw std::bad_alloc();
-  std::unique_ptr<XXH64_state_t, XXH_errorcode (*)(XXH64_state_t*)> sumOwner(sum, XXH64_freeState);
-  XXH64_reset(sum, 0);
-  XXH64_update(sum, &h, sizeof h);
+  // Each section is read straight into its array (no staging copy: a billion-triangle file's
+  // index is ~78 MB), then the checksum runs over the arrays in file order. Nothing read is
+  // trusted, or kept, unless the checksum matches (open() throws, and the reader goes with its
+  // arrays).
+  std::vector<FileRange> pieces;
   auto take = [&](uint64_t off, auto* dst, uint64_t count) {
     using T = typename std::remove_pointer_t<decltype(dst)>::value_type;
     dst->resize(size_t(count));
-    if (!count) return;
-    file_->read(off, size_t(count) * sizeof(T), dst->data());
-    XXH64_update(sum, dst->data(), size_t(count) * sizeof(T));
+    if (count) pieces.push_back({off, size_t(count) * sizeof(T), dst->data()});
   };
   take(h.nodesOffset, &nodes_, h.nodeCount);
   take(h.arcsOffset, &arcs_, h.arcCount);
@@ -408,6 +402,13 @@ void MtFileReader::readIndex(const Footer& f) {
   if (textured) take(texturesOffset, &textures_, h.patchCount);
   std::vector<uint8_t> block;
   take(h.metadataOffset, &block, h.metadataSize);
+  readRanges(*file_, pieces);  // several reads in flight for a large index
+  XXH64_state_t* sum = XXH64_createState();
+  if (!sum) throw std::bad_alloc();
+  std::unique_ptr<XXH64_state_t, XXH_errorcode (*)(XXH64_state_t*)> sumOwner(sum, XXH64_freeState);
+  XXH64_reset(sum, 0);
+  XXH64_update(sum, &h, sizeof h);
+  for (const FileRange& p : pieces) XXH64_update(sum, p.to, p.bytes);
   if (kChecksumsChecked && XXH64_digest(sum) != f.checksum)
     failCorrupt(path, "checksum mismatch over header + DAG + index (bytes 0-" + std::to_string(kHeaderSize) + " and " +
                           std::to_string(h.metaOffset) + "-" + std::to_string(footerAt) + ")");

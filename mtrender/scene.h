@@ -15,6 +15,7 @@
 
 #include "mtfile/mt_file.h"
 #include "mtrender/closed_surface.h"
+#include "mtrender/patch_cache.h"
 
 namespace mt::render {
 
@@ -86,7 +87,7 @@ class Scene {
   const double* patchOrigin(uint32_t patch) const { return nodes_[arcs_[patches_[patch].arc].cullNode].center; }
   // For each node but the sources, the patches one move on it needs resident together (its in- and
   // out-patches; for a sink, the coarsest cut), for PatchCache's per-class floor.
-  std::vector<std::vector<uint32_t>> moveGroups() const;
+  PatchGroups moveGroups() const;
   // A patch's id within the scene from (file, local patch id).
   uint32_t globalPatch(uint32_t file, uint32_t local) const { return patchBase_[file] + local; }
   // The file a scene patch comes from.

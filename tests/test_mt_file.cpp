@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <set>
 #include <string>
 
 #include "base/env.h"
@@ -277,6 +278,50 @@ TEST(MtFile, FailingReadNamesTheOffset) {
     EXPECT_EQ(std::string(e.what()), b.path + ": injected read failure at byte offset " + std::to_string(r->patches()[2].offset));
   }
   EXPECT_EQ(r->readPayload(2), b.payloads[2]) << "the next read succeeds";
+}
+
+// readRanges (the reader's index read): a large read in 1 MiB chunks by several threads gives
+// the bytes one read per range gives, and a failing chunk's error is thrown, naming its offset.
+TEST(MtFile, RangesReadInParallelChunksGiveTheSameBytes) {
+  test::TempDir dir;
+  const std::string path = dir.file("r.bin");
+  std::string bytes(5 * 1024 * 1024 + 12345, '\0');
+  uint64_t x = 88172645463325252ull;
+  for (char& c : bytes) x ^= x << 13, x ^= x >> 7, x ^= x << 17, c = char(x);
+  test::writeFile(path, bytes);
+  // Three ranges out of file order, none a whole number of chunks, one empty.
+  const std::vector<std::pair<uint64_t, size_t>> spans = {{2900000, 2345678}, {17, 2999983}, {5000, 0}};
+  for (uint64_t parallelFrom : {uint64_t(0), uint64_t(1) << 40}) {
+    std::vector<std::string> out;
+    std::vector<FileRange> ranges;
+    for (const auto& [offset, size] : spans) out.emplace_back(size, '\0');
+    for (size_t i = 0; i < spans.size(); ++i) ranges.push_back({spans[i].first, spans[i].second, out[i].data()});
+    FaultInjectionEnv counting(Env::Default());
+    auto counted = counting.newRandomAccessFile(path);
+    readRanges(*counted, ranges, parallelFrom);
+    for (size_t i = 0; i < spans.size(); ++i)
+      EXPECT_EQ(out[i], bytes.substr(size_t(spans[i].first), spans[i].second)) << "range " << i << " parallelFrom " << parallelFrom;
+    EXPECT_EQ(counting.reads, parallelFrom ? 2 : 6) << "one read per non-empty range, or one per MiB chunk";
+  }
+  // Every read from the third on fails in turn: the error is an Io error at a chunk's start.
+  for (int64_t n = 1; n <= 6; ++n) {
+    FaultInjectionEnv env(Env::Default());
+    env.failAfter(FaultInjectionEnv::Op::Read, n);
+    auto f = env.newRandomAccessFile(path);
+    std::string a(2345678, '\0'), b(2999983, '\0');
+    std::vector<FileRange> ranges = {{2900000, a.size(), a.data()}, {17, b.size(), b.data()}};
+    try {
+      readRanges(*f, ranges, 0);
+      ADD_FAILURE() << "read " << n << " did not fail";
+    } catch (const Error& e) {
+      EXPECT_EQ(e.kind(), ErrorKind::Io) << e.what();
+      const std::string what = e.what();
+      const std::string prefix = path + ": injected read failure at byte offset ";
+      ASSERT_EQ(what.compare(0, prefix.size(), prefix), 0) << what;
+      const std::set<std::string> chunkStarts = {"17", "1048593", "2097169", "2900000", "3948576", "4997152"};
+      EXPECT_EQ(chunkStarts.count(what.substr(prefix.size())), 1u) << what;
+    }
+  }
 }
 
 // The resume constructor continues the temporary file at the checkpoint's length: bytes written
