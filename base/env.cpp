@@ -238,7 +238,7 @@ class FaultyRandomAccessFile : public RandomAccessFile {
 
 void readRanges(const RandomAccessFile& file, const std::vector<FileRange>& ranges, uint64_t parallelFrom) {
   constexpr size_t kChunk = size_t(1) << 20;
-  constexpr unsigned kReaders = 8;
+  constexpr unsigned kReaders = 4;
   uint64_t total = 0;
   for (const FileRange& r : ranges) total += r.bytes;
   if (total < parallelFrom) {

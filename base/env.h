@@ -45,11 +45,12 @@ struct FileRange {
 };
 
 // Reads every range. When they add up to `parallelFrom` bytes or more, they are read in 1 MiB
-// chunks by up to eight threads at once: one read of tens of megabytes from a file not in the
-// page cache waits on the disk one readahead window at a time, while several reads in flight keep
-// the device's queue full (a billion-triangle MT file's 78 MB index: ~250 ms as one read, ~40-140
-// ms as eight, on this project's VM). Throws what the file's read throws; with several failures,
-// the one first in file order (the same message whatever the threads' timing).
+// chunks by up to four threads at once: one read of tens of megabytes from a file not in the page
+// cache waits on the disk one readahead window at a time, while several reads in flight keep the
+// device's queue full (a billion-triangle MT file's 78 MB index, dropped from the page cache: 250
+// ms as one read, 73-138 ms as four, on this project's VM; from the page cache the threads cost
+// ~10 ms more). Throws what the file's read throws; with several failures, the one first in file
+// order (the same message whatever the threads' timing).
 void readRanges(const RandomAccessFile& file, const std::vector<FileRange>& ranges, uint64_t parallelFrom = uint64_t(4) << 20);
 
 class Env {

@@ -40,7 +40,7 @@ Engine::Engine(EngineOptions options) : options_(std::move(options)) {
   } else {
     std::vector<uint64_t> bounds(scene_->patches().size());
     for (uint32_t p = 0; p < bounds.size(); ++p) bounds[p] = scene_->decodedBytesBound(p);
-    cache_ = std::make_unique<PatchCache>(options_.cacheBytes, bounds, scene_->moveGroups());
+    cache_ = std::make_unique<PatchCache>(options_.cacheBytes, bounds, [this](const auto& group) { scene_->forEachMoveGroup(group); });
     PatchServer::Options so;
     so.readDelayMs = options_.readDelayMs;
     so.quiet = options_.quiet;

@@ -16,10 +16,10 @@ uint32_t packNormal(const float n[3]) {
 }
 
 PatchCache::PatchCache(uint64_t capBytes, const std::vector<uint64_t>& patchBytes)
-    : PatchCache(capBytes, patchBytes, PatchGroups()) {}
+    : PatchCache(capBytes, patchBytes, MoveGroups()) {}
 
 PatchCache::PatchCache(uint64_t capBytes, const std::vector<uint64_t>& patchBytes,
-                       const PatchGroups& moves)
+                       const MoveGroups& moves)
     : capBytes_(capBytes) {
   uint64_t largest = 64;
   for (uint64_t b : patchBytes) largest = std::max(largest, b);
@@ -51,12 +51,13 @@ PatchCache::PatchCache(uint64_t capBytes, const std::vector<uint64_t>& patchByte
   }
   // The floor: the largest move's patches of each class, plus 3 (see the header).
   std::vector<uint64_t> floor(nc, 0), inMove(nc, 0);
-  for (size_t g = 0; g < moves.size(); ++g) {
-    std::fill(inMove.begin(), inMove.end(), 0);
-    for (uint32_t i = moves.offsets[g]; i < moves.offsets[g + 1]; ++i)
-      if (moves.ids[i] < patchClass_.size()) ++inMove[patchClass_[moves.ids[i]]];
-    for (size_t k = 0; k < nc; ++k) floor[k] = std::max(floor[k], inMove[k]);
-  }
+  if (moves)
+    moves([&](const uint32_t* ids, size_t count) {
+      std::fill(inMove.begin(), inMove.end(), 0);
+      for (size_t i = 0; i < count; ++i)
+        if (ids[i] < patchClass_.size()) ++inMove[patchClass_[ids[i]]];
+      for (size_t k = 0; k < nc; ++k) floor[k] = std::max(floor[k], inMove[k]);
+    });
   std::vector<uint64_t> least(nc);
   for (size_t k = 0; k < nc; ++k) {
     least[k] = std::min<uint64_t>(count[k], std::max<uint64_t>(3, floor[k] ? floor[k] + 3 : 0));

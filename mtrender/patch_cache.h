@@ -23,6 +23,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <list>
 #include <memory>
 #include <mutex>
@@ -104,14 +105,11 @@ struct CacheStats {
   uint64_t givenUp = 0;        // reserve() refused: no room
 };
 
-// Groups of patch ids laid out flat (one allocation, not one per group): group g holds
-// ids[offsets[g] .. offsets[g + 1]). A billion-triangle file has 171 k groups, and a vector each
-// took ~50 ms of its opening.
-struct PatchGroups {
-  std::vector<uint32_t> offsets{0};
-  std::vector<uint32_t> ids;
-  size_t size() const { return offsets.size() - 1; }
-};
+// The groups of patches one cut move needs resident together (for each DAG node, its in- and
+// out-patches; Scene::forEachMoveGroup): calls `group` once per group, with ids valid during the
+// call only (one buffer reused: a billion-triangle file has 171 k groups, and a vector each took
+// ~50 ms of its opening).
+using MoveGroups = std::function<void(const std::function<void(const uint32_t* ids, size_t count)>& group)>;
 
 class PatchCache {
  public:
@@ -121,11 +119,11 @@ class PatchCache {
   // mt::Error when the cap cannot give every size class a few place holders.
   PatchCache(uint64_t capBytes, const std::vector<uint64_t>& patchBytes);
   // The same, knowing which patches one cut move needs resident together (`moves`: for each DAG
-  // node, its in- and out-patches; Scene::moveGroups): each size class gets at least the place
+  // node, its in- and out-patches; Scene::forEachMoveGroup): each size class gets at least the place
   // holders the largest move needs in it, plus 3. Without that floor a class sized by its share
   // of the bytes alone could be smaller than one refinement of the coarse levels (whose patches
   // are the largest), and the cut stayed at the coarsest for ever.
-  PatchCache(uint64_t capBytes, const std::vector<uint64_t>& patchBytes, const PatchGroups& moves);
+  PatchCache(uint64_t capBytes, const std::vector<uint64_t>& patchBytes, const MoveGroups& moves);
   ~PatchCache();
 
   // ---- render thread ----

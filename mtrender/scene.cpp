@@ -1,7 +1,6 @@
 #include "mtrender/scene.h"
 
 #include <algorithm>
-#include <cassert>
 #include <cmath>
 #include <limits>
 #include <memory>
@@ -111,35 +110,19 @@ void Scene::boundingSphere(double c[3], double& r) const {
 
 namespace mt::render {
 
-PatchGroups Scene::moveGroups() const {
+void Scene::forEachMoveGroup(const std::function<void(const uint32_t* ids, size_t count)>& group) const {
   // The sink is never moved either, but its in-patches are the coarsest cut: resident together.
-  // Two passes: the groups' sizes, then their ids (a source's group stays empty: never moved, its
-  // out-arcs are every finest patch).
-  PatchGroups groups;
-  groups.offsets.resize(nodes_.size() + 1);
-  uint64_t total = 0;
-  for (size_t i = 0; i < nodes_.size(); ++i) {
-    const SceneNode& n = nodes_[i];
-    groups.offsets[i] = uint32_t(total);
-    if (n.source) continue;
-    for (uint32_t k = 0; k < n.arcCount; ++k) total += arcs_[n.firstArc + k].patchCount;
-    for (uint32_t k = 0; k < n.inArcCount; ++k) total += arcs_[inArcs_[n.firstInArc + k]].patchCount;
-  }
-  if (total > UINT32_MAX) throw Error("mtrender: the scene's move groups hold more than 2^32 patch ids");
-  groups.offsets[nodes_.size()] = uint32_t(total);
-  groups.ids.resize(size_t(total));
-  uint32_t* out = groups.ids.data();
+  std::vector<uint32_t> ids;
   auto add = [&](const SceneArc& a) {
-    out = std::copy(arcPatches_.begin() + a.firstPatch, arcPatches_.begin() + a.firstPatch + a.patchCount, out);
+    ids.insert(ids.end(), arcPatches_.begin() + a.firstPatch, arcPatches_.begin() + a.firstPatch + a.patchCount);
   };
-  for (size_t i = 0; i < nodes_.size(); ++i) {
-    const SceneNode& n = nodes_[i];
-    if (n.source) continue;
+  for (const SceneNode& n : nodes_) {
+    if (n.source) continue;  // never moved (its out-arcs are every finest patch)
+    ids.clear();
     for (uint32_t k = 0; k < n.arcCount; ++k) add(arcs_[n.firstArc + k]);
     for (uint32_t k = 0; k < n.inArcCount; ++k) add(arcs_[inArcs_[n.firstInArc + k]]);
+    group(ids.data(), ids.size());
   }
-  assert(out == groups.ids.data() + total);
-  return groups;
 }
 
 uint64_t Scene::decodedBytesBound(uint32_t patch) const {

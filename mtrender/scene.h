@@ -86,8 +86,8 @@ class Scene {
   // of the sphere that bounds the patch (the arc's cull node).
   const double* patchOrigin(uint32_t patch) const { return nodes_[arcs_[patches_[patch].arc].cullNode].center; }
   // For each node but the sources, the patches one move on it needs resident together (its in- and
-  // out-patches; for a sink, the coarsest cut), for PatchCache's per-class floor.
-  PatchGroups moveGroups() const;
+  // out-patches; for a sink, the coarsest cut), for PatchCache's per-class floor (MoveGroups).
+  void forEachMoveGroup(const std::function<void(const uint32_t* ids, size_t count)>& group) const;
   // A patch's id within the scene from (file, local patch id).
   uint32_t globalPatch(uint32_t file, uint32_t local) const { return patchBase_[file] + local; }
   // The file a scene patch comes from.

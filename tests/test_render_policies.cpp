@@ -357,7 +357,7 @@ TEST_F(RenderPolicies, ASmallCacheNeverStrandsTheCutAtTheCoarsest) {
   // the largest; the root's refinement needs 5 patches of the largest class at once, which a
   // 600 kB cache gave fewer place holders than that: the refinement could never load, the cut
   // stayed at 1 patch (547 px here) for ever. The classes now get at least what the largest move
-  // needs (Scene::moveGroups), and the cut leaves the coarsest.
+  // needs (Scene::forEachMoveGroup), and the cut leaves the coarsest.
   Rig rig({model()}, 600'000);
   ExtractOptions eo;
   eo.fixedTriangles = 1'000'000;

@@ -25,14 +25,15 @@ struct RenderRig {
   std::unique_ptr<render::PatchServer> server;
   glm::dvec3 center{0};
   double radius = 1;
-  // The cache's place holders come in size classes with the per-class floor of Scene::moveGroups
+  // The cache's place holders come in size classes with the per-class floor of Scene::forEachMoveGroup
   // (as in Engine) unless `classFloor` is false (the two-argument cache constructor).
   explicit RenderRig(const std::vector<std::string>& files, uint64_t cacheBytes = 16ull << 20,
                      render::PatchServer::Options serverOptions = {}, bool classFloor = true)
       : scene(files) {
     std::vector<uint64_t> bounds(scene.patches().size());
     for (uint32_t p = 0; p < bounds.size(); ++p) bounds[p] = scene.decodedBytesBound(p);
-    cache = classFloor ? std::make_unique<render::PatchCache>(cacheBytes, bounds, scene.moveGroups())
+    cache = classFloor ? std::make_unique<render::PatchCache>(cacheBytes, bounds,
+                                                              [this](const auto& group) { scene.forEachMoveGroup(group); })
                        : std::make_unique<render::PatchCache>(cacheBytes, bounds);
     server = std::make_unique<render::PatchServer>(scene, *cache, serverOptions);
     double c[3];
