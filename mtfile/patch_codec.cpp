@@ -126,9 +126,10 @@ Prepared prepare(const PatchInput& in, const QuantizationGrid& grid, const Patch
   constexpr double kCoherentIndexBytes = 1.3;
   std::vector<uint32_t> remap(in.vertexCount);
   codec_detail::setMeshoptVersions();  // the index codec version is process-wide state: set before the first encode
-  // The index code is what the coherence test below and payload coding A (patch_codec_meshopt.cpp)
-  // read; a simplified patch uses neither (unless coded as a strip, which has its own code).
-  const bool indexCode = !options.simplified || options.strips;
+  // The index code is what the coherence test below and payload coding A (Prepared::codingA)
+  // read; a simplified patch uses neither.
+  out.codingA = !options.simplified;
+  const bool indexCode = out.codingA;
   auto orderBy = [&](const uint32_t* tri) {
     size_t used = meshopt_optimizeVertexFetchRemap(remap.data(), tri, indexCount, in.vertexCount);
     out.indices.resize(indexCount);

@@ -183,12 +183,9 @@ std::vector<uint8_t> encodeMeshoptWith(const Prepared& p, const std::vector<uint
     abuf.resize(meshopt_encodeVertexBuffer(abuf.data(), abuf.size(), attrs.data(), n, attrStride));
   }
 
-  // A: sizes, index code and attributes in the frame; coded only where it can be the smaller. A
-  // simplified patch (the level loop's output) has no index code to compare (prepare() leaves it
-  // out) and goes to C: A won on none of the simplified patches of six scan-derived builds and 143
-  // small real meshes (it wins on grid-regular level-0 patches, where zstd finds the codes'
-  // repeats), and coding it cost ~4% of the level loop from level 2 on.
-  const bool tryA = strip || !options.simplified;
+  // A: sizes, index code and attributes in the frame; coded only where it can be the smaller: a
+  // strip always (it has no C), a list when prepare() made its index code (Prepared::codingA).
+  const bool tryA = strip || p.codingA;
   std::vector<uint8_t> raw, frame;
   if (tryA) {
     uint32_t sizes[3] = {uint32_t(ibuf.size()), indexCount, uint32_t(abuf.size())};
