@@ -241,33 +241,40 @@ void readRanges(const RandomAccessFile& file, const std::vector<FileRange>& rang
   constexpr unsigned kReaders = 4;
   uint64_t total = 0;
   for (const FileRange& r : ranges) total += r.bytes;
-  if (total < parallelFrom) {
-    for (const FileRange& r : ranges)
-      if (r.bytes) file.read(r.offset, r.bytes, r.to);
-    return;
-  }
+  // In file order, so that the first failure in it is the one thrown on either path.
+  const bool parallel = total >= parallelFrom;
+  const size_t chunk = parallel ? kChunk : SIZE_MAX;  // one read a range when not parallel
   std::vector<FileRange> chunks;
   for (const FileRange& r : ranges)
-    for (size_t at = 0; at < r.bytes; at += kChunk)
-      chunks.push_back({r.offset + at, std::min(kChunk, r.bytes - at), static_cast<char*>(r.to) + at});
+    for (size_t at = 0; at < r.bytes; at += std::min(chunk, r.bytes - at))
+      chunks.push_back({r.offset + at, std::min(chunk, r.bytes - at), static_cast<char*>(r.to) + at});
   std::sort(chunks.begin(), chunks.end(), [](const FileRange& a, const FileRange& b) { return a.offset < b.offset; });
+  if (!parallel) {
+    for (const FileRange& c : chunks) file.read(c.offset, c.bytes, c.to);
+    return;
+  }
   std::vector<std::exception_ptr> errors(chunks.size());
-  std::atomic<size_t> next{0};
+  std::atomic<size_t> next{0}, firstFailed{chunks.size()};
   auto work = [&] {
     for (size_t c; (c = next.fetch_add(1)) < chunks.size();) {
+      if (c > firstFailed.load()) continue;  // a chunk before it failed: nothing after it is wanted
       try {
         file.read(chunks[c].offset, chunks[c].bytes, chunks[c].to);
       } catch (...) {
         errors[c] = std::current_exception();
+        for (size_t f = firstFailed.load(); c < f && !firstFailed.compare_exchange_weak(f, c);) {
+        }
       }
     }
   };
   std::vector<std::thread> threads;
+  threads.reserve(kReaders - 1);
   const unsigned n = unsigned(std::min<size_t>(kReaders, chunks.size()));
   try {
     for (unsigned t = 1; t < n; ++t) threads.emplace_back(work);
-  } catch (const std::system_error&) {
-    // No more threads to be had: the ones started and this one read everything.
+  } catch (...) {
+    // No more threads to be had (a thread that failed to start was not made): the ones started
+    // and this one read everything.
   }
   work();
   for (auto& t : threads) t.join();

@@ -50,7 +50,7 @@ struct FileRange {
 // device's queue full (a billion-triangle MT file's 78 MB index, dropped from the page cache: 250
 // ms as one read, 73-138 ms as four, on this project's VM; from the page cache the threads cost
 // ~10 ms more). Throws what the file's read throws; with several failures, the one first in file
-// order (the same message whatever the threads' timing).
+// order (the same message whatever the threads' timing; chunks after a failed one are not read).
 void readRanges(const RandomAccessFile& file, const std::vector<FileRange>& ranges, uint64_t parallelFrom = uint64_t(4) << 20);
 
 class Env {

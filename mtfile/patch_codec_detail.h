@@ -28,7 +28,7 @@ struct Prepared {
   // patches of six scan-derived builds and 143 small real meshes (it wins on grid-regular level-0
   // patches, where zstd finds the codes' repeats), and coding it cost ~4% of the level loop from
   // level 2 on. indexCode is computed only then (a strip has its own code).
-  bool codingA = true;
+  bool codingA = false;
   std::vector<uint8_t> indexCode; // meshopt_encodeIndexBuffer(indices) when codingA (Codec::Meshopt)
 };
 

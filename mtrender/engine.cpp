@@ -34,11 +34,11 @@ Engine::Engine(EngineOptions options) : options_(std::move(options)) {
       mapSizes_.push_back(size);
     }
     uint64_t largest = 0;
-    for (uint32_t p = 0; p < scene_->patches().size(); ++p) largest = std::max(largest, scene_->decodedBytesBound(p));
+    for (uint32_t p = 0; p < scene_->patchCount(); ++p) largest = std::max(largest, scene_->decodedBytesBound(p));
     scratch_.resize(largest);
     extract_ = std::make_unique<ExtractRender>(*scene_, nullptr, nullptr, options_.extract);
   } else {
-    std::vector<uint64_t> bounds(scene_->patches().size());
+    std::vector<uint64_t> bounds(scene_->patchCount());
     for (uint32_t p = 0; p < bounds.size(); ++p) bounds[p] = scene_->decodedBytesBound(p);
     cache_ = std::make_unique<PatchCache>(options_.cacheBytes, bounds, [this](const auto& group) { scene_->forEachMoveGroup(group); });
     PatchServer::Options so;
@@ -76,7 +76,7 @@ void Engine::start(double timeoutMs) { extract_->start(timeoutMs); }
 PatchView Engine::baselineFetch(uint32_t id) {
   PatchView v;
   if (baselineBad_.count(id)) return v;
-  const ScenePatch& sp = scene_->patches()[id];
+  const ScenePatch sp = scene_->patch(id);
   const MtFileReader& reader = scene_->reader(sp.file);
   const format::PatchRecord& rec = reader.patches()[sp.local];
   try {

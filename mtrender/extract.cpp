@@ -103,7 +103,7 @@ double ExtractRender::pinLimit() const {
   if (!cache_) return 1e18;
   const double slots = cache_->stats().slots;
   // A cache that holds every patch of the scene needs no room kept for prefetching.
-  if (slots >= double(scene_.patches().size())) return slots;
+  if (slots >= double(scene_.patchCount())) return slots;
   return options_.memoryFraction * slots;
 }
 

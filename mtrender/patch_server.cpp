@@ -15,7 +15,7 @@ std::pair<uint32_t, uint32_t> decodeInto(const Scene& scene, uint32_t id, const 
                                          uint64_t capacity, PatchBound* bound) {
   const uint32_t nv = p.vertexCount(), nt = p.triangleCount();
   if (renderPatchBytes(nv, nt) > capacity)
-    throw Error("patch " + std::to_string(scene.patches()[id].local) + ": decodes to " +
+    throw Error("patch " + std::to_string(scene.patch(id).local) + ": decodes to " +
                 std::to_string(renderPatchBytes(nv, nt)) + " bytes, more than its place holder (" +
                 std::to_string(capacity) + ")");
   auto* v = reinterpret_cast<RenderVertex*>(out);
@@ -23,7 +23,7 @@ std::pair<uint32_t, uint32_t> decodeInto(const Scene& scene, uint32_t id, const 
   std::memcpy(idx, p.triangles.data(), p.triangles.size() * sizeof(uint32_t));
   // Positions relative to the patch's origin, in double from the exact grid coordinates: the
   // file's floats (origin + step * q rounded to float) lose centimetres millions of units out.
-  const QuantizationGrid& grid = scene.reader(scene.patches()[id].file).grid();
+  const QuantizationGrid& grid = scene.reader(scene.patch(id).file).grid();
   const double* origin = scene.patchOrigin(id);
   for (uint32_t i = 0; i < nv; ++i)
     for (int a = 0; a < 3; ++a) v[i].position[a] = float(grid.dequantize(a, p.q[3 * i + a]) - origin[a]);
@@ -178,7 +178,7 @@ void PatchServer::run() {
     int slot = cache_.reserve(req.id, req.urgency, frame);
     if (slot < 0) continue;  // present, bad, or no room (3.3.2: give up; asked again next frame)
     const auto t0 = std::chrono::steady_clock::now();
-    const ScenePatch& sp = scene_.patches()[req.id];
+    const ScenePatch sp = scene_.patch(req.id);
     const MtFileReader& reader = scene_.reader(sp.file);
     try {
       if (options_.readDelayMs > 0)

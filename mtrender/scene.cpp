@@ -19,28 +19,27 @@ Scene::Scene(const std::vector<std::string>& paths) {
   // Every file opened first, so the arrays are sized once (a billion-triangle file has 1.2 M
   // patches and 624 k arcs: growing by doubling copied them and faulted their pages in again).
   std::vector<std::unique_ptr<MtFileReader>> opened;
-  size_t nodeTotal = 0, arcTotal = 0, refTotal = 0, patchTotal = 0;
+  size_t nodeTotal = 0, arcTotal = 0, refTotal = 0;
   for (const std::string& path : paths) {
     opened.push_back(MtFileReader::open(path));
     nodeTotal += opened.back()->nodes().size();
     arcTotal += opened.back()->arcs().size();
     refTotal += opened.back()->patchRefs().size();
-    patchTotal += opened.back()->patches().size();
   }
   nodes_.reserve(nodeTotal);
   arcs_.reserve(arcTotal);
   inArcs_.reserve(arcTotal);
   arcPatches_.reserve(refTotal);
-  patches_.reserve(patchTotal);
   for (auto& reader : opened) {
     const std::string& path = reader->path();
     const auto& h = reader->header();
     const uint32_t file = uint32_t(readers_.size());
     const uint32_t nodeBase = uint32_t(nodes_.size()), arcBase = uint32_t(arcs_.size());
-    const uint32_t patchBase = uint32_t(patches_.size());
+    const uint32_t patchBase = patchCount_;
     if (uint64_t(nodeBase) + h.nodeCount > UINT32_MAX || uint64_t(patchBase) + h.patchCount > UINT32_MAX)
       fail(path, "the scene has more than 2^32 nodes or patches");
     patchBase_.push_back(patchBase);
+    arcBase_.push_back(arcBase);
     if (h.vertexFlags & format::kHasColors) hasColors_ = true;
     for (int a = 0; a < 3; ++a) {
       boundsMin[a] = std::min(boundsMin[a], h.boundsMin[a]);
@@ -86,8 +85,7 @@ Scene::Scene(const std::vector<std::string>& paths) {
       s.cullNode = a.from == 0 ? s.to : s.from;
       arcs_.push_back(s);
     }
-    for (const auto& p : reader->patches())
-      patches_.push_back({file, uint32_t(patches_.size()) - patchBase, arcBase + p.arc, p.triangles, p.vertices, p.size});
+    patchCount_ += uint32_t(reader->patches().size());
     surfaces_.push_back(ClosedSurface::ofFile(*reader));
     readers_.push_back(std::move(reader));
   }
@@ -126,7 +124,7 @@ void Scene::forEachMoveGroup(const std::function<void(const uint32_t* ids, size_
 }
 
 uint64_t Scene::decodedBytesBound(uint32_t patch) const {
-  const ScenePatch& p = patches_[patch];
+  const ScenePatch p = this->patch(patch);
   uint64_t v = p.vertices;
   // Draco may split non-manifold vertices on decode (mt_format.h); allow a quarter more.
   if (readers_[p.file]->codec() == format::Codec::Draco) v = std::min<uint64_t>(3ull * p.triangles, v + v / 4 + 64);

@@ -9,13 +9,13 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
 
 #include "mtfile/mt_file.h"
 #include "mtrender/closed_surface.h"
-#include "mtrender/patch_cache.h"
 
 namespace mt::render {
 
@@ -41,6 +41,9 @@ struct SceneArc {
   uint32_t cullNode;  // node whose sphere/cone bounds the arc's patches (from, or to for a source)
 };
 
+// A patch as the scene sees it (Scene::patch), made from its file's record when asked for: a
+// billion-triangle file has 1.2 M patches, and a copy of them all was 29 MB of fresh memory to
+// fault in at open.
 struct ScenePatch {
   uint32_t file;
   uint32_t local;      // patch id inside its file
@@ -58,7 +61,12 @@ class Scene {
   const std::vector<SceneArc>& arcs() const { return arcs_; }
   const std::vector<uint32_t>& inArcs() const { return inArcs_; }
   const std::vector<uint32_t>& arcPatches() const { return arcPatches_; }
-  const std::vector<ScenePatch>& patches() const { return patches_; }
+  size_t patchCount() const { return patchCount_; }
+  ScenePatch patch(uint32_t id) const {
+    const uint32_t file = fileOfPatch(id), local = id - patchBase_[file];
+    const format::PatchRecord& r = readers_[file]->patches()[local];
+    return {file, local, arcBase_[file] + r.arc, r.triangles, r.vertices, r.size};
+  }
   const std::vector<uint32_t>& sources() const { return sources_; }
   const std::vector<uint32_t>& sinks() const { return sinks_; }
   size_t fileCount() const { return readers_.size(); }
@@ -84,7 +92,7 @@ class Scene {
   // drawing: floats hold small offsets from it, so a model millions of units from the origin keeps
   // its centimetres; the GL backend composes the model-view matrix in double). It is the centre
   // of the sphere that bounds the patch (the arc's cull node).
-  const double* patchOrigin(uint32_t patch) const { return nodes_[arcs_[patches_[patch].arc].cullNode].center; }
+  const double* patchOrigin(uint32_t patch) const { return nodes_[arcs_[this->patch(patch).arc].cullNode].center; }
   // For each node but the sources, the patches one move on it needs resident together (its in- and
   // out-patches; for a sink, the coarsest cut), for PatchCache's per-class floor (MoveGroups).
   void forEachMoveGroup(const std::function<void(const uint32_t* ids, size_t count)>& group) const;
@@ -100,8 +108,8 @@ class Scene {
   std::vector<std::unique_ptr<MtFileReader>> readers_;
   std::vector<SceneNode> nodes_;
   std::vector<SceneArc> arcs_;
-  std::vector<uint32_t> inArcs_, arcPatches_, patchBase_;
-  std::vector<ScenePatch> patches_;
+  std::vector<uint32_t> inArcs_, arcPatches_, patchBase_, arcBase_;
+  uint32_t patchCount_ = 0;
   std::vector<uint32_t> sources_, sinks_;
   bool hasColors_ = false;
   std::vector<ClosedSurface> surfaces_;

@@ -303,7 +303,7 @@ TEST(MtFile, RangesReadInParallelChunksGiveTheSameBytes) {
       EXPECT_EQ(out[i], bytes.substr(size_t(spans[i].first), spans[i].second)) << "range " << i << " parallelFrom " << parallelFrom;
     EXPECT_EQ(counting.reads, parallelFrom ? 2 : 6) << "one read per non-empty range, or one per MiB chunk";
   }
-  // Every read from the third on fails in turn: the error is an Io error at a chunk's start.
+  // Each read in turn (the 1st to the 6th) fails: an Io error naming a chunk's start.
   for (int64_t n = 1; n <= 6; ++n) {
     FaultInjectionEnv env(Env::Default());
     env.failAfter(FaultInjectionEnv::Op::Read, n);
@@ -322,6 +322,30 @@ TEST(MtFile, RangesReadInParallelChunksGiveTheSameBytes) {
       EXPECT_EQ(chunkStarts.count(what.substr(prefix.size())), 1u) << what;
     }
   }
+  // Two chunks fail: the one first in the file is named, whatever the threads' timing, on both paths.
+  struct FailsAt : RandomAccessFile {
+    const RandomAccessFile& base;
+    std::set<uint64_t> bad;
+    FailsAt(const RandomAccessFile& b, std::set<uint64_t> at) : base(b), bad(std::move(at)) {}
+    void read(uint64_t offset, size_t size, void* out) const override {
+      if (bad.count(offset)) throw Error("failed at byte offset " + std::to_string(offset), ErrorKind::Io);
+      base.read(offset, size, out);
+    }
+    uint64_t size() const override { return base.size(); }
+  };
+  auto plain = Env::Default()->newRandomAccessFile(path);
+  for (uint64_t parallelFrom : {uint64_t(0), uint64_t(1) << 40})
+    for (int round = 0; round < 20; ++round) {
+      std::string a(2345678, '\0'), b(2999983, '\0');
+      std::vector<FileRange> ranges = {{2900000, a.size(), a.data()}, {17, b.size(), b.data()}};
+      const FailsAt file(*plain, parallelFrom ? std::set<uint64_t>{2900000, 17} : std::set<uint64_t>{1048593, 3948576});
+      try {
+        readRanges(file, ranges, parallelFrom);
+        ADD_FAILURE() << "no failure";
+      } catch (const Error& e) {
+        EXPECT_EQ(std::string(e.what()), parallelFrom ? "failed at byte offset 17" : "failed at byte offset 1048593") << "round " << round;
+      }
+    }
 }
 
 // The resume constructor continues the temporary file at the checkpoint's length: bytes written

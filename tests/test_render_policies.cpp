@@ -311,7 +311,7 @@ TEST_F(RenderPolicies, AFullCacheRaisesTheLodScaleAndRelaxesItWithoutOscillation
   eo.memoryFraction = 0.3;  // the cut may pin 30% of the place holders
   ExtractRender ex(rig.scene, rig.cache.get(), rig.server.get(), eo);
   ex.start(10000);
-  ASSERT_LT(double(rig.cache->stats().slots), double(rig.scene.patches().size()));
+  ASSERT_LT(double(rig.cache->stats().slots), double(rig.scene.patchCount()));
   CameraPose close;
   close.target = rig.center;
   close.eye = rig.center + rig.radius * glm::dvec3(0, -0.9, 0.5);

@@ -30,7 +30,7 @@ struct RenderRig {
   explicit RenderRig(const std::vector<std::string>& files, uint64_t cacheBytes = 16ull << 20,
                      render::PatchServer::Options serverOptions = {}, bool classFloor = true)
       : scene(files) {
-    std::vector<uint64_t> bounds(scene.patches().size());
+    std::vector<uint64_t> bounds(scene.patchCount());
     for (uint32_t p = 0; p < bounds.size(); ++p) bounds[p] = scene.decodedBytesBound(p);
     cache = classFloor ? std::make_unique<render::PatchCache>(cacheBytes, bounds,
                                                               [this](const auto& group) { scene.forEachMoveGroup(group); })

@@ -107,14 +107,14 @@ TEST_F(TexturedBuild, RamCacheHoldsAndCountsTheTexels) {
   // Every textured patch's bound includes its texels; load a few of them.
   std::vector<LoadRequest> want;
   uint64_t textured = 0;
-  for (uint32_t p = 0; p < sc.patches().size(); ++p) {
-    const auto& rec = reader.textures()[sc.patches()[p].local];
+  for (uint32_t p = 0; p < sc.patchCount(); ++p) {
+    const auto& rec = reader.textures()[sc.patch(p).local];
     if (rec.size == 0) continue;
     ++textured;
-    EXPECT_GE(sc.decodedBytesBound(p), uint64_t(sc.patches()[p].triangles) * 12 + uint64_t(rec.width) * rec.height * 3);
+    EXPECT_GE(sc.decodedBytesBound(p), uint64_t(sc.patch(p).triangles) * 12 + uint64_t(rec.width) * rec.height * 3);
     if (want.size() < 8 && (p % 7) == 0) want.push_back({p, Urgency::UrgentDown});
   }
-  ASSERT_GT(textured, sc.patches().size() / 2) << "most patches carry an atlas";
+  ASSERT_GT(textured, sc.patchCount() / 2) << "most patches carry an atlas";
   ASSERT_FALSE(want.empty());
   rig.server->submit(want, 1);
   ASSERT_TRUE(rig.server->waitIdle(60000));
@@ -125,7 +125,7 @@ TEST_F(TexturedBuild, RamCacheHoldsAndCountsTheTexels) {
     const uint32_t id = r.id;
     ASSERT_TRUE(rig.cache->pinAll(&id, 1));
     const PatchView v = rig.cache->view(id);
-    const auto& rec = reader.textures()[sc.patches()[id].local];
+    const auto& rec = reader.textures()[sc.patch(id).local];
     ASSERT_TRUE(v.textured());
     EXPECT_EQ(v.texWidth, rec.width);
     EXPECT_EQ(v.texHeight, rec.height);
@@ -133,8 +133,8 @@ TEST_F(TexturedBuild, RamCacheHoldsAndCountsTheTexels) {
                              uint64_t(rec.width) * rec.height * 3);
     viewBytes += v.bytes();
     // The texels are the stored image's, bottom row first.
-    const mt::DecodedPatch d = reader.readPatch(sc.patches()[id].local);
-    const mt::TexturePayload t = reader.readTexture(sc.patches()[id].local, d);
+    const mt::DecodedPatch d = reader.readPatch(sc.patch(id).local);
+    const mt::TexturePayload t = reader.readTexture(sc.patch(id).local, d);
     const mt::tex::RgbImage img = mt::tex::decodeAnyImage(t.image.data(), t.image.size(), "atlas");
     for (int y : {0, int(rec.height) / 2, int(rec.height) - 1})
       for (int x : {0, int(rec.width) / 3, int(rec.width) - 1})
@@ -154,7 +154,7 @@ TEST_F(TexturedBuild, GpuSplitsVerticesAndCountsTheAtlas) {
   mt::test::RenderRig rig({mt()}, 64ull << 20);
   const auto& reader = rig.scene.reader(0);
   uint32_t id = 0;
-  while (reader.textures()[rig.scene.patches()[id].local].size == 0) ++id;
+  while (reader.textures()[rig.scene.patch(id).local].size == 0) ++id;
   rig.server->submit({{id, Urgency::UrgentDown}}, 1);
   ASSERT_TRUE(rig.server->waitIdle(60000));
   ASSERT_TRUE(rig.cache->pinAll(&id, 1));
@@ -263,9 +263,9 @@ TEST_F(TexturedBuild, ShadedDrawingLoadsNoTexels) {
   Scene withTexels({mt()}), without({mt()});
   without.setLoadTextures(false);
   uint64_t texelBytes = 0;
-  for (uint32_t p = 0; p < withTexels.patches().size(); ++p) {
-    const auto& rec = withTexels.reader(0).textures()[withTexels.patches()[p].local];
-    const uint64_t expected = rec.size ? renderTextureBytes(withTexels.patches()[p].triangles, rec.width, rec.height) : 0;
+  for (uint32_t p = 0; p < withTexels.patchCount(); ++p) {
+    const auto& rec = withTexels.reader(0).textures()[withTexels.patch(p).local];
+    const uint64_t expected = rec.size ? renderTextureBytes(withTexels.patch(p).triangles, rec.width, rec.height) : 0;
     EXPECT_EQ(withTexels.decodedBytesBound(p), without.decodedBytesBound(p) + expected) << "patch " << p;
     texelBytes += expected;
   }
