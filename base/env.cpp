@@ -241,13 +241,13 @@ void readRanges(const RandomAccessFile& file, const std::vector<FileRange>& rang
   constexpr unsigned kReaders = 4;
   uint64_t total = 0;
   for (const FileRange& r : ranges) total += r.bytes;
-  // In file order, so that the first failure in it is the one thrown on either path.
   const bool parallel = total >= parallelFrom;
   const size_t chunk = parallel ? kChunk : SIZE_MAX;  // one read a range when not parallel
   std::vector<FileRange> chunks;
   for (const FileRange& r : ranges)
     for (size_t at = 0; at < r.bytes; at += std::min(chunk, r.bytes - at))
       chunks.push_back({r.offset + at, std::min(chunk, r.bytes - at), static_cast<char*>(r.to) + at});
+  // In file order, so that the first failure in it is the one thrown on either path.
   std::sort(chunks.begin(), chunks.end(), [](const FileRange& a, const FileRange& b) { return a.offset < b.offset; });
   if (!parallel) {
     for (const FileRange& c : chunks) file.read(c.offset, c.bytes, c.to);

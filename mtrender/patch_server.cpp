@@ -14,8 +14,9 @@ namespace mt::render {
 std::pair<uint32_t, uint32_t> decodeInto(const Scene& scene, uint32_t id, const DecodedPatch& p, uint8_t* out,
                                          uint64_t capacity, PatchBound* bound) {
   const uint32_t nv = p.vertexCount(), nt = p.triangleCount();
+  const ScenePatch sp = scene.patch(id);
   if (renderPatchBytes(nv, nt) > capacity)
-    throw Error("patch " + std::to_string(scene.patch(id).local) + ": decodes to " +
+    throw Error("patch " + std::to_string(sp.local) + ": decodes to " +
                 std::to_string(renderPatchBytes(nv, nt)) + " bytes, more than its place holder (" +
                 std::to_string(capacity) + ")");
   auto* v = reinterpret_cast<RenderVertex*>(out);
@@ -23,7 +24,7 @@ std::pair<uint32_t, uint32_t> decodeInto(const Scene& scene, uint32_t id, const 
   std::memcpy(idx, p.triangles.data(), p.triangles.size() * sizeof(uint32_t));
   // Positions relative to the patch's origin, in double from the exact grid coordinates: the
   // file's floats (origin + step * q rounded to float) lose centimetres millions of units out.
-  const QuantizationGrid& grid = scene.reader(scene.patch(id).file).grid();
+  const QuantizationGrid& grid = scene.reader(sp.file).grid();
   const double* origin = scene.patchOrigin(id);
   for (uint32_t i = 0; i < nv; ++i)
     for (int a = 0; a < 3; ++a) v[i].position[a] = float(grid.dequantize(a, p.q[3 * i + a]) - origin[a]);
