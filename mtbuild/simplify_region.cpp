@@ -280,10 +280,9 @@ double meanEdgeLength(const double* positions, const uint32_t* triangles, size_t
 // Deterministic; usually runs once. Fills `kept`; returns the number of runs.
 int simplifyWithRules(Run& run, const double* positions, size_t vertexCount, const uint32_t* triangles,
                       size_t indexCount, const uint8_t* locked, const std::vector<uint8_t>& used,
-                      const SimplifyRegionOptions& options, std::vector<uint8_t>& kept) {
+                      const Adjacency& adjacency, const SimplifyRegionOptions& options, std::vector<uint8_t>& kept) {
   const bool quadric = options.simplifier == RegionSimplifier::Quadric;
   const size_t targetIndexCount = std::min(options.targetTriangles * 3, indexCount);
-  Adjacency adjacency(triangles, indexCount, vertexCount);
   std::vector<uint8_t> lock(vertexCount, 0), bad(vertexCount);
   if (locked)
     for (size_t v = 0; v < vertexCount; ++v) lock[v] = locked[v] ? 1 : 0;
@@ -371,14 +370,15 @@ void assembleResult(SimplifiedRegion& r, const Run& run, const double* positions
 // other surface:
 //   (a) input -> result: every input vertex no result vertex sits on (removed or moved);
 //   (b) result -> input: moved vertices, and the centroids and edge midpoints of result triangles,
-//       except for the result triangles that are input triangles with unmoved corners.
+//       except for the result triangles that are input triangles with unmoved corners, and for
+//       the edges that are input edges between unmoved vertices (both lie on the input).
 // Each query only has to decide whether its sample is farther than the worst so far
 // (TriangleGrid::distance2Above), which most samples are not; the value is the same as computing
 // every sample's distance exactly. A strided subset of all samples goes first so the running worst
 // is large early and the other queries stop at their first close triangle.
 double measureError(const SimplifiedRegion& r, const Run& run, const double* positions, size_t vertexCount,
                     const uint32_t* triangles, size_t indexCount, const std::vector<uint8_t>& used,
-                    const std::vector<uint8_t>& kept) {
+                    const std::vector<uint8_t>& kept, const Adjacency& adjacency) {
   const std::vector<uint32_t>& out = run.out;
   auto moved = [&](uint32_t v) { return !run.moved.empty() && run.moved[v]; };
   const double* at = run.positions.empty() ? positions : run.positions.data();  // result positions by input id
@@ -395,13 +395,20 @@ double measureError(const SimplifiedRegion& r, const Run& run, const double* pos
     if (i < indexCount && out[t] == triangles[i] && out[t + 1] == triangles[i + 1] && out[t + 2] == triangles[i + 2])
       onInput[t / 3] = 1, i += 3;
   }
-  std::vector<uint64_t> edges;  // (lower, higher) input vertex ids of the queried triangles' edges
+  // (lower, higher) input vertex ids of the queried triangles' edges. An edge of the input
+  // between two unmoved vertices needs no query either: its midpoint lies on an input triangle
+  // (a half-edge collapse keeps the edges opposite the removed vertex, so many result edges are
+  // input edges). Its computed distance would be zero up to rounding (~1e-16 of the coordinates),
+  // so the max changes only where every other sample is nearer still: never above that rounding,
+  // and the stored float error is the max plus the quantization error.
+  std::vector<uint64_t> edges;
   edges.reserve(out.size());
   for (size_t t = 0; t < out.size() / 3; ++t)
     if (!onInput[t])
       for (int e = 0; e < 3; ++e) {
-        const uint64_t a = out[t * 3 + e], b = out[t * 3 + (e + 1) % 3];
-        edges.push_back(a < b ? a << 32 | b : b << 32 | a);
+        const uint32_t a = out[t * 3 + e], b = out[t * 3 + (e + 1) % 3];
+        if (still(a) && still(b) && adjacency.uses(a, b) > 0) continue;
+        edges.push_back(a < b ? uint64_t(a) << 32 | b : uint64_t(b) << 32 | a);
       }
   std::sort(edges.begin(), edges.end());
   edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
@@ -453,12 +460,13 @@ SimplifiedRegion simplifyRegion(const double* positions, size_t vertexCount, con
   Run run;
   std::vector<uint8_t> kept(vertexCount);
   SimplifiedRegion r;
-  r.attempts = uint32_t(simplifyWithRules(run, positions, vertexCount, triangles, indexCount, locked, used, options, kept));
+  const Adjacency adjacency(triangles, indexCount, vertexCount);
+  r.attempts = uint32_t(simplifyWithRules(run, positions, vertexCount, triangles, indexCount, locked, used, adjacency, options, kept));
   assembleResult(r, run, positions, kept, options.colors);
   if (options.simplifier == RegionSimplifier::Meshopt && vertexCount)
     r.quadricError = double(run.relError) * double(meshopt_simplifyScale(run.pos.data(), vertexCount, 12));
   if (options.measureError && (run.out.size() < indexCount || r.movedVertices))
-    r.error = measureError(r, run, positions, vertexCount, triangles, indexCount, used, kept);
+    r.error = measureError(r, run, positions, vertexCount, triangles, indexCount, used, kept, adjacency);
   if (options.measureError && options.colors && (run.out.size() < indexCount || r.movedVertices || !run.colors.empty())) {
     ColorErrorInput ce;
     ce.positions = positions;
