@@ -1,6 +1,7 @@
 #include "base/process.h"
 
 #include <malloc.h>
+#include <sys/mman.h>
 #include <sys/resource.h>
 #include <unistd.h>
 
@@ -73,6 +74,27 @@ void reexecWithMallocHugePages(char** argv) {
   // The exec failed: run on without the tunable (and leave the variable as it was).
   if (had) setenv("GLIBC_TUNABLES", tunables.c_str(), 1);
   else unsetenv("GLIBC_TUNABLES");
+}
+
+void adviseHugePages(void* data, uint64_t bytes) {
+#ifdef MADV_HUGEPAGE
+  constexpr uint64_t kHuge = uint64_t(2) << 20;
+  if (bytes < 2 * kHuge || !data) return;
+  // The environment and the kernel's mode, read once.
+  static const bool enabled = [] {
+    const char* no = std::getenv("MT_NO_HUGEPAGES");
+    if (no && std::strcmp(no, "1") == 0) return false;
+    std::ifstream thp("/sys/kernel/mm/transparent_hugepage/enabled");
+    std::string modes;
+    return std::getline(thp, modes) && modes.find("[never]") == std::string::npos;
+  }();
+  if (!enabled) return;
+  const uint64_t begin = (reinterpret_cast<uintptr_t>(data) + kHuge - 1) & ~(kHuge - 1);
+  const uint64_t end = (reinterpret_cast<uintptr_t>(data) + bytes) & ~(kHuge - 1);
+  if (end > begin) madvise(reinterpret_cast<void*>(begin), end - begin, MADV_HUGEPAGE);  // advice: failure is harmless
+#else
+  (void)data, (void)bytes;
+#endif
 }
 
 }  // namespace mt

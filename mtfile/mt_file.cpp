@@ -16,6 +16,7 @@
 #include "base/buffered_file.h"
 #include "base/fuzzing.h"
 #include "base/error.h"
+#include "base/process.h"
 
 namespace mt {
 
@@ -391,6 +392,8 @@ void MtFileReader::readIndex(const Footer& f) {
   std::vector<FileRange> pieces;
   auto take = [&](uint64_t off, auto* dst, uint64_t count) {
     using T = typename std::remove_pointer_t<decltype(dst)>::value_type;
+    dst->reserve(size_t(count));
+    adviseHugePages(dst->data(), count * sizeof(T));  // before the first touch (resize zeroes it)
     dst->resize(size_t(count));
     if (count) pieces.push_back({off, size_t(count) * sizeof(T), dst->data()});
   };

@@ -3,6 +3,7 @@
 // mtbuild's stats JSON prints the plan it ran with.
 #include <gtest/gtest.h>
 
+#include <fstream>
 #include <string>
 
 #include "base/memory_plan.h"
@@ -179,6 +180,39 @@ TEST(MemoryPlan, BothIngestPathsGiveTheSameStore) {
   }
   EXPECT_GT(segments[0].size(), 100000u);
   EXPECT_TRUE(segments[0] == segments[1]) << "the chunked (32M) and resident (512M) paths differ";
+}
+
+// reexecWithMallocHugePages (mtbuild, mtverify, mtextract and mtrender call it first): the process
+// it ends in has glibc.malloc.hugetlb=1 appended to the user's own tunables, the same arguments
+// and MT_HUGEPAGES_REEXEC=1, or, when the user chose (MT_NO_HUGEPAGES=1, a hugetlb tunable of
+// their own) or the kernel has no huge pages, is the process it started in, with the
+// environment as it was.
+TEST(MemoryPlan, HugePageReexecKeepsTheUsersChoiceAndTheArguments) {
+  std::ifstream thp("/sys/kernel/mm/transparent_hugepage/enabled");
+  std::string modes;
+  const bool kernelHasThem = std::getline(thp, modes) && modes.find("[never]") == std::string::npos;
+  const std::string clean = "env -u GLIBC_TUNABLES -u MT_NO_HUGEPAGES -u MT_HUGEPAGES_REEXEC ";
+  const std::string probe = binDir() + "/reexec_probe 'two words' --x 7";
+  auto run = [&](const std::string& env) {
+    CommandResult r = runShell(clean + env + " " + probe);
+    EXPECT_EQ(r.exitCode, 0) << r.output;
+    EXPECT_NE(r.output.find("\nargs=two words --x 7\n"), std::string::npos) << r.output;
+    return r.output;
+  };
+  std::string out = run("");
+  if (kernelHasThem) {
+    EXPECT_NE(out.find("tunables=glibc.malloc.hugetlb=1\nreexec=1\n"), std::string::npos) << out;
+  } else {
+    EXPECT_NE(out.find("tunables=(unset)\nreexec=(unset)\n"), std::string::npos) << out;
+  }
+  out = run("GLIBC_TUNABLES=glibc.malloc.arena_max=2");
+  if (kernelHasThem) {
+    EXPECT_NE(out.find("tunables=glibc.malloc.arena_max=2:glibc.malloc.hugetlb=1\nreexec=1\n"), std::string::npos) << out;
+  }
+  out = run("GLIBC_TUNABLES=glibc.malloc.hugetlb=0");
+  EXPECT_NE(out.find("tunables=glibc.malloc.hugetlb=0\nreexec=(unset)\n"), std::string::npos) << out;
+  out = run("MT_NO_HUGEPAGES=1");
+  EXPECT_NE(out.find("tunables=(unset)\nreexec=(unset)\n"), std::string::npos) << out;
 }
 
 }  // namespace

@@ -9,6 +9,7 @@
 
 #include "base/env.h"
 #include "base/error.h"
+#include "base/process.h"
 #include "mtfile/mt_file.h"
 #include "testing/scan_grid.h"
 #include "tests/test_support.h"
@@ -278,6 +279,25 @@ TEST(MtFile, FailingReadNamesTheOffset) {
     EXPECT_EQ(std::string(e.what()), b.path + ": injected read failure at byte offset " + std::to_string(r->patches()[2].offset));
   }
   EXPECT_EQ(r->readPayload(2), b.payloads[2]) << "the next read succeeds";
+}
+
+// adviseHugePages is advice only: whatever the buffer holds before and whatever is written after
+// stays, for any start (aligned or not) and size (below its 4 MiB floor, or many huge pages).
+TEST(MtFile, HugePageAdviceKeepsEveryByte) {
+  std::vector<uint64_t> big(3 * 1024 * 1024 + 7);  // ~24 MiB: several 2 MiB pages inside
+  for (size_t i = 0; i < big.size(); ++i) big[i] = i * 0x9E3779B97F4A7C15ull;
+  adviseHugePages(big.data(), big.size() * 8);                               // written before
+  adviseHugePages(reinterpret_cast<char*>(big.data()) + 3, big.size() * 8 - 3);  // unaligned
+  adviseHugePages(big.data(), 4096);                                          // below the floor
+  adviseHugePages(nullptr, uint64_t(1) << 30);
+  for (size_t i = 0; i < big.size(); ++i) ASSERT_EQ(big[i], i * 0x9E3779B97F4A7C15ull) << "word " << i;
+  std::vector<uint32_t> fresh;
+  fresh.reserve(5 * 1024 * 1024);
+  adviseHugePages(fresh.data(), fresh.capacity() * 4);  // the reader's use: before the first touch
+  fresh.resize(fresh.capacity());
+  for (uint32_t v : fresh) ASSERT_EQ(v, 0u);
+  for (size_t i = 0; i < fresh.size(); ++i) fresh[i] = uint32_t(i ^ 0x5a5a5a5au);
+  for (size_t i = 0; i < fresh.size(); ++i) ASSERT_EQ(fresh[i], uint32_t(i ^ 0x5a5a5a5au)) << "word " << i;
 }
 
 // readRanges (the reader's index read): a large read in 1 MiB chunks by several threads gives

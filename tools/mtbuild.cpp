@@ -12,9 +12,6 @@
 #include "patchstore/patch_store.h"
 #include "tools/build_cli.h"
 
-// The least --memory at which mtbuild runs glibc's malloc on huge pages (see main).
-constexpr uint64_t kHugePagesFromMemory = 256ull << 20;
-
 int main(int argc, char** argv) {
   CLI::App app{
       "mtbuild: batch-build a multiresolution MT file (a DAG of simplified, compressed patches) from a\n"
@@ -32,7 +29,7 @@ int main(int argc, char** argv) {
   // "Where the CPU goes"): fewer page faults and TLB misses over the region buffers, the same
   // bytes. Below 256M a 2 MiB page's unused part weighs on the cap.
   try {
-    if (mt::tools::parseBuildMemory(cli.memory) >= kHugePagesFromMemory) mt::reexecWithMallocHugePages(argv);
+    if (mt::tools::parseBuildMemory(cli.memory) >= mt::kMallocHugePagesFromMemory) mt::reexecWithMallocHugePages(argv);
   } catch (const mt::Error&) {
     // an unusable --memory is refused below, with its range
   }
