@@ -78,7 +78,7 @@ void reexecWithMallocHugePages(char** argv) {
 
 void adviseHugePages(void* data, uint64_t bytes) {
 #ifdef MADV_HUGEPAGE
-  constexpr uint64_t kHuge = uint64_t(2) << 20;
+  constexpr uintptr_t kHuge = uintptr_t(2) << 20;
   if (bytes < 2 * kHuge || !data) return;
   // The environment and the kernel's mode, read once.
   static const bool enabled = [] {
@@ -89,8 +89,8 @@ void adviseHugePages(void* data, uint64_t bytes) {
     return std::getline(thp, modes) && modes.find("[never]") == std::string::npos;
   }();
   if (!enabled) return;
-  const uint64_t begin = (reinterpret_cast<uintptr_t>(data) + kHuge - 1) & ~(kHuge - 1);
-  const uint64_t end = (reinterpret_cast<uintptr_t>(data) + bytes) & ~(kHuge - 1);
+  const uintptr_t begin = (reinterpret_cast<uintptr_t>(data) + kHuge - 1) & ~uintptr_t(kHuge - 1);
+  const uintptr_t end = (reinterpret_cast<uintptr_t>(data) + uintptr_t(bytes)) & ~uintptr_t(kHuge - 1);
   if (end > begin) madvise(reinterpret_cast<void*>(begin), end - begin, MADV_HUGEPAGE);  // advice: failure is harmless
 #else
   (void)data, (void)bytes;

@@ -366,19 +366,39 @@ void assembleResult(SimplifiedRegion& r, const Run& run, const double* positions
   for (size_t i = 0; i < run.out.size(); ++i) r.triangles[i] = remap[run.out[i]];
 }
 
+// Per result triangle, bit e set when its edge from corner e to corner e + 1 is an edge of the
+// input between two unmoved vertices: the segment then lies on an input triangle (a half-edge
+// collapse keeps the edges opposite the removed vertex, so many result edges are such), its true
+// distance from the input is 0, and measureError queries no midpoint for it. Marked while the
+// adjacency exists (it is freed before the result and the grids are built, as it was before).
+std::vector<uint8_t> markInputEdges(const Run& run, const std::vector<uint8_t>& kept, const Adjacency& adjacency) {
+  const std::vector<uint32_t>& out = run.out;
+  auto still = [&](uint32_t v) { return kept[v] && (run.moved.empty() || !run.moved[v]); };
+  std::vector<uint8_t> mask(out.size() / 3, 0);
+  for (size_t t = 0; t < mask.size(); ++t)
+    for (int e = 0; e < 3; ++e) {
+      const uint32_t a = out[t * 3 + e], b = out[t * 3 + (e + 1) % 3];
+      if (still(a) && still(b) && adjacency.uses(a, b) > 0) mask[t] |= uint8_t(1u << e);
+    }
+  return mask;
+}
+
 // The measured error (SimplifiedRegion::error): the max over samples of the exact distance to the
 // other surface:
 //   (a) input -> result: every input vertex no result vertex sits on (removed or moved);
 //   (b) result -> input: moved vertices, and the centroids and edge midpoints of result triangles,
 //       except for the result triangles that are input triangles with unmoved corners, and for
-//       the edges that are input edges between unmoved vertices (both lie on the input).
+//       the edges that are input edges between unmoved vertices (markInputEdges): both lie on
+//       the input. Their true distance is 0; the value a query computed for them could exceed it
+//       only by rounding, or on a (near-)degenerate input triangle (pointTriangle2's interior
+//       case), so leaving them out never raises the error.
 // Each query only has to decide whether its sample is farther than the worst so far
 // (TriangleGrid::distance2Above), which most samples are not; the value is the same as computing
 // every sample's distance exactly. A strided subset of all samples goes first so the running worst
 // is large early and the other queries stop at their first close triangle.
 double measureError(const SimplifiedRegion& r, const Run& run, const double* positions, size_t vertexCount,
                     const uint32_t* triangles, size_t indexCount, const std::vector<uint8_t>& used,
-                    const std::vector<uint8_t>& kept, const Adjacency& adjacency) {
+                    const std::vector<uint8_t>& kept, const std::vector<uint8_t>& inputEdges) {
   const std::vector<uint32_t>& out = run.out;
   auto moved = [&](uint32_t v) { return !run.moved.empty() && run.moved[v]; };
   const double* at = run.positions.empty() ? positions : run.positions.data();  // result positions by input id
@@ -395,19 +415,15 @@ double measureError(const SimplifiedRegion& r, const Run& run, const double* pos
     if (i < indexCount && out[t] == triangles[i] && out[t + 1] == triangles[i + 1] && out[t + 2] == triangles[i + 2])
       onInput[t / 3] = 1, i += 3;
   }
-  // (lower, higher) input vertex ids of the queried triangles' edges. An edge of the input
-  // between two unmoved vertices needs no query either: its midpoint lies on an input triangle
-  // (a half-edge collapse keeps the edges opposite the removed vertex, so many result edges are
-  // input edges). Its computed distance would be zero up to rounding (~1e-16 of the coordinates),
-  // so the max changes only where every other sample is nearer still: never above that rounding,
-  // and the stored float error is the max plus the quantization error.
+  // (lower, higher) input vertex ids of the queried triangles' edges, less the input edges
+  // between unmoved vertices (markInputEdges).
   std::vector<uint64_t> edges;
   edges.reserve(out.size());
   for (size_t t = 0; t < out.size() / 3; ++t)
     if (!onInput[t])
       for (int e = 0; e < 3; ++e) {
+        if ((inputEdges[t] >> e) & 1) continue;
         const uint32_t a = out[t * 3 + e], b = out[t * 3 + (e + 1) % 3];
-        if (still(a) && still(b) && adjacency.uses(a, b) > 0) continue;
         edges.push_back(a < b ? uint64_t(a) << 32 | b : uint64_t(b) << 32 | a);
       }
   std::sort(edges.begin(), edges.end());
@@ -460,13 +476,17 @@ SimplifiedRegion simplifyRegion(const double* positions, size_t vertexCount, con
   Run run;
   std::vector<uint8_t> kept(vertexCount);
   SimplifiedRegion r;
-  const Adjacency adjacency(triangles, indexCount, vertexCount);
-  r.attempts = uint32_t(simplifyWithRules(run, positions, vertexCount, triangles, indexCount, locked, used, adjacency, options, kept));
+  std::vector<uint8_t> inputEdges;  // per result triangle (markInputEdges), for measureError
+  {
+    const Adjacency adjacency(triangles, indexCount, vertexCount);
+    r.attempts = uint32_t(simplifyWithRules(run, positions, vertexCount, triangles, indexCount, locked, used, adjacency, options, kept));
+    if (options.measureError) inputEdges = markInputEdges(run, kept, adjacency);
+  }
   assembleResult(r, run, positions, kept, options.colors);
   if (options.simplifier == RegionSimplifier::Meshopt && vertexCount)
     r.quadricError = double(run.relError) * double(meshopt_simplifyScale(run.pos.data(), vertexCount, 12));
   if (options.measureError && (run.out.size() < indexCount || r.movedVertices))
-    r.error = measureError(r, run, positions, vertexCount, triangles, indexCount, used, kept, adjacency);
+    r.error = measureError(r, run, positions, vertexCount, triangles, indexCount, used, kept, inputEdges);
   if (options.measureError && options.colors && (run.out.size() < indexCount || r.movedVertices || !run.colors.empty())) {
     ColorErrorInput ce;
     ce.positions = positions;

@@ -383,11 +383,16 @@ int main(int argc, char** argv) {
   o.hasTriangles = tri->count() > 0;
   o.hasEye = eye->count() > 0;
   o.hasTarget = target->count() > 0;
-  mt::installInterruptHandlers();
   try {
     o.memoryBytes = mt::cli::sizeOption(memory, "--memory", uint64_t(1) << 20, uint64_t(1) << 50, "1M", "1024T");
-    // glibc's malloc on transparent huge pages (base/process.h), as mtbuild and mtverify.
-    if (o.memoryBytes >= mt::kMallocHugePagesFromMemory) mt::reexecWithMallocHugePages(argv);
+  } catch (const std::exception& e) {
+    return mt::reportError("mtextract", e);
+  }
+  // glibc's malloc on transparent huge pages (base/process.h), as mtbuild and mtverify; before the
+  // interrupt handlers, so that no Ctrl-C can arrive in the image the exec replaces.
+  if (o.memoryBytes >= mt::kMallocHugePagesFromMemory) mt::reexecWithMallocHugePages(argv);
+  mt::installInterruptHandlers();
+  try {
     return run(o);
   } catch (const mt::Interrupted& e) {
     std::fprintf(stderr, "mtextract: %s; nothing was written\n", e.what());
