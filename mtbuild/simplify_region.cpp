@@ -366,20 +366,33 @@ void assembleResult(SimplifiedRegion& r, const Run& run, const double* positions
   for (size_t i = 0; i < run.out.size(); ++i) r.triangles[i] = remap[run.out[i]];
 }
 
-// Per result triangle, bit e set when its edge from corner e to corner e + 1 is an edge of the
-// input between two unmoved vertices: the segment then lies on an input triangle (a half-edge
-// collapse keeps the edges opposite the removed vertex, so many result edges are such), its true
-// distance from the input is 0, and measureError queries no midpoint for it. Marked while the
-// adjacency exists (it is freed before the result and the grids are built, as it was before).
-std::vector<uint8_t> markInputEdges(const Run& run, const std::vector<uint8_t>& kept, const Adjacency& adjacency) {
+// What measureError can leave out, per result triangle, marked while the rules' adjacency exists
+// (it is freed before the result and the grids are built). Samples on the input are at distance 0
+// from it and cannot raise the max:
+//  - kOnInput: the triangle is an input triangle with unmoved corners (a third of the result
+//    triangles at the level loop's halving). Both simplifiers keep the survivors in input order,
+//    so one merge-like walk finds them; a survivor out of order would only be queried like the
+//    others.
+//  - bit e, for the other triangles: the edge from corner e to corner e + 1 is an edge of the
+//    input between unmoved vertices, so it lies on an input triangle (a half-edge collapse keeps
+//    the edges opposite the removed vertex, so many result edges are such).
+constexpr uint8_t kOnInput = 8;
+std::vector<uint8_t> samplesOnInput(const Run& run, const std::vector<uint8_t>& kept, const uint32_t* triangles,
+                                    size_t indexCount, const Adjacency& adjacency) {
   const std::vector<uint32_t>& out = run.out;
   auto still = [&](uint32_t v) { return kept[v] && (run.moved.empty() || !run.moved[v]); };
   std::vector<uint8_t> mask(out.size() / 3, 0);
+  for (size_t t = 0, i = 0; t < out.size(); t += 3) {
+    while (i < indexCount && !(still(triangles[i]) && still(triangles[i + 1]) && still(triangles[i + 2]))) i += 3;
+    if (i < indexCount && out[t] == triangles[i] && out[t + 1] == triangles[i + 1] && out[t + 2] == triangles[i + 2])
+      mask[t / 3] = kOnInput, i += 3;
+  }
   for (size_t t = 0; t < mask.size(); ++t)
-    for (int e = 0; e < 3; ++e) {
-      const uint32_t a = out[t * 3 + e], b = out[t * 3 + (e + 1) % 3];
-      if (still(a) && still(b) && adjacency.uses(a, b) > 0) mask[t] |= uint8_t(1u << e);
-    }
+    if (!mask[t])
+      for (int e = 0; e < 3; ++e) {
+        const uint32_t a = out[t * 3 + e], b = out[t * 3 + (e + 1) % 3];
+        if (still(a) && still(b) && adjacency.uses(a, b) > 0) mask[t] |= uint8_t(1u << e);
+      }
   return mask;
 }
 
@@ -388,7 +401,7 @@ std::vector<uint8_t> markInputEdges(const Run& run, const std::vector<uint8_t>& 
 //   (a) input -> result: every input vertex no result vertex sits on (removed or moved);
 //   (b) result -> input: moved vertices, and the centroids and edge midpoints of result triangles,
 //       except for the result triangles that are input triangles with unmoved corners, and for
-//       the edges that are input edges between unmoved vertices (markInputEdges): both lie on
+//       the edges that are input edges between unmoved vertices (samplesOnInput): both lie on
 //       the input. Their true distance is 0; the value a query computed for them could exceed it
 //       only by rounding, or on a (near-)degenerate input triangle (pointTriangle2's interior
 //       case), so leaving them out never raises the error.
@@ -398,31 +411,21 @@ std::vector<uint8_t> markInputEdges(const Run& run, const std::vector<uint8_t>& 
 // is large early and the other queries stop at their first close triangle.
 double measureError(const SimplifiedRegion& r, const Run& run, const double* positions, size_t vertexCount,
                     const uint32_t* triangles, size_t indexCount, const std::vector<uint8_t>& used,
-                    const std::vector<uint8_t>& kept, const std::vector<uint8_t>& inputEdges) {
+                    const std::vector<uint8_t>& kept, const std::vector<uint8_t>& onInput) {
   const std::vector<uint32_t>& out = run.out;
   auto moved = [&](uint32_t v) { return !run.moved.empty() && run.moved[v]; };
   const double* at = run.positions.empty() ? positions : run.positions.data();  // result positions by input id
   TriangleGrid resultGrid(r.positions.data(), r.origin.size(), r.triangles.data(), r.triangleCount());
   TriangleGrid inputGrid(positions, vertexCount, triangles, indexCount / 3);
-  // Result triangles that are input triangles lie on the input: their samples need no query (a
-  // third of the result triangles at the level loop's halving). Both simplifiers keep the
-  // survivors in input order, so one merge-like walk finds them; a survivor out of order would
-  // only be queried like the others.
   auto still = [&](uint32_t v) { return kept[v] && !moved(v); };
-  std::vector<uint8_t> onInput(out.size() / 3, 0);
-  for (size_t t = 0, i = 0; t < out.size(); t += 3) {
-    while (i < indexCount && !(still(triangles[i]) && still(triangles[i + 1]) && still(triangles[i + 2]))) i += 3;
-    if (i < indexCount && out[t] == triangles[i] && out[t + 1] == triangles[i + 1] && out[t + 2] == triangles[i + 2])
-      onInput[t / 3] = 1, i += 3;
-  }
   // (lower, higher) input vertex ids of the queried triangles' edges, less the input edges
-  // between unmoved vertices (markInputEdges).
+  // between unmoved vertices (samplesOnInput).
   std::vector<uint64_t> edges;
   edges.reserve(out.size());
   for (size_t t = 0; t < out.size() / 3; ++t)
-    if (!onInput[t])
+    if (!(onInput[t] & kOnInput))
       for (int e = 0; e < 3; ++e) {
-        if ((inputEdges[t] >> e) & 1) continue;
+        if ((onInput[t] >> e) & 1) continue;
         const uint32_t a = out[t * 3 + e], b = out[t * 3 + (e + 1) % 3];
         edges.push_back(a < b ? uint64_t(a) << 32 | b : uint64_t(b) << 32 | a);
       }
@@ -440,7 +443,7 @@ double measureError(const SimplifiedRegion& r, const Run& run, const double* pos
       if (kept[v] && moved(uint32_t(v)) && ((k++ % kStride == 0) == (pass == 0)))
         worst2 = std::max(worst2, inputGrid.distance2Above(at + v * 3, worst2));
     for (size_t t = 0; t < out.size() / 3; ++t) {
-      if ((t % kStride == 0) != (pass == 0) || onInput[t]) continue;
+      if ((t % kStride == 0) != (pass == 0) || (onInput[t] & kOnInput)) continue;
       const double *p0 = at + size_t(out[t * 3]) * 3, *p1 = at + size_t(out[t * 3 + 1]) * 3,
                    *p2 = at + size_t(out[t * 3 + 2]) * 3;
       double c[3];
@@ -476,17 +479,17 @@ SimplifiedRegion simplifyRegion(const double* positions, size_t vertexCount, con
   Run run;
   std::vector<uint8_t> kept(vertexCount);
   SimplifiedRegion r;
-  std::vector<uint8_t> inputEdges;  // per result triangle (markInputEdges), for measureError
+  std::vector<uint8_t> onInput;  // per result triangle (samplesOnInput), for measureError
   {
     const Adjacency adjacency(triangles, indexCount, vertexCount);
     r.attempts = uint32_t(simplifyWithRules(run, positions, vertexCount, triangles, indexCount, locked, used, adjacency, options, kept));
-    if (options.measureError) inputEdges = markInputEdges(run, kept, adjacency);
+    if (options.measureError) onInput = samplesOnInput(run, kept, triangles, indexCount, adjacency);
   }
   assembleResult(r, run, positions, kept, options.colors);
   if (options.simplifier == RegionSimplifier::Meshopt && vertexCount)
     r.quadricError = double(run.relError) * double(meshopt_simplifyScale(run.pos.data(), vertexCount, 12));
   if (options.measureError && (run.out.size() < indexCount || r.movedVertices))
-    r.error = measureError(r, run, positions, vertexCount, triangles, indexCount, used, kept, inputEdges);
+    r.error = measureError(r, run, positions, vertexCount, triangles, indexCount, used, kept, onInput);
   if (options.measureError && options.colors && (run.out.size() < indexCount || r.movedVertices || !run.colors.empty())) {
     ColorErrorInput ce;
     ce.positions = positions;
