@@ -44,19 +44,33 @@ CpuSeconds processCpuSeconds() {
   return c;
 }
 
-void reexecWithMallocHugePages(char** argv) {
+namespace {
+
+// MT_NO_HUGEPAGES=1: the user turned huge pages off.
+bool hugePagesRefused() {
   const char* no = std::getenv("MT_NO_HUGEPAGES");
-  if (no && std::strcmp(no, "1") == 0) return;
+  return no && std::strcmp(no, "1") == 0;
+}
+
+// The kernel's transparent huge pages are on ("always [madvise] never": the bracketed word is the
+// mode in force); off when the mode is never or cannot be read.
+bool kernelHasHugePages() {
+  std::ifstream thp("/sys/kernel/mm/transparent_hugepage/enabled");
+  std::string modes;
+  return std::getline(thp, modes) && modes.find("[never]") == std::string::npos;
+}
+
+}  // namespace
+
+void reexecWithMallocHugePages(char** argv) {
+  if (hugePagesRefused()) return;
   // Once per run, whatever glibc makes of GLIBC_TUNABLES (2.36 rewrites the string in place).
   if (std::getenv("MT_HUGEPAGES_REEXEC")) return;
   const char* given = std::getenv("GLIBC_TUNABLES");
   if (given && std::strstr(given, "glibc.malloc.hugetlb")) return;
   const bool had = given != nullptr;
   const std::string tunables = had ? given : "";  // setenv may free what getenv returned
-  // "always [madvise] never": the bracketed word is the mode in force.
-  std::ifstream thp("/sys/kernel/mm/transparent_hugepage/enabled");
-  std::string modes;
-  if (!std::getline(thp, modes) || modes.find("[never]") != std::string::npos) return;
+  if (!kernelHasHugePages()) return;
   std::string value = tunables.empty() ? std::string() : tunables + ":";
   value += "glibc.malloc.hugetlb=1";
   if (setenv("GLIBC_TUNABLES", value.c_str(), 1) != 0 || setenv("MT_HUGEPAGES_REEXEC", "1", 1) != 0) return;
@@ -80,14 +94,7 @@ void adviseHugePages(void* data, uint64_t bytes) {
 #ifdef MADV_HUGEPAGE
   constexpr uintptr_t kHuge = uintptr_t(2) << 20;
   if (bytes < 2 * kHuge || !data) return;
-  // The environment and the kernel's mode, read once.
-  static const bool enabled = [] {
-    const char* no = std::getenv("MT_NO_HUGEPAGES");
-    if (no && std::strcmp(no, "1") == 0) return false;
-    std::ifstream thp("/sys/kernel/mm/transparent_hugepage/enabled");
-    std::string modes;
-    return std::getline(thp, modes) && modes.find("[never]") == std::string::npos;
-  }();
+  static const bool enabled = !hugePagesRefused() && kernelHasHugePages();  // read once
   if (!enabled) return;
   const uintptr_t begin = (reinterpret_cast<uintptr_t>(data) + kHuge - 1) & ~uintptr_t(kHuge - 1);
   const uintptr_t end = (reinterpret_cast<uintptr_t>(data) + uintptr_t(bytes)) & ~uintptr_t(kHuge - 1);

@@ -51,6 +51,7 @@ struct Run {
   std::vector<uint32_t> out;
   std::vector<double> positions;  // Quadric only: 3 per input vertex
   std::vector<uint8_t> moved;     // Quadric only: 1 per input vertex
+  bool isMoved(uint32_t v) const { return !moved.empty() && moved[v]; }
   std::vector<uint8_t> colors;    // Quadric with colours only: 4 per input vertex
   float relError = 0;             // Meshopt only
   std::vector<float> pos;         // Meshopt only: centred float positions (+ lock duplicates)
@@ -356,7 +357,7 @@ void assembleResult(SimplifiedRegion& r, const Run& run, const double* positions
       remap[v] = i;
       r.origin.push_back(uint32_t(v));
       for (int a = 0; a < 3; ++a) r.positions[size_t(i) * 3 + a] = from[v * 3 + a];
-      r.movedVertices += !run.moved.empty() && run.moved[v];
+      r.movedVertices += run.isMoved(uint32_t(v));
       if (colors) {
         const uint8_t* c = run.colors.empty() ? colors + v * 4 : &run.colors[v * 4];
         r.colors.insert(r.colors.end(), c, c + 4);
@@ -380,7 +381,7 @@ constexpr uint8_t kOnInput = 8;
 std::vector<uint8_t> samplesOnInput(const Run& run, const std::vector<uint8_t>& kept, const uint32_t* triangles,
                                     size_t indexCount, const Adjacency& adjacency) {
   const std::vector<uint32_t>& out = run.out;
-  auto still = [&](uint32_t v) { return kept[v] && (run.moved.empty() || !run.moved[v]); };
+  auto still = [&](uint32_t v) { return kept[v] && !run.isMoved(v); };
   std::vector<uint8_t> mask(out.size() / 3, 0);
   for (size_t t = 0, i = 0; t < out.size(); t += 3) {
     while (i < indexCount && !(still(triangles[i]) && still(triangles[i + 1]) && still(triangles[i + 2]))) i += 3;
@@ -413,11 +414,10 @@ double measureError(const SimplifiedRegion& r, const Run& run, const double* pos
                     const uint32_t* triangles, size_t indexCount, const std::vector<uint8_t>& used,
                     const std::vector<uint8_t>& kept, const std::vector<uint8_t>& onInput) {
   const std::vector<uint32_t>& out = run.out;
-  auto moved = [&](uint32_t v) { return !run.moved.empty() && run.moved[v]; };
   const double* at = run.positions.empty() ? positions : run.positions.data();  // result positions by input id
   TriangleGrid resultGrid(r.positions.data(), r.origin.size(), r.triangles.data(), r.triangleCount());
   TriangleGrid inputGrid(positions, vertexCount, triangles, indexCount / 3);
-  auto still = [&](uint32_t v) { return kept[v] && !moved(v); };
+  auto still = [&](uint32_t v) { return kept[v] && !run.isMoved(v); };
   // (lower, higher) input vertex ids of the queried triangles' edges, less the input edges
   // between unmoved vertices (samplesOnInput).
   std::vector<uint64_t> edges;
@@ -440,7 +440,7 @@ double measureError(const SimplifiedRegion& r, const Run& run, const double* pos
         worst2 = std::max(worst2, resultGrid.distance2Above(positions + v * 3, worst2));
     k = 0;
     for (size_t v = 0; v < vertexCount; ++v)
-      if (kept[v] && moved(uint32_t(v)) && ((k++ % kStride == 0) == (pass == 0)))
+      if (kept[v] && run.isMoved(uint32_t(v)) && ((k++ % kStride == 0) == (pass == 0)))
         worst2 = std::max(worst2, inputGrid.distance2Above(at + v * 3, worst2));
     for (size_t t = 0; t < out.size() / 3; ++t) {
       if ((t % kStride == 0) != (pass == 0) || (onInput[t] & kOnInput)) continue;
