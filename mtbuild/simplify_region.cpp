@@ -43,6 +43,18 @@ struct Adjacency {
     for (uint32_t i = start[a]; i < start[a + 1]; ++i) n += adj[i] == b;
     return n;
   }
+  // v is on an open border of the input that is not the region's: some edge at v is used by one
+  // input triangle and its ends are not both `locked` (such an edge between two locked vertices
+  // may be the region's border, which the region cannot tell from a hole's edge; null: none).
+  bool onOpenBorder(uint32_t v, const uint8_t* locked) const {
+    for (uint32_t i = start[v]; i < start[v + 1]; ++i) {
+      if (locked && locked[v] && locked[adj[i]]) continue;
+      size_t n = 0;
+      for (uint32_t j = start[v]; j < start[v + 1]; ++j) n += adj[j] == adj[i];
+      if (n == 1) return true;
+    }
+    return false;
+  }
 };
 
 // One simplifier run with `lock` frozen: the kept triangle list (input ids) in `out`, and for the
@@ -222,7 +234,17 @@ namespace {
 // (1) a locked vertex vanished (all its triangles collapsed away); (2) an output edge is used by 3+
 // triangles that the input did not have so (two hole borders pinched together: a crack-like
 // defect in a cut); (3) a new edge between two locked vertices (a chord across the region's
-// border can duplicate an edge an outside patch already has, which the region cannot see).
+// border can duplicate an edge an outside patch already has, which the region cannot see); (4) an
+// output edge used by one triangle that is not such an edge of the input joins a vertex that is
+// not on an open border of the input (Adjacency::onOpenBorder; mtverify's rule, mt_cut.h: a cut's
+// boundary edges join boundary vertices of the finest cut). On a manifold input neither simplifier
+// breaks it: a border vertex only collapses along its border, so the ends of a new border edge
+// each had an open edge to the free vertex that went. On a non-manifold one both can: the sheets
+// around an edge used by three triangles, or two fans pinched at one vertex, look manifold to a
+// local check, and a collapse there can leave an edge with one triangle in the middle of the
+// surface (a hole in every cut that holds it: 1-6 of 10 cuts of scans of CGAL's bull, boeing and
+// ALSTOM models), also from a vertex that is on the region's border only (boeing, regular
+// partition).
 // Marks the vertices involved in `bad`; returns whether any rule was broken.
 bool findBrokenRules(const std::vector<uint32_t>& out, const std::vector<uint8_t>& lock,
                      const std::vector<uint8_t>& used, const uint8_t* locked, const Adjacency& adjacency,
@@ -248,11 +270,15 @@ bool findBrokenRules(const std::vector<uint32_t>& out, const std::vector<uint8_t
   std::vector<uint32_t> count(vertexCount, 0);
   for (size_t v = 0; v < vertexCount; ++v) {
     uint32_t e0 = edgeStart[v], e1 = edgeStart[v + 1];
-    if (e1 - e0 < 3) continue;
     for (uint32_t e = e0; e < e1; ++e) ++count[edgeOther[e]];
     for (uint32_t e = e0; e < e1; ++e) {
       uint32_t w = edgeOther[e];
       if (count[w] >= 3 && adjacency.uses(uint32_t(v), w) <= 2) bad[v] = bad[w] = 1, problem = true;
+      // Rule 4; an input boundary edge kept as it is (the region's border, a hole's) is the
+      // common case and is settled by one count.
+      if (count[w] == 1 && adjacency.uses(uint32_t(v), w) != 1 &&
+          !(adjacency.onOpenBorder(uint32_t(v), locked) && adjacency.onOpenBorder(w, locked)))
+        bad[v] = bad[w] = 1, problem = true;
     }
     for (uint32_t e = e0; e < e1; ++e) count[edgeOther[e]] = 0;
   }

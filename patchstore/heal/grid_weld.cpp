@@ -128,12 +128,11 @@ std::vector<std::vector<uint64_t>> candidateClusters(CellSorter& sorter) {
 
 struct Cluster {
   Cell cell;
-  Pos target;  // the member with the smallest position
   uint32_t members = 0;
   std::set<PatchId> patches;  // the members' owners
 };
 
-// Step 3: the clusters' exact cells and targets, read before anything is committed (commits move
+// Step 3: the clusters' exact cells, read before anything is committed (commits move
 // patch-local indices, so a member's gid is only good until then). A hashed key may join
 // vertices of different cells: members are regrouped by their exact cell.
 std::vector<Cluster> exactClusters(const PatchStore& store, const GridCells& grid,
@@ -147,10 +146,8 @@ std::vector<Cluster> exactClusters(const PatchStore& store, const GridCells& gri
     Patch p = store.patch(id);
     for (auto [local, c] : list) {
       const double* q = &p.positions[3 * size_t(local)];
-      Pos pos{q[0], q[1], q[2]};
       Cell cell = cellOf(grid, q);
-      auto [it, fresh] = found.try_emplace({c, cell}, Cluster{cell, pos, 0, {}});
-      it->second.target = std::min(it->second.target, pos);
+      auto [it, fresh] = found.try_emplace({c, cell}, Cluster{cell, 0, {}});
       ++it->second.members;
       it->second.patches.insert(id);
     }
@@ -184,26 +181,33 @@ RegionEdit withoutDegenerate(const Region& r, const std::vector<uint32_t>& to, u
 }
 
 // Step 4 for one group: every region vertex in a cluster's cell becomes the cluster's target
-// vertex (the member copies of one store vertex, shared between loaded patches, are one region
-// vertex already).
+// vertex, the one with the smallest position (the first in region order among equals; the member
+// copies of one store vertex, shared between loaded patches, are one region vertex already). The
+// target is chosen here, from what the store holds now, not in step 3: an earlier group's edit
+// can remove a member (its only triangles became degenerate when a neighbouring cluster merged),
+// and a target chosen before would then be missing (scans of CGAL's joint, pinion and pipe models).
 void mergeGroup(PatchStore& store, const GridCells& grid, const std::set<PatchId>& patches,
-                const std::map<Cell, Pos>& target, WeldCounts& counts) {
-  auto wanted = [&](const Region& r, uint32_t u) { return target.count(cellOf(grid, &r.positions[3 * size_t(u)])) != 0; };
+                const std::set<Cell>& cells, WeldCounts& counts) {
+  auto wanted = [&](const Region& r, uint32_t u) { return cells.count(cellOf(grid, &r.positions[3 * size_t(u)])) != 0; };
   Region r = loadUnlocked(store, {patches.begin(), patches.end()}, wanted);
+  auto pos = [&](uint32_t u) {
+    const double* q = &r.positions[3 * size_t(u)];
+    return Pos{q[0], q[1], q[2]};
+  };
   std::map<Cell, uint32_t> targetVertex;
   std::vector<uint32_t> to(r.vertexCount());
   for (uint32_t u = 0; u < r.vertexCount(); ++u) {
     to[u] = u;
-    const double* q = &r.positions[3 * size_t(u)];
-    auto it = target.find(cellOf(grid, q));
-    if (it == target.end()) continue;
+    const Cell cell = cellOf(grid, &r.positions[3 * size_t(u)]);
+    if (!cells.count(cell)) continue;
     if (r.locked[u]) fail(store.dir(), "grid weld: a cluster spans too many patches to load together");
-    if (Pos{q[0], q[1], q[2]} == it->second && !targetVertex.count(it->first)) targetVertex[it->first] = u;
+    auto [it, fresh] = targetVertex.try_emplace(cell, u);
+    if (!fresh && pos(u) < pos(it->second)) it->second = u;
   }
   for (uint32_t u = 0; u < r.vertexCount(); ++u) {
-    auto it = target.find(cellOf(grid, &r.positions[3 * size_t(u)]));
-    if (it != target.end()) to[u] = targetVertex.at(it->first);
-    counts.merged += it != target.end() && to[u] != u;
+    auto it = targetVertex.find(cellOf(grid, &r.positions[3 * size_t(u)]));
+    if (it != targetVertex.end()) to[u] = it->second;
+    counts.merged += to[u] != u;
   }
   counts.dropped += commitRegion(store, r, withoutDegenerate(r, to, counts.degenerate)).droppedVertices;
 }
@@ -215,14 +219,14 @@ void mergeClusters(PatchStore& store, const GridCells& grid, const std::vector<C
   Progress apply(progressOn, "grid weld: merge", list.size(), "clusters");
   for (size_t i = 0; i < list.size();) {
     std::set<PatchId> patches;
-    std::map<Cell, Pos> target;
+    std::set<Cell> cells;
     size_t j = i;
     while (j < list.size() && (patches.size() < 32 || j == i)) {
       patches.insert(list[j].patches.begin(), list[j].patches.end());
-      target[list[j].cell] = list[j].target;
+      cells.insert(list[j].cell);
       ++j;
     }
-    if (!target.empty()) mergeGroup(store, grid, patches, target, counts);
+    if (!cells.empty()) mergeGroup(store, grid, patches, cells, counts);
     apply.update(j);
     i = j;
   }
