@@ -233,18 +233,24 @@ namespace {
 // the same per collapse, but inputs that are non-manifold already can defeat a local check):
 // (1) a locked vertex vanished (all its triangles collapsed away); (2) an output edge is used by 3+
 // triangles that the input did not have so (two hole borders pinched together: a crack-like
-// defect in a cut); (3) a new edge between two locked vertices (a chord across the region's
-// border can duplicate an edge an outside patch already has, which the region cannot see); (4) an
-// output edge used by one triangle that is not such an edge of the input joins a vertex that is
-// not on an open border of the input (Adjacency::onOpenBorder; mtverify's rule, mt_cut.h: a cut's
-// boundary edges join boundary vertices of the finest cut). On a manifold input neither simplifier
-// breaks it: a border vertex only collapses along its border, so the ends of a new border edge
-// each had an open edge to the free vertex that went. On a non-manifold one both can: the sheets
-// around an edge used by three triangles, or two fans pinched at one vertex, look manifold to a
-// local check, and a collapse there can leave an edge with one triangle in the middle of the
-// surface (a hole in every cut that holds it: 1-6 of 10 cuts of scans of CGAL's bull, boeing and
-// ALSTOM models), also from a vertex that is on the region's border only (boeing, regular
-// partition).
+// defect in a cut); (3) an edge between two locked vertices changed its count of triangles other
+// than from 3+ down to no fewer than 2. The region cannot see the edge's triangles outside it, so
+// it keeps its own share: a new edge (a chord across the region's border can duplicate an edge an
+// outside patch already has, and the two sheets touch along it: found on a closed torus), or a
+// share that drops to 0 or 1, can leave the edge with one triangle (a crack) or with 3+ where the
+// finest cut had neither. On a manifold input a collapse keeps every edge's count (a border edge
+// keeps its triangle in the neighbouring one); on a non-manifold one an edge shared by three
+// triangles of two regions lost the two of one region (a scan of CGAL's boeing with strong noise:
+// 1 of 10 cuts conforming); (4) an output edge used by one triangle that is not such an edge of
+// the input joins a vertex that is not on an open border of the input (Adjacency::onOpenBorder;
+// mtverify's rule, mt_cut.h: a cut's boundary edges join boundary vertices of the finest cut). On a
+// manifold input neither simplifier breaks it: a border vertex only collapses along its border, so
+// the ends of a new border edge each had an open edge to the free vertex that went. On a
+// non-manifold one both can: the sheets around an edge used by three triangles, or two fans
+// pinched at one vertex, look manifold to a local check, and a collapse there can leave an edge
+// with one triangle in the middle of the surface (a hole in every cut that holds it: 1-6 of 10
+// cuts of scans of CGAL's bull, boeing and ALSTOM models), also from a vertex that is on the
+// region's border only (boeing, regular partition).
 // Marks the vertices involved in `bad`; returns whether any rule was broken.
 bool findBrokenRules(const std::vector<uint32_t>& out, const std::vector<uint8_t>& lock,
                      const std::vector<uint8_t>& used, const uint8_t* locked, const Adjacency& adjacency,
@@ -256,7 +262,7 @@ bool findBrokenRules(const std::vector<uint32_t>& out, const std::vector<uint8_t
   bool problem = false;
   for (size_t v = 0; v < vertexCount; ++v)
     if (lock[v] && used[v] && !kept[v]) bad[v] = 1, problem = true;
-  // Output edges bucketed by their smaller vertex (counting sort), to find edges with 3+ triangles.
+  // Output edges bucketed by their smaller vertex (counting sort), to count each edge's triangles.
   std::vector<uint32_t> edgeStart(vertexCount + 1, 0), edgeOther(out.size());
   for (size_t t = 0; t < out.size(); t += 3)
     for (int k = 0; k < 3; ++k) ++edgeStart[std::min(out[t + k], out[t + (k + 1) % 3]) + 1];
@@ -272,22 +278,32 @@ bool findBrokenRules(const std::vector<uint32_t>& out, const std::vector<uint8_t
     uint32_t e0 = edgeStart[v], e1 = edgeStart[v + 1];
     for (uint32_t e = e0; e < e1; ++e) ++count[edgeOther[e]];
     for (uint32_t e = e0; e < e1; ++e) {
-      uint32_t w = edgeOther[e];
-      if (count[w] >= 3 && adjacency.uses(uint32_t(v), w) <= 2) bad[v] = bad[w] = 1, problem = true;
+      const uint32_t w = edgeOther[e], n = count[w];
+      if (n >= 3 && adjacency.uses(uint32_t(v), w) <= 2) bad[v] = bad[w] = 1, problem = true;
+      if (locked && locked[v] && locked[w]) {
+        const size_t was = adjacency.uses(uint32_t(v), w);
+        if (n != was && (n <= 1 || n > was)) bad[v] = bad[w] = 1, problem = true;
+      }
       // Rule 4; an input boundary edge kept as it is (the region's border, a hole's) is the
       // common case and is settled by one count.
-      if (count[w] == 1 && adjacency.uses(uint32_t(v), w) != 1 &&
+      if (n == 1 && adjacency.uses(uint32_t(v), w) != 1 &&
           !(adjacency.onOpenBorder(uint32_t(v), locked) && adjacency.onOpenBorder(w, locked)))
         bad[v] = bad[w] = 1, problem = true;
     }
     for (uint32_t e = e0; e < e1; ++e) count[edgeOther[e]] = 0;
   }
+  // Rule 3 for the edges between locked vertices that the output no longer has.
   if (locked)
-    for (size_t t = 0; t < out.size(); t += 3)
-      for (int k = 0; k < 3; ++k) {
-        uint32_t a = out[t + k], b = out[t + (k + 1) % 3];
-        if (locked[a] && locked[b] && adjacency.uses(a, b) == 0) bad[a] = bad[b] = 1, problem = true;
+    for (uint32_t a = 0; a < vertexCount; ++a) {
+      if (!locked[a]) continue;
+      for (uint32_t i = adjacency.start[a]; i < adjacency.start[a + 1]; ++i) {
+        const uint32_t b = adjacency.adj[i];
+        if (b <= a || !locked[b]) continue;
+        bool kept = false;
+        for (uint32_t e = edgeStart[a]; e < edgeStart[a + 1] && !kept; ++e) kept = edgeOther[e] == b;
+        if (!kept) bad[a] = bad[b] = 1, problem = true;
       }
+    }
   return problem;
 }
 

@@ -25,8 +25,8 @@
 //     matching seam as "locked": so every locked vertex gets one unreferenced duplicate appended
 //     to the position array, which makes it keep that vertex exactly.
 // Either result is checked against the rules the builder needs (locked vertices kept, no new
-// non-manifold edge, no new edge between locked vertices, no edge with one triangle inside the
-// surface) and redone with more locks if broken.
+// non-manifold edge, each edge between locked vertices keeps its share of triangles, no edge with
+// one triangle inside the surface) and redone with more locks if broken.
 #pragma once
 
 #include <cstddef>

@@ -5,7 +5,7 @@
 # (it runs `apt-get update` once if the download fails, which needs root) and network access.
 set -euo pipefail
 dir=${1:?usage: scripts/scan_bases.sh DIR}
-wanted=(ChineseDragon-10kv elephant camel lion-head man bull armadillo mech-holes-shark boeing joint)
+wanted=(ChineseDragon-10kv elephant camel lion-head man bull armadillo mech-holes-shark boeing joint ALSTOM_TEST4 pipe)
 complete() {
   [ -f "$dir/.complete" ] || return 1
   for name in "${wanted[@]}"; do [ -s "$dir/$name.off" ] || return 1; done
