@@ -249,7 +249,17 @@ TEST(RealScans, QuadricSimplifierKeepsThePromises) {
   buildAndCheck(meshes, dir, "--simplifier quadric");
 }
 
-TEST(RealScans, ScanDerivedMeshesKeepThePromises) {
+// A scangen mesh: a base model of scripts/scan_bases.sh, its LEVELS and options.
+struct Recipe {
+  const char* base;
+  int levels;
+  const char* options;
+};
+
+// The recipes' meshes in `dir`, with their triangle counts (scangen's report); fails the test
+// (ASSERT) when scangen, the shared tools or the base models are missing.
+void makeScanMeshes(const std::vector<Recipe>& recipes, const TempDir& dir, std::vector<Mesh>& meshes,
+                    std::vector<double>& triangles) {
   const std::string scangenSource = kSourceDir + "/../shared/tools/scangen.cpp";
   ASSERT_TRUE(fileExists(scangenSource))
       << scangenSource << " is missing: the scan-derived meshes are made by ../shared/tools/scangen.cpp, so the "
@@ -261,68 +271,58 @@ TEST(RealScans, ScanDerivedMeshesKeepThePromises) {
   auto fetched = runShell(kSourceDir + "/scripts/scan_bases.sh " + bases);  // does nothing when complete
   ASSERT_EQ(fetched.exitCode, 0) << "scripts/scan_bases.sh " << bases << " could not fetch the base models:\n"
                                  << fetched.output;
-  TempDir dir;
-  struct Recipe {
-    const char* base;
-    int levels;
-    const char* options;
-  };
-  // Five real scanned models, 0.14-0.32 M triangles, with scangen's face shuffling, holes and
-  // displacement amplitude varied.
-  const Recipe recipes[] = {{"ChineseDragon-10kv", 2, "--shuffle 3"},
-                            {"camel", 2, "--holes 0.3"},
-                            {"lion-head", 2, "--amp 0.008"},
-                            {"man", 1, "--shuffle 7 --amp 0.002"},
-                            {"bull", 2, "--holes 0.25 --shuffle 5"}};
-  std::vector<Mesh> meshes;
   for (const Recipe& r : recipes) {
-    std::string args = std::string(r.base) + " " + std::to_string(r.levels) + " " + r.options;
-    Mesh m{"scangen " + args, dir.file(std::string(r.base) + ".ply")};
+    const std::string args = std::to_string(r.levels) + " " + r.options;
+    Mesh m{std::string("scangen ") + r.base + " " + args, dir.file(std::string(r.base) + std::to_string(meshes.size()) + ".ply")};
     auto made = runTool("scangen", bases + "/" + r.base + ".off " + std::to_string(r.levels) + " " + m.path + " " + r.options);
     ASSERT_EQ(made.exitCode, 0) << made.output;
     static const std::regex count("([0-9]+) triangles");
-    std::smatch triangles;
-    ASSERT_TRUE(std::regex_search(made.output, triangles, count)) << made.output;
-    double n = std::stod(triangles[1]);
-    EXPECT_GE(n, 1e5) << args;
-    EXPECT_LE(n, 5e5) << args;
+    std::smatch found;
+    ASSERT_TRUE(std::regex_search(made.output, found, count)) << made.output;
+    triangles.push_back(std::stod(found[1]));
     meshes.push_back(m);
+  }
+}
+
+TEST(RealScans, ScanDerivedMeshesKeepThePromises) {
+  TempDir dir;
+  // Five real scanned models, 0.14-0.32 M triangles, with scangen's face shuffling, holes and
+  // displacement amplitude varied.
+  const std::vector<Recipe> recipes = {{"ChineseDragon-10kv", 2, "--shuffle 3"},
+                                       {"camel", 2, "--holes 0.3"},
+                                       {"lion-head", 2, "--amp 0.008"},
+                                       {"man", 1, "--shuffle 7 --amp 0.002"},
+                                       {"bull", 2, "--holes 0.25 --shuffle 5"}};
+  std::vector<Mesh> meshes;
+  std::vector<double> triangles;
+  makeScanMeshes(recipes, dir, meshes, triangles);
+  if (HasFatalFailure()) return;
+  for (size_t i = 0; i < meshes.size(); ++i) {
+    EXPECT_GE(triangles[i], 1e5) << meshes[i].name;
+    EXPECT_LE(triangles[i], 5e5) << meshes[i].name;
   }
   buildAndCheck(meshes, dir);
 }
 
-// Scanned models that are non-manifold already (CGAL's boeing, ALSTOM, bull and joint: edges with
-// three triangles, fans pinched at a vertex, thousands of open borders). A collapse next to such
-// an edge left a boundary edge in the middle of the surface (boeing at 0.16 M triangles: 1 of 10
-// cuts conforming); with strong noise an edge on a region's border lost its share of triangles on
-// one side (ALSTOM, regular partition: 15 of 34); and on joint an earlier group of the grid weld
-// removed the chosen target of a later cluster (mtbuild stopped with "map::at"; on pipe, once that
-// was mended, a cell kept two vertices: two degenerate triangles in the finest cut). Found by
+// Scanned models that are non-manifold already (CGAL's boeing, ALSTOM, bull, joint and pipe: edges
+// with three triangles, fans pinched at a vertex, thousands of open borders). A collapse next to
+// such an edge left a boundary edge in the middle of the surface (boeing at 0.16 M triangles: 1 of
+// 10 cuts conforming); with strong noise an edge on a region's border lost its share of triangles
+// on one side (ALSTOM, regular partition: 15 of 34); and on joint an earlier group of the grid
+// weld removed the chosen target of a later cluster (mtbuild stopped with "map::at"; on pipe, once
+// that was mended, a cell kept two vertices: two degenerate triangles in the finest cut). Found by
 // sweeps of every libcgal-demo model (bench/sweep_bases.sh).
 TEST(RealScans, NonManifoldScansKeepThePromises) {
-  ASSERT_TRUE(fileExists(mt::test::binDir() + "/scangen")) << "build/bin/scangen is missing (see ScanDerivedMeshesKeepThePromises)";
-  const std::string bases = kBuildDir + "/scan-bases";
-  auto fetched = runShell(kSourceDir + "/scripts/scan_bases.sh " + bases);
-  ASSERT_EQ(fetched.exitCode, 0) << fetched.output;
   TempDir dir;
-  struct Recipe {
-    const char* base;
-    int levels;
-    const char* options;
-  };
-  const Recipe recipes[] = {{"boeing", 3, "--holes 0.3"},
-                            {"ALSTOM_TEST4", 3, "--amp 0.1 --freq 300"},
-                            {"bull", 2, "--amp 0.01 --holes 0.05"},
-                            {"joint", 5, "--amp 0.01 --holes 0.05"},
-                            {"pipe", 5, "--holes 0.5 --amp 0.03 --shuffle 2"}};
+  const std::vector<Recipe> recipes = {{"boeing", 3, "--holes 0.3"},
+                                       {"ALSTOM_TEST4", 3, "--amp 0.1 --freq 300"},
+                                       {"bull", 2, "--amp 0.01 --holes 0.05"},
+                                       {"joint", 5, "--amp 0.01 --holes 0.05"},
+                                       {"pipe", 5, "--holes 0.5 --amp 0.03 --shuffle 2"}};
   std::vector<Mesh> meshes;
-  for (const Recipe& r : recipes) {
-    std::string args = std::to_string(r.levels) + " " + r.options;
-    Mesh m{std::string("scangen ") + r.base + " " + args, dir.file(std::string(r.base) + std::to_string(meshes.size()) + ".ply")};
-    auto made = runTool("scangen", bases + "/" + r.base + ".off " + std::to_string(r.levels) + " " + m.path + " " + r.options);
-    ASSERT_EQ(made.exitCode, 0) << made.output;
-    meshes.push_back(m);
-  }
+  std::vector<double> triangles;
+  makeScanMeshes(recipes, dir, meshes, triangles);
+  if (HasFatalFailure()) return;
   // The topology does not depend on the codec: meshopt only (the test's time halves).
   buildAndCheck(meshes, dir, "", {"meshopt"});
 }
