@@ -2,9 +2,10 @@
 # Every base model Debian's libcgal-demo ships (scripts/scan_bases.sh: scanned statues and animals,
 # CAD parts, non-manifold and degenerate test meshes), made scan-like by ../shared/tools/scangen.cpp
 # and built: one line per model with the scangen options, the triangle count and the verdict
-# (`mtbuild` exit status and last line, then `mtverify --cuts N`), and a count at the end. The
-# scangen options rotate over none, holes, shuffled faces and noise with holes (--rotate K starts
-# the rotation K models later, so two runs cover other pairs). A model scangen cannot read
+# (`mtbuild` exit status and last line, then `mtverify --cuts N`; for a good file, its top level
+# and that level's triangles), and a count at the end. The scangen options rotate over none,
+# holes, shuffled faces and noise with holes (--rotate K starts the rotation K models later, so
+# two runs cover other pairs). A model scangen cannot read
 # (polygons, counts that do not match) is listed as skipped. Exit status 1 when a build or a
 # verification failed; the failing inputs are kept in WORK.
 #
@@ -42,7 +43,7 @@ EOF
 [[ "$rotate" =~ ^[0-9]+$ ]] || { echo "bench/sweep_bases.sh: --rotate must be a count from 0 (got '$rotate')" >&2; exit 1; }
 
 bin="${BIN:-build/bin}"
-for tool in mtbuild mtverify scangen; do
+for tool in mtbuild mtverify mtinfo scangen; do
   [[ -x "$bin/$tool" ]] || { echo "bench/sweep_bases.sh: $bin/$tool is missing: build it first (scangen needs ../shared)" >&2; exit 1; }
 done
 bases="$(dirname "$bin")/scan-bases"
@@ -79,7 +80,10 @@ for name in $models; do
   verdict=$("$bin/mtverify" "$work/out.mt" --cuts "$cuts" 2>&1 | grep -E 'crack-free cuts|^OK|FAILED' | tr -s ' ' | tr '\n' ' ' || true)
   if [[ "$verdict" == *OK* && "$verdict" != *FAILED* ]]; then
     ok=$((ok + 1))
-    printf '%-52s %9s  ok\n' "$label" "$triangles"
+    # The coarsest level's triangles and the level count: a build whose retries kept its regions
+    # whole stops early with a large coarsest level.
+    coarsest=$("$bin/mtinfo" "$work/out.mt" --json | sed -n 's/.*"level": \([0-9]*\),.*"triangles": \([0-9]*\),.*/\1 \2/p' | tail -1)
+    printf '%-52s %9s  ok, top level %s: %s triangles\n' "$label" "$triangles" "${coarsest%% *}" "${coarsest##* }"
   else
     failed=$((failed + 1))
     cp "$work/in.ply" "$work/failed-$name.ply"
