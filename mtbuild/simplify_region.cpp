@@ -279,16 +279,16 @@ bool findBrokenRules(const std::vector<uint32_t>& out, const std::vector<uint8_t
     for (uint32_t e = e0; e < e1; ++e) ++count[edgeOther[e]];
     for (uint32_t e = e0; e < e1; ++e) {
       const uint32_t w = edgeOther[e], n = count[w];
-      if (n >= 3 && adjacency.uses(uint32_t(v), w) <= 2) bad[v] = bad[w] = 1, problem = true;
-      if (locked && locked[v] && locked[w]) {
-        const size_t was = adjacency.uses(uint32_t(v), w);
-        if (n != was && (n <= 1 || n > was)) bad[v] = bad[w] = 1, problem = true;
-      }
+      const bool between = locked && locked[v] && locked[w];
+      if (n == 2 && !between) continue;  // no rule looks at the input's count then
+      const size_t was = adjacency.uses(uint32_t(v), w);
+      bool broken = n >= 3 && was <= 2;                              // rule 2
+      broken |= between && n != was && (n <= 1 || n > was);         // rule 3
       // Rule 4; an input boundary edge kept as it is (the region's border, a hole's) is the
-      // common case and is settled by one count.
-      if (n == 1 && adjacency.uses(uint32_t(v), w) != 1 &&
-          !(adjacency.onOpenBorder(uint32_t(v), locked) && adjacency.onOpenBorder(w, locked)))
-        bad[v] = bad[w] = 1, problem = true;
+      // common case and is settled by the count.
+      broken |= n == 1 && was != 1 &&
+                !(adjacency.onOpenBorder(uint32_t(v), locked) && adjacency.onOpenBorder(w, locked));
+      if (broken) bad[v] = bad[w] = 1, problem = true;
     }
     for (uint32_t e = e0; e < e1; ++e) count[edgeOther[e]] = 0;
   }
@@ -299,9 +299,9 @@ bool findBrokenRules(const std::vector<uint32_t>& out, const std::vector<uint8_t
       for (uint32_t i = adjacency.start[a]; i < adjacency.start[a + 1]; ++i) {
         const uint32_t b = adjacency.adj[i];
         if (b <= a || !locked[b]) continue;
-        bool kept = false;
-        for (uint32_t e = edgeStart[a]; e < edgeStart[a + 1] && !kept; ++e) kept = edgeOther[e] == b;
-        if (!kept) bad[a] = bad[b] = 1, problem = true;
+        bool present = false;
+        for (uint32_t e = edgeStart[a]; e < edgeStart[a + 1] && !present; ++e) present = edgeOther[e] == b;
+        if (!present) bad[a] = bad[b] = 1, problem = true;
       }
     }
   return problem;
