@@ -147,7 +147,7 @@ void lockBorderRing(std::vector<uint8_t>& lock, const uint8_t* locked, const std
 // region be run 17 times and kept whole, at every level (a 5.7 M scan-derived elephant: 33
 // regions so, the level loop 2.5x as long, the root level refused). Returns the number of
 // triangles removed.
-size_t removeFlattenedPairs(std::vector<uint32_t>& out, const uint8_t* keep) {
+size_t removeFlattenedPairs(std::vector<uint32_t>& out, const uint8_t* keep, const uint8_t* pinned) {
   const size_t triangleCount = out.size() / 3;
   // Triangles keyed by their sorted corners, in an open-addressing table (most results have no
   // pair at all, so one linear pass, not a sort of every triangle); a pair is a key held by exactly
@@ -212,6 +212,7 @@ size_t removeFlattenedPairs(std::vector<uint32_t>& out, const uint8_t* keep) {
       uint32_t u = uses[std::lower_bound(edges.begin(), edges.end(), key(out[p.first * 3 + k], out[p.first * 3 + (k + 1) % 3])) - edges.begin()];
       ok &= u == 2 || u == 4;
       if (keep && keep[out[p.first * 3 + k]]) ok &= fanSize[out[p.first * 3 + k]] > 2;
+      if (pinned) ok &= !pinned[out[p.first * 3 + k]];
     }
     if (!ok) continue;
     drop[p.first] = drop[p.second] = 1;
@@ -326,7 +327,7 @@ int simplifyWithRules(Run& run, const double* positions, size_t vertexCount, con
                       const Adjacency& adjacency, const SimplifyRegionOptions& options, std::vector<uint8_t>& kept) {
   const bool quadric = options.simplifier == RegionSimplifier::Quadric;
   const size_t targetIndexCount = std::min(options.targetTriangles * 3, indexCount);
-  std::vector<uint8_t> lock(vertexCount, 0), bad(vertexCount);
+  std::vector<uint8_t> lock(vertexCount, 0), bad(vertexCount), pinned(vertexCount, 0);
   if (locked)
     for (size_t v = 0; v < vertexCount; ++v) lock[v] = locked[v] ? 1 : 0;
   if (!quadric) {
@@ -355,7 +356,7 @@ int simplifyWithRules(Run& run, const double* positions, size_t vertexCount, con
       run.out.resize(n);
     } else {
       runMeshopt(run, vertexCount, triangles, indexCount, lock, targetIndexCount);
-      removeFlattenedPairs(run.out, lock.data());
+      removeFlattenedPairs(run.out, lock.data(), pinned.data());
     }
     const bool broken = findBrokenRules(run.out, lock, used, locked, adjacency, kept, bad);
     // A region that had triangles keeps some: a closed component alone in its region (a
@@ -364,7 +365,21 @@ int simplifyWithRules(Run& run, const double* positions, size_t vertexCount, con
     // unbounded error (no surface to measure against) that every node above it inherits.
     const bool vanished = run.out.empty() && indexCount > 0;
     if (!broken && !vanished) return attempt + 1;
-    if (attempt == 16 || vanished) {
+    // The next run sees what this one saw plus the offending vertices: their triangles locked, and
+    // the flattened pairs at them kept (a pair of the input removed at the region's border takes an
+    // edge between two locked vertices with it, which rule 3 refuses; with every triangle around
+    // already locked, only keeping the pair lets the run pass: scans with strong noise ran 17 times
+    // and were kept whole). A run that would see nothing new would repeat this one: stop then.
+    bool progress = false;
+    if (broken && !vanished) {
+      for (size_t v = 0; v < vertexCount; ++v)
+        if (bad[v] && !pinned[v]) pinned[v] = 1, progress |= !quadric;
+      for (size_t t = 0; t < indexCount; t += 3)
+        if (bad[triangles[t]] || bad[triangles[t + 1]] || bad[triangles[t + 2]])
+          for (int k = 0; k < 3; ++k)
+            if (!lock[triangles[t + k]]) lock[triangles[t + k]] = 1, progress = true;
+    }
+    if (attempt == 16 || !progress) {
       // Rare (seen on inputs that are non-manifold already, and on closed components that
       // vanish): keep the region as it is. An unsimplified region is always a valid fragment; the
       // level above simplifies it.
@@ -376,9 +391,6 @@ int simplifyWithRules(Run& run, const double* positions, size_t vertexCount, con
       for (uint32_t v : run.out) kept[v] = 1;
       return attempt + 1;
     }
-    for (size_t t = 0; t < indexCount; t += 3)
-      if (bad[triangles[t]] || bad[triangles[t + 1]] || bad[triangles[t + 2]])
-        lock[triangles[t]] = lock[triangles[t + 1]] = lock[triangles[t + 2]] = 1;
   }
 }
 

@@ -94,8 +94,9 @@ SimplifiedRegion simplifyRegion(const LoadedMesh& mesh, const SimplifyRegionOpti
 // Removes from a triangle list (3 vertex ids each) every pair of triangles with the same corners and
 // opposite orientation whose three edges are each used by the pair alone or by exactly two other
 // triangles: a thin part collapsed flat (simplify_region.cpp), unless that would leave a vertex v
-// with keep[v] != 0 (when given) without a triangle. Keeps the order of the rest; returns the
-// number of triangles removed.
-size_t removeFlattenedPairs(std::vector<uint32_t>& triangles, const uint8_t* keep = nullptr);
+// with keep[v] != 0 (when given) without a triangle, or a corner of the pair is pinned (pinned[v]
+// != 0, when given: a retry keeps the pairs where the run before broke a rule). Keeps the order of
+// the rest; returns the number of triangles removed.
+size_t removeFlattenedPairs(std::vector<uint32_t>& triangles, const uint8_t* keep = nullptr, const uint8_t* pinned = nullptr);
 
 }  // namespace mt

@@ -437,6 +437,12 @@ TEST(SimplifyRegion, FlattenedPairsAreRemovedWhereTheSurfaceCloses) {
   std::vector<uint32_t> fin = {3, 1, 0, 0, 1, 2, 3, 2, 1, 3, 0, 2, 4, 0, 1, 0, 2, 1, 4, 1, 2, 4, 2, 0};
   EXPECT_EQ(removeFlattenedPairs(fin, keepAll), 2u);
   EXPECT_EQ(fin, cap);
+  // A pinned corner (a retry after a rule broke there) keeps the pair, every other pair still goes.
+  const uint8_t pinned2[8] = {0, 0, 1, 0, 0, 0, 0, 0};
+  std::vector<uint32_t> pinnedFin = {3, 1, 0, 0, 1, 2, 3, 2, 1, 3, 0, 2, 4, 0, 1, 0, 2, 1, 4, 1, 2, 4, 2, 0, 5, 6, 7, 7, 6, 5};
+  const std::vector<uint32_t> finKept(pinnedFin.begin(), pinnedFin.end() - 6);
+  EXPECT_EQ(removeFlattenedPairs(pinnedFin, nullptr, pinned2), 2u);
+  EXPECT_EQ(pinnedFin, finKept);
 }
 
 // A double-sided triangle in the input (scan debris, or a sliver the grid weld folded) whose

@@ -108,6 +108,7 @@ struct Job {
   std::string log;  // the tools' outputs, for the failure message
   std::string weld;  // mtbuild's grid-weld line, if any
   double middleError = 0, seconds = 0;
+  double inputTriangles = 0, topTriangles = 0;  // mtinfo: the input's, and the coarsest level's
   CutTopology finest, middle;
   std::string label() const {
     return mesh->name + " --codec " + codec + " --partition " + partition + (extra.empty() ? "" : " " + extra);
@@ -153,6 +154,11 @@ void runJob(Job& job, const std::string& dir, size_t index) {
     return;
   }
   job.middleError = errors[errors.size() / 2];
+  std::smatch count;
+  static const std::regex input("\"inputTriangles\": *([0-9]+)"), level("\"triangles\": *([0-9]+)");
+  if (std::regex_search(info.output, count, input)) job.inputTriangles = std::stod(count[1]);
+  for (std::sregex_iterator it(info.output.begin(), info.output.end(), level), end; it != end; ++it)
+    job.topTriangles = std::stod((*it)[1]);  // perLevel's last entry: the coarsest level
   bool ok = true;
   for (auto [error, cut, out] : {std::tuple{0.0, &job.finest, dir + "/finest" + std::to_string(index) + ".ply"},
                                  std::tuple{job.middleError, &job.middle, dir + "/middle" + std::to_string(index) + ".ply"}}) {
@@ -172,9 +178,9 @@ void runJob(Job& job, const std::string& dir, size_t index) {
 }
 
 // Every mesh with each codec (both by default) and both partitions, a few builds at a time; then
-// the checks.
-void buildAndCheck(const std::vector<Mesh>& meshes, const TempDir& dir, const std::string& extra = "",
-                   const std::vector<std::string>& codecs = {"meshopt", "draco"}) {
+// the checks. Returns the jobs, for a test's own checks.
+std::vector<Job> buildAndCheck(const std::vector<Mesh>& meshes, const TempDir& dir, const std::string& extra = "",
+                               const std::vector<std::string>& codecs = {"meshopt", "draco"}) {
   std::vector<Job> jobs;
   for (const Mesh& mesh : meshes)
     for (const std::string& codec : codecs)
@@ -203,6 +209,7 @@ void buildAndCheck(const std::vector<Mesh>& meshes, const TempDir& dir, const st
     std::printf("%-80s %5.1f s  middle cut %8llu triangles at %-10.4g %s\n", job.label().c_str(), job.seconds,
                 (unsigned long long)job.middle.triangles, job.middleError, job.weld.c_str());
   }
+  return jobs;
 }
 
 // ---- the meshes ---------------------------------------------------------------------------------
@@ -311,7 +318,10 @@ TEST(RealScans, ScanDerivedMeshesKeepThePromises) {
 // on one side (ALSTOM, regular partition: 15 of 34); and on joint an earlier group of the grid
 // weld removed the chosen target of a later cluster (mtbuild stopped with "map::at"; on pipe, once
 // that was mended, a cell kept two vertices: two degenerate triangles in the finest cut). Found by
-// sweeps of every libcgal-demo model (bench/sweep_bases.sh).
+// sweeps of every libcgal-demo model (bench/sweep_bases.sh). Noise that strong (ALSTOM) also folds
+// a region's result at many places; the runs that lock them must converge, or the regions are kept
+// whole and the model barely simplifies (the coarsest level held 83-89% of the input, in 2 levels,
+// when a flattened pair of the input at the region's border was removed by every run).
 TEST(RealScans, NonManifoldScansKeepThePromises) {
   TempDir dir;
   const std::vector<Recipe> recipes = {{"boeing", 3, "--holes 0.3"},
@@ -324,7 +334,12 @@ TEST(RealScans, NonManifoldScansKeepThePromises) {
   makeScanMeshes(recipes, dir, meshes, triangles);
   if (HasFatalFailure()) return;
   // The topology does not depend on the codec: meshopt only (the test's time halves).
-  buildAndCheck(meshes, dir, "", {"meshopt"});
+  for (const Job& job : buildAndCheck(meshes, dir, "", {"meshopt"}))
+    if (job.built && job.mesh->name.find("--amp 0.1 ") != std::string::npos) {
+      SCOPED_TRACE(job.label());
+      EXPECT_GT(job.inputTriangles, 0) << job.log;
+      EXPECT_LE(job.topTriangles, 0.5 * job.inputTriangles) << "the coarsest level keeps most of the input:\n" << job.log;
+    }
 }
 
 }  // namespace
