@@ -321,25 +321,31 @@ TEST(RealScans, ScanDerivedMeshesKeepThePromises) {
 // sweeps of every libcgal-demo model (bench/sweep_bases.sh). Noise that strong (ALSTOM) also folds
 // a region's result at many places; the runs that lock them must converge, or the regions are kept
 // whole and the model barely simplifies (the coarsest level held 83-89% of the input, in 2 levels,
-// when a flattened pair of the input at the region's border was removed by every run).
+// when a flattened pair of the input at the region's border was removed by every run); and a
+// further root step that deviates 2.3x the level before is no fold (handle: the root kept 45% of
+// the input when the limit was 2x).
 TEST(RealScans, NonManifoldScansKeepThePromises) {
   TempDir dir;
   const std::vector<Recipe> recipes = {{"boeing", 3, "--holes 0.3"},
                                        {"ALSTOM_TEST4", 3, "--amp 0.1 --freq 300"},
                                        {"bull", 2, "--amp 0.01 --holes 0.05"},
                                        {"joint", 5, "--amp 0.01 --holes 0.05"},
-                                       {"pipe", 5, "--holes 0.5 --amp 0.03 --shuffle 2"}};
+                                       {"pipe", 5, "--holes 0.5 --amp 0.03 --shuffle 2"},
+                                       {"handle", 3, "--amp 0.05 --freq 200 --holes 0.4"}};
   std::vector<Mesh> meshes;
   std::vector<double> triangles;
   makeScanMeshes(recipes, dir, meshes, triangles);
   if (HasFatalFailure()) return;
   // The topology does not depend on the codec: meshopt only (the test's time halves).
-  for (const Job& job : buildAndCheck(meshes, dir, "", {"meshopt"}))
-    if (job.built && job.mesh->name.find("--amp 0.1 ") != std::string::npos) {
-      SCOPED_TRACE(job.label());
-      EXPECT_GT(job.inputTriangles, 0) << job.log;
-      EXPECT_LE(job.topTriangles, 0.5 * job.inputTriangles) << "the coarsest level keeps most of the input:\n" << job.log;
-    }
+  for (const Job& job : buildAndCheck(meshes, dir, "", {"meshopt"})) {
+    const bool alstom = job.mesh->name.find("ALSTOM") != std::string::npos;
+    const bool handle = job.mesh->name.find("handle") != std::string::npos;
+    if (!job.built || !(alstom || handle)) continue;
+    SCOPED_TRACE(job.label());
+    EXPECT_GT(job.inputTriangles, 0) << job.log;
+    EXPECT_LE(job.topTriangles, (alstom ? 0.5 : 0.3) * job.inputTriangles) << "the coarsest level keeps much of the input:\n"
+                                                                           << job.log;
+  }
 }
 
 }  // namespace
