@@ -30,6 +30,14 @@ for fmt, e in (("binary_little_endian", "<"), ("binary_big_endian", ">")):
     put("reader_ply", f"{fmt}_double_rgb.ply",
         ply_header(fmt, ["double x", "double y", "double z", "uchar red", "uchar green", "uchar blue"], 5, 4,
                    "property list uchar uint vertex_indices").encode() + body)
+# PLY triangle strips: -1 ends a strip, a repeated index joins two; ascii and binary.
+S = [0, 1, 2, 3, -1, 4, 3, 3, 2, 1]
+strip_header = lambda fmt: (f"ply\nformat {fmt} 1.0\nelement vertex 5\nproperty float x\nproperty float y\nproperty float z\n"
+                            "element tristrips 1\nproperty list int int vertex_indices\nend_header\n")
+put("reader_ply", "ascii_tristrips.ply", strip_header("ascii") + "".join("%g %g %g\n" % v for v in V) +
+    "%d %s\n" % (len(S), " ".join(map(str, S))))
+put("reader_ply", "binary_tristrips.ply", strip_header("binary_little_endian").encode() +
+    b"".join(struct.pack("<fff", *v) for v in V) + struct.pack("<i", len(S)) + b"".join(struct.pack("<i", i) for i in S))
 # OBJ: v/vn/vt, faces with slashes, negative indices, a quad, comments, groups.
 put("reader_obj", "tet.obj", "# seed\n" + "".join("v %g %g %g\n" % v for v in V) + "".join("f %d %d %d\n" % tuple(i + 1 for i in f) for f in F))
 put("reader_obj", "slashes.obj", "o thing\ng part\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvn 0 0 1\n"

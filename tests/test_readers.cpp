@@ -365,6 +365,64 @@ TEST(PlyReader, PolygonsFanTriangulatedInBothPaths) {
   }
 }
 
+// A 3 x 2 grid of quads as triangle strips: two strips separated by the end marker, the second
+// with a degenerate join (a repeated index) in the middle, then a strip of two indices (nothing).
+// Triangle k of a strip is (v[k], v[k+1], v[k+2]), its first two corners swapped when k is odd.
+TEST(PlyReader, TriangleStripsUnrolledKeepingTheirOrientation) {
+  TempDir dir;
+  const std::vector<int64_t> strips = {0, 4, 1, 5, 2, 6, 3, 7, -1, 4, 8, 5, 9, 9, 6, 6, 10, 7, 11, -1, 1, 2};
+  // Strip one: (0,4,1) (1,4,5) (1,5,2) (2,5,6) (2,6,3) (3,6,7). Strip two: (4,8,5) (5,8,9), then
+  // the joins (5,9,9) (9,9,6) (9,6,6) (6,6,10) dropped, (6,10,7) at k = 6 (even), (7,10,11) at k = 7.
+  const std::vector<uint32_t> expected = {0, 4, 1, 1, 4, 5, 1, 5, 2, 2, 5, 6, 2, 6, 3, 3, 6, 7,
+                                          4, 8, 5, 5, 8, 9, 6, 10, 7, 7, 10, 11};
+  struct Variant {
+    std::string format, count, index;
+  };
+  for (const Variant& v : {Variant{"binary_little_endian", "int", "int"}, Variant{"binary_big_endian", "int", "int"},
+                           Variant{"binary_little_endian", "uchar", "uint"}, Variant{"binary_big_endian", "ushort", "ushort"},
+                           Variant{"ascii", "int", "int"}}) {
+    SCOPED_TRACE(v.format + " " + v.count + " " + v.index);
+    const bool ascii = v.format == "ascii";
+    Bytes b;
+    b.bigEndian = v.format == "binary_big_endian";
+    // An extra scalar before the list and an extra list after it, read and dropped.
+    b.s = plyHeader(v.format, "element vertex 12\nproperty float x\nproperty float y\nproperty float z\n"
+                              "element tristrips 1\nproperty uchar flags\nproperty list " + v.count + " " + v.index +
+                                  " vertex_indices\nproperty list uchar float weights\n");
+    std::string text;
+    for (int i = 0; i < 12; ++i) {
+      if (ascii) text += std::to_string(i % 4) + " " + std::to_string(i / 4) + " 0\n";
+      else b.put(float(i % 4)).put(float(i / 4)).put(0.f);
+    }
+    // The end marker: -1, or the largest value of an unsigned index type.
+    const double end = v.index == "uint" ? 4294967295.0 : v.index == "ushort" ? 65535.0 : -1.0;
+    if (ascii) {
+      text += "3 " + std::to_string(strips.size());
+      for (int64_t x : strips) text += " " + std::to_string(x);
+      text += " 1 0.5\n";
+      b.s += text;
+    } else {
+      b.put(uint8_t(3)).as(v.count, double(strips.size()));
+      for (int64_t x : strips) b.as(v.index, x < 0 ? end : double(x));
+      b.put(uint8_t(1)).put(0.5f);
+    }
+    writeFile(dir.file("s.ply"), b.s);
+    Collect c = readMesh(dir.file("s.ply"));
+    EXPECT_EQ(c.t, expected);
+    EXPECT_EQ(c.v.size(), 12u);
+    EXPECT_EQ(c.stats.triangles, 10u);
+    EXPECT_EQ(c.stats.degenerateTriangles, 0u);  // the joins are not delivered
+    EXPECT_EQ(c.header.declaredFaces, -1);        // a strip's triangle count is not declared
+  }
+  // Faces and strips in one file: both are read, in the file's order.
+  std::string body = "element vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
+                     "element face 1\nproperty list uchar int vertex_indices\n"
+                     "element tristrips 1\nproperty list int int vertex_indices\n";
+  writeFile(dir.file("fs.ply"), plyHeader("ascii", body) + "0 0 0\n1 0 0\n0 1 0\n1 1 0\n3 0 1 2\n4 1 3 2 0\n");
+  Collect c = readMesh(dir.file("fs.ply"));
+  EXPECT_EQ(c.t, (std::vector<uint32_t>{0, 1, 2, 1, 3, 2, 2, 3, 0}));
+}
+
 TEST(PlyReader, AsciiFloatAndDoubleAndRecordsAcrossLines) {
   TempDir dir;
   std::string body = "element vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
@@ -731,6 +789,34 @@ TEST(ReaderErrors, PlyHeaderProblems) {
   EXPECT_THAT(errorOf(p), HasSubstr("unknown type 'quad' in PLY header (line 8)"));
   writeFile(p, "ply\nformat ascii 1.0\n" + v);
   EXPECT_THAT(errorOf(p), HasSubstr("no end_header"));
+}
+
+TEST(ReaderErrors, PlyStripProblems) {
+  TempDir dir;
+  std::string p = dir.file("s.ply");
+  std::string v = "element vertex 3\nproperty float x\nproperty float y\nproperty float z\n";
+  std::string s = "element tristrips 1\nproperty list int int vertex_indices\n";
+  Bytes b;
+  b.s = plyHeader("binary_little_endian", v + s);
+  for (int i = 0; i < 3; ++i) b.put(float(i)).put(float(i * i)).put(0.f);
+  const size_t list = b.s.size();
+  b.put(int32_t(5)).put(int32_t(0)).put(int32_t(1)).put(int32_t(2)).put(int32_t(-1)).put(int32_t(3));
+  writeFile(p, b.s);
+  EXPECT_THAT(errorOf(p), HasSubstr("index 3 out of range (3 vertices) at tristrips 0 entry 4 (byte offset " +
+                                    std::to_string(list + 4 + 16) + ")"));
+  writeFile(p, b.s.substr(0, list + 10));
+  EXPECT_THAT(errorOf(p), HasSubstr("unexpected end of file in tristrips 0"));
+  writeFile(p, plyHeader("ascii", v + s) + "0 0 0\n1 0 0\n0 1 0\n4 0 1 -2 2\n");
+  EXPECT_THAT(errorOf(p), HasSubstr("index -2 out of range (3 vertices) at tristrips 0 entry 2 (line 14)"));
+  // Nothing but joins and short strips: no triangle.
+  writeFile(p, plyHeader("ascii", v + s) + "0 0 0\n1 0 0\n0 1 0\n7 0 1 1 -1 2 0 -1\n");
+  EXPECT_EQ(errorOf(p), p + ": mesh has no triangles");
+  writeFile(p, plyHeader("ascii", s + v));
+  EXPECT_THAT(errorOf(p), HasSubstr("tristrips element comes before the vertex element"));
+  writeFile(p, plyHeader("ascii", v + "element tristrips 1\nproperty list int float vertex_indices\n") + "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
+  EXPECT_THAT(errorOf(p), HasSubstr("tristrips vertex_indices must have an integer index type"));
+  writeFile(p, plyHeader("ascii", v + "element tristrips 1\nproperty int x\n") + "0 0 0\n1 0 0\n0 1 0\n3\n");
+  EXPECT_THAT(errorOf(p), HasSubstr("tristrips element has no vertex_indices list"));
 }
 
 TEST(ReaderErrors, ObjProblems) {

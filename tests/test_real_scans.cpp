@@ -26,6 +26,9 @@
 #include <unordered_map>
 #include <vector>
 
+#include <meshoptimizer.h>
+
+#include "patchstore/io/mesh_reader.h"
 #include "tests/test_support.h"
 
 namespace {
@@ -346,6 +349,69 @@ TEST(RealScans, NonManifoldScansKeepThePromises) {
   makeScanMeshes(recipes, dir, meshes, triangles);
   if (HasFatalFailure()) return;
   // The topology does not depend on the codec: meshopt only (the test's time halves).
+  buildAndCheck(meshes, dir, "", {"meshopt"});
+}
+
+// Triangle strips (a PLY "tristrips" element, as some scanning pipelines write) of a scan-derived
+// mesh: stripified by meshoptimizer with end markers and with degenerate joins, read back as the
+// mesh's own triangles (each with its orientation), and built with the promises kept.
+TEST(RealScans, TriangleStripsOfAScanReadAsItsFaces) {
+  TempDir dir;
+  std::vector<Mesh> meshes;
+  std::vector<double> triangles;
+  makeScanMeshes({{"bunny00", 1, "--holes 0.3 --shuffle 3"}}, dir, meshes, triangles);
+  if (HasFatalFailure()) return;
+  struct Collect : mt::MeshSink {
+    std::vector<mt::InputVertex> v;
+    std::vector<uint32_t> t;
+    void vertices(const mt::InputVertex* in, size_t n, uint64_t) override { v.insert(v.end(), in, in + n); }
+    void triangles(const uint32_t* idx, size_t n) override { t.insert(t.end(), idx, idx + 3 * n); }
+  };
+  // The triangles, each rotated to start at its least index (orientation kept), sorted; without
+  // degenerate ones (a strip has none but its joins, which are not read).
+  auto canonical = [](const std::vector<uint32_t>& t) {
+    std::vector<std::array<uint32_t, 3>> out;
+    for (size_t i = 0; i < t.size(); i += 3) {
+      std::array<uint32_t, 3> a = {t[i], t[i + 1], t[i + 2]};
+      if (a[0] == a[1] || a[1] == a[2] || a[0] == a[2]) continue;
+      std::rotate(a.begin(), std::min_element(a.begin(), a.end()), a.end());
+      out.push_back(a);
+    }
+    std::sort(out.begin(), out.end());
+    return out;
+  };
+  Collect faces;
+  mt::openMesh(meshes[0].path)->read(faces);
+  const auto expected = canonical(faces.t);
+  ASSERT_GT(expected.size(), 100000u);
+  std::vector<uint32_t> kept;  // the non-degenerate triangles, in the file's order
+  for (size_t i = 0; i < faces.t.size(); i += 3)
+    if (faces.t[i] != faces.t[i + 1] && faces.t[i + 1] != faces.t[i + 2] && faces.t[i] != faces.t[i + 2])
+      kept.insert(kept.end(), faces.t.begin() + i, faces.t.begin() + i + 3);
+  for (const unsigned restart : {~0u, 0u}) {  // end markers (-1), degenerate joins
+    SCOPED_TRACE(restart ? "end markers" : "degenerate joins");
+    std::vector<unsigned> strip(meshopt_stripifyBound(kept.size()));
+    strip.resize(meshopt_stripify(strip.data(), kept.data(), kept.size(), faces.v.size(), restart));
+    const std::string path = dir.file(restart ? "strips.ply" : "joined.ply");
+    std::string header = "ply\nformat binary_little_endian 1.0\nelement vertex " + std::to_string(faces.v.size()) +
+                         "\nproperty double x\nproperty double y\nproperty double z\nelement tristrips 1\n"
+                         "property list int int vertex_indices\nend_header\n";
+    std::string bytes = header;
+    for (const mt::InputVertex& v : faces.v) bytes.append(reinterpret_cast<const char*>(v.p), 24);
+    const int32_t n = int32_t(strip.size());
+    bytes.append(reinterpret_cast<const char*>(&n), 4);
+    bytes.append(reinterpret_cast<const char*>(strip.data()), 4 * strip.size());  // ~0u is -1 as int
+    mt::test::writeFile(path, bytes);
+    Collect back;
+    mt::openMesh(path)->read(back);
+    ASSERT_EQ(back.v.size(), faces.v.size());
+    for (size_t i = 0; i < back.v.size(); ++i)
+      ASSERT_TRUE(std::equal(back.v[i].p, back.v[i].p + 3, faces.v[i].p)) << "vertex " << i;
+    EXPECT_EQ(back.t.size(), kept.size());  // no join delivered
+    EXPECT_TRUE(canonical(back.t) == expected) << "the strips' triangles are not the mesh's";
+    if (restart) meshes.push_back(Mesh{"bunny00 as triangle strips", path});
+  }
+  meshes.erase(meshes.begin());
   buildAndCheck(meshes, dir, "", {"meshopt"});
 }
 

@@ -14,6 +14,13 @@
 // they are; otherwise they go per corner and openMesh splits them (per-vertex coordinates with
 // texnumber are then held in RAM, 8 bytes a vertex). Coordinates without any TextureFile are
 // ignored (nothing to show). Errors name the element and its line or byte offset.
+//
+// Triangle strips (the "tristrips" element some scanning pipelines write, e.g. the Digital
+// Michelangelo Project's models: "property list int int vertex_indices", one long list whose
+// strips are separated by -1) are read as OpenGL's GL_TRIANGLE_STRIP: triangle k of a strip is
+// (v[k], v[k+1], v[k+2]), its first two corners swapped when k is odd, so every triangle keeps
+// the strip's orientation. The degenerate triangles that join strips (a repeated index) are
+// stitching, not surface: they are dropped, not delivered. A file may hold faces, strips or both.
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -179,6 +186,8 @@ class PlyReader final : public MeshReader {
         readVertices(e, batch);
       } else if (&e == face_) {
         readFaces(e, batch);
+      } else if (&e == strips_) {
+        readStrips(e, batch);
       } else {
         skipElement(e);
       }
@@ -258,14 +267,20 @@ class PlyReader final : public MeshReader {
         if (!vertex_) fail(path_, "PLY face element comes before the vertex element (cannot be streamed)");
         face_ = &e;
       }
+      if (e.name == "tristrips" && !strips_) {
+        if (!vertex_) fail(path_, "PLY tristrips element comes before the vertex element (cannot be streamed)");
+        strips_ = &e;
+      }
     }
     if (!vertex_) fail(path_, "PLY file has no vertex element");
-    if (!face_ || face_->count == 0 || vertex_->count == 0) fail(path_, "mesh has no triangles");
+    if (((!face_ || face_->count == 0) && (!strips_ || strips_->count == 0)) || vertex_->count == 0)
+      fail(path_, "mesh has no triangles");
     if (vertex_->count > kMaxVertices)
       fail(path_, std::to_string(vertex_->count) + " vertices is more than the supported " +
                       std::to_string(kMaxVertices), ErrorKind::Resource);
     mapVertexProperties(*vertex_);
-    mapFaceProperties(*face_);
+    if (face_) mapFaceProperties(*face_);
+    if (strips_) mapStripProperties(*strips_);
     if (!header_.materials.empty() && (vertexUV_ || faceUV_)) {
       for (const InputMaterial& m : header_.materials) checkTextureFile(m);
       header_.cornerTexcoords = faceUV_ || texnumber_;
@@ -279,8 +294,9 @@ class PlyReader final : public MeshReader {
       // No image: texture coordinates are not kept (clear their slots).
       for (Property& p : vertex_->properties)
         if (p.slot == kU || p.slot == kV) p.slot = kNone;
-      for (Property& p : face_->properties)
-        if (p.slot == kTexcoords || p.slot == kTexnumber) p.slot = kNone;
+      if (face_)
+        for (Property& p : face_->properties)
+          if (p.slot == kTexcoords || p.slot == kTexnumber) p.slot = kNone;
       vertexUV_ = faceUV_ = texnumber_ = false;
     }
     // The offsets of the fixed-record path, from the final slots.
@@ -290,7 +306,8 @@ class PlyReader final : public MeshReader {
       if (f.slot > kZ) extraFields_.push_back(f);
     for (int k = 0; k < 3; ++k) xyzOffset_[k] = fieldOffset(Slot(kX + k));
     header_.declaredVertices = int64_t(vertex_->count);
-    header_.declaredFaces = int64_t(face_->count);
+    // Strips hold an unknown number of triangles (joins dropped): the count is not declared.
+    header_.declaredFaces = strips_ ? -1 : int64_t(face_->count);
   }
 
   void parseProperty(Tokens& tok, Element& e) {
@@ -390,6 +407,19 @@ class PlyReader final : public MeshReader {
                  (list->countType == Type::UInt8 || list->countType == Type::Int8) &&
                  (list->type == Type::Int32 || list->type == Type::UInt32);
     indexType_ = list->type;
+  }
+
+  // The strips' index list; a value of -1 (or, for an unsigned type, the type's largest) ends a strip.
+  void mapStripProperties(Element& e) {
+    Property* list = nullptr;
+    for (Property& p : e.properties)
+      if ((p.name == "vertex_indices" || p.name == "vertex_index") && !list) list = &p;
+    if (!list || !list->isList) fail(path_, "PLY tristrips element has no vertex_indices list");
+    if (!isInteger(list->type)) fail(path_, "PLY tristrips vertex_indices must have an integer index type");
+    list->slot = kIndices;
+    stripEnd_ = -1;
+    if (list->type == Type::UInt8 || list->type == Type::UInt16 || list->type == Type::UInt32)
+      stripEnd_ = int64_t((uint64_t(1) << (8 * typeSize(list->type))) - 1);
   }
 
   // ---- errors ----
@@ -540,6 +570,56 @@ class PlyReader final : public MeshReader {
       batch.commitTriangles(made, degenerate);
       i += made;
       if (made < n) readRecord(e, "face", i++, nullptr, &batch);
+    }
+  }
+
+  // ---- triangle strips ----
+
+  // Every record of the tristrips element: its index list unrolled into triangles (see the top of
+  // the file), other properties read and dropped.
+  void readStrips(const Element& e, Batcher& batch) {
+    const uint64_t vertexCount = vertex_->count;
+    for (uint64_t i = 0; i < e.count; ++i) {
+      const uint64_t start = in_->offset();
+      for (const Property& p : e.properties) {
+        if (!p.isList) {
+          scalar(p.type, "tristrips", i, false);
+          continue;
+        }
+        const int64_t count = integer(p.countType, "tristrips", i);
+        if (count < 0)
+          fail(path_, "negative list length " + std::to_string(count) + " at tristrips " + std::to_string(i) + where(start));
+        if (p.slot != kIndices) {
+          if (binary_) {
+            if (!in_->skip(uint64_t(count) * typeSize(p.type))) truncated("tristrips", i);
+          } else {
+            for (int64_t k = 0; k < count; ++k) scalar(p.type, "tristrips", i, false);
+          }
+          continue;
+        }
+        uint32_t a = 0, b = 0;
+        uint64_t inStrip = 0;  // indices of the current strip so far
+        for (int64_t k = 0; k < count; ++k) {
+          const uint64_t at = in_->offset();
+          const int64_t vi = integer(p.type, "tristrips", i);
+          if (vi == stripEnd_) {
+            inStrip = 0;
+            continue;
+          }
+          if (vi < 0 || uint64_t(vi) >= vertexCount)
+            fail(path_, "index " + std::to_string(vi) + " out of range (" + std::to_string(vertexCount) + " vertices) at tristrips " +
+                            std::to_string(i) + " entry " + std::to_string(k) + (binary_ ? atByte(at) : atLine(in_->line())));
+          const uint32_t c = uint32_t(vi);
+          // Triangle inStrip - 2 of the strip; odd ones swap their first two corners.
+          if (inStrip >= 2 && a != b && b != c && a != c) {
+            if (inStrip & 1) batch.addTriangle(b, a, c);
+            else batch.addTriangle(a, b, c);
+          }
+          a = b;
+          b = c;
+          ++inStrip;
+        }
+      }
     }
   }
 
@@ -737,6 +817,8 @@ class PlyReader final : public MeshReader {
   std::vector<Element> elements_;
   Element* vertex_ = nullptr;  // into elements_, which no longer changes after the header
   Element* face_ = nullptr;
+  Element* strips_ = nullptr;  // "tristrips", when the file has one
+  int64_t stripEnd_ = -1;      // the index value that ends a strip
   bool binary_ = false, swap_ = false;
   std::vector<Field> fields_;  // mapped vertex properties with their offsets in a fixed record
   std::vector<Field> extraFields_;  // the same without x, y, z: normals and colours
