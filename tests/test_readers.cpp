@@ -781,7 +781,10 @@ TEST(ReaderErrors, PlyHeaderProblems) {
   writeFile(p, plyHeader("ascii", v + "element face 0\nproperty list uchar int vertex_indices\n"));
   EXPECT_EQ(errorOf(p), p + ": mesh has no triangles");
   writeFile(p, plyHeader("ascii", v));
-  EXPECT_EQ(errorOf(p), p + ": mesh has no triangles");
+  EXPECT_EQ(errorOf(p), p + ": mesh has no triangles: no face or tristrips element, a point cloud of 3 vertices; mtbuild needs a triangle mesh");
+  // Stanford's raw range scans: vertices and a range_grid of per-pixel vertex lists.
+  writeFile(p, plyHeader("ascii", "obj_info num_cols 2\nobj_info num_rows 1\n" + v + "element range_grid 2\nproperty list uchar int vertex_indices\n"));
+  EXPECT_THAT(errorOf(p), HasSubstr("a range image (range_grid); triangulate it into a mesh first"));
   writeFile(p, plyHeader("binary_little_endian",
                          "element vertex 5000000000\nproperty float x\nproperty float y\nproperty float z\n" + f));
   EXPECT_THAT(errorOf(p), HasSubstr("5000000000 vertices is more than the supported"));

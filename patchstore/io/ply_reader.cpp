@@ -273,6 +273,15 @@ class PlyReader final : public MeshReader {
       }
     }
     if (!vertex_) fail(path_, "PLY file has no vertex element");
+    if (!face_ && !strips_) {
+      // A point cloud, or a range image (Stanford's raw scans: a range_grid element of per-pixel
+      // vertex lists): say which, since the file is not broken, only not a mesh.
+      bool grid = false;
+      for (const Element& e : elements_) grid = grid || e.name == "range_grid";
+      fail(path_, "mesh has no triangles: no face or tristrips element, " +
+                      (grid ? std::string("a range image (range_grid); triangulate it into a mesh first")
+                            : "a point cloud of " + std::to_string(vertex_->count) + " vertices; mtbuild needs a triangle mesh"));
+    }
     if (((!face_ || face_->count == 0) && (!strips_ || strips_->count == 0)) || vertex_->count == 0)
       fail(path_, "mesh has no triangles");
     if (vertex_->count > kMaxVertices)
