@@ -414,6 +414,17 @@ TEST(PlyReader, TriangleStripsUnrolledKeepingTheirOrientation) {
     EXPECT_EQ(c.stats.degenerateTriangles, 0u);  // the joins are not delivered
     EXPECT_EQ(c.header.declaredFaces, -1);        // a strip's triangle count is not declared
   }
+  // A join of three degenerate triangles after a strip of odd length: the parity is the position
+  // in the strip, not the count of triangles delivered (which would swap (6,10,7)).
+  {
+    std::string text = plyHeader("ascii", "element vertex 12\nproperty float x\nproperty float y\nproperty float z\n"
+                                          "element tristrips 1\nproperty list int uint vertex_indices\n");
+    for (int i = 0; i < 12; ++i) text += std::to_string(i % 4) + " " + std::to_string(i / 4) + " 0\n";
+    text += "13 0 4 1 5 2 2 2 6 6 10 7 11 -1\n";  // ascii -1 ends a strip of an unsigned type too
+    writeFile(dir.file("odd.ply"), text);
+    Collect c = readMesh(dir.file("odd.ply"));
+    EXPECT_EQ(c.t, (std::vector<uint32_t>{0, 4, 1, 1, 4, 5, 1, 5, 2, 6, 10, 7, 7, 10, 11}));
+  }
   // Faces and strips in one file: both are read, in the file's order.
   std::string body = "element vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
                      "element face 1\nproperty list uchar int vertex_indices\n"

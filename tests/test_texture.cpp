@@ -303,6 +303,20 @@ TEST(TextureReaders, PlyPerVertexPerCornerAndTexnumber) {
   EXPECT_EQ(b.corner(1, 1), (std::array<double, 3>{.5, .5, 1}));
   EXPECT_NE(b.t[0], b.t[3]);  // vertex 0: (0, 0) in both faces, but two images
   EXPECT_EQ(b.v.size(), 6u);
+  // Triangle strips beside faces with texnumber: a strip's triangles take image 0 and their
+  // vertices' coordinates; the face keeps its image.
+  test::writeFile(dir.file("st.ply"),
+                  "ply\nformat ascii 1.0\ncomment TextureFile t0.png\ncomment TextureFile t1.png\nelement vertex 4\n"
+                  "property float x\nproperty float y\nproperty float z\nproperty float s\nproperty float t\nelement face 1\n"
+                  "property list uchar int vertex_indices\nproperty int texnumber\nelement tristrips 1\n"
+                  "property list int int vertex_indices\nend_header\n0 0 0 0 0\n1 0 0 1 0\n1 1 0 1 1\n0 1 0 0 1\n"
+                  "3 0 1 2 1\n3 0 2 3\n");
+  Collect st = readAll(dir.file("st.ply"));
+  ASSERT_EQ(st.t.size(), 6u);
+  EXPECT_EQ(st.corner(0, 1), (std::array<double, 3>{1, 0, 1}));
+  EXPECT_EQ(st.corner(1, 1), (std::array<double, 3>{1, 1, 0}));
+  EXPECT_EQ(st.corner(1, 2), (std::array<double, 3>{0, 1, 0}));
+  EXPECT_EQ(st.pos(1, 2), (std::array<double, 3>{0, 1, 0}));
 }
 
 TEST(TextureReaders, BadReferencesAreClearErrors) {

@@ -21,6 +21,9 @@
 // (v[k], v[k+1], v[k+2]), its first two corners swapped when k is odd, so every triangle keeps
 // the strip's orientation. The degenerate triangles that join strips (a repeated index) are
 // stitching, not surface: they are dropped, not delivered. A file may hold faces, strips or both.
+// With an unsigned index type of 8 or 16 bits, vertex 255 or 65535 cannot be used (it ends a
+// strip, as OpenGL's fixed restart index does). Strips take per-vertex texture coordinates (image
+// 0); a file whose faces carry per-corner coordinates leaves its strips untextured.
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -611,7 +614,7 @@ class PlyReader final : public MeshReader {
         for (int64_t k = 0; k < count; ++k) {
           const uint64_t at = in_->offset();
           const int64_t vi = integer(p.type, "tristrips", i);
-          if (vi == stripEnd_) {
+          if (vi == stripEnd_ || vi == -1) {  // -1 also in ascii text of an unsigned type
             inStrip = 0;
             continue;
           }
@@ -621,8 +624,16 @@ class PlyReader final : public MeshReader {
           const uint32_t c = uint32_t(vi);
           // Triangle inStrip - 2 of the strip; odd ones swap their first two corners.
           if (inStrip >= 2 && a != b && b != c && a != c) {
-            if (inStrip & 1) batch.addTriangle(b, a, c);
-            else batch.addTriangle(a, b, c);
+            const uint32_t v[3] = {inStrip & 1 ? b : a, inStrip & 1 ? a : b, c};
+            if (keepVertexUV_) {
+              // Per-vertex coordinates kept for the faces' texnumber: a strip's triangles take
+              // image 0 (a strip has no texnumber), with their corners' coordinates.
+              float uv[6];
+              for (int q = 0; q < 3; ++q) uv[2 * q] = vertexUVTable_[2 * size_t(v[q])], uv[2 * q + 1] = vertexUVTable_[2 * size_t(v[q]) + 1];
+              batch.addTriangle(v, uv, 0);
+            } else {
+              batch.addTriangle(v[0], v[1], v[2]);
+            }
           }
           a = b;
           b = c;
