@@ -62,6 +62,8 @@ async function main() {
     stillShareLoading: q.has('loadshare') ? Number(q.get('loadshare')) : undefined,
     // stillshare=S: the still frames' drawing share once nothing loads (MTObject.stillShare).
     stillShare: q.has('stillshare') ? Number(q.get('stillshare')) : undefined,
+    // stillupdate=MS: while a still view's patches load, its cut update runs at most every MS (ExtractRender's stillLoadingMs; 0: every frame).
+    stillLoadingMs: q.has('stillupdate') ? Number(q.get('stillupdate')) : undefined,
     // stillwait=MS: while a still view's patches load, a new image starts when the last one is this old (MTObject.stillWaitMs).
     stillWaitMs: q.has('stillwait') ? Number(q.get('stillwait')) : undefined,
     // occlusion=0: a still image draws every patch of its cut (no occlusion tests, occlusion.js);

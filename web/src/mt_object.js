@@ -26,12 +26,13 @@ export class MTObject extends THREE.Group {
    *          libs?:object, material?:THREE.Material, onWarning?:(msg:string)=>void, source?:object,
    *          precompile?:{renderer:THREE.WebGLRenderer, scene:THREE.Scene, camera:THREE.Camera},
    *          early?:object, tailBytes?:number, loadAhead?:boolean, aheadBatch?:number,
-   *          aheadGate?:number}} [options]
+   *          aheadGate?:number, stillLoadingMs?:number}} [options]
    * `precompile`: the materials' shaders are compiled for that renderer and scene (its lights)
    * while the coarsest cut loads, so the first frame does not wait for them.
    * `loadAhead` (default true): while the camera moves, batches of `aheadBatch` (32) of the patches
    * the view would need once still are loaded after frames within `aheadGate` (0.6) of the budget
-   * (ExtractRender.loadAheadOf).
+   * (ExtractRender.loadAheadOf). `stillLoadingMs` (250): while a still view's loads are pending,
+   * its cut update runs at most this often (ExtractRender's option; 0: every frame).
    */
   static async open(url, options = {}) {
     const times = { start: performance.now() };  // the opening's milestones (performance.now(), ms)
@@ -104,6 +105,7 @@ export class MTObject extends THREE.Group {
       loadAhead: options.loadAhead ?? true,
       aheadBatch: options.aheadBatch ?? 32,
       aheadGate: options.aheadGate ?? 0.6,
+      stillLoadingMs: options.stillLoadingMs ?? 250,
     });
     this.meshes = new Map();  // patch id -> Mesh (patches of the cut)
     this.backMeshes = new Map();  // patch id -> Mesh of its back faces (the back pass)

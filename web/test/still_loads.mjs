@@ -10,7 +10,9 @@
 //   list) must reach the target's node set, having loaded only its patches, with exactly the cut's
 //   patches pinned; with one of those patches damaged, they must stop with it out of the cut;
 //   settled, an update repeats the last (ExtractRender.stillRepeats) and keeps its figures, one
-//   after an arrival does not;
+//   after an arrival does not; while loads are pending, one after an arrival within
+//   stillLoadingMs of the last that ran repeats too, one after that time or with nothing pending
+//   does not;
 // - moving on from the settled still view with a budget and no load arriving, the cut coarsens
 //   through the levels never loaded (ExtractRender.coarsenThrough) to within the budget in at most
 //   3 updates, with exactly its patches pinned;
@@ -31,11 +33,13 @@ if (!h) {
   console.error('usage: node still_loads.mjs FILE.mt VIEWS TOLERANCE WIDTH HEIGHT');
   process.exit(2);
 }
-// A PatchServer that loads nothing and keeps the last request list.
+// A PatchServer that loads nothing and keeps the last request list; `busy` says loads are pending
+// (the tests load the requests between updates: idle unless a test says otherwise).
 class RecordingServer {
-  constructor() { this.last = []; this.aheadInFlight = 0; }
+  constructor() { this.last = []; this.aheadInFlight = 0; this.busy = false; }
   submit(list) { this.last = list; }
   meanLoadMs() { return 0; }
+  idle() { return !this.busy; }
 }
 const options = { pixelTolerance: Number(tol), fixedTriangles: 2 ** 40, extractMs: 1e9 };
 let failed = 0, deeper = 0, aheadSeen = 0;
@@ -119,6 +123,23 @@ try {
       while (other >= 0 && cache.state(other) !== 'absent') --other;
       if (other >= 0) cache.reserve(other, 1), cache.commit(other, {}, 1);
       const after = er.update(rounds + 4, view, null);
+      // Loads pending: an arrival within stillLoadingMs of the last update that ran is not looked
+      // at (the update repeats); after that time, or once nothing is pending, it is.
+      const arrive = () => {
+        while (other >= 0 && cache.state(other) !== 'absent') --other;
+        if (other >= 0) cache.reserve(other, 1), cache.commit(other, {}, 1);
+      };
+      server.busy = true;
+      arrive();
+      const pendingSoon = er.update(rounds + 5, view, null);
+      er.stillAt -= er.options.stillLoadingMs;
+      const pendingLater = er.update(rounds + 6, view, null);
+      arrive();
+      const pendingSoon2 = er.update(rounds + 7, view, null);
+      server.busy = false;
+      const idleSoon = er.update(rounds + 8, view, null);
+      const throttled = other < 0 || (pendingSoon.repeated && !pendingLater.repeated && pendingSoon2.repeated && !idleSoon.repeated);
+      const throttleFigures = `${pendingSoon.repeated} ${pendingLater.repeated} ${pendingSoon2.repeated} ${idleSoon.repeated}`;
       const cut = patchesOf(er.cutArcs);
       const pinned = [...cache.entries].filter(([, e]) => e.pins > 0).map(([id]) => id);
       const problems = [];
@@ -129,6 +150,7 @@ try {
       if (rounds >= 500) problems.push('did not settle in 500 updates');
       if (again.repeated || !arrival.repeated || arrival.maxScreenError !== againErr) problems.push('a settled still update was not skipped, or gave another error');
       if (after.repeated && other >= 0) problems.push('a still update after a patch arrived was skipped');
+      if (!throttled) problems.push(`loads pending: a still update within stillLoadingMs of the last that ran was not skipped, or one after it or with nothing pending was (repeated: ${throttleFigures})`);
       if (pinned.length !== cut.size || pinned.some((id) => !cut.has(id) || cache.entries.get(id).pins !== 1))
         problems.push(`${pinned.length} patches pinned, the cut holds ${cut.size}, not each pinned once`);
       for (const id of cut) if (cache.state(id) !== 'ready') problems.push(`the cut holds patch ${id}, ${cache.state(id)}`);
