@@ -397,13 +397,20 @@ class PlyReader final : public MeshReader {
     return 0;
   }
 
-  void mapFaceProperties(Element& e) {
+  // The index list of a face or tristrips element (its first "vertex_indices" or "vertex_index"
+  // property), checked and given the indices' slot.
+  Property* indexList(Element& e) {
     Property* list = nullptr;
     for (Property& p : e.properties)
       if ((p.name == "vertex_indices" || p.name == "vertex_index") && !list) list = &p;
-    if (!list || !list->isList) fail(path_, "PLY face element has no vertex_indices list");
-    if (!isInteger(list->type)) fail(path_, "PLY vertex_indices must have an integer index type");
+    if (!list || !list->isList) fail(path_, "PLY " + e.name + " element has no vertex_indices list");
+    if (!isInteger(list->type)) fail(path_, "PLY " + e.name + " vertex_indices must have an integer index type");
     list->slot = kIndices;
+    return list;
+  }
+
+  void mapFaceProperties(Element& e) {
+    Property* list = indexList(e);
     for (Property& p : e.properties) {
       if (p.name == "texcoord" && p.isList) {
         if (isInteger(p.type)) fail(path_, "PLY face texcoord list must have a float type");
@@ -423,12 +430,7 @@ class PlyReader final : public MeshReader {
 
   // The strips' index list; a value of -1 (or, for an unsigned type, the type's largest) ends a strip.
   void mapStripProperties(Element& e) {
-    Property* list = nullptr;
-    for (Property& p : e.properties)
-      if ((p.name == "vertex_indices" || p.name == "vertex_index") && !list) list = &p;
-    if (!list || !list->isList) fail(path_, "PLY tristrips element has no vertex_indices list");
-    if (!isInteger(list->type)) fail(path_, "PLY tristrips vertex_indices must have an integer index type");
-    list->slot = kIndices;
+    const Property* list = indexList(e);
     stripEnd_ = -1;
     if (list->type == Type::UInt8 || list->type == Type::UInt16 || list->type == Type::UInt32)
       stripEnd_ = int64_t((uint64_t(1) << (8 * typeSize(list->type))) - 1);
