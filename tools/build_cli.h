@@ -76,8 +76,8 @@ struct BuildCli {
   // `tool`: "mtbuild" or "mtcluster"; `cluster` adds what differs in the help.
   void add(CLI::App& app, bool cluster) {
     app.add_option("input", input,
-                   cluster ? "Input mesh (PLY, OBJ, OFF, STL) or a patch store made by `mtstore ingest`, read by rank 0"
-                           : "Input mesh (PLY, OBJ, OFF, STL) or a patch store made by `mtstore ingest`")
+                   cluster ? "Input mesh (PLY with faces or triangle strips, OBJ, OFF, STL, glTF/GLB) or a patch store made by `mtstore ingest`, read by rank 0"
+                           : "Input mesh (PLY with faces or triangle strips, OBJ, OFF, STL, glTF/GLB) or a patch store made by `mtstore ingest`")
         ->required();
     app.add_option("-o,--output", output,
                    std::string("Output MT file, ending in .mt") + (cluster ? ", written by rank 0" : "") +

@@ -163,7 +163,7 @@ struct Commands {
 };
 
 void addIngest(CLI::App& app, Args& a, Commands& c) {
-  c.ingest = app.add_subcommand("ingest", "Build a patch store from a mesh file (PLY, OBJ, OFF, STL)");
+  c.ingest = app.add_subcommand("ingest", "Build a patch store from a mesh file (PLY with faces or triangle strips, OBJ, OFF, STL, glTF/GLB)");
   c.ingest->add_option("input", a.input, "Input mesh file")->required();
   c.ingest->add_option("-o,--output", a.output,
                        "Store directory to create (must not exist: an existing folder, even empty, is refused)")->required();
