@@ -600,15 +600,9 @@ class PlyReader final : public MeshReader {
           scalar(p.type, "tristrips", i, false);
           continue;
         }
-        const int64_t count = integer(p.countType, "tristrips", i);
-        if (count < 0)
-          fail(path_, "negative list length " + std::to_string(count) + " at tristrips " + std::to_string(i) + where(start));
+        const int64_t count = listLength(p, "tristrips", i, start);
         if (p.slot != kIndices) {
-          if (binary_) {
-            if (!in_->skip(uint64_t(count) * typeSize(p.type))) truncated("tristrips", i);
-          } else {
-            for (int64_t k = 0; k < count; ++k) scalar(p.type, "tristrips", i, false);
-          }
+          skipItems(p.type, count, "tristrips", i);
           continue;
         }
         uint32_t a = 0, b = 0;
@@ -661,10 +655,7 @@ class PlyReader final : public MeshReader {
         if (values && p.slot != kNone && p.slot < kIndices) values[p.slot] = v;
         continue;
       }
-      int64_t count = integer(p.countType, kind, index);
-      if (count < 0)
-        fail(path_, "negative list length " + std::to_string(count) + " at " + kind + " " +
-                        std::to_string(index) + where(start));
+      const int64_t count = listLength(p, kind, index, start);
       if (p.slot == kIndices && batch) {
         batch->beginFace();
         for (int64_t k = 0; k < count; ++k) {
@@ -677,11 +668,26 @@ class PlyReader final : public MeshReader {
         if (batch->endFace() < 3)
           fail(path_, "face " + std::to_string(index) + " has " + std::to_string(count) +
                           " corners (at least 3 needed)" + where(start));
-      } else if (binary_) {
-        if (!in_->skip(uint64_t(count) * typeSize(p.type))) truncated(kind, index);
       } else {
-        for (int64_t k = 0; k < count; ++k) scalar(p.type, kind, index, false);
+        skipItems(p.type, count, kind, index);
       }
+    }
+  }
+
+  // The length of list property `p` of record `index` (of element `kind`, which starts at `start`).
+  int64_t listLength(const Property& p, const char* kind, uint64_t index, uint64_t start) {
+    const int64_t count = integer(p.countType, kind, index);
+    if (count < 0)
+      fail(path_, "negative list length " + std::to_string(count) + " at " + kind + " " + std::to_string(index) + where(start));
+    return count;
+  }
+
+  // Reads and drops `count` items of type `t` of a list.
+  void skipItems(Type t, int64_t count, const char* kind, uint64_t index) {
+    if (binary_) {
+      if (!in_->skip(uint64_t(count) * typeSize(t))) truncated(kind, index);
+    } else {
+      for (int64_t k = 0; k < count; ++k) scalar(t, kind, index, false);
     }
   }
 
@@ -697,9 +703,7 @@ class PlyReader final : public MeshReader {
         else scalar(p.type, "face", index, false);
         continue;
       }
-      int64_t count = integer(p.countType, "face", index);
-      if (count < 0)
-        fail(path_, "negative list length " + std::to_string(count) + " at face " + std::to_string(index) + where(start));
+      const int64_t count = listLength(p, "face", index, start);
       for (int64_t k = 0; k < count; ++k) {
         if (p.slot == kIndices) {
           int64_t vi = integer(p.type, "face", index);
