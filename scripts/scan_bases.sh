@@ -12,6 +12,11 @@ complete() {
 }
 if complete; then exit 0; fi
 mkdir -p "$dir"
+# Callers at once (ctest -j runs the scan tests side by side, each asking for the models): one
+# fetches under a lock on the folder, the others wait for it and find the folder complete.
+exec 9>"$dir/.lock"
+flock 9
+if complete; then exit 0; fi
 work=$(mktemp -d "${TMPDIR:-/tmp}/scan-bases.XXXXXX")
 trap 'rm -rf "$work"' EXIT
 (
