@@ -4,7 +4,8 @@
 # with each figure's runs and how many met the web viewer's targets (docs/web.md): the first image
 # within 1 s of the page's load event, at least 95% of the path's frames within the budget, the
 # cache never above its cap, and the screen error at the tolerance within 2 s of the camera
-# stopping. Each run's full output is kept in OUT (default out/web-series/).
+# stopping. Each run's full output is kept in OUT (default out/web-series/) as I.K.log: the
+# I-th file given (from 0), its K-th run.
 #   bench/web_series.sh [--runs 5] [--out DIR] FILE.mt... [-- bench/web.sh options]
 # Exit status 1 when a run failed (its log names why); the targets missed are only counted.
 set -euo pipefail
@@ -15,7 +16,7 @@ while [[ $# -gt 0 ]]; do
     --runs) runs=$2; shift 2 ;;
     --out) out=$2; shift 2 ;;
     --) shift; extra=("$@"); break ;;
-    -h|--help) sed -n '2,9p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    -h|--help) sed -n '2,10p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
     -*) echo "web_series.sh: unknown option $1 (--runs N, --out DIR, FILE.mt..., -- bench/web.sh options)" >&2; exit 2 ;;
     *) files+=("$1"); shift ;;
   esac
@@ -27,7 +28,7 @@ mkdir -p "$out"
 failed=0
 for ((k = 1; k <= runs; ++k)); do
   for i in "${!files[@]}"; do
-    log="$out/$i.$(basename "${files[$i]}" .mt).$k.log"
+    log="$out/$i.$k.log"  # file i of the command line, run k
     echo "web_series.sh: run $k of $runs, ${files[$i]}" >&2
     bench/web.sh "${files[$i]}" "${extra[@]}" >"$log" 2>&1 || { echo "web_series.sh: run $k of ${files[$i]} failed: $(tail -1 "$log")" >&2; failed=1; }
   done
@@ -47,9 +48,7 @@ pat = {
 for i, f in enumerate(files):
     rows = []
     for k in range(1, runs + 1):
-        base = os.path.basename(f)
-        base = base[:-3] if base.endswith('.mt') else base
-        log = os.path.join(out, f'{i}.{base}.{k}.log')
+        log = os.path.join(out, f'{i}.{k}.log')
         r = {}
         for line in open(log):
             for key, (rx, conv) in pat.items():
@@ -72,7 +71,7 @@ for i, f in enumerate(files):
     cache = [r['cache'] for r in ok]
     line('cache max / cap (MiB)', [f'{m}/{c}' for m, c in cache], f'{sum(float(m) <= float(c) for m, c in cache)} of {n} never above')
     line('fetched (KiB/frame, MiB, %)', [f'{a}, {b}, {c}%' for a, b, c in (r['fetched'] for r in ok)])
-    line('stop to loaded at the tol.', [f'{r["loaded"][0]} s' for r in ok])
+    line('stop to loaded at the tol.', [r['loaded'][0] + ('' if r['loaded'][0] == 'never' else ' s') for r in ok])
     tol = [r['tol'][0] for r in ok]
     line('tolerance after the stop', [f'{int(t) / 1000:.2f} s' if t else 'not in 20 s' for t in tol],
          f'{sum(1 for t in tol if t and int(t) <= 2000)} of {n} within 2 s')

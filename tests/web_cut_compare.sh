@@ -59,7 +59,6 @@ for f in $files; do
     "$bin/web_cut_nodes" "$t/$f.mt" "$t/views" $tol 1280 720 >"$t/cpp"
     node "$src/web/test/cut_nodes.mjs" "$t/$f.mt" "$t/views" $tol 1280 720 >"$t/js" 2>"$t/jserr" || { cat "$t/jserr" >&2; exit 1; }
     # Normal cones cull only a closed surface (closed_surface.js): a, c, d and x are closed, b, e and s have holes.
-    # The scan s is open (its holes).
     want=true; [[ $f == b || $f == e || $f == s ]] && want=false
     grep -q "closed $want" "$t/jserr" || { echo "web_cut_compare: $f.mt: expected closed $want: $(cat "$t/jserr")" >&2; exit 1; }
     n=$(wc -l <"$t/cpp")
