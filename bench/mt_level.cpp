@@ -5,8 +5,11 @@
 //   encode   every floor patch with the file's codec (meshopt and draco, bytes per triangle too),
 //   simplify simplifyRegion to half, locks as in the level loop (attempts = meshopt runs),
 //   measure  the same with the error measurement on (measure - simplify = its cost).
-// Usage: bench_mt_level STORE [--regions N] [--repeat R] [--step S]. Not a Google Benchmark: the
-// inputs are a store on disk, and what matters is the split between phases.
+// Usage: bench_mt_level STORE [--regions N] [--repeat R] [--step S] [--simplified]. Not a Google
+// Benchmark: the inputs are a store on disk, and what matters is the split between phases.
+// --simplified: the floor is a level's output, not the input's patches (a build stopped after level
+// L keeps its store in OUT.work/store): encoded as the level loop encodes the floors of levels 2 and
+// up (PatchCodecOptions::simplified: fan order, one payload coding).
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -37,17 +40,23 @@ struct Region {
 
 int main(int argc, char** argv) {
   if (argc < 2) {
-    std::fprintf(stderr, "usage: %s STORE [--regions N] [--repeat R] [--step S]\n", argv[0]);
+    std::fprintf(stderr, "usage: %s STORE [--regions N] [--repeat R] [--step S] [--simplified]\n", argv[0]);
     return 2;
   }
   std::string dir = argv[1];
   size_t maxRegions = 64;
   int repeat = 1;
   double step = 0;
-  for (int i = 2; i + 1 < argc; i += 2) {
-    if (!std::strcmp(argv[i], "--regions")) maxRegions = std::strtoul(argv[i + 1], nullptr, 10);
-    else if (!std::strcmp(argv[i], "--repeat")) repeat = std::atoi(argv[i + 1]);
-    else if (!std::strcmp(argv[i], "--step")) step = std::atof(argv[i + 1]);
+  bool simplified = false;
+  for (int i = 2; i < argc; ++i) {
+    if (!std::strcmp(argv[i], "--simplified")) simplified = true;
+    else if (i + 1 < argc && !std::strcmp(argv[i], "--regions")) maxRegions = std::strtoul(argv[++i], nullptr, 10);
+    else if (i + 1 < argc && !std::strcmp(argv[i], "--repeat")) repeat = std::atoi(argv[++i]);
+    else if (i + 1 < argc && !std::strcmp(argv[i], "--step")) step = std::atof(argv[++i]);
+    else {
+      std::fprintf(stderr, "bench_mt_level: unknown or incomplete option %s\n", argv[i]);
+      return 2;
+    }
   }
   try {
     auto store = PatchStore::open(dir);
@@ -82,6 +91,7 @@ int main(int argc, char** argv) {
     for (format::Codec codec : {format::Codec::Meshopt, format::Codec::Draco}) {
       PatchCodecOptions co;
       co.codec = codec;
+      co.simplified = simplified;
       size_t bytes = 0;
       auto t = Clock::now();
       for (int rep = 0; rep < repeat; ++rep)

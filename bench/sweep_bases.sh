@@ -10,7 +10,12 @@
 # verification failed; the failing inputs are kept in WORK.
 #
 #   bench/sweep_bases.sh [--size 150k] [--cuts 8] [--rotate 0] [--work DIR] [--models "A B ..."]
-#                        [-- MTBUILD OPTIONS...]
+#                        [--tools] [-- MTBUILD OPTIONS...]
+#
+# --tools: after a verified build, every tool that reads the file runs on it too, and any exit
+# status but 0 fails the model: the finest cut (`mtextract --error 0`, its triangles checked
+# against level 0's) built again by `mtbuild` and verified, a cut of an eighth of the triangles as
+# GLB, `mtexport tiles`, `mtrender --headless` (20 orbit frames; needs EGL) and `mtinfo --json`.
 #
 # --size: each model's LEVELS is the smallest giving at least this many triangles (base triangles
 # x 4^LEVELS, at most 7 levels); 150k takes ~10 minutes for the ~125 readable models on 2 cores.
@@ -19,7 +24,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-size=150k cuts=8 rotate=0 work=out/sweep-bases models="" extra=()
+size=150k cuts=8 rotate=0 work=out/sweep-bases models="" tools=0 extra=()
 while [[ $# -gt 0 ]]; do
   case "$1" in
     --size) size=$2; shift 2 ;;
@@ -27,8 +32,9 @@ while [[ $# -gt 0 ]]; do
     --rotate) rotate=$2; shift 2 ;;
     --work) work=$2; shift 2 ;;
     --models) models=$2; shift 2 ;;
+    --tools) tools=1; shift ;;
     --) shift; extra=("$@"); break ;;
-    -h|--help) sed -n '2,18p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    -h|--help) sed -n '2,23p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
     *) echo "bench/sweep_bases.sh: unknown option $1 (see --help)" >&2; exit 1 ;;
   esac
 done
@@ -43,7 +49,9 @@ EOF
 [[ "$rotate" =~ ^[0-9]+$ ]] || { echo "bench/sweep_bases.sh: --rotate must be a count from 0 (got '$rotate')" >&2; exit 1; }
 
 bin="${BIN:-build/bin}"
-for tool in mtbuild mtverify mtinfo scangen; do
+needed="mtbuild mtverify mtinfo scangen"
+(( tools )) && needed="$needed mtextract mtexport mtrender"
+for tool in $needed; do
   [[ -x "$bin/$tool" ]] || { echo "bench/sweep_bases.sh: $bin/$tool is missing: build it first (scangen needs ../shared)" >&2; exit 1; }
 done
 bases="$(dirname "$bin")/scan-bases"
@@ -52,6 +60,34 @@ mkdir -p "$work"
 [[ -n "$models" ]] || models=$(cd "$bases" && ls *.off | sed 's/\.off$//' | tr '\n' ' ')
 
 options=("" "--holes 0.3" "--shuffle 5" "--amp 0.01 --holes 0.05")
+
+# Runs the tools of --tools on MT file $1 in folder $2 (emptied first); prints " TOOL: last line"
+# for each that failed, nothing when all passed. Each tool's output is kept in $2/TOOL.log.
+tools_on() {
+  local mt=$1 dir=$2 out=""
+  rm -rf "$dir" && mkdir -p "$dir"
+  step() {  # step NAME COMMAND...: runs it, its output in NAME.log; a failure is added to out
+    local tag=$1
+    shift
+    if ! timeout 600 "$@" >"$dir/$tag.log" 2>&1; then out+=" $tag: $(tail -1 "$dir/$tag.log")"; return 1; fi
+  }
+  local level0
+  step info "$bin/mtinfo" "$mt" --json
+  level0=$(sed -n 's/.*"level": 0,.*"triangles": \([0-9]*\),.*/\1/p' "$dir/info.log")
+  [[ -n "$level0" ]] || { out+=" info: no level 0 in its --json"; level0=0; }
+  if step extract-finest "$bin/mtextract" "$mt" --error 0 -o "$dir/finest.ply"; then
+    local got
+    got=$(sed -n 's/.*: \([0-9]*\) triangles,.*/\1/p' "$dir/extract-finest.log")
+    [[ "$got" == "$level0" ]] || out+=" extract-finest: $got triangles, level 0 has $level0"
+    step rebuild "$bin/mtbuild" "$dir/finest.ply" -o "$dir/finest.mt" -q &&
+      step rebuild-verify "$bin/mtverify" "$dir/finest.mt" --cuts 2
+  fi
+  step extract-glb "$bin/mtextract" "$mt" --triangles $(( (level0 + 7) / 8 )) -o "$dir/eighth.glb"
+  step tiles "$bin/mtexport" tiles "$mt" "$dir/tiles"
+  step render "$bin/mtrender" "$mt" --headless --quiet --camera-path orbit --frames 20 --width 320 --height 240
+  rm -rf "$dir/finest.ply" "$dir/finest.mt" "$dir/tiles" "$dir/eighth.glb"
+  printf '%s' "$out"
+}
 echo "bench/sweep_bases.sh: $(nproc) cores, load $(cut -d' ' -f1-3 /proc/loadavg); size >= $target, mtverify --cuts $cuts, mtbuild ${extra[*]:-(defaults)}"
 i=$rotate ok=0 failed=0 skipped=0
 for name in $models; do
@@ -78,7 +114,16 @@ for name in $models; do
     continue
   fi
   verdict=$("$bin/mtverify" "$work/out.mt" --cuts "$cuts" 2>&1 | grep -E 'crack-free cuts|^OK|FAILED' | tr -s ' ' | tr '\n' ' ' || true)
-  if [[ "$verdict" == *OK* && "$verdict" != *FAILED* ]]; then
+  # --tools: what failed among the tools run on the verified file, empty when all passed.
+  broken=""
+  if (( tools )) && [[ "$verdict" == *OK* && "$verdict" != *FAILED* ]]; then
+    broken=$(tools_on "$work/out.mt" "$work/tools")
+  fi
+  if [[ "$verdict" == *OK* && "$verdict" != *FAILED* && -n "$broken" ]]; then
+    failed=$((failed + 1))
+    cp "$work/in.ply" "$work/failed-$name.ply"
+    printf '%-52s %9s  TOOLS FAILED:%s\n' "$label" "$triangles" "$broken"
+  elif [[ "$verdict" == *OK* && "$verdict" != *FAILED* ]]; then
     ok=$((ok + 1))
     # The coarsest level's triangles and the level count: a build whose retries kept its regions
     # whole stops early with a large coarsest level.
