@@ -114,16 +114,16 @@ for name in $models; do
     continue
   fi
   verdict=$("$bin/mtverify" "$work/out.mt" --cuts "$cuts" 2>&1 | grep -E 'crack-free cuts|^OK|FAILED' | tr -s ' ' | tr '\n' ' ' || true)
+  verified=0
+  [[ "$verdict" == *OK* && "$verdict" != *FAILED* ]] && verified=1
   # --tools: what failed among the tools run on the verified file, empty when all passed.
   broken=""
-  if (( tools )) && [[ "$verdict" == *OK* && "$verdict" != *FAILED* ]]; then
-    broken=$(tools_on "$work/out.mt" "$work/tools")
-  fi
-  if [[ "$verdict" == *OK* && "$verdict" != *FAILED* && -n "$broken" ]]; then
+  (( tools && verified )) && broken=$(tools_on "$work/out.mt" "$work/tools")
+  if (( verified )) && [[ -n "$broken" ]]; then
     failed=$((failed + 1))
     cp "$work/in.ply" "$work/failed-$name.ply"
     printf '%-52s %9s  TOOLS FAILED:%s\n' "$label" "$triangles" "$broken"
-  elif [[ "$verdict" == *OK* && "$verdict" != *FAILED* ]]; then
+  elif (( verified )); then
     ok=$((ok + 1))
     # The coarsest level's triangles and the level count: a build whose retries kept its regions
     # whole stops early with a large coarsest level.
