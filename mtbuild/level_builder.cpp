@@ -420,9 +420,12 @@ bool LevelBuilder::beginLevel() {
   s.lr.trianglesIn = s.liveTriangles;
   s.nextCommit = 0;
   s.doneTriangles = s.outTriangles = 0;
-  s.progress = std::make_unique<Progress>(
-      s.options.progress, s.options.toolName + ": level " + std::to_string(level + 1) + "/" + std::to_string(s.ctx.partitionLevels),
-      s.liveTriangles);
+  // Past the partition's levels come further root levels (the whole model in one region, while
+  // each gains 10%; docs/mtbuild.md "The root"): "level 7/6" would read as a miscount.
+  const std::string label = level + 1 <= s.ctx.partitionLevels
+                                ? "level " + std::to_string(level + 1) + "/" + std::to_string(s.ctx.partitionLevels)
+                                : "level " + std::to_string(level + 1) + " (a further root level)";
+  s.progress = std::make_unique<Progress>(s.options.progress, s.options.toolName + ": " + label, s.liveTriangles);
   return true;
 }
 

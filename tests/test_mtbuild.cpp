@@ -293,9 +293,26 @@ TEST(Mtbuild, ARootLevelThatGainsNothingIsNotAdded) {
   o.patchTriangles = 300;
   o.rootTriangles = 200;
   o.simplifier = RegionSimplifier::Quadric;  // meshopt drops an isolated triangle whole
+  o.progress = true;  // the progress lines name the levels past the partition's as root levels
+  testing::internal::CaptureStderr();
   BuildReport r = buildMt(in, out, o);
+  const std::string progress = testing::internal::GetCapturedStderr();
   ASSERT_GE(r.levels.size(), 2u);
   EXPECT_EQ(r.levels.back().regions, 1u) << "the last level is a root level";
+  // "level N/M" counts the partition's M levels; a further root level is not "level 7/6".
+  size_t counted = 0, furtherRoot = 0;
+  for (size_t at = progress.find("level "); at != std::string::npos; at = progress.find("level ", at + 1)) {
+    unsigned level = 0, of = 0;
+    char after = 0;
+    if (std::sscanf(progress.c_str() + at, "level %u/%u", &level, &of) == 2) {
+      ++counted;
+      EXPECT_LE(level, of) << progress;
+    } else if (std::sscanf(progress.c_str() + at, "level %u (a further root level%c", &level, &after) == 2 && after == ')') {
+      ++furtherRoot;
+    }
+  }
+  EXPECT_GE(counted, 1u) << progress;
+  EXPECT_GE(furtherRoot, 1u) << "this build tries a root level past the partition's (and drops it)\n" << progress;
   for (size_t i = 1; i < r.levels.size(); ++i)
     EXPECT_LE(r.levels[i].trianglesOut * 10, r.levels[i].trianglesIn * 9)
         << "level " << r.levels[i].level << " keeps " << r.levels[i].trianglesOut << " of " << r.levels[i].trianglesIn
