@@ -14,13 +14,14 @@
 #      first frame (cold)
 #
 #   bench/billion.sh [--triangles 1000M] [--work DIR] [--memory 512M] [--threads 2] [--frames 600]
-#                    [--keep-input] [--keep] [--skip-render] [--same-bytes-at 256M]
+#                    [--keep-input] [--keep] [--skip-render] [--same-bytes-at 256M] [--level-ratio 2]
+# --level-ratio K goes to both builds (mtbuild --level-ratio: each level keeps 1/K of the one below).
 # BIN=dir/bin picks the build dir (default build/bin). Disk needed is checked first and printed:
 # about 19 bytes per triangle for the PLY, at most 2x that of build scratch, ~2.4 for the MT file.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 triangles=1000M; work=out/billion; memory=512M; threads=2; frames=600
-keepInput=0; keep=0; render=1; again=""
+keepInput=0; keep=0; render=1; again=""; ratio=2
 while [[ $# -gt 0 ]]; do
   case "$1" in
     --triangles) triangles="$2"; shift 2 ;;
@@ -32,7 +33,8 @@ while [[ $# -gt 0 ]]; do
     --keep) keep=1; shift ;;
     --skip-render) render=0; shift ;;
     --same-bytes-at) again="$2"; shift 2 ;;
-    -h|--help) sed -n '2,19p' "$0"; exit 0 ;;
+    --level-ratio) ratio="$2"; shift 2 ;;
+    -h|--help) sed -n '2,20p' "$0"; exit 0 ;;
     *) echo "billion.sh: unknown option $1 (see --help)" >&2; exit 2 ;;
   esac
 done
@@ -95,7 +97,7 @@ rm -f "$mt"
 start=$(df -B1 --output=avail "$work" | tail -1)
 watchDisk "$work/disk.low" & watcher=$!
 /usr/bin/time -f "%e %U %S %M" -o "$work/build.time" "$bin/mtbuild" "$ply" -o "$mt" --memory "$memory" --threads "$threads" \
-  --stats-json "$work/stats.json" -q > "$work/build.log" 2>&1 &
+  --level-ratio "$ratio" --stats-json "$work/stats.json" -q > "$work/build.log" 2>&1 &
 builder=$!
 sleep 0.2
 bpid=$(pgrep -P "$builder" | head -1 || true)  # mtbuild (whatever name it runs under)
@@ -131,7 +133,7 @@ if [[ -n "$again" ]]; then
   loadavg "build at --memory $again"
   mt2="$work/scan.$again.mt"; rm -f "$mt2"
   if /usr/bin/time -f "%e %U %S %M" -o "$work/build2.time" "$bin/mtbuild" "$ply" -o "$mt2" --memory "$again" --threads "$threads" \
-       --stats-json "$work/stats2.json" -q > "$work/build2.log" 2>&1; then
+       --level-ratio "$ratio" --stats-json "$work/stats2.json" -q > "$work/build2.log" 2>&1; then
     read -r aw au as ar < "$work/build2.time"
     h1=$(sha256sum "$mt" | cut -c1-16); h2=$(sha256sum "$mt2" | cut -c1-16)
     [[ "$h1" == "$h2" ]] && same="the same bytes" || same="DIFFERENT bytes"

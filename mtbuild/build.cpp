@@ -31,7 +31,7 @@ std::string BuildReport::toJson() const {
   s << "{\n  \"input_triangles\": " << inputTriangles << ",\n  \"stored_triangles\": " << storedTriangles
     << ",\n  \"nodes\": " << nodes << ",\n  \"arcs\": " << arcs << ",\n  \"patches\": " << patches
     << ",\n  \"file_bytes\": " << fileBytes << ",\n  \"bytes_per_input_triangle\": "
-    << (inputTriangles ? double(fileBytes) / double(inputTriangles) : 0) << ",\n  \"grid_step\": " << gridStep
+    << (inputTriangles ? double(fileBytes) / double(inputTriangles) : 0) << ",\n  \"grid_step\": " << gridStep << ",\n  \"level_ratio\": " << levelRatio
     << ",\n  \"welded_vertices\": " << weldedVertices << ",\n  \"welded_triangles\": " << weldedTriangles
     << ",\n  \"ingest_seconds\": " << ingestSeconds << ",\n  \"build_seconds\": " << buildSeconds
     << ",\n  \"total_seconds\": " << totalSeconds << ",\n  \"ingest_user_seconds\": " << ingestUserSeconds

@@ -1,9 +1,9 @@
 // The batched MT builder (BMT sections 4 and 6): from a scan (or a patch store) to one MT file.
 //
 //   ingest (V-partitioned, patchstore) -> for level i = 0, 1, ...: for each region R of V(i+1):
-//   load the V*i patches inside R, simplify to about half with R's border locked, split by
-//   V*(i+1), write back -> one DAG node per region; the floor patches become the payloads of the
-//   arcs into that node. Regions run in parallel and commit in region order, so the file does not
+//   load the V*i patches inside R, simplify to about half (1/k: the partition's level ratio) with
+//   R's border locked, split by V*(i+1), write back -> one DAG node per region; the floor patches
+//   become the payloads of the arcs into that node. Regions run in parallel and commit in region order, so the file does not
 //   depend on the thread count; every step is deterministic, so it does not depend on the memory
 //   cap either.
 #pragma once
@@ -52,6 +52,10 @@ struct BuildOptions {
   uint32_t threads = 0;               // 0: all cores
   PartitionKind partition = PartitionKind::Irregular;
   uint32_t patchTriangles = 0;        // 0: kDefaultMtPatchTriangles (ignored for a store input)
+  // --level-ratio k: each level keeps 1/k of the triangles of the one below (the irregular
+  // partition's levels aim at 1/k of the cells, each region is simplified to 1/k). 0: 2 for a mesh,
+  // the store's own for a store input (another value than the store's is refused).
+  uint32_t levelRatio = 0;
   format::Codec codec = format::Codec::Meshopt;
   bool strips = false;                // meshopt patches as tri-strips (--index-order strip)
   bool normals = false;               // store normals (else the renderer computes them)
@@ -107,6 +111,7 @@ struct BuildReport {
   uint64_t nodes = 0, arcs = 0, patches = 0;
   uint64_t fileBytes = 0;
   double gridStep = 0;
+  uint32_t levelRatio = 2;            // the partition's: each level keeps about 1/levelRatio of the one below
   uint64_t weldedVertices = 0, weldedTriangles = 0;  // by the grid weld (vertices closer than the grid step)
   double ingestSeconds = 0, buildSeconds = 0, totalSeconds = 0;
   // CPU seconds (user, kernel): the ingest's (the span of ingestSeconds) and the whole run's (this
@@ -223,7 +228,8 @@ struct RegionResult {
 };
 
 // Encodes the floor patches (rebuilt exactly from task.mesh via unifiedOf), simplifies the region
-// to about half with its border locked, and keys the result's triangles by V*(level) cell.
+// to about half (1/k: the partition's level ratio) with its border locked, and keys the result's
+// triangles by V*(level) cell.
 // Deterministic: depends on its arguments only. Thread-safe.
 RegionResult processRegion(const RegionTask& task, const RegionContext& context);
 

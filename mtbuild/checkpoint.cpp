@@ -125,6 +125,10 @@ std::string fingerprint(const std::string& input, const BuildOptions& o, bool st
   if (o.colorWeight != kDefaultColorWeight) s << "color_weight=" << o.colorWeight << "\n";
   s << "root_triangles=" << o.rootTriangles << "\n";
   s << "texture_quality=" << o.textureQuality << "\n";
+  // A mesh input's partition takes the option (0 is 2); a store's has its own ratio, in its bytes
+  // above, and mtbuild refuses another before it resumes (requireStoreLevelRatio). The last line,
+  // so a checkpoint written before it existed is refused naming it.
+  if (!storeInput) s << "level_ratio=" << (o.levelRatio ? o.levelRatio : kDefaultLevelRatio) << "\n";
   return s.str();
 }
 

@@ -69,6 +69,19 @@ RegionSimplifier resolvedSimplifier(const BuildOptions& options, bool colors) {
 // (commitRegion).
 bool gains(uint64_t in, uint64_t out) { return out * 10 <= in * 9; }
 
+// `mtbuild STORE --level-ratio K`: the store's partition fixed its ratio at ingest, so another K
+// is refused, read from the store as it is (no lock, nothing changes) before anything is copied.
+void requireStoreLevelRatio(const std::string& input, uint32_t ratio) {
+  PartitionSequence sequence;
+  if (!loadStoreSequence(*PatchStore::open(input), sequence) || sequence.levelRatio() == ratio) return;
+  const std::string kind = partitionKindName(sequence.kind());
+  fail(input, "--level-ratio " + std::to_string(ratio) + ": the patch store's " + kind + " V-partition has level ratio " +
+                  std::to_string(sequence.levelRatio()) + "; omit --level-ratio to build with it" +
+                  (sequence.kind() == PartitionKind::Irregular
+                       ? ", or ingest the mesh again with `mtstore ingest --level-ratio " + std::to_string(ratio) + "`"
+                       : ""));
+}
+
 double largestMagnitude(const Box3& box) {
   double m = 0;
   for (int a = 0; a < 3; ++a) m = std::max({m, std::abs(box.lo[a]), std::abs(box.hi[a])});
@@ -153,6 +166,7 @@ void LevelBuilder::State::ingestLevelZero(bool storeInput) {
       VPartitionOptions vp;
       vp.kind = options.partition;
       vp.patchTriangles = options.patchTriangles ? options.patchTriangles : kDefaultMtPatchTriangles;
+      vp.levelRatio = options.levelRatio ? options.levelRatio : kDefaultLevelRatio;
       VPartitionAssigner assigner(vp);
       IngestOptions io;
       io.memoryBytes = options.memoryBytes;
@@ -272,9 +286,11 @@ LevelBuilder::LevelBuilder(const std::string& input, const std::string& output, 
   if (options.patchTriangles != 0 && (options.patchTriangles < kMinPatchTriangles || options.patchTriangles > kMaxPatchTriangles))
     throw Error("--patch-triangles " + std::to_string(options.patchTriangles) + ": out of range (accepted " +
                 std::to_string(kMinPatchTriangles) + " to " + std::to_string(kMaxPatchTriangles) + ")");
+  if (options.levelRatio != 0) checkLevelRatio(options.levelRatio, options.partition);
   // Nothing is touched before the input and the output are known to be what they should.
   const bool storeInput = isStoreDir(input);
   if (!storeInput) requireRegularFile(input, "a mesh file (PLY, OBJ, OFF, STL) or a patch store");
+  if (storeInput && options.levelRatio != 0) requireStoreLevelRatio(input, options.levelRatio);
   checkOutputPath(output, {input});
   // One build per output, one per work directory: a second one is refused (naming the first's
   // PID) before it removes or writes anything.
@@ -323,6 +339,7 @@ LevelBuilder::LevelBuilder(const std::string& input, const std::string& output, 
   s.ctx.codec.strips = options.strips;
   s.ctx.sequence = &s.sequence;
   s.ctx.partitionLevels = s.sequence.levels();
+  s.report.levelRatio = s.sequence.levelRatio();
   const bool colors = s.header.vertexFlags & format::kHasColors;
   s.ctx.simplifier = resolvedSimplifier(options, colors);
   s.ctx.colorWeight = colors ? options.colorWeight : 0;

@@ -151,7 +151,8 @@ RegionResult processRegion(const RegionTask& task, const RegionContext& ctx) {
     atlases = floorAtlases(floor, *ctx.texture);
     encodeTextures(floor, atlases, ctx.grid, *ctx.texture, codec.codec, out.encoded);
   }
-  // Simplify to about half with the region's border locked (BMT 4), split by V*(level).
+  // Simplify to about 1/k with the region's border locked (BMT 4: half, k = 2; k is the
+  // partition's level ratio, whose next level aims at 1/k of the cells), split by V*(level).
   SimplifyRegionOptions so;
   so.simplifier = ctx.simplifier;
   so.colorWeight = ctx.colorWeight;
@@ -160,7 +161,8 @@ RegionResult processRegion(const RegionTask& task, const RegionContext& ctx) {
   // At least one triangle: a region that had some must keep some, or its node would carry no
   // patch and have no arc to the sink (a one-triangle input built such a file).
   const size_t n = lm.triangleCount();
-  so.targetTriangles = std::max<size_t>(1, task.root ? std::min<size_t>(n / 2, ctx.rootTriangles / 2) : n / 2);
+  const size_t ratio = ctx.sequence->levelRatio();
+  so.targetTriangles = std::max<size_t>(1, task.root ? std::min<size_t>(n / 2, ctx.rootTriangles / 2) : n / ratio);
   SimplifiedRegion sr = simplifyRegion(lm, so);
   if (task.root) sr = settleRoot(std::move(sr), lm, so, task, ctx);
   out.deviation = sr.error;

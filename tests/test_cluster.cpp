@@ -61,6 +61,13 @@ TEST(Mtcluster, ThreeRanksWriteTheSameBytesAsMtbuild) {
   EXPECT_EQ(sumOf(json, "tasks"), sumOf(readFile(tmp.file("ref.json")), "regions")) << json;
   EXPECT_GT(sumOf(json, "bytes_sent"), 0u);
   EXPECT_FALSE(fs::exists(tmp.file("c.mt.work")));
+  // Another level ratio travels with the partition to the ranks (each region kept at a quarter).
+  CommandResult b = runTool("mtbuild", in + " -o " + tmp.file("ref4.mt") + " -q " + opts + " --level-ratio 4");
+  ASSERT_EQ(b.exitCode, 0) << b.output;
+  r = mpirun(3, in + " -o " + tmp.file("c4.mt") + " -q " + opts + " --level-ratio 4");
+  ASSERT_EQ(r.exitCode, 0) << r.output;
+  EXPECT_TRUE(readFile(tmp.file("c4.mt")) == readFile(tmp.file("ref4.mt"))) << "--level-ratio 4: mtcluster -np 3 and mtbuild differ";
+  EXPECT_FALSE(readFile(tmp.file("c4.mt")) == ref);
 }
 
 TEST(Mtcluster, ADeadRankStopsTheJobNamingRankAndLevelAndResumeFinishes) {

@@ -468,5 +468,116 @@ TEST(MtbuildResume, AKilledIngestStartsOverAndAPlainRunDiscardsOldWork) {
   EXPECT_TRUE(readFile(out) == readFile(tmp.file("clean.mt")));
 }
 
+// --level-ratio 4: each level keeps about a quarter of the one below (the partition's levels aim
+// at a quarter of the cells, each region is simplified to a quarter), so the file stores ~4/3 of
+// the input's triangles instead of ~2x; the cuts stay crack-free, the errors monotone, the bytes
+// the same whatever the threads and the cap, a killed build resumes to them, and a resume or a
+// store input with another ratio is refused.
+double jsonLevelShare(const nlohmann::json& level) {
+  return double(level["triangles_out"].get<uint64_t>()) / double(level["triangles_in"].get<uint64_t>());
+}
+
+TEST(MtbuildLevelRatio, EachLevelKeepsAQuarterAndCutsStayCrackFree) {
+  TempDir tmp;
+  std::string in = makeScan(tmp, "scan.ply", "--triangles 80k --holes 12 --components 2 --seed 31");
+  build(in, tmp.file("two.mt"), "--patch-triangles 300 --stats-json " + tmp.file("two.json"));
+  build(in, tmp.file("four.mt"), "--patch-triangles 300 --level-ratio 4 --threads 1 --stats-json " + tmp.file("four.json"));
+  auto two = nlohmann::json::parse(readFile(tmp.file("two.json")));
+  auto four = nlohmann::json::parse(readFile(tmp.file("four.json")));
+  EXPECT_EQ(two["level_ratio"], 2);
+  EXPECT_EQ(four["level_ratio"], 4);
+  const auto& levels = four["levels"];
+  ASSERT_GE(levels.size(), 3u) << four.dump();
+  EXPECT_LT(levels.size(), two["levels"].size());
+  // Every level but the root's keeps about a quarter (the default: about half).
+  for (size_t l = 0; l + 1 < levels.size(); ++l) {
+    EXPECT_NEAR(jsonLevelShare(levels[l]), 0.25, 0.06) << "level " << l + 1;
+    EXPECT_NEAR(jsonLevelShare(two["levels"][l]), 0.5, 0.06) << "level " << l + 1 << " at ratio 2";
+  }
+  const double input = four["input_triangles"].get<double>();
+  EXPECT_LT(four["stored_triangles"].get<double>(), 1.45 * input);
+  EXPECT_GT(two["stored_triangles"].get<double>(), 1.8 * input);
+  EXPECT_LT(four["file_bytes"].get<double>(), 0.8 * two["file_bytes"].get<double>());
+
+  auto mt = MtFileReader::open(tmp.file("four.mt"));
+  std::vector<int> onArc(mt->patches().size(), 0);
+  for (const auto& arc : mt->arcs()) {
+    EXPECT_GE(mt->nodes()[arc.to].error, mt->nodes()[arc.from].error) << "error must not shrink towards the sink";
+    for (uint32_t i = 0; i < arc.patchCount; ++i) ++onArc[mt->patchRefs()[arc.firstPatchRef + i]];
+  }
+  for (size_t p = 0; p < onArc.size(); ++p) EXPECT_EQ(onArc[p], 1) << "patch " << p;
+  CommandResult v = runTool("mtverify", tmp.file("four.mt") + " --cuts 12");
+  EXPECT_EQ(v.exitCode, 0) << v.output;
+
+  // The same bytes at 2 threads and a small cap; ratio 3 builds and verifies too.
+  build(in, tmp.file("four2.mt"), "--patch-triangles 300 --level-ratio 4 --threads 2 --memory 24M");
+  EXPECT_TRUE(readFile(tmp.file("four.mt")) == readFile(tmp.file("four2.mt"))) << "--threads 1 and 2 (24M) differ";
+  build(in, tmp.file("three.mt"), "--patch-triangles 300 --level-ratio 3");
+  v = runTool("mtverify", tmp.file("three.mt") + " --cuts 6");
+  EXPECT_EQ(v.exitCode, 0) << v.output;
+  // --level-ratio 2 is the default, byte for byte.
+  build(in, tmp.file("two2.mt"), "--patch-triangles 300 --level-ratio 2");
+  EXPECT_TRUE(readFile(tmp.file("two.mt")) == readFile(tmp.file("two2.mt")));
+}
+
+TEST(MtbuildLevelRatio, ResumesAndStoresKeepTheirRatioAndBadValuesAreRefused) {
+  TempDir tmp;
+  std::string in = makeScan(tmp, "scan.ply", "--triangles 40k --holes 6 --seed 32");
+  const std::string opts = "--patch-triangles 200 --level-ratio 4";
+  build(in, tmp.file("clean.mt"), opts);
+  std::string out = tmp.file("k.mt");
+  ASSERT_TRUE(killed(buildKilled(in, out, opts, "MT_TEST_KILL_AFTER_LEVEL", 1)));
+  // Another ratio: refused, naming it; the checkpoint stays, and the same ratio finishes it.
+  CommandResult r = runTool("mtbuild", in + " -o " + out + " -q --resume --patch-triangles 200");
+  EXPECT_EQ(r.exitCode, 1) << r.output;
+  EXPECT_NE(r.output.find("level_ratio was 4 for the killed build, is 2 now"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(out));
+  r = runTool("mtbuild", in + " -o " + out + " -q --resume " + opts);
+  ASSERT_EQ(r.exitCode, 0) << r.output;
+  EXPECT_TRUE(readFile(out) == readFile(tmp.file("clean.mt"))) << "resumed build differs from the uninterrupted one";
+
+  // A store made with a ratio keeps it: built as such, and another ratio is refused by name.
+  ASSERT_EQ(runTool("mtstore", "ingest " + in + " -o " + tmp.file("s") + " -q " + opts).exitCode, 0);
+  build(tmp.file("s"), tmp.file("store.mt"), "--stats-json " + tmp.file("store.json"));
+  EXPECT_EQ(nlohmann::json::parse(readFile(tmp.file("store.json")))["level_ratio"], 4);
+  EXPECT_EQ(runTool("mtverify", tmp.file("store.mt") + " --cuts 4").exitCode, 0);
+  r = runTool("mtbuild", tmp.file("s") + " -o " + tmp.file("other.mt") + " -q --level-ratio 2");
+  EXPECT_EQ(r.exitCode, 1) << r.output;
+  EXPECT_NE(r.output.find("V-partition has level ratio 4; omit --level-ratio"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(tmp.file("other.mt")));
+  EXPECT_FALSE(fs::exists(tmp.file("other.mt.work"))) << "refused before the store was copied";
+  // A default store, asked for another ratio: refused the same way.
+  ASSERT_EQ(runTool("mtstore", "ingest " + in + " -o " + tmp.file("s2") + " -q --patch-triangles 200").exitCode, 0);
+  r = runTool("mtbuild", tmp.file("s2") + " -o " + tmp.file("other.mt") + " -q --level-ratio 4");
+  EXPECT_EQ(r.exitCode, 1) << r.output;
+  EXPECT_NE(r.output.find("V-partition has level ratio 2"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(tmp.file("other.mt.work")));
+  // The library checks what the tools check.
+  BuildOptions o;
+  o.levelRatio = 9;
+  EXPECT_THROW(buildMt(in, tmp.file("lib.mt"), o), Error);
+  o.levelRatio = 4;
+  o.partition = PartitionKind::Regular;
+  EXPECT_THROW(buildMt(in, tmp.file("lib.mt"), o), Error);
+  EXPECT_FALSE(fs::exists(tmp.file("lib.mt.work")));
+
+  // Out of range, not a number, or with a partition that has its own ratios: refused before
+  // anything is written.
+  for (const char* bad : {"--level-ratio 1", "--level-ratio 9", "--level-ratio 0", "--level-ratio x",
+                          "--level-ratio 4 --partition regular"}) {
+    r = runTool("mtbuild", in + " -o " + tmp.file("bad.mt") + " -q " + bad);
+    EXPECT_NE(r.exitCode, 0) << bad << "\n" << r.output;  // 1, or CLI11's own code for "x"
+    EXPECT_NE(r.output.find("level-ratio"), std::string::npos) << bad << "\n" << r.output;
+    EXPECT_FALSE(fs::exists(tmp.file("bad.mt"))) << bad;
+    EXPECT_FALSE(fs::exists(tmp.file("bad.mt.work"))) << bad;
+  }
+  for (const char* bad : {"--level-ratio 9", "--level-ratio 4 --partition grid", "--level-ratio 4 --partition regular2d"}) {
+    r = runTool("mtstore", "ingest " + in + " -o " + tmp.file("bad") + " -q " + std::string(bad));
+    EXPECT_NE(r.exitCode, 0) << bad << "\n" << r.output;
+    EXPECT_NE(r.output.find("level-ratio"), std::string::npos) << bad << "\n" << r.output;
+    EXPECT_FALSE(fs::exists(tmp.file("bad"))) << bad;
+  }
+}
+
 }  // namespace
 }  // namespace mt::test

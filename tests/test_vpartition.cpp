@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <map>
 #include <set>
 #include <thread>
@@ -52,6 +53,23 @@ uint32_t bruteNearest(const std::vector<float>& seeds, const float p[3]) {
 
 // ---- irregular: shape on scan-like meshes --------------------------------------------------
 
+// The shape every level of a sequence keeps: each seed owns a non-empty cell, the counts are on
+// target and the cells within 2x the mean where a level has cells to count, and a V(i+1) cell
+// overlaps a bounded number of Vi cells (the backward star: what the DAG's fan-in follows).
+void expectLevelShapes(const PartitionSequence& seq, const PartitionMetrics& m, double starMean, uint32_t starMax) {
+  for (const LevelMetrics& l : m.levels) {
+    SCOPED_TRACE("level " + std::to_string(l.level));
+    EXPECT_EQ(l.cells, seq.cellCount(l.level));
+    EXPECT_GE(l.minTriangles, 1u);
+    if (l.target >= 16) {
+      EXPECT_NEAR(double(l.cells) / l.target, 1.0, 0.15);
+      EXPECT_LE(l.maxTriangles / l.meanTriangles, 2.0);
+    }
+    EXPECT_LE(l.backwardStarMean, starMean);
+    EXPECT_LE(l.backwardStarMax, starMax);
+  }
+}
+
 class IrregularShape : public ::testing::TestWithParam<NamedMesh> {};
 
 TEST_P(IrregularShape, CellsUniformCountsOnTargetStarsBounded) {
@@ -66,18 +84,7 @@ TEST_P(IrregularShape, CellsUniformCountsOnTargetStarsBounded) {
   ASSERT_GE(seq.levels(), 3u);
   // Streaming: a handful of passes (area, seeding + calibration, Lloyd, recount).
   EXPECT_LE(m.build.passes, 6u);
-  for (const LevelMetrics& l : m.levels) {
-    SCOPED_TRACE("level " + std::to_string(l.level));
-    // Every seed owns a non-empty cell.
-    EXPECT_EQ(l.cells, seq.cellCount(l.level));
-    EXPECT_GE(l.minTriangles, 1u);
-    if (l.target >= 16) {
-      EXPECT_NEAR(double(l.cells) / l.target, 1.0, 0.15);
-      EXPECT_LE(l.maxTriangles / l.meanTriangles, 2.0);
-    }
-    EXPECT_LE(l.backwardStarMean, 8.0);
-    EXPECT_LE(l.backwardStarMax, 16u);
-  }
+  expectLevelShapes(seq, m, 8.0, 16);
   // Coarsest level is small; path length (levels) logarithmic in the finest cell count.
   EXPECT_LE(m.levels.back().cells, 12u);
   EXPECT_LE(double(seq.levels()), std::log2(double(m.levels[0].cells)) + 2);
@@ -385,6 +392,82 @@ TEST(Assign, SerializeRoundTripAndCorruption) {
     EXPECT_THROW(PartitionSequence::deserialize(blob.substr(0, blob.size() - 9)), Error);
     EXPECT_THROW(PartitionSequence::deserialize("not a partition"), Error);
   }
+}
+
+// --level-ratio: each level aims at 1/k of the cells of the one below (BMT halves: k = 2), with
+// the shape the default keeps (counts on target, cells within 2x the mean); the ratio travels in
+// the serialized sequence (version 2), and a sequence of ratio 2 keeps its version-1 bytes.
+TEST(IrregularLevelRatio, EachLevelAimsAtAQuarterAndTheRatioTravelsWithTheSequence) {
+  TestMesh mesh = meshClosed();
+  MemoryCentroids src(mesh);
+  VPartitionOptions o;
+  o.patchTriangles = 200;
+  PartitionSequence halves = PartitionSequence::build(src, o);
+  o.levelRatio = 4;
+  PartitionSequence seq = PartitionSequence::build(src, o);
+  EXPECT_EQ(halves.levelRatio(), 2u);
+  ASSERT_EQ(seq.levelRatio(), 4u);
+  ASSERT_GE(seq.levels(), 3u);
+  EXPECT_LT(seq.levels(), halves.levels());
+  EXPECT_EQ(seq.levelTarget(0), halves.levelTarget(0));
+  PartitionMetrics m = computeMetrics(seq, src);
+  std::printf("%s", formatMetricsText(m).c_str());
+  for (const LevelMetrics& l : m.levels) {
+    if (l.level > 0 && l.target >= 16) {
+      EXPECT_NEAR(double(seq.levelTarget(l.level - 1)) / double(l.target), 4.0, 0.1) << "level " << l.level;
+    }
+  }
+  // A V(i+1) cell covers about four Vi cells and their crossings (6-8 at ratio 2).
+  expectLevelShapes(seq, m, 12.0, 20);
+  EXPECT_LE(m.levels.back().cells, 12u);
+  // The patches: V0 cells crossed by V1 cells four times their size, about the size asked for.
+  EXPECT_NEAR(m.levels[0].crossMean / o.patchTriangles, 1.0, 0.35);
+
+  std::string blob = seq.serialize(), blob2 = halves.serialize();
+  uint32_t version = 0, version2 = 0;
+  std::memcpy(&version, blob.data() + 8, 4);
+  std::memcpy(&version2, blob2.data() + 8, 4);
+  EXPECT_EQ(version, 2u);
+  EXPECT_EQ(version2, 1u) << "a ratio-2 sequence is written as before";
+  PartitionSequence back = PartitionSequence::deserialize(blob);
+  EXPECT_EQ(back.levelRatio(), 4u);
+  EXPECT_EQ(back.serialize(), blob);
+  for (uint32_t l = 0; l < seq.levels(); ++l) {
+    for (size_t t = 0; t < src.count(); t += 17) {
+      ASSERT_EQ(back.crossKey(l, &src.data()[4 * t]), seq.crossKey(l, &src.data()[4 * t]));
+    }
+  }
+  EXPECT_NE(back.describe().find("ratio 4"), std::string::npos) << back.describe();
+  // A version-2 blob must carry a ratio other than 2, within range (checksum made right).
+  for (uint8_t bad : {uint8_t(2), uint8_t(1), uint8_t(9)}) {
+    std::string b = blob;
+    b[13] = char(bad);
+    uint64_t h = XXH64(b.data(), b.size() - 8, 0);
+    std::memcpy(&b[b.size() - 8], &h, 8);
+    try {
+      PartitionSequence::deserialize(b);
+      ADD_FAILURE() << "level ratio " << int(bad) << " accepted";
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find("level ratio"), std::string::npos) << e.what();
+    }
+  }
+  // A version-2 blob of a regular kind: refused (only irregular sequences carry a ratio).
+  {
+    std::string b = blob;
+    b[12] = char(uint8_t(PartitionKind::Regular));
+    uint64_t h = XXH64(b.data(), b.size() - 8, 0);
+    std::memcpy(&b[b.size() - 8], &h, 8);
+    EXPECT_THROW(PartitionSequence::deserialize(b), Error);
+  }
+  // Out of range, or a regular kind: refused, before any pass over the input.
+  o.levelRatio = 9;
+  EXPECT_THROW(PartitionSequence::build(src, o), Error);
+  o.levelRatio = 1;
+  EXPECT_THROW(PartitionSequence::build(src, o), Error);
+  o.levelRatio = 4;
+  o.kind = PartitionKind::Regular;
+  EXPECT_THROW(PartitionSequence::build(src, o), Error);
+  EXPECT_THROW(VPartitionAssigner{o}, Error);
 }
 
 TEST(Options, ParseHelpers) {

@@ -137,6 +137,7 @@ void runExport(const std::string& dir, const std::string& output, bool quiet) {
 struct Args {
   std::string input, output, dir, memory = "256M", partition = mt::tools::kDefaultPartition;
   uint32_t patchTriangles = 0;
+  int64_t levelRatio = mt::kDefaultLevelRatio;
   bool json = false, quiet = false, noComponents = false;
   // heal
   double weldEps = 0;
@@ -171,6 +172,11 @@ void addIngest(CLI::App& app, Args& a, Commands& c) {
   c.ingest->add_option("--patch-triangles", a.patchTriangles,
                        "Target triangles per patch (default: the partition's own, see docs/vpartition.md)");
   c.ingest->add_option("--partition", a.partition, mt::tools::partitionHelp());
+  c.ingest->add_option("--level-ratio", a.levelRatio,
+                       "Irregular partition: each level aims at 1/K of the cells of the one below, and mtbuild simplifies each\n"
+                       "region to 1/K (default " + std::to_string(mt::kDefaultLevelRatio) + "; accepted " +
+                           std::to_string(mt::kMinLevelRatio) + " to " + std::to_string(mt::kMaxLevelRatio) +
+                           "; mtbuild --level-ratio, docs/mtbuild.md)");
   c.ingest->add_flag("-q,--quiet", a.quiet, "No progress lines on stderr");
 }
 
@@ -232,7 +238,7 @@ int runIngest(const Args& a) {
   options.memoryBytes = mt::parseSize(a.memory);
   options.patchTriangles = a.patchTriangles;
   options.progress = !a.quiet;
-  auto assigner = mt::tools::makeAssigner(a.partition, a.patchTriangles);
+  auto assigner = mt::tools::makeAssigner(a.partition, a.patchTriangles, a.levelRatio);
   mt::IngestReport r;
   try {
     r = mt::PatchStore::ingest(a.input, a.output, *assigner, options);

@@ -20,11 +20,21 @@ inline std::string partitionHelp() {
          "no multiresolution sequence)";
 }
 
-inline std::unique_ptr<CellAssigner> makeAssigner(const std::string& kind, uint32_t patchTriangles) {
-  if (kind == "grid") return makeGridAssigner(patchTriangles ? patchTriangles : kDefaultPatchTriangles);
+// levelRatio: --level-ratio (irregular partitions only; throws mt::Error naming the range or the kind).
+inline std::unique_ptr<CellAssigner> makeAssigner(const std::string& kind, uint32_t patchTriangles,
+                                                  int64_t levelRatio = kDefaultLevelRatio) {
+  if (kind == "grid") {
+    checkLevelRatio(levelRatio, PartitionKind::Irregular);
+    if (levelRatio != kDefaultLevelRatio)
+      throw Error("--level-ratio " + std::to_string(levelRatio) + ": the grid partition has no levels; another ratio than 2 needs "
+                  "the irregular one");
+    return makeGridAssigner(patchTriangles ? patchTriangles : kDefaultPatchTriangles);
+  }
   VPartitionOptions o;
   o.kind = parsePartitionKind(kind);
+  checkLevelRatio(levelRatio, o.kind);
   o.patchTriangles = patchTriangles;
+  o.levelRatio = uint32_t(levelRatio);
   return makeVPartitionAssigner(o);
 }
 

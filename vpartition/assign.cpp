@@ -3,7 +3,10 @@
 // falls"), plus the sequence's serialized form and the ingest CellAssigner.
 //
 // Serialized form (little endian), kept by the store as blob "assigner":
-//   "MTVPSEQ1" | u32 version=1 | u8 kind | u32 levelCount | levels | u64 XXH64(all before)
+//   "MTVPSEQ1" | u32 version | u8 kind | [version 2: u8 levelRatio] | u32 levelCount | levels |
+//   u64 XXH64(all before)
+// Version 1 is a sequence of level ratio 2 (every sequence before the ratio existed); a sequence
+// of ratio 2 is still written as version 1, so stores of the default partition keep their bytes.
 //   level: u8 type | f64 scale | u64 target | f64 origin[3] | u32 n[3] | u8 axis0 | u8 axis1 |
 //          u32 seedCount | f32 seeds[3*seedCount]
 // The seeds are stored bit-exactly, so a deserialized sequence assigns exactly like the original.
@@ -75,8 +78,19 @@ PartitionSequence::~PartitionSequence() = default;
 PartitionSequence::PartitionSequence(PartitionSequence&&) noexcept = default;
 PartitionSequence& PartitionSequence::operator=(PartitionSequence&&) noexcept = default;
 
+void checkLevelRatio(int64_t ratio, PartitionKind kind) {
+  if (ratio < kMinLevelRatio || ratio > kMaxLevelRatio)
+    throw Error("--level-ratio " + std::to_string(ratio) + ": out of range (accepted " + std::to_string(kMinLevelRatio) + " to " +
+                std::to_string(kMaxLevelRatio) + "; default " + std::to_string(kDefaultLevelRatio) + ")");
+  // The regular sequences' cell counts change by their geometry's ratios (8/3, 1, 3 in 3D).
+  if (ratio != kDefaultLevelRatio && kind != PartitionKind::Irregular)
+    throw Error("--level-ratio " + std::to_string(ratio) + ": the " + partitionKindName(kind) +
+                " V-partition has its own level ratios; another ratio than 2 needs the irregular one");
+}
+
 PartitionSequence PartitionSequence::build(const CentroidSource& centroids,
                                            const VPartitionOptions& options) {
+  checkLevelRatio(options.levelRatio, options.kind);  // before any pass over the input
   return options.kind == PartitionKind::Irregular ? buildIrregularSequence(centroids, options)
                                                   : buildRegularSequence(centroids, options);
 }
@@ -127,6 +141,11 @@ uint64_t PartitionSequence::memoryBytes() const {
   return bytes;
 }
 
+void PartitionSequence::setLevelRatio(uint32_t ratio) {
+  checkLevelRatio(ratio, kind_);
+  levelRatio_ = ratio;
+}
+
 uint64_t PartitionSequence::levelTarget(uint32_t level) const {
   assert(level < levels_.size());
   return levels_[level]->target;
@@ -135,6 +154,7 @@ uint64_t PartitionSequence::levelTarget(uint32_t level) const {
 std::string PartitionSequence::describe() const {
   std::ostringstream s;
   s << partitionKindName(kind_) << " V-partition, " << levels_.size() << " levels";
+  if (levelRatio_ != kDefaultLevelRatio) s << " (ratio " << levelRatio_ << ")";
   if (kind_ == PartitionKind::Irregular) {
     s << ", seeds";
     for (size_t l = 0; l < levels_.size(); ++l) s << (l ? "/" : " ") << levels_[l]->cellCount();
@@ -147,7 +167,8 @@ std::string PartitionSequence::describe() const {
 namespace {
 
 const char kMagic[8] = {'M', 'T', 'V', 'P', 'S', 'E', 'Q', '1'};
-constexpr uint32_t kVersion = 1;
+constexpr uint32_t kVersion = 1;              // level ratio 2
+constexpr uint32_t kVersionWithRatio = 2;     // any other level ratio
 
 template <class T> void put(std::string& out, const T& v) {
   out.append(reinterpret_cast<const char*>(&v), sizeof(T));
@@ -173,8 +194,10 @@ struct Reader {
 
 std::string PartitionSequence::serialize() const {
   std::string out(kMagic, 8);
-  put(out, kVersion);
+  const bool ratio = levelRatio_ != kDefaultLevelRatio;
+  put(out, ratio ? kVersionWithRatio : kVersion);
   put(out, uint8_t(kind_));
+  if (ratio) put(out, uint8_t(levelRatio_));
   put(out, uint32_t(levels_.size()));
   for (const auto& L : levels_) {
     put(out, uint8_t(L->type));
@@ -201,12 +224,20 @@ PartitionSequence PartitionSequence::deserialize(const std::string& bytes) {
   std::string body = bytes.substr(0, bytes.size() - 8);
   Reader r{body, 8};
   uint32_t version = r.get<uint32_t>();
-  if (version != kVersion)
+  if (version != kVersion && version != kVersionWithRatio)
     throw Error("V-partition blob: unsupported version " + std::to_string(version));
   uint8_t kind = r.get<uint8_t>();
   if (kind > 2) throw Error("V-partition blob: bad kind " + std::to_string(kind));
   PartitionSequence seq;
   seq.kind_ = PartitionKind(kind);
+  if (version == kVersionWithRatio) {
+    uint8_t ratio = r.get<uint8_t>();
+    // Written only for another ratio than 2, and only for irregular sequences.
+    if (ratio == kDefaultLevelRatio || ratio < kMinLevelRatio || ratio > kMaxLevelRatio || seq.kind_ != PartitionKind::Irregular)
+      throw Error("V-partition blob: bad level ratio " + std::to_string(ratio) + " for a " + partitionKindName(seq.kind_) +
+                  " sequence");
+    seq.levelRatio_ = ratio;
+  }
   uint32_t levels = r.get<uint32_t>();
   for (uint32_t l = 0; l < levels; ++l) {
     auto L = std::make_unique<PartitionLevel>();

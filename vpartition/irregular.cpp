@@ -5,11 +5,12 @@
 // sequential scan, we remove small patches and we apply a step of Lloyd's relaxation." All levels
 // are seeded in the same scans, each with its own radius r_i and its own hash grid.
 //
-// Radii: level i should hold N / (T0 * 2^i) cells, where T0 is the triangles of a V0 cell; BMT
-// halves the triangles per level and the cells with them ("decreasing the triangle count, from a
-// level to the next, by the same ratio as the number of seeds"), so on a surface r_(i+1) ~ sqrt(2)
-// r_i. T0 = patchTriangles * kCrossPerCell because the patches are the V*0 cells, and each V0 cell
-// is cut into ~kCrossPerCell pieces by the V1 cells (measured, docs/vpartition.md).
+// Radii: level i should hold N / (T0 * k^i) cells, where T0 is the triangles of a V0 cell and k
+// the level ratio (VPartitionOptions::levelRatio, 2 by default); BMT halves the triangles per level
+// and the cells with them ("decreasing the triangle count, from a level to the next, by the same
+// ratio as the number of seeds"), so on a surface r_(i+1) ~ sqrt(k) r_i. T0 = patchTriangles *
+// kCrossPerCell because the patches are the V*0 cells, and each V0 cell is cut into
+// ~kCrossPerCell pieces by the V1 cells (measured at k = 2, docs/vpartition.md).
 //
 // Passes (each one sequential scan of the centroid sample, each one function below):
 //   1. surfaceArea: total area (the area channel) -> r_i from the mean area per cell, and a
@@ -340,12 +341,15 @@ bool tooSmall(uint32_t count, uint32_t cells, double mean) {
   return count == 0 || (cells > 1 && count < kMinCellFraction * mean);
 }
 
-// Level targets: N / (T0 2^i) cells, down to the first level with <= maxCoarsestCells.
+// Level targets: N / (T0 k^i) cells (k = the level ratio: each level's mesh keeps 1/k of the
+// triangles of the one below, so its cells keep about as many triangles), down to the first level
+// with <= maxCoarsestCells. k^i by products of integers: exact, so k = 2 gives the 2^i it always did.
 std::vector<double> levelTargets(uint64_t Ntotal, uint32_t P, const VPartitionOptions& o) {
   const double T0 = P * kCrossPerCell;
   std::vector<double> target;
-  for (uint32_t l = 0; l < o.maxLevels; ++l) {
-    double t = std::max(1.0, std::round(double(Ntotal) / (T0 * std::ldexp(1.0, int(l)))));
+  double power = 1;
+  for (uint32_t l = 0; l < o.maxLevels; ++l, power *= o.levelRatio) {
+    double t = std::max(1.0, std::round(double(Ntotal) / (T0 * power)));
     target.push_back(t);
     if (t <= o.maxCoarsestCells) break;
   }
@@ -675,6 +679,7 @@ PartitionSequence buildIrregularFromSample(const vp::CentroidSample& sample, con
 
   PartitionSequence seq;
   seq.setKind(PartitionKind::Irregular);
+  seq.setLevelRatio(o.levelRatio);
   if (plan.N == 0) {
     addSingleCell(seq, plan.box);
     seq.mutableStats() = stats;

@@ -1,6 +1,6 @@
 // Shape metrics of a partition sequence (BMT section 3.2): a well-behaving DAG needs (1) path
-// length logarithmic in the number of nodes -- the number of levels against log2(cells of V0) --
-// and (2) uniform cells, so that "the floor of each fragment of V(i+1) intersects a roughly
+// length logarithmic in the number of nodes -- the number of levels against log_k(cells of V0), k
+// the level ratio -- and (2) uniform cells, so that "the floor of each fragment of V(i+1) intersects a roughly
 // constant number of fragments of Vi" -- the backward star, read off the V*i cells: every
 // distinct (Vi, V(i+1)) pair of a triangle is one V*i cell, and a V(i+1) cell overlaps as many Vi
 // cells as it has V*i cells. One pass over the centroids; memory ~ the V*i cells of all levels.

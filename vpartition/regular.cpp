@@ -203,6 +203,7 @@ bool isSingleCell(const PartitionLevel& L) {
 PartitionSequence buildRegularSequence(const CentroidSource& src, const VPartitionOptions& o) {
   auto start = std::chrono::steady_clock::now();
   const bool twoD = o.kind == PartitionKind::Regular2D;
+  checkLevelRatio(o.levelRatio, o.kind);
   const uint32_t P = o.patchTriangles ? o.patchTriangles : kDefaultPatchTriangles;
   Box3 box = src.bounds();
   double ext[3];

@@ -37,9 +37,21 @@ constexpr uint32_t kDefaultPatchTriangles = 1000;
 // "--patch-triangles N": a positive integer in [16, 1<<24]. Throws mt::Error otherwise.
 uint32_t parsePatchTriangles(const std::string& text);
 
+// The level ratio k: V(i+1) aims at 1/k of Vi's cells, and mtbuild simplifies each region to 1/k
+// of its triangles, so every level keeps about 1/k of the one below (BMT halves: k = 2). Irregular
+// partitions only; the regular sequences' ratios are fixed by their geometry (docs/vpartition.md).
+constexpr uint32_t kDefaultLevelRatio = 2;
+constexpr uint32_t kMinLevelRatio = 2;
+constexpr uint32_t kMaxLevelRatio = 8;
+// "--level-ratio K" for a partition of this kind: throws mt::Error naming K when it is outside
+// [kMinLevelRatio, kMaxLevelRatio], or is not 2 for a regular kind. The one check every caller
+// (the tools' options, BuildOptions, VPartitionOptions) goes through, so the messages agree.
+void checkLevelRatio(int64_t ratio, PartitionKind kind);
+
 struct VPartitionOptions {
   PartitionKind kind = PartitionKind::Irregular;
   uint32_t patchTriangles = 0;    // target mean triangles per V*0 cell (a patch); 0: default
+  uint32_t levelRatio = kDefaultLevelRatio;  // irregular: level i aims at N / (T0 * ratio^i) cells
   uint64_t seed = 0;              // regular kinds: 0 puts the grid origin at the bounding box
                                   // corner, otherwise it is shifted by a hash of the seed (avoids
                                   // grid planes through axis-aligned CAD faces); irregular: unused
@@ -99,9 +111,13 @@ class PartitionSequence {
   const std::vector<float>& seeds(uint32_t level) const;
   // Irregular: the level's seed spacing radius r_i; regular: the grid spacing.
   double levelScale(uint32_t level) const;
-  // Irregular: the cell count the level aimed for (N / (kCrossPerCell * patchTriangles * 2^i));
-  // 0 for regular kinds.
+  // Irregular: the cell count the level aimed for (N / (kCrossPerCell * patchTriangles * k^i),
+  // k = levelRatio()); 0 for regular kinds.
   uint64_t levelTarget(uint32_t level) const;
+  // How many times fewer cells each level aims for than the one before (2 unless the irregular
+  // sequence was built with another VPartitionOptions::levelRatio); mtbuild simplifies each
+  // region by the same factor.
+  uint32_t levelRatio() const { return levelRatio_; }
 
   // Bytes the sequence keeps in core (seeds, grids, candidate tables).
   uint64_t memoryBytes() const;
@@ -117,9 +133,11 @@ class PartitionSequence {
   // Used by the builders.
   void addLevel(std::unique_ptr<PartitionLevel> level);
   void setKind(PartitionKind kind) { kind_ = kind; }
+  void setLevelRatio(uint32_t ratio);  // after setKind; throws mt::Error as checkLevelRatio
 
  private:
   PartitionKind kind_ = PartitionKind::Irregular;
+  uint32_t levelRatio_ = kDefaultLevelRatio;
   std::vector<std::unique_ptr<PartitionLevel>> levels_;
   PartitionBuildStats stats_;
 };
@@ -145,7 +163,10 @@ PartitionSequence buildIrregularFromSample(const vp::CentroidSample& sample, con
 // with PartitionSequence::deserialize).
 class VPartitionAssigner : public CellAssigner {
  public:
-  explicit VPartitionAssigner(const VPartitionOptions& options) : options_(options) {}
+  // Throws mt::Error for a level ratio the kind does not take (checkLevelRatio), before any pass.
+  explicit VPartitionAssigner(const VPartitionOptions& options) : options_(options) {
+    checkLevelRatio(options.levelRatio, options.kind);
+  }
   void prepare(const CentroidSource& centroids, uint64_t memoryBytes) override;
   // crossKey(0, c), balanced: V*0 slivers join their V0 cell's largest piece, oversized pieces
   // are cut into slabs (assign.cpp). The V1 half, the region the level loop reads, is kept
