@@ -3,9 +3,9 @@
 //   ingest (V-partitioned, patchstore) -> for level i = 0, 1, ...: for each region R of V(i+1):
 //   load the V*i patches inside R, simplify to about half (1/k: the partition's level ratio) with
 //   R's border locked, split by V*(i+1), write back -> one DAG node per region; the floor patches
-//   become the payloads of the arcs into that node. Regions run in parallel and commit in region order, so the file does not
-//   depend on the thread count; every step is deterministic, so it does not depend on the memory
-//   cap either.
+//   become the payloads of the arcs into that node. Regions run in parallel and commit in region
+//   order, so the file does not depend on the thread count; every step is deterministic, so it
+//   does not depend on the memory cap either.
 #pragma once
 
 #include <cstdint>

@@ -32,7 +32,7 @@ inline std::unique_ptr<CellAssigner> makeAssigner(const std::string& kind, uint3
   }
   VPartitionOptions o;
   o.kind = parsePartitionKind(kind);
-  checkLevelRatio(levelRatio, o.kind);
+  checkLevelRatio(levelRatio, o.kind);  // on the int64 the option was read into, before it narrows
   o.patchTriangles = patchTriangles;
   o.levelRatio = uint32_t(levelRatio);
   return makeVPartitionAssigner(o);
