@@ -26,6 +26,7 @@
 #include <string>
 #include <vector>
 
+#include "base/process.h"
 #include "base/temp_file.h"
 
 namespace mt {
@@ -246,13 +247,21 @@ class RunMerger {
 // So a sorter with more runs than its fan-in first merges consecutive runs into longer ones, until
 // few enough are left (reduceRuns): the same order (ties go to the lower run, and a merged run
 // takes the place of the consecutive runs it holds), at the cost of rewriting the runs merged.
-constexpr size_t kMaxMergeFanIn = 128;
+// The fan-in is at most maxMergeFanIn(): 128 when the process may hold only ~1024 descriptors,
+// up to 1024 when it may hold more (openFileLimit(): eight per run left for two sorters merging at
+// once, each run's two descriptors, and everything else). The billion-triangle ingest's sorts make
+// 250-270 runs of 72-134 MiB: at 128 their finish() and the parallel merge rewrote them twice (24 s
+// and ~45 s of its 574 s on this project's VM), merged at once they are read once.
+inline size_t maxMergeFanIn() {
+  const uint64_t limit = openFileLimit();
+  return std::clamp<size_t>(size_t(limit > 256 ? (limit - 256) / 8 : 0), 128, 1024);
+}
 // The fan-in `bufferBytes` of read buffers allow: each run's reader and the merged run's writer
 // get bufferBytes / (fanIn + 1), at least kMinReadBuffer (the writer at least 64 KiB, which
 // matters only for budgets of a few hundred KiB).
 inline size_t mergeFanIn(uint64_t bufferBytes) {
   const uint64_t buffers = bufferBytes / kMinReadBuffer;
-  return std::clamp<size_t>(size_t(buffers > 1 ? buffers - 1 : 0), 2, kMaxMergeFanIn);
+  return std::clamp<size_t>(size_t(buffers > 1 ? buffers - 1 : 0), 2, maxMergeFanIn());
 }
 
 // Merges runs[first, last) into one new run at `path` (readers and writer sharing bufferBytes),

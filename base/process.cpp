@@ -5,6 +5,7 @@
 #include <sys/resource.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -33,6 +34,21 @@ uint64_t currentRssBytes() {
   int n = std::fscanf(f, "%llu %llu", &size, &resident);
   std::fclose(f);
   return n == 2 ? uint64_t(resident) * uint64_t(sysconf(_SC_PAGESIZE)) : 0;
+}
+
+uint64_t openFileLimit() {
+  static const uint64_t limit = [] {
+    rlimit r{};
+    if (getrlimit(RLIMIT_NOFILE, &r) != 0) return uint64_t(1024);
+    const rlim_t want = r.rlim_max == RLIM_INFINITY ? rlim_t(65536) : std::min<rlim_t>(r.rlim_max, 65536);
+    if (r.rlim_cur != RLIM_INFINITY && r.rlim_cur < want) {
+      rlimit raised = r;
+      raised.rlim_cur = want;
+      if (setrlimit(RLIMIT_NOFILE, &raised) == 0) r = raised;
+    }
+    return r.rlim_cur == RLIM_INFINITY ? uint64_t(65536) : uint64_t(r.rlim_cur);
+  }();
+  return limit;
 }
 
 CpuSeconds processCpuSeconds() {

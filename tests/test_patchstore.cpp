@@ -1,5 +1,6 @@
 // Patch store: round trips, boundary lists, load/write-back semantics, crash safety.
 #include <gtest/gtest.h>
+#include <sys/resource.h>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
@@ -14,6 +15,7 @@
 #include <sstream>
 
 #include "base/external_sort.h"
+#include "base/process.h"
 #include "base/size.h"
 #include "patchstore/io/ply_writer.h"
 #include "patchstore/patch_store.h"
@@ -776,13 +778,29 @@ size_t openDescriptors() {
   return n;
 }
 
+// The descriptors a merge may use: the soft limit is raised to the hard one (at most 65536), and
+// the fan-in follows from what it is.
+TEST(ExternalSorter, TheFanInFollowsTheRaisedDescriptorLimit) {
+  const uint64_t limit = openFileLimit();
+  rlimit r{};
+  ASSERT_EQ(getrlimit(RLIMIT_NOFILE, &r), 0);
+  EXPECT_EQ(uint64_t(r.rlim_cur), limit);
+  if (r.rlim_max == RLIM_INFINITY || r.rlim_max >= 65536) {
+    EXPECT_EQ(limit, 65536u);
+  } else {
+    EXPECT_EQ(uint64_t(r.rlim_cur), uint64_t(r.rlim_max));
+  }
+  EXPECT_EQ(maxMergeFanIn(), std::clamp<size_t>(size_t((limit - 256) / 8), 128, 1024));
+  EXPECT_EQ(mergeFanIn(uint64_t(2) << 30), maxMergeFanIn());
+}
+
 // The bounded fan-in (base/external_sort.h): hundreds of runs through a budget that gives a merge
 // room for only a few readers at a time are merged a few at a time first, into the same order,
 // with few files open while the result is read, and nothing left on disk after.
 TEST(ExternalSorter, ManyRunsMergeInBoundedFanInToTheSameOrder) {
   TempDir tmp;
   EXPECT_EQ(mergeFanIn(64 << 10), 3u);
-  EXPECT_EQ(mergeFanIn(1 << 30), kMaxMergeFanIn);
+  EXPECT_EQ(mergeFanIn(1 << 30), maxMergeFanIn());
   EXPECT_EQ(mergeFanIn(0), 2u);
   struct Rec {
     uint64_t key;
