@@ -17,11 +17,12 @@ void useStreamingAllocator();
 // Resident set size now (statm), in bytes.
 uint64_t currentRssBytes();
 
-// The most descriptors this process may hold open (RLIMIT_NOFILE's soft value). The first call
-// raises the soft value to the hard one, at most 65536: the external sorts merge their runs all at
-// once when the descriptors allow (base/external_sort.h, maxMergeFanIn), and a default soft value
-// of 1024 would make them rewrite the runs of a billion-triangle ingest in extra passes. Raising
-// it is what the soft value is for; other limits of the process are left as they are.
+// The most descriptors this process may hold open (RLIMIT_NOFILE's soft value; 65536 when it is
+// unlimited). The first call raises a soft value below 65536 to the hard one, or to 65536 when
+// the hard one is higher (a soft value already above is kept): the external sorts merge their runs
+// all at once when the descriptors allow (base/external_sort.h, maxMergeFanIn), and a default soft
+// value of 1024 would make them rewrite the runs of a billion-triangle ingest in extra passes.
+// Raising it is what the soft value is for; other limits of the process are left as they are.
 uint64_t openFileLimit();
 
 // CPU time this process has used so far, all its threads (those that ended included): the
