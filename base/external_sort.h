@@ -249,9 +249,10 @@ class RunMerger {
 // takes the place of the consecutive runs it holds), at the cost of rewriting the runs merged.
 // The fan-in is at most maxMergeFanIn(): 128 when the process may hold only ~1024 descriptors,
 // up to 1024 when it may hold more (openFileLimit(): eight per run left for two sorters merging at
-// once, each run's two descriptors, and everything else). The billion-triangle ingest's sorts make
-// 250-270 runs of 72-134 MiB: at 128 their finish() and the parallel merge rewrote them twice (24 s
-// and ~45 s of its 574 s on this project's VM), merged at once they are read once.
+// once, each run's two descriptors, and everything else). The billion-triangle ingest's Morton sort
+// makes 268 runs: at 128 its finish() and mergeInParts rewrote them (and the assign stage its
+// groups'), merged at once they are read once: that ingest took 422.6 s against 467.6 s
+// (docs/patchstore.md).
 inline size_t maxMergeFanIn() {
   const uint64_t limit = openFileLimit();
   return std::clamp<size_t>(size_t(limit > 256 ? (limit - 256) / 8 : 0), 128, 1024);
