@@ -30,8 +30,9 @@
 //                       the DAG and the process keep the other half
 // Beside a stage's buffers some data stays resident from one stage to the next: once the chunked
 // path has made the V-partition, its seeds and candidate tables (up to the assigner's share, a
-// quarter of the cap and more at a billion triangles) stay for the rest of the ingest, and the
-// store's patch records (one std::map node per patch, kPatchRecordBytes) grow with the patches.
+// quarter of the cap and more at a billion triangles) stay through the assign stage (then the
+// assigner keeps only its serialized bytes: CellAssigner::releaseLookups), and the store's patch
+// records (one std::map node per patch, kPatchRecordBytes) grow with the patches.
 // The stages that run beside them (the chunked path's assign, group, join and patch stages, and
 // the boundary stage) take their shares from besides(resident): the same rule applied to what the
 // cap leaves. Counted in the whole-cap rule instead, they took the billion-triangle build to

@@ -59,6 +59,10 @@ class CellAssigner {
   virtual std::string describe() const = 0;
   // Opaque bytes the assigner wants kept in the store (e.g. the V-partition seeds), or empty.
   virtual std::string serialize() const { return {}; }
+  // Called once the last cellKey() has returned: frees what only cellKey() needs (lookup tables,
+  // the sample's key maps), so the ingest's later stages plan with that memory. describe() and
+  // serialize() answer as before; cellKey() must not be called again.
+  virtual void releaseLookups() {}
 };
 
 // The default until a V-partition is plugged in: a uniform grid over the bounding box with cubic

@@ -724,14 +724,23 @@ void chunkedStages(IngestContext& ctx, const ParsedInput& in, PatchStageOutput& 
   IngestContext assignCtx{ctx.scratch, ctx.options, assignPlan, ctx.progress, ctx.assigner, ctx.report, ctx.impl, ctx.clock};
   std::unique_ptr<FaceGroups> groups = chunkedAssign(assignCtx, in, coherent);
   if (!in.faceFile.ply) std::remove(in.faceFile.path.c_str());
+  // Every face has its cell: the assigner keeps only what the store saves of it (the sequence's
+  // bytes), and what that frees (the seed grids, candidate tables and key maps: most of the
+  // partition's resident set) goes to the later stages' sorters.
+  const uint64_t beforeRelease = currentRssBytes();
+  if (!ctx.options.keepAssignerLookups) ctx.assigner.releaseLookups();
+  malloc_trim(0);
+  const uint64_t freed = beforeRelease - std::min(beforeRelease, currentRssBytes());
+  const uint64_t partition = resident - std::min(resident, freed);
   std::unique_ptr<PairSorter> pairs = chunkedGroup(assignCtx, *groups, out);
   // The join and the patch stage also run beside the store's patch records, which the patch stage
   // adds one per patch (and the patch keys).
-  const MemoryPlan patchPlan = ctx.plan.besides(resident + uint64_t(out.patchKey.size()) * (kPatchRecordBytes + 8));
+  const MemoryPlan patchPlan = ctx.plan.besides(partition + uint64_t(out.patchKey.size()) * (kPatchRecordBytes + 8));
   IngestContext patchCtx{ctx.scratch, ctx.options, patchPlan, ctx.progress, ctx.assigner, ctx.report, ctx.impl, ctx.clock};
   if (ctx.progress)
-    std::fprintf(stderr, "ingest: beside the stages: %.0f MiB resident after the partition, %.0f MiB of %zu patch records; sorters %.0f then %.0f MiB\n",
-                 double(resident) / double(1 << 20), double(out.patchKey.size() * (kPatchRecordBytes + 8)) / double(1 << 20),
+    std::fprintf(stderr, "ingest: beside the stages: %.0f MiB resident after the partition (%.0f MiB once the assignment is done), %.0f MiB of %zu patch records; sorters %.0f then %.0f MiB\n",
+                 double(resident) / double(1 << 20), double(partition) / double(1 << 20),
+                 double(out.patchKey.size() * (kPatchRecordBytes + 8)) / double(1 << 20),
                  out.patchKey.size(), double(assignPlan.chunkedSorter) / double(1 << 20), double(patchPlan.chunkedSorter) / double(1 << 20));
   std::unique_ptr<PatchSorter<Full>> byPatch = chunkedJoin<Full>(patchCtx, in, *pairs, out);
   pairs.reset();

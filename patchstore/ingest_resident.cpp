@@ -668,6 +668,10 @@ void residentStages(IngestContext& ctx, ParsedInput& in, PatchStageOutput& out) 
   const ResidentVertices rv{in.records.data(), in.layout, in.layout.size()};
   const bool coherent = residentPartition(ctx, in, rv);
   std::unique_ptr<FaceGroups> groups = residentAssign(ctx, in, rv, coherent);
+  // Every face has its cell: the assigner keeps only what the store saves of it, and the later
+  // passes, which plan with the resident set they measure, have the rest for their sorters.
+  if (!ctx.options.keepAssignerLookups) ctx.assigner.releaseLookups();
+  malloc_trim(0);
   std::vector<uint8_t> state = residentShared(ctx, in, *groups, out);
   residentPatches(ctx, in, rv, *groups, state, out);
   groups->release();

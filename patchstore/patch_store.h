@@ -151,6 +151,10 @@ struct IngestOptions {
   // Tests: the chunked path's vertex positions in RAM, its windows and chunks (0: the memory
   // plan's share), to make small inputs take every branch of the join (ingest_join.h).
   uint64_t positionBytes = 0;
+  // Once every face has its cell the ingest calls the assigner's releaseLookups(), so its later
+  // stages have that memory; true keeps the assigner answering cellKey() after the ingest (tests
+  // that check the stored keys against it).
+  bool keepAssignerLookups = false;
 };
 
 // Figures that ingest measured, kept in the store and printed by `mtstore info`.

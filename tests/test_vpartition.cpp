@@ -722,9 +722,32 @@ TEST(Store, IngestKeysPatchesByV0CrossingAndInfoPrintsMetrics) {
   auto assigner = makeVPartitionAssigner(o);
   IngestOptions io;
   io.progress = false;
+  io.keepAssignerLookups = true;  // cellKey() is asked below
   PatchStore::ingest(dir.file("torus.obj"), dir.file("store"), *assigner, io);
   auto store = PatchStore::open(dir.file("store"));
   EXPECT_EQ(store->blob("assigner"), assigner->serialize());
+  {
+    // By default the ingest frees the assigner's lookups once every face has its cell: the store
+    // is the same, and the assigner still describes and serializes itself as before.
+    auto released = makeVPartitionAssigner(o);
+    io.keepAssignerLookups = false;
+    PatchStore::ingest(dir.file("torus.obj"), dir.file("store2"), *released, io);
+    auto store2 = PatchStore::open(dir.file("store2"));
+    EXPECT_EQ(released->serialize(), assigner->serialize());
+    EXPECT_EQ(released->describe(), assigner->describe());
+    EXPECT_EQ(store2->blob("assigner"), store->blob("assigner"));
+    ASSERT_EQ(store2->patchIds(), store->patchIds());
+    for (PatchId id : store->patchIds()) {
+      Patch a = store->patch(id), b = store2->patch(id);
+      EXPECT_EQ(a.cell, b.cell);
+      EXPECT_EQ(a.positions, b.positions);
+      EXPECT_EQ(a.triangles, b.triangles);
+    }
+    auto* v = dynamic_cast<VPartitionAssigner*>(released.get());
+    ASSERT_NE(v, nullptr);
+    EXPECT_GT(dynamic_cast<VPartitionAssigner*>(assigner.get())->sequence().memoryBytes(), 0u);
+    EXPECT_EQ(v->sequence().levels(), 0u);  // the seeds and grids are gone
+  }
   PartitionSequence seq;
   ASSERT_TRUE(loadStoreSequence(*store, seq));
   // Every patch is one V*0 cell: all its triangles have the patch's key.

@@ -550,6 +550,7 @@ uint64_t VPartitionAssigner::joinedKey(uint64_t key) const {
 }
 
 uint64_t VPartitionAssigner::cellKey(const float c[3]) const {
+  assert(!released_);
   const uint64_t raw = sequence_.crossKey(0, c);
   uint64_t key = raw;
   const Slabs* slabs = nullptr;
@@ -576,8 +577,26 @@ uint64_t VPartitionAssigner::cellKey(const float c[3]) const {
 }
 
 std::string VPartitionAssigner::describe() const {
+  if (released_) return described_;
   return sequence_.describe() + "; patches balanced: " + std::to_string(remap_.size()) + " V*0 slivers merged, " +
          std::to_string(slabs_.size()) + " large cells cut into slabs";
+}
+
+void VPartitionAssigner::releaseLookups() {
+  if (released_) return;
+  serialized_ = sequence_.serialize();
+  described_ = describe();
+  released_ = true;
+  // Swapped with empty containers: clear() would keep the buckets and capacities.
+  sequence_ = PartitionSequence();
+  std::unordered_map<uint64_t, uint64_t>().swap(remap_);
+  std::unordered_map<uint64_t, Slabs>().swap(slabs_);
+  std::unordered_map<uint64_t, uint64_t>().swap(seen_);
+  std::unordered_map<uint32_t, uint64_t>().swap(largest_);
+  std::vector<uint64_t>().swap(sampleKeys_);
+  std::vector<KeyEntry>().swap(keyTable_);
+  std::vector<Slabs>().swap(slabList_);
+  keyMask_ = 0;
 }
 
 std::unique_ptr<CellAssigner> makeVPartitionAssigner(const VPartitionOptions& options) {
