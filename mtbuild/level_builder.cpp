@@ -587,12 +587,11 @@ void LevelBuilder::endLevel() {
   s.report.levels.push_back(s.lr);
   s.liveTriangles = s.outTriangles;
   ++s.builtLevels;
-  // The root level simplifies the whole model at once; when it could only halve it
-  // (processRegion's settleRoot), another root level follows while the root is over twice its
-  // size and each level gains (a further root level that does not gain is not even added:
-  // commitRegion).
-  if ((s.root && s.outTriangles <= 2 * s.ctx.rootTriangles) || s.outTriangles <= s.ctx.rootTriangles ||
-      !gains(s.lr.trianglesIn, s.outTriangles))
+  // A root level simplifies the whole model to 1/k while that keeps more than rootTriangles, then
+  // to rootTriangles / 2 (processRegion's rootTarget; settleRoot halves it where that step fails):
+  // another root level follows while the root is over rootTriangles and each level gains (a
+  // further root level that does not gain is not even added: commitRegion).
+  if (s.outTriangles <= s.ctx.rootTriangles || !gains(s.lr.trianglesIn, s.outTriangles))
     s.finished = true;
   // The level is durable: the checkpoint a resumed build restarts from.
   s.writeCheckpoint();

@@ -106,27 +106,42 @@ uint64_t resultBytes(const RegionResult& r) {
          m.origin.size() * 4 + m.triangleCell.size() * 8;
 }
 
-// The root region goes from a few tens of thousands of triangles to ctx.rootTriangles / 2 in one
-// step. On a scan whose welded input keeps non-manifold edges (which both simplifiers freeze),
-// that can break the builder's rules on every run (simplifyRegion then keeps the region whole:
-// a 53 M armadillo scan's root stayed at level 10's 51,858 triangles) or, past the first root
-// level, reach the count only by folding the model (deviations of a third of its size). So when
-// the direct step kept the region whole, or, on a further root level, went over the deviation
-// limit, the root is halved instead, and a halving over the limit keeps the region whole, which
-// ends the level loop (LevelBuilder::endLevel: another root level follows while one gains). The
-// first root level's direct step is never limited, so builds it served keep their bytes.
+// The root's target: 1/k of the region, as any level's, while that keeps more than
+// ctx.rootTriangles (further root levels follow: LevelBuilder::endLevel), then
+// ctx.rootTriangles / 2 in one step. So the coarse end of the DAG is a chain of whole-model nodes
+// 2x (k x) apart, as the levels below are: going from the partition's last level (a few tens of
+// thousands of triangles in up to 8 nodes) to rootTriangles / 2 in one step left no cut between
+// them (arm3.3M: 51,820 triangles at error 1.03, then the root's 1,998 at 6.24; every budget from
+// 2 k to 51 k drew the 1,998).
+static size_t rootTarget(size_t n, size_t ratio, uint64_t rootTriangles) {
+  const size_t step = n / ratio;
+  return step > rootTriangles ? step : std::min<size_t>(n / 2, size_t(rootTriangles / 2));
+}
+
+// A root step. On a scan whose welded input keeps non-manifold edges (which both simplifiers
+// freeze), a step deeper than a halving can break the builder's rules on every run
+// (simplifyRegion then keeps the region whole: a 53 M armadillo scan's root stayed at level 10's
+// 51,858 triangles when it went to rootTriangles / 2 in one step) or, past the first root level,
+// reach the count only by folding the model (deviations of a third of its size). So when such a
+// step kept the region whole, or, on a further root level, went over the deviation limit, the
+// root is halved instead; and a step over the limit that is a halving keeps the region whole,
+// which ends the level loop (LevelBuilder::commitRegion drops a level that does not gain). The
+// first root level's own step is never limited.
 static SimplifiedRegion settleRoot(SimplifiedRegion sr, const LoadedMesh& lm, SimplifyRegionOptions so, const RegionTask& task,
-                            const RegionContext& ctx) {
+                                   const RegionContext& ctx) {
   const size_t n = lm.triangleCount();
   const double limit = task.rootDeviationLimit;
   const bool firstRoot = task.level <= ctx.partitionLevels;
   const bool keptWhole = sr.triangleCount() == n;
   const bool overLimit = !firstRoot && limit > 0 && sr.error > limit;
-  if ((!keptWhole && !overLimit) || so.targetTriangles >= n / 2 || n < 2) return sr;
-  uint32_t attempts = sr.attempts;  // every run counts (LevelReport::simplifierRuns)
-  so.targetTriangles = n / 2;
-  sr = simplifyRegion(lm, so);
-  if (limit > 0 && sr.error > limit) {
+  if ((!keptWhole && !overLimit) || n < 2) return sr;
+  uint32_t attempts = 0;  // every run counts (LevelReport::simplifierRuns)
+  if (so.targetTriangles < n / 2) {
+    attempts += sr.attempts;
+    so.targetTriangles = n / 2;
+    sr = simplifyRegion(lm, so);
+  }
+  if (limit > 0 && sr.error > limit && sr.triangleCount() != n) {
     attempts += sr.attempts;
     so.targetTriangles = n;  // no collapse: the region as it is
     sr = simplifyRegion(lm, so);
@@ -162,7 +177,7 @@ RegionResult processRegion(const RegionTask& task, const RegionContext& ctx) {
   // patch and have no arc to the sink (a one-triangle input built such a file).
   const size_t n = lm.triangleCount();
   const size_t ratio = ctx.sequence->levelRatio();
-  so.targetTriangles = std::max<size_t>(1, task.root ? std::min<size_t>(n / 2, ctx.rootTriangles / 2) : n / ratio);
+  so.targetTriangles = std::max<size_t>(1, task.root ? rootTarget(n, ratio, ctx.rootTriangles) : n / ratio);
   SimplifiedRegion sr = simplifyRegion(lm, so);
   if (task.root) sr = settleRoot(std::move(sr), lm, so, task, ctx);
   out.deviation = sr.error;

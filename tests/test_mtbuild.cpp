@@ -323,6 +323,47 @@ TEST(Mtbuild, ARootLevelThatGainsNothingIsNotAdded) {
   EXPECT_EQ(v.exitCode, 0) << v.output;
 }
 
+// The coarse end of the DAG: past the partition's last level the whole model is one region, and
+// the root levels keep 1/k of it each while that stays over rootTriangles, then go to
+// rootTriangles / 2. So no level is more than 2k times smaller than the one below, and a budget
+// between the partition's last level and the root gets a cut of about its size (before, the root
+// went there in one step: on arm3.3M 51,820 triangles, then 1,998, and every budget from 2 k to
+// 51 k drew the 1,998).
+TEST(Mtbuild, TheRootIsReachedInStepsOfTheLevelRatio) {
+  TempDir tmp;
+  const std::string in = makeScan(tmp, "r.ply", "--triangles 120k --holes 6 --seed 23");
+  for (uint32_t k : {2u, 4u}) {
+    BuildOptions o;
+    o.threads = 2;
+    o.progress = false;
+    o.patchTriangles = 300;  // rootTriangles: 600
+    o.levelRatio = k;
+    const std::string out = tmp.file("r" + std::to_string(k) + ".mt");
+    const BuildReport r = buildMt(in, out, o);
+    ASSERT_GE(r.levels.size(), 3u);
+    EXPECT_LE(r.levels.back().trianglesOut, 600u) << "k " << k;
+    size_t roots = 0;
+    for (const LevelReport& l : r.levels) {
+      EXPECT_GE(l.trianglesOut * 2 * k, l.trianglesIn) << "k " << k << ": level " << l.level << " keeps " << l.trianglesOut
+                                                       << " of " << l.trianglesIn << " triangles";
+      roots += l.regions == 1;
+    }
+    EXPECT_GE(roots, 2u) << "k " << k << ": the partition's last level reaches the root in more than one step";
+    // A budget of each whole-model level's size draws that level, not the root below it.
+    for (const LevelReport& l : r.levels) {
+      if (l.regions != 1 || l.trianglesOut <= 600) continue;
+      CommandResult e = runTool("mtextract", out + " --triangles " + std::to_string(l.trianglesOut) + " -o " + tmp.file("c.ply"));
+      ASSERT_EQ(e.exitCode, 0) << e.output;
+      const size_t at = e.output.find(" triangles,");
+      ASSERT_NE(at, std::string::npos) << e.output;
+      const uint64_t drawn = std::stoull(e.output.substr(e.output.rfind(' ', at - 1) + 1));
+      EXPECT_EQ(drawn, l.trianglesOut) << "k " << k << ": a budget of " << l.trianglesOut << "\n" << e.output;
+    }
+    CommandResult v = runTool("mtverify", out + " --cuts 8");
+    EXPECT_EQ(v.exitCode, 0) << v.output;
+  }
+}
+
 TEST(Mtbuild, TinyInputsBuildFilesThatVerify) {
   // One triangle, three collinear vertices, two triangles, a tetrahedron, an open pyramid: each
   // region must keep a triangle, or its node has no arc to the sink and mtverify rejects the file.
