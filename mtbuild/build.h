@@ -193,8 +193,8 @@ struct RegionTask {
   uint32_t level = 0;                 // the level being built (1 = first simplification)
   uint32_t region = 0;                // the V(level) cell
   bool root = false;                  // the last partition level: one region, everything
-  // Root levels only: the largest deviation a root simplification that had to fall back to a
-  // halving may add (twice the previous level's largest node error); 0: none. See processRegion.
+  // Root levels only: the largest deviation a root step past the first root level may add (four
+  // times the previous level's largest node error); 0: none. See settleRoot (region_work.cpp).
   double rootDeviationLimit = 0;
   // The largest error of the nodes whose fragments hold the floor patches: the new node's error
   // is this plus the measured deviation (textured builds tie the atlases' texel size to it).

@@ -345,8 +345,10 @@ TEST(Mtbuild, TheRootIsReachedInStepsOfTheLevelRatio) {
     EXPECT_LE(r.levels.back().trianglesOut, 600u) << "k " << k;
     size_t roots = 0;
     for (const LevelReport& l : r.levels) {
-      EXPECT_GE(l.trianglesOut * 2 * k, l.trianglesIn) << "k " << k << ": level " << l.level << " keeps " << l.trianglesOut
-                                                       << " of " << l.trianglesIn << " triangles";
+      // At most 2k: the last root step goes from at most k x rootTriangles to rootTriangles / 2
+      // (10% for a simplifier that stops a little under its target).
+      EXPECT_GE(l.trianglesOut * 2 * k * 11 / 10, l.trianglesIn)
+          << "k " << k << ": level " << l.level << " keeps " << l.trianglesOut << " of " << l.trianglesIn << " triangles";
       roots += l.regions == 1;
     }
     EXPECT_GE(roots, 2u) << "k " << k << ": the partition's last level reaches the root in more than one step";
