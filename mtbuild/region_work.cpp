@@ -122,20 +122,34 @@ static size_t rootTarget(size_t n, size_t ratio, uint64_t rootTriangles) {
 // freeze), a step deeper than a halving can break the builder's rules on every run
 // (simplifyRegion then keeps the region whole: a 53 M armadillo scan's root stayed at level 10's
 // 51,858 triangles when it went to rootTriangles / 2 in one step) or, past the first root level,
-// reach the count only by folding the model (deviations of a third of its size). So when such a
-// step kept the region whole, or, on a further root level, went over the deviation limit, the
-// root is halved instead; and a step over the limit that is a halving keeps the region whole,
-// which ends the level loop (LevelBuilder::commitRegion drops a level that does not gain). The
-// first root level's own step is never limited.
+// reach the count only by folding the model (deviations of a third of its size). So a 1/k step of
+// a further root level is limited (task.rootDeviationLimit), and the root's own step (to
+// rootTriangles / 2) is not, as the one step to it was before the chain: a 1/k step over the limit
+// is replaced by the root's own step (on noisy and CAD scans a 1/k step of the chain can fold
+// where one step to the root, from the level below, did not: scangen's blade ended at 11,944
+// triangles, against 8,320 with the one step). When a step deeper than a halving kept the region
+// whole, the root is halved instead, and a halving over the limit keeps the region whole, which
+// ends the level loop (LevelBuilder::commitRegion drops a level that does not gain).
 static SimplifiedRegion settleRoot(SimplifiedRegion sr, const LoadedMesh& lm, SimplifyRegionOptions so, const RegionTask& task,
                                    const RegionContext& ctx) {
   const size_t n = lm.triangleCount();
   const double limit = task.rootDeviationLimit;
   const bool firstRoot = task.level <= ctx.partitionLevels;
+  const size_t ownTarget = std::max<size_t>(1, std::min<size_t>(n / 2, size_t(ctx.rootTriangles / 2)));
+  const bool ownStep = so.targetTriangles <= ownTarget;
   const bool keptWhole = sr.triangleCount() == n;
-  const bool overLimit = !firstRoot && limit > 0 && sr.error > limit;
+  const bool overLimit = !firstRoot && !ownStep && limit > 0 && sr.error > limit;
   if ((!keptWhole && !overLimit) || n < 2) return sr;
   uint32_t attempts = 0;  // every run counts (LevelReport::simplifierRuns)
+  if (overLimit) {
+    attempts += sr.attempts;
+    so.targetTriangles = ownTarget;
+    sr = simplifyRegion(lm, so);
+    if (sr.triangleCount() != n) {
+      sr.attempts += attempts;
+      return sr;
+    }
+  }
   if (so.targetTriangles < n / 2) {
     attempts += sr.attempts;
     so.targetTriangles = n / 2;
