@@ -124,12 +124,13 @@ static size_t rootTarget(size_t n, size_t ratio, uint64_t rootTriangles) {
 // 51,858 triangles when it went to rootTriangles / 2 in one step) or, past the first root level,
 // reach the count only by folding the model (deviations of a third of its size). So a 1/k step of
 // a further root level is limited (task.rootDeviationLimit), and the root's own step (to
-// rootTriangles / 2) is not, as the one step to it was before the chain: a 1/k step over the limit
-// is replaced by the root's own step (on noisy and CAD scans a 1/k step of the chain can fold
-// where one step to the root, from the level below, did not: scangen's blade ended at 11,944
-// triangles, against 8,320 with the one step). When a step deeper than a halving kept the region
-// whole, the root is halved instead, and a halving over the limit keeps the region whole, which
-// ends the level loop (LevelBuilder::commitRegion drops a level that does not gain).
+// rootTriangles / 2) is not, as the one step to it was before the chain: a 1/k step over the limit,
+// or one that kept the region whole, is replaced by the root's own step (on noisy and CAD scans a
+// 1/k step of the chain can fold, or break the rules, where one step to the root, from the level
+// below, did not: scangen's blade ended at 11,944 triangles, against 8,320 with the one step).
+// When that too kept the region whole, the root is halved instead (unless the 1/k step was the
+// halving), and a halving over the limit keeps the region whole, which ends the level loop
+// (LevelBuilder::commitRegion drops a level that does not gain).
 static SimplifiedRegion settleRoot(SimplifiedRegion sr, const LoadedMesh& lm, SimplifyRegionOptions so, const RegionTask& task,
                                    const RegionContext& ctx) {
   const size_t n = lm.triangleCount();
@@ -140,8 +141,9 @@ static SimplifiedRegion settleRoot(SimplifiedRegion sr, const LoadedMesh& lm, Si
   const bool keptWhole = sr.triangleCount() == n;
   const bool overLimit = !firstRoot && !ownStep && limit > 0 && sr.error > limit;
   if ((!keptWhole && !overLimit) || n < 2) return sr;
+  const size_t firstTarget = so.targetTriangles;
   uint32_t attempts = 0;  // every run counts (LevelReport::simplifierRuns)
-  if (overLimit) {
+  if (overLimit || (keptWhole && !ownStep)) {
     attempts += sr.attempts;
     so.targetTriangles = ownTarget;
     sr = simplifyRegion(lm, so);
@@ -150,7 +152,7 @@ static SimplifiedRegion settleRoot(SimplifiedRegion sr, const LoadedMesh& lm, Si
       return sr;
     }
   }
-  if (so.targetTriangles < n / 2) {
+  if (so.targetTriangles < n / 2 && firstTarget != n / 2) {
     attempts += sr.attempts;
     so.targetTriangles = n / 2;
     sr = simplifyRegion(lm, so);
@@ -205,17 +207,25 @@ RegionResult processRegion(const RegionTask& task, const RegionContext& ctx) {
     if (!lm.normals.empty()) rep.normals.insert(rep.normals.end(), &lm.normals[3 * o], &lm.normals[3 * o] + 3);
   rep.colors = std::move(sr.colors);  // the input's, or the quadric's best colours (empty without colours)
   rep.triangleCell.resize(sr.triangleCount());
+  // A root level's output goes to the next root level whole (low half 0: one region), in patches
+  // by the coarsest partition level's cells (at most maxCoarsestCells, 8): one patch of a whole
+  // root node (up to ~26 k triangles in the root chain) would be drawn whole by a renderer whose
+  // frame budget is below it, and be read and decoded whole.
+  const bool splitRoot = task.root && L > 0;
   for (uint32_t t = 0; t < sr.triangleCount(); ++t) {
-    uint64_t low = 0;
-    if (task.level + 1 < L) {
+    uint64_t high = task.root ? 0 : task.region, low = 0;
+    if (task.level + 1 < L || splitRoot) {
       float c[3];
       triangleCentroid(&sr.positions[3 * sr.triangles[3 * t]], &sr.positions[3 * sr.triangles[3 * t + 1]],
                        &sr.positions[3 * sr.triangles[3 * t + 2]], c);
-      low = ctx.sequence->cellOf(task.level + 1, c);
+      if (splitRoot)
+        high = ctx.sequence->cellOf(L - 1, c);
+      else
+        low = ctx.sequence->cellOf(task.level + 1, c);
     }
     // The triangle belongs to region R by construction (BMT 4: "this simplified mesh portion ...
     // corresponds to a blue patch"), whatever its new centroid.
-    rep.triangleCell[t] = uint64_t(task.root ? 0 : task.region) << 32 | low;
+    rep.triangleCell[t] = high << 32 | low;
   }
   Sphere sphere = sphereOf(sr.positions);
   for (int a = 0; a < 3; ++a) out.sphere[a] = sphere.c[a];

@@ -362,6 +362,21 @@ TEST(Mtbuild, TheRootIsReachedInStepsOfTheLevelRatio) {
       const uint64_t drawn = std::stoull(e.output.substr(e.output.rfind(' ', at - 1) + 1));
       EXPECT_EQ(drawn, l.trianglesOut) << "k " << k << ": a budget of " << l.trianglesOut << "\n" << e.output;
     }
+    // Each whole-model node is stored in patches by the coarsest partition cells (2 to 8 here),
+    // not as one patch that a renderer must draw whole whatever its budget.
+    CommandResult info = runTool("mtinfo", out);
+    ASSERT_EQ(info.exitCode, 0) << info.output;
+    for (size_t i = 0; i < r.levels.size(); ++i) {
+      if (r.levels[i].regions != 1) continue;
+      const std::string row = "\n" + std::string(i + 1 < 10 ? "    " : "   ") + std::to_string(i + 1) + " ";
+      const size_t at = info.output.find(row);
+      ASSERT_NE(at, std::string::npos) << "k " << k << ": no row for level " << i + 1 << "\n" << info.output;
+      unsigned level = 0, nodes = 0, patches = 0;
+      ASSERT_EQ(std::sscanf(info.output.c_str() + at, "%u %u %u", &level, &nodes, &patches), 3) << info.output;
+      EXPECT_EQ(nodes, 1u) << "k " << k << ": level " << level;
+      EXPECT_GE(patches, 2u) << "k " << k << ": level " << level << "\n" << info.output;
+      EXPECT_LE(patches, 8u) << "k " << k << ": level " << level << "\n" << info.output;
+    }
     CommandResult v = runTool("mtverify", out + " --cuts 8");
     EXPECT_EQ(v.exitCode, 0) << v.output;
   }

@@ -375,8 +375,10 @@ TEST_F(RenderPolicies, ASmallCacheNeverStrandsTheCutAtTheCoarsest) {
     if (f == 1) first = last;
     rig.server->waitIdle(2000);
   }
-  EXPECT_EQ(first.patches, 1u);
-  EXPECT_GT(last.patches, 4u) << "the cut is stranded at the coarsest";
+  // The coarsest cut is the root node: its patches are the coarsest partition level's cells (at
+  // most 8, region_work.cpp).
+  EXPECT_LE(first.patches, 8u);
+  EXPECT_GT(last.patches, first.patches + 3) << "the cut is stranded at the coarsest";
   EXPECT_LT(last.maxScreenError, 0.5 * first.maxScreenError);
 }
 
@@ -391,8 +393,8 @@ TEST_F(RenderPolicies, AStillHeadlessViewIsNotLeftAtTheCoarsestCut) {
                                          "--test-read-delay-ms 5 --fixed-triangles 200000 --still-frames 1 --stats " + csv);
   ASSERT_EQ(r.exitCode, 0) << r.output;
   Csv c = readCsv(csv);
-  EXPECT_EQ(c.at(0, "patches"), 1.0);
-  EXPECT_GT(c.rows.back()[c.col("patches")], 10.0) << "the still view stayed at the coarsest cut";
+  EXPECT_LE(c.at(0, "patches"), 8.0);  // the root node's patches (the coarsest cut)
+  EXPECT_GT(c.rows.back()[c.col("patches")], c.at(0, "patches") + 9) << "the still view stayed at the coarsest cut";
   EXPECT_LE(c.rows.back()[c.col("max_screen_error")], 1.0);
 }
 

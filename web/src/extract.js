@@ -217,10 +217,17 @@ export class ExtractRender {
     if (!this.cache) return;
     this.server.submit(start.map((id) => ({ id, urgency: Urgency.UrgentUp })), 0);
   }
-  /** Pins the coarsest cut's patches that arrived (call once start()'s loads are done). */
+  /**
+   * Pins the coarsest cut's patches that arrived (call once start()'s loads are done): once as the
+   * cut's (released when a refinement leaves them), and once more for the whole run, so that they
+   * are never evicted and a frame over its budget can always coarsen to them at once
+   * (coarsenThrough ends on them; a few whole-model nodes above the partition's levels hold
+   * patches that a 2 MiB cache evicts while the cut is finer, and waiting for them drew cuts of
+   * 2-6x the budget for 5-14 frames after a slow one). They are the file's smallest cut.
+   */
   pinStart() {
     if (!this.cache) return;
-    for (const id of this.startPatches) this.cache.pinAll([id]);
+    for (const id of this.startPatches) this.cache.pinAll([id, id]);
   }
 
   arcVisible(arc, view) {
