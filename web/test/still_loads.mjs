@@ -8,14 +8,14 @@
 //   nothing;
 // - still updates whose requests are loaded between them (all, or only every other one of each
 //   list) must reach the target's node set, having loaded only its patches, with exactly the cut's
-//   patches pinned; with one of those patches damaged, they must stop with it out of the cut;
+//   patches pinned once (and the coarsest cut's once more, for the whole run); with one of those patches damaged, they must stop with it out of the cut;
 //   settled, an update repeats the last (ExtractRender.stillRepeats) and keeps its figures, one
 //   after an arrival does not; while loads are pending, one after an arrival within
 //   stillLoadingMs of the last that ran repeats too, one after that time or with nothing pending
 //   does not;
 // - moving on from the settled still view with a budget and no load arriving, the cut coarsens
 //   through the levels never loaded (ExtractRender.coarsenThrough) to within the budget in at most
-//   3 updates, with exactly its patches pinned;
+//   3 updates, with exactly its patches pinned (and the coarsest cut's);
 // - a moving update's look-ahead (ExtractRender.loadAheadOf): after a frame within its gate, with
 //   no look-ahead batch in flight, it adds at most aheadBatch requests at Urgency.Ahead, after all
 //   others, each a patch the view needs (in some view at least one); after a slow frame, or with a
@@ -64,6 +64,13 @@ try {
       return out;
     };
     const startPatches = new Set(all.startPatches);
+    // The pins: one for each patch of the cut, and one more, held for the whole run, for each patch
+    // of the coarsest cut (ExtractRender.pinStart); nothing else pinned.
+    const pinsWrong = (cache, cut) => {
+      const ids = new Set([...cut, ...startPatches, ...[...cache.entries].filter(([, e]) => e.pins > 0).map(([id]) => id)]);
+      const wrong = [...ids].filter((id) => (cache.entries.get(id)?.pins ?? 0) !== (cut.has(id) ? 1 : 0) + (startPatches.has(id) ? 1 : 0));
+      return wrong.length ? `${wrong.length} patches pinned otherwise than once for the cut (${cut.size} patches) and once for the coarsest cut (${startPatches.size}): ${wrong.slice(0, 4).map((id) => `${id}: ${cache.entries.get(id)?.pins ?? 0}`).join(', ')}` : '';
+    };
     const finalCut = patchesOf(all.cutArcs);
     const needed = new Set([...finalCut].filter((id) => !startPatches.has(id)));
     const target = all.nodeSet().join(' ');
@@ -141,7 +148,6 @@ try {
       const throttled = other < 0 || (pendingSoon.repeated && !pendingLater.repeated && pendingSoon2.repeated && !idleSoon.repeated);
       const throttleFigures = `${pendingSoon.repeated} ${pendingLater.repeated} ${pendingSoon2.repeated} ${idleSoon.repeated}`;
       const cut = patchesOf(er.cutArcs);
-      const pinned = [...cache.entries].filter(([, e]) => e.pins > 0).map(([id]) => id);
       const problems = [];
       // Nothing loaded that neither the target's cut nor the cut settled on holds (the levels
       // between are refined through).
@@ -151,8 +157,8 @@ try {
       if (again.repeated || !arrival.repeated || arrival.maxScreenError !== againErr) problems.push('a settled still update was not skipped, or gave another error');
       if (after.repeated && other >= 0) problems.push('a still update after a patch arrived was skipped');
       if (!throttled) problems.push(`loads pending: a still update within stillLoadingMs of the last that ran was not skipped, or one after it or with nothing pending was (repeated: ${throttleFigures})`);
-      if (pinned.length !== cut.size || pinned.some((id) => !cut.has(id) || cache.entries.get(id).pins !== 1))
-        problems.push(`${pinned.length} patches pinned, the cut holds ${cut.size}, not each pinned once`);
+      const wrongPins = pinsWrong(cache, cut);
+      if (wrongPins) problems.push(wrongPins);
       for (const id of cut) if (cache.state(id) !== 'ready') problems.push(`the cut holds patch ${id}, ${cache.state(id)}`);
       return { er, cache, loaded, rounds, problems };
     };
@@ -178,10 +184,10 @@ try {
         if (er.visibleTriangles <= budget) break;
       }
       const cut = patchesOf(er.cutArcs);
-      const pinned = [...r.cache.entries].filter(([, e]) => e.pins > 0).map(([id]) => id);
       console.log(`view ${k}: moving on with a budget of ${budget}: ${before} -> ${er.visibleTriangles} visible triangles in ${updates + 1} update(s), ${st.coarsenings} coarsenings`);
       if (er.visibleTriangles > budget) problems.push(`moving on: ${er.visibleTriangles} visible triangles after 3 updates with no loads, over the budget of ${budget}`);
-      if (pinned.length !== cut.size || pinned.some((id) => !cut.has(id) || r.cache.entries.get(id).pins !== 1)) problems.push(`moving on: ${pinned.length} patches pinned, the cut holds ${cut.size}`);
+      const wrongPins = pinsWrong(r.cache, cut);
+      if (wrongPins) problems.push(`moving on: ${wrongPins}`);
       for (const id of cut) if (r.cache.state(id) !== 'ready') problems.push(`moving on: the cut holds patch ${id}, ${r.cache.state(id)}`);
     }
     if (needed.size) {
