@@ -140,6 +140,19 @@ static SimplifiedRegion settleRoot(SimplifiedRegion sr, const LoadedMesh& lm, Si
   const bool ownStep = so.targetTriangles <= ownTarget;
   const bool keptWhole = sr.triangleCount() == n;
   const bool overLimit = !firstRoot && !ownStep && limit > 0 && sr.error > limit;
+  if (!keptWhole && !overLimit && !ownStep && n >= 2 && sr.triangleCount() * 4 > so.targetTriangles * 5) {
+    // The 1/k step stopped well above its target (rules broken on every run: a CAD or noisy
+    // scan): with the root's own, lower target the simplifier can get further from the same input
+    // (scangen's blade: 13,665 -> 11,944 at 1/2, 10,554 at the own step). The smaller result is
+    // kept, within the limit past the first root level.
+    SimplifyRegionOptions own = so;
+    own.targetTriangles = ownTarget;
+    SimplifiedRegion deeper = simplifyRegion(lm, own);
+    deeper.attempts += sr.attempts;
+    sr.attempts = deeper.attempts;
+    if (deeper.triangleCount() < sr.triangleCount() && (firstRoot || limit <= 0 || deeper.error <= limit)) return deeper;
+    return sr;
+  }
   if ((!keptWhole && !overLimit) || n < 2) return sr;
   const size_t firstTarget = so.targetTriangles;
   uint32_t attempts = 0;  // every run counts (LevelReport::simplifierRuns)
