@@ -122,15 +122,15 @@ static size_t rootTarget(size_t n, size_t ratio, uint64_t rootTriangles) {
 // freeze), a step deeper than a halving can break the builder's rules on every run
 // (simplifyRegion then keeps the region whole: a 53 M armadillo scan's root stayed at level 10's
 // 51,858 triangles when it went to rootTriangles / 2 in one step) or, past the first root level,
-// reach the count only by folding the model (deviations of a third of its size). So a 1/k step of
-// a further root level is limited (task.rootDeviationLimit), and the root's own step (to
-// rootTriangles / 2) is not, as the one step to it was before the chain: a 1/k step over the limit,
-// or one that kept the region whole, is replaced by the root's own step (on noisy and CAD scans a
-// 1/k step of the chain can fold, or break the rules, where one step to the root, from the level
-// below, did not: scangen's blade ended at 11,944 triangles, against 8,320 with the one step).
-// When that too kept the region whole, the root is halved instead (unless the 1/k step was the
-// halving), and a halving over the limit keeps the region whole, which ends the level loop
-// (LevelBuilder::commitRegion drops a level that does not gain).
+// reach the count only by folding the model (deviations of a third of its size). So every step of
+// a further root level is held to task.rootDeviationLimit (the first root level's is not, as the
+// one step to the root was not before the chain). A 1/k step over the limit, or one that kept the
+// region whole, is replaced by the root's own step (to rootTriangles / 2), and one that stopped
+// far above its target is tried beside it (on noisy and CAD scans the simplifier gets further from
+// the same input with the lower target: scangen's blade ended at 11,944 triangles with the 1/k
+// steps alone, against 8,320 with the one step). When that too failed, the root is halved instead
+// (unless the 1/k step was the halving), and a halving over the limit keeps the region whole,
+// which ends the level loop (LevelBuilder::commitRegion drops a level that does not gain).
 static SimplifiedRegion settleRoot(SimplifiedRegion sr, const LoadedMesh& lm, SimplifyRegionOptions so, const RegionTask& task,
                                    const RegionContext& ctx) {
   const size_t n = lm.triangleCount();
@@ -139,28 +139,32 @@ static SimplifiedRegion settleRoot(SimplifiedRegion sr, const LoadedMesh& lm, Si
   const size_t ownTarget = std::max<size_t>(1, std::min<size_t>(n / 2, size_t(ctx.rootTriangles / 2)));
   const bool ownStep = so.targetTriangles <= ownTarget;
   const bool keptWhole = sr.triangleCount() == n;
-  const bool overLimit = !firstRoot && !ownStep && limit > 0 && sr.error > limit;
+  // Past the first root level every step is held to the limit, the root's own included.
+  auto withinLimit = [&](const SimplifiedRegion& r) { return firstRoot || limit <= 0 || r.error <= limit; };
+  const bool overLimit = !withinLimit(sr);
   if (!keptWhole && !overLimit && !ownStep && n >= 2 && sr.triangleCount() * 4 > so.targetTriangles * 5) {
     // The 1/k step stopped well above its target (rules broken on every run: a CAD or noisy
     // scan): with the root's own, lower target the simplifier can get further from the same input
     // (scangen's blade: 13,665 -> 11,944 at 1/2, 10,554 at the own step). The smaller result is
-    // kept, within the limit past the first root level.
+    // kept when it is within the limit and not below half the 1/k target (the chain's steps stay
+    // at most 2k apart).
     SimplifyRegionOptions own = so;
     own.targetTriangles = ownTarget;
     SimplifiedRegion deeper = simplifyRegion(lm, own);
     deeper.attempts += sr.attempts;
     sr.attempts = deeper.attempts;
-    if (deeper.triangleCount() < sr.triangleCount() && (firstRoot || limit <= 0 || deeper.error <= limit)) return deeper;
+    if (deeper.triangleCount() < sr.triangleCount() && 2 * deeper.triangleCount() >= so.targetTriangles && withinLimit(deeper))
+      return deeper;
     return sr;
   }
   if ((!keptWhole && !overLimit) || n < 2) return sr;
   const size_t firstTarget = so.targetTriangles;
   uint32_t attempts = 0;  // every run counts (LevelReport::simplifierRuns)
-  if (overLimit || (keptWhole && !ownStep)) {
+  if ((overLimit || keptWhole) && !ownStep) {
     attempts += sr.attempts;
     so.targetTriangles = ownTarget;
     sr = simplifyRegion(lm, so);
-    if (sr.triangleCount() != n) {
+    if (sr.triangleCount() != n && withinLimit(sr)) {
       sr.attempts += attempts;
       return sr;
     }

@@ -266,6 +266,10 @@ PartitionSequence PartitionSequence::deserialize(const std::string& bytes) {
 }
 
 void VPartitionAssigner::prepare(const CentroidSource& centroids, uint64_t memoryBytes) {
+  // A prepared-again assigner describes its new partition, not one it released.
+  released_ = false;
+  serialized_.clear();
+  described_.clear();
   // One pass over the input: a stride sample (vp::sampleCentroids) that the irregular builder
   // and the patch balancing below run on in memory. Its size depends on the input only.
   const uint32_t P = options_.patchTriangles ? options_.patchTriangles : kDefaultPatchTriangles;
