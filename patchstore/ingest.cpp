@@ -207,6 +207,14 @@ IngestReport build(const std::string& input, const std::string& dir, const std::
 }
 
 }  // namespace
+
+uint64_t releaseAssignerLookups(IngestContext& ctx) {
+  const uint64_t before = currentRssBytes();
+  if (!ctx.options.keepAssignerLookups) ctx.assigner.releaseLookups();
+  malloc_trim(0);
+  return before - std::min(before, currentRssBytes());
+}
+
 }  // namespace ingest
 
 namespace {

@@ -727,10 +727,7 @@ void chunkedStages(IngestContext& ctx, const ParsedInput& in, PatchStageOutput& 
   // Every face has its cell: the assigner keeps only what the store saves of it (the sequence's
   // bytes), and what that frees (the seed grids, candidate tables and key maps: most of the
   // partition's resident set) goes to the later stages' sorters.
-  const uint64_t beforeRelease = currentRssBytes();
-  if (!ctx.options.keepAssignerLookups) ctx.assigner.releaseLookups();
-  malloc_trim(0);
-  const uint64_t freed = beforeRelease - std::min(beforeRelease, currentRssBytes());
+  const uint64_t freed = releaseAssignerLookups(ctx);
   const uint64_t partition = resident - std::min(resident, freed);
   std::unique_ptr<PairSorter> pairs = chunkedGroup(assignCtx, *groups, out);
   // The join and the patch stage also run beside the store's patch records, which the patch stage

@@ -385,6 +385,10 @@ struct PatchStageOutput {
   std::unique_ptr<EdgeSorter> edges;     // uses of edges between two shared vertices
 };
 
+// After the assign stage of either path (every face has its cell): the assigner's lookups are
+// released (CellAssigner::releaseLookups; unless IngestOptions::keepAssignerLookups) and the heap
+// trimmed, so the later stages' sorters have that memory. Returns the resident bytes it freed.
+uint64_t releaseAssignerLookups(IngestContext& ctx);
 // Stage 1 (ingest_parse.cpp): reads the input into scratch (and RAM, when resident).
 ParsedInput parseInput(const std::string& input, IngestContext& ctx);
 // Stages 2-5 of the resident path (ingest_resident.cpp). Frees the parse's records.

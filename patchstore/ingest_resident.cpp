@@ -668,10 +668,9 @@ void residentStages(IngestContext& ctx, ParsedInput& in, PatchStageOutput& out) 
   const ResidentVertices rv{in.records.data(), in.layout, in.layout.size()};
   const bool coherent = residentPartition(ctx, in, rv);
   std::unique_ptr<FaceGroups> groups = residentAssign(ctx, in, rv, coherent);
-  // Every face has its cell: the assigner keeps only what the store saves of it, and the later
-  // passes, which plan with the resident set they measure, have the rest for their sorters.
-  if (!ctx.options.keepAssignerLookups) ctx.assigner.releaseLookups();
-  malloc_trim(0);
+  // Every face has its cell: the later passes, which plan with the resident set they measure,
+  // have what the assigner's lookups held for their sorters.
+  releaseAssignerLookups(ctx);
   std::vector<uint8_t> state = residentShared(ctx, in, *groups, out);
   residentPatches(ctx, in, rv, *groups, state, out);
   groups->release();

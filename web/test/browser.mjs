@@ -186,7 +186,6 @@ await test('path', async () => {
   const over = f.filter((x) => x.cacheBytes > cap);
   check(over.length === 0, `cache above its cap of ${cap} bytes in ${over.length} frames (max ${Math.max(...f.map((x) => x.cacheBytes))})`);
   const overBudget = f.filter((x) => x.drawn > Math.max(x.budget, f[0].drawn) * 1.001);
-  if (process.env.DEBUG_PATH && overBudget.length) for (const i of [f.indexOf(overBudget[0]) - 1, f.indexOf(overBudget[0])]) console.log(JSON.stringify(f[i]));
   check(overBudget.length === 0, `the drawn cut exceeded the render budget in ${overBudget.length} frames (${overBudget
     .slice(0, 4).map((x) => `frame ${f.indexOf(x)}: ${x.drawn} drawn, budget ${Math.round(x.budget)}, ${x.patches} patches`).join('; ')}; the first frame drew ${f[0].drawn})`);
   const ms = f.slice(1).map((x) => x.frameMs).sort((a, b) => a - b);

@@ -8,7 +8,8 @@
 //   nothing;
 // - still updates whose requests are loaded between them (all, or only every other one of each
 //   list) must reach the target's node set, having loaded only its patches, with exactly the cut's
-//   patches pinned once (and the coarsest cut's once more, for the whole run); with one of those patches damaged, they must stop with it out of the cut;
+//   patches pinned once (and the coarsest cut's once more, for the whole run); with one of those
+//   patches damaged, they must stop with it out of the cut;
 //   settled, an update repeats the last (ExtractRender.stillRepeats) and keeps its figures, one
 //   after an arrival does not; while loads are pending, one after an arrival within
 //   stillLoadingMs of the last that ran repeats too, one after that time or with nothing pending
