@@ -21,10 +21,18 @@ namespace fs = std::filesystem;
 bool haveMpirun() { return std::system("command -v mpirun > /dev/null 2>&1") == 0; }
 
 // mpirun as CI runs it: as root, more ranks than cores. `env`: a variable to pass to the ranks.
+// Each mpirun has a session directory of its own (TMPDIR): ctest runs these tests in parallel, and
+// Open MPI's shared one (/tmp/ompi.HOST.UID) was removed by an mpirun ending while another created
+// its own in it ("orte_session_dir failed", seen once in CI).
 CommandResult mpirun(int ranks, const std::string& args, const std::string& env = "") {
-  std::string cmd = "mpirun --allow-run-as-root --oversubscribe -np " + std::to_string(ranks) +
+  char session[] = "/tmp/mt-mpirun-XXXXXX";
+  const bool own = mkdtemp(session) != nullptr;
+  std::string cmd = (own ? "TMPDIR=" + std::string(session) + " " : std::string()) +
+                    "mpirun --allow-run-as-root --oversubscribe -np " + std::to_string(ranks) +
                     (env.empty() ? "" : " -x " + env) + " " + binDir() + "/mtcluster " + args;
-  return mt::test::runShell(cmd);
+  CommandResult r = mt::test::runShell(cmd);
+  if (own) std::filesystem::remove_all(session);
+  return r;
 }
 
 std::string scanAndReference(const TempDir& tmp, const std::string& mtgen, const std::string& build) {
