@@ -25,14 +25,10 @@ bool haveMpirun() { return std::system("command -v mpirun > /dev/null 2>&1") == 
 // Open MPI's shared one (/tmp/ompi.HOST.UID) was removed by an mpirun ending while another created
 // its own in it ("orte_session_dir failed", seen once in CI).
 CommandResult mpirun(int ranks, const std::string& args, const std::string& env = "") {
-  char session[] = "/tmp/mt-mpirun-XXXXXX";
-  const bool own = mkdtemp(session) != nullptr;
-  std::string cmd = (own ? "TMPDIR=" + std::string(session) + " " : std::string()) +
-                    "mpirun --allow-run-as-root --oversubscribe -np " + std::to_string(ranks) +
-                    (env.empty() ? "" : " -x " + env) + " " + binDir() + "/mtcluster " + args;
-  CommandResult r = mt::test::runShell(cmd);
-  if (own) std::filesystem::remove_all(session);
-  return r;
+  const TempDir session;
+  return mt::test::runShell("TMPDIR=" + session.path() + " mpirun --allow-run-as-root --oversubscribe -np " +
+                            std::to_string(ranks) + (env.empty() ? "" : " -x " + env) + " " + binDir() +
+                            "/mtcluster " + args);
 }
 
 std::string scanAndReference(const TempDir& tmp, const std::string& mtgen, const std::string& build) {
