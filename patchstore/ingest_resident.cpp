@@ -296,13 +296,14 @@ void writePayload(ResidentPatch& w, const ResidentVertices& rv, const uint8_t* s
   const VertexRecordLayout& L = rv.layout;
   const size_t posBytes = L.doublePrecision ? 24 : 12;
   const size_t bytes =
-      sizeof(store_format::GeometryHeader) + nv * (posBytes + (L.normals ? 12 : 0) + (L.colors ? 4 : 0) + (L.texcoords ? 12 : 0)) + nc * 4;
+      sizeof(store_format::GeometryHeader) + nv * (posBytes + (L.normals ? 12 : 0) + (L.colors ? 4 : 0) + (L.texcoords ? 12 : 0));
   w.payload.resize(bytes);
   char* out = w.payload.data();
   store_format::GeometryHeader h{nv, uint32_t(nt), (L.doublePrecision ? store_format::kGeomDouble : 0u) |
                                                        (L.normals ? store_format::kGeomNormals : 0u) |
                                                        (L.colors ? store_format::kGeomColors : 0u) |
-                                                       (L.texcoords ? store_format::kGeomTexcoords | store_format::kGeomVertexUV : 0u),
+                                                       (L.texcoords ? store_format::kGeomTexcoords | store_format::kGeomVertexUV : 0u) |
+                                                       (nt ? store_format::kGeomPackedTriangles : 0u),
                                  0};
   std::memcpy(out, &h, sizeof h);
   out += sizeof h;
@@ -343,8 +344,8 @@ void writePayload(ResidentPatch& w, const ResidentVertices& rv, const uint8_t* s
       std::memcpy(out, rv.record(s.globals[l]) + L.texcoordOffset(), 12);
       out += 12;
     }
-  std::memcpy(out, s.local.data(), nc * 4);
-  assert(size_t(out + nc * 4 - w.payload.data()) == bytes);  // every byte of the block written once
+  assert(size_t(out - w.payload.data()) == bytes);  // every byte of the vertices written once
+  if (nt) appendPackedTriangles(w.payload, s.local.data(), nc, nv);
 }
 
 // buildResidentPatch, step 3. Duplicate faces (same vertex set): sorted local triples packed into

@@ -7,6 +7,10 @@
 #include <cstring>
 #include <limits>
 
+#include <meshoptimizer.h>
+
+#include <mutex>
+
 #include "base/byte_io.h"
 #include "patchstore/store_impl.h"
 
@@ -28,9 +32,28 @@ Box3 boundsOf(const std::vector<double>& positions) {
   return b;
 }
 
+// The index sequence code keeps every index in its place (meshopt_encodeIndexBuffer would rotate
+// triangles, and the corners' texture coordinates and the floors' payloads follow the corner
+// order). Version 1, as the MT file's payload codec sets it process-wide (setMeshoptVersions):
+// the same bytes whichever sets it first.
+void appendPackedTriangles(std::string& block, const uint32_t* indices, size_t indexCount, uint32_t vertexCount) {
+  assert(indexCount > 0 && indexCount % 3 == 0);
+  static std::once_flag once;
+  std::call_once(once, [] { meshopt_encodeIndexVersion(1); });
+  const size_t at = block.size();
+  block.resize(at + 4 + meshopt_encodeIndexSequenceBound(indexCount, vertexCount));
+  const uint32_t n = uint32_t(meshopt_encodeIndexSequence(reinterpret_cast<unsigned char*>(&block[at + 4]),
+                                                          block.size() - at - 4, indices, indexCount));
+  assert(n > 0);
+  std::memcpy(&block[at], &n, 4);
+  block.resize(at + 4 + n);
+}
+
 std::string encodeGeometry(const Patch& p, const VertexLayout& layout) {
   const bool vertexUV = layout.texcoords && !p.texcoords.empty();
-  GeometryHeader h{p.vertexCount(), p.triangleCount(), layoutFlags(layout) | (vertexUV ? kGeomVertexUV : 0), 0};
+  const bool packed = !p.triangles.empty();
+  GeometryHeader h{p.vertexCount(), p.triangleCount(),
+                   layoutFlags(layout) | (vertexUV ? kGeomVertexUV : 0) | (packed ? kGeomPackedTriangles : 0), 0};
   ByteWriter w;
   w.put(h);
   if (layout.doublePrecision) {
@@ -48,7 +71,7 @@ std::string encodeGeometry(const Patch& p, const VertexLayout& layout) {
       w.put<uint32_t>(p.vertexMaterial[v]);
     }
   }
-  w.putRaw(p.triangles.data(), p.triangles.size() * sizeof(uint32_t));
+  if (packed) appendPackedTriangles(w.bytes(), p.triangles.data(), p.triangles.size(), p.vertexCount());
   if (layout.texcoords && !vertexUV) {
     if (p.cornerUV.size() != 6 * size_t(p.triangleCount()) || p.triangleMaterial.size() != p.triangleCount())
       fail("patch " + std::to_string(p.id), "texture coordinates missing for a textured store");
@@ -64,14 +87,18 @@ void decodeGeometry(const std::string& payload, const VertexLayout& layout, Patc
                     const std::string& source) {
   ByteReader r(payload, source);
   auto h = r.get<GeometryHeader>();
-  const bool vertexUV = layout.texcoords && h.flags == (layoutFlags(layout) | kGeomVertexUV);
-  if (h.flags != layoutFlags(layout) && !vertexUV) fail(source, "geometry block has the wrong vertex layout");
+  const bool packed = h.flags & kGeomPackedTriangles;
+  const uint32_t flags = h.flags & ~kGeomPackedTriangles;
+  const bool vertexUV = layout.texcoords && flags == (layoutFlags(layout) | kGeomVertexUV);
+  if (flags != layoutFlags(layout) && !vertexUV) fail(source, "geometry block has the wrong vertex layout");
+  if (packed && h.triangleCount == 0) fail(source, "geometry block packs the triangles of an empty patch");
   const size_t nv = h.vertexCount, nt = h.triangleCount;
   // Every array is found in the block before anything is allocated: a damaged count must not ask
   // for gigabytes the block does not hold (checked in one statement first, for a message with the counts).
   const uint64_t perVertex = (layout.doublePrecision ? 24 : 12) + (layout.normals ? 12 : 0) + (layout.colors ? 4 : 0) +
                              (vertexUV ? 12 : 0);
-  const uint64_t perTriangle = 12 + (layout.texcoords && !vertexUV ? 28 : 0);
+  // A packed triangle takes at least one byte of its code.
+  const uint64_t perTriangle = (packed ? 1 : 12) + (layout.texcoords && !vertexUV ? 28 : 0);
   if (uint64_t(nv) * perVertex + uint64_t(nt) * perTriangle > payload.size() - sizeof h)
     fail(source, "geometry block of " + std::to_string(payload.size()) + " bytes is too short for its " + std::to_string(nv) +
                      " vertices and " + std::to_string(nt) + " triangles");
@@ -80,7 +107,8 @@ void decodeGeometry(const std::string& payload, const VertexLayout& layout, Patc
   const char* normals = layout.normals ? r.getRaw(nv * 3 * sizeof(float)) : nullptr;
   const char* colors = layout.colors ? r.getRaw(nv * 4) : nullptr;
   const char* vertexUVRaw = vertexUV ? r.getRaw(nv * 12) : nullptr;
-  const char* triangles = r.getRaw(nt * 3 * sizeof(uint32_t));
+  const uint32_t triangleBytes = packed ? r.get<uint32_t>() : uint32_t(nt * 3 * sizeof(uint32_t));
+  const char* triangles = r.getRaw(triangleBytes);
   const char* triangleMaterial = nullptr;
   const char* cornerUV = nullptr;
   const char* atlas = nullptr;
@@ -123,7 +151,14 @@ void decodeGeometry(const std::string& payload, const VertexLayout& layout, Patc
     }
   }
   out.triangles.resize(nt * 3);
-  if (nt) std::memcpy(out.triangles.data(), triangles, nt * 3 * sizeof(uint32_t));
+  if (packed) {
+    if (meshopt_decodeIndexSequence(out.triangles.data(), nt * 3, sizeof(uint32_t),
+                                    reinterpret_cast<const unsigned char*>(triangles), triangleBytes) != 0)
+      fail(source, "geometry block's packed triangles (" + std::to_string(triangleBytes) + " bytes) do not decode to " +
+                       std::to_string(nt) + " triangles");
+  } else if (nt) {
+    std::memcpy(out.triangles.data(), triangles, nt * 3 * sizeof(uint32_t));
+  }
   out.cornerUV.clear();
   out.triangleMaterial.clear();
   out.atlas.clear();

@@ -64,7 +64,9 @@ struct BlockHandle {
 //   normals     vertexCount * 3 * float32            (if kGeomNormals)
 //   colors      vertexCount * 4 * uint8              (if kGeomColors)
 //   texcoords   vertexCount * {float32 u, v, uint32 material}   (if kGeomTexcoords and kGeomVertexUV)
-//   triangles   triangleCount * 3 * uint32 local vertex indices
+//   triangles   triangleCount * 3 * uint32 local vertex indices, or with kGeomPackedTriangles:
+//               uint32 n, then n bytes of meshopt_encodeIndexSequence over the 3 * triangleCount
+//               indices (exact: the same triangles, corners in the same order)
 //   corners     (if kGeomTexcoords without kGeomVertexUV) triangleCount * uint32 material, then
 //               triangleCount * 6 * float32 (u, v of each corner), then uint32 n and n bytes:
 //               the patch's atlas image (JPEG or PNG; n = 0: none)
@@ -73,8 +75,13 @@ struct BlockHandle {
 // (kGeomVertexUV: its vertex records carry them, one vertex per wedge, readers' wedge split), and
 // decoding turns that form into per-corner. Materials index the store's "materials" blob
 // (store_textures.h); kAtlasMaterial is the patch's own atlas, kNoMaterial untextured.
-// The layout flags stored in the manifest never include kGeomVertexUV.
-constexpr uint32_t kGeomDouble = 1, kGeomNormals = 2, kGeomColors = 4, kGeomTexcoords = 8, kGeomVertexUV = 16;
+// The layout flags stored in the manifest never include kGeomVertexUV or kGeomPackedTriangles.
+// kGeomPackedTriangles: the triangles as an index sequence code, ~3 bytes a triangle where the
+// plain indices take 12 (ingest and the level loop write and read the whole mesh through the store:
+// at a billion triangles the plain indices alone were ~12 GB written and read back per pass).
+// Readers take both forms; writers pack.
+constexpr uint32_t kGeomDouble = 1, kGeomNormals = 2, kGeomColors = 4, kGeomTexcoords = 8, kGeomVertexUV = 16,
+                   kGeomPackedTriangles = 32;
 struct GeometryHeader {
   uint32_t vertexCount;
   uint32_t triangleCount;

@@ -136,6 +136,8 @@ struct PatchStore::Impl {
 
 // Patch payload coding, shared by ingest and write-back.
 std::string encodeGeometry(const Patch& p, const VertexLayout& layout);
+// A geometry block's packed triangles (kGeomPackedTriangles), appended: the byte count, the code.
+void appendPackedTriangles(std::string& block, const uint32_t* indices, size_t indexCount, uint32_t vertexCount);
 void decodeGeometry(const std::string& payload, const VertexLayout& layout, Patch& out,
                     const std::string& source);
 std::string encodeBoundary(const std::vector<BoundaryEntry>& entries);

@@ -282,6 +282,72 @@ TEST(FuzzRegressions, StoreBlockWithHugeCountsIsRefusedBeforeAllocating) {
   EXPECT_THROW(mt::decodeBoundary(block, "SEG-000001.dat: patch 3"), mt::Error);
 }
 
+// Geometry blocks pack their triangles (kGeomPackedTriangles): every index comes back in its place
+// (corner order included, which the per-corner texture coordinates follow), the block is several
+// times smaller than the plain indices, a block of the plain form (stores written before) still
+// reads, and a damaged code is refused naming the block.
+TEST(FuzzRegressions, StoreBlockPacksTrianglesExactlyAndReadsThePlainForm) {
+  mt::VertexLayout layout;
+  layout.texcoords = true;
+  mt::Patch p;
+  const uint32_t nv = 3000;
+  for (uint32_t v = 0; v < nv; ++v)
+    for (int a = 0; a < 3; ++a) p.positions.push_back(double(float(v * 0.25 + a)));
+  uint32_t seed = 7;
+  auto next = [&] { return seed = seed * 1664525u + 1013904223u; };
+  for (uint32_t t = 0; t < 5000; ++t) {
+    // Mostly neighbouring indices, as a scan's patches have, some far jumps, corners in every rotation.
+    const uint32_t base = (t / 2 + (next() >> 28)) % (nv - 2);
+    uint32_t tri[3] = {base, base + 1, (next() % 8 == 0) ? next() % nv : base + 2};
+    const uint32_t r = next() % 3;
+    for (int c = 0; c < 3; ++c) p.triangles.push_back(tri[(c + r) % 3]);
+    p.triangleMaterial.push_back(t % 3);
+    for (int c = 0; c < 6; ++c) p.cornerUV.push_back(float(t * 6 + c) / 65536.0f);
+  }
+  const std::string block = mt::encodeGeometry(p, layout);
+  mt::store_format::GeometryHeader h;
+  std::memcpy(&h, block.data(), sizeof h);
+  EXPECT_TRUE(h.flags & mt::store_format::kGeomPackedTriangles);
+  const size_t plainBytes = p.triangles.size() * 4;
+  const size_t vertexBytes = size_t(nv) * 12, cornerBytes = p.triangleCount() * 28 + 4;
+  const size_t packedBytes = block.size() - sizeof h - vertexBytes - cornerBytes;
+  EXPECT_LT(packedBytes * 2, plainBytes) << packedBytes << " bytes packed against " << plainBytes << " plain";
+  mt::Patch q;
+  mt::decodeGeometry(block, layout, q, "SEG-000002.dat: patch 9");
+  EXPECT_EQ(q.triangles, p.triangles);
+  EXPECT_EQ(q.cornerUV, p.cornerUV);
+  EXPECT_EQ(q.triangleMaterial, p.triangleMaterial);
+  EXPECT_EQ(q.positions, p.positions);
+
+  // The plain form: the header without the flag and the indices as they are.
+  std::string plain = block.substr(0, sizeof h + vertexBytes);
+  h.flags &= ~mt::store_format::kGeomPackedTriangles;
+  std::memcpy(plain.data(), &h, sizeof h);
+  plain.append(reinterpret_cast<const char*>(p.triangles.data()), plainBytes);
+  plain.append(block.substr(block.size() - cornerBytes));
+  mt::Patch r;
+  mt::decodeGeometry(plain, layout, r, "SEG-000002.dat: patch 9");
+  EXPECT_EQ(r.triangles, p.triangles);
+  EXPECT_EQ(r.cornerUV, p.cornerUV);
+
+  // Damaged: the code cut short (its byte count lowered, the rest taken for the corners), and a
+  // code claiming more bytes than the block holds.
+  for (const int64_t delta : {int64_t(-40), int64_t(1) << 20}) {
+    std::string bad = block;
+    uint32_t n;
+    std::memcpy(&n, bad.data() + sizeof h + vertexBytes, 4);
+    n = uint32_t(int64_t(n) + delta);
+    std::memcpy(bad.data() + sizeof h + vertexBytes, &n, 4);
+    mt::Patch b;
+    try {
+      mt::decodeGeometry(bad, layout, b, "SEG-000002.dat: patch 9");
+      ADD_FAILURE() << "a damaged packed code was accepted (delta " << delta << ")";
+    } catch (const mt::Error& e) {
+      EXPECT_NE(std::string(e.what()).find("SEG-000002.dat: patch 9"), std::string::npos) << e.what();
+    }
+  }
+}
+
 // The glTF reader (fuzz_reader_gltf and inputs made for it): a JSON member of the wrong type threw
 // nlohmann's exception, which named no file; byte counts that were believed before the bytes were
 // seen (a view of a meshopt fallback buffer, a meshopt view's byteLength or compressed length)
