@@ -254,6 +254,7 @@ struct PatchScratch {
   std::vector<uint64_t> a, b, set;
   std::vector<uint32_t> globals, local, firstCorner, nb;
   std::vector<uint8_t> shared;  // per local vertex: held by another patch too
+  std::vector<char> positions;  // the patch's position records, before packing
 };
 
 // buildResidentPatch, step 1. Corners sorted by vertex (radix, on the patch's index range): the
@@ -295,18 +296,17 @@ void writePayload(ResidentPatch& w, const ResidentVertices& rv, const uint8_t* s
   const size_t nt = w.faces.size(), nc = 3 * nt;
   const VertexRecordLayout& L = rv.layout;
   const size_t posBytes = L.doublePrecision ? 24 : 12;
-  const size_t bytes =
-      sizeof(store_format::GeometryHeader) + nv * (posBytes + (L.normals ? 12 : 0) + (L.colors ? 4 : 0) + (L.texcoords ? 12 : 0));
-  w.payload.resize(bytes);
-  char* out = w.payload.data();
+  const size_t attributeBytes = nv * ((L.normals ? 12 : 0) + (L.colors ? 4 : 0) + (L.texcoords ? 12 : 0));
   store_format::GeometryHeader h{nv, uint32_t(nt), (L.doublePrecision ? store_format::kGeomDouble : 0u) |
                                                        (L.normals ? store_format::kGeomNormals : 0u) |
                                                        (L.colors ? store_format::kGeomColors : 0u) |
                                                        (L.texcoords ? store_format::kGeomTexcoords | store_format::kGeomVertexUV : 0u) |
-                                                       (nt ? store_format::kGeomPackedTriangles : 0u),
+                                                       (nt ? store_format::kGeomPackedTriangles : 0u) |
+                                                       (nv ? store_format::kGeomPackedPositions : 0u),
                                  0};
-  std::memcpy(out, &h, sizeof h);
-  out += sizeof h;
+  w.payload.assign(reinterpret_cast<const char*>(&h), sizeof h);
+  s.positions.resize(nv * posBytes);
+  char* out = s.positions.data();
   for (int a = 0; a < 3; ++a) {
     w.bounds.lo[a] = std::numeric_limits<double>::infinity();
     w.bounds.hi[a] = -std::numeric_limits<double>::infinity();
@@ -329,6 +329,10 @@ void writePayload(ResidentPatch& w, const ResidentVertices& rv, const uint8_t* s
       w.bounds.hi[a] = std::max(w.bounds.hi[a], p[a]);
     }
   }
+  if (nv) appendPackedPositions(w.payload, s.positions.data(), nv, posBytes);
+  const size_t at = w.payload.size();
+  w.payload.resize(at + attributeBytes);
+  out = w.payload.data() + at;
   if (L.normals)
     for (uint32_t l = 0; l < nv; ++l) {
       std::memcpy(out, rv.record(s.globals[l]) + posBytes, 12);
@@ -344,7 +348,7 @@ void writePayload(ResidentPatch& w, const ResidentVertices& rv, const uint8_t* s
       std::memcpy(out, rv.record(s.globals[l]) + L.texcoordOffset(), 12);
       out += 12;
     }
-  assert(size_t(out - w.payload.data()) == bytes);  // every byte of the vertices written once
+  assert(size_t(out - w.payload.data()) == at + attributeBytes);  // every byte of the attributes written once
   if (nt) appendPackedTriangles(w.payload, s.local.data(), nc, nv);
 }
 

@@ -49,18 +49,35 @@ void appendPackedTriangles(std::string& block, const uint32_t* indices, size_t i
   block.resize(at + 4 + n);
 }
 
+// Version 0 of the vertex codec, the one meshoptimizer 0.18 has and the MT file's payloads use.
+void appendPackedPositions(std::string& block, const void* positions, size_t vertexCount, size_t vertexSize) {
+  assert(vertexCount > 0 && vertexSize % 4 == 0);
+  static std::once_flag once;
+  std::call_once(once, [] { meshopt_encodeVertexVersion(0); });
+  const size_t at = block.size();
+  block.resize(at + 4 + meshopt_encodeVertexBufferBound(vertexCount, vertexSize));
+  const uint32_t n = uint32_t(meshopt_encodeVertexBuffer(reinterpret_cast<unsigned char*>(&block[at + 4]),
+                                                         block.size() - at - 4, positions, vertexCount, vertexSize));
+  assert(n > 0);
+  std::memcpy(&block[at], &n, 4);
+  block.resize(at + 4 + n);
+}
+
 std::string encodeGeometry(const Patch& p, const VertexLayout& layout) {
   const bool vertexUV = layout.texcoords && !p.texcoords.empty();
-  const bool packed = !p.triangles.empty();
+  const bool packed = !p.triangles.empty(), packedPositions = p.vertexCount() > 0;
   GeometryHeader h{p.vertexCount(), p.triangleCount(),
-                   layoutFlags(layout) | (vertexUV ? kGeomVertexUV : 0) | (packed ? kGeomPackedTriangles : 0), 0};
+                   layoutFlags(layout) | (vertexUV ? kGeomVertexUV : 0) | (packed ? kGeomPackedTriangles : 0) |
+                       (packedPositions ? kGeomPackedPositions : 0),
+                   0};
   ByteWriter w;
   w.put(h);
-  if (layout.doublePrecision) {
-    w.putRaw(p.positions.data(), p.positions.size() * sizeof(double));
+  if (!packedPositions) {
+  } else if (layout.doublePrecision) {
+    appendPackedPositions(w.bytes(), p.positions.data(), p.vertexCount(), 3 * sizeof(double));
   } else {
     std::vector<float> f(p.positions.begin(), p.positions.end());
-    w.putRaw(f.data(), f.size() * sizeof(float));
+    appendPackedPositions(w.bytes(), f.data(), p.vertexCount(), 3 * sizeof(float));
   }
   if (layout.normals) w.putRaw(p.normals.data(), p.normals.size() * sizeof(float));
   if (layout.colors) w.putRaw(p.colors.data(), p.colors.size());
@@ -87,23 +104,31 @@ void decodeGeometry(const std::string& payload, const VertexLayout& layout, Patc
                     const std::string& source) {
   ByteReader r(payload, source);
   auto h = r.get<GeometryHeader>();
-  const bool packed = h.flags & kGeomPackedTriangles;
-  const uint32_t flags = h.flags & ~kGeomPackedTriangles;
+  const bool packed = h.flags & kGeomPackedTriangles, packedPositions = h.flags & kGeomPackedPositions;
+  const uint32_t flags = h.flags & ~(kGeomPackedTriangles | kGeomPackedPositions);
   const bool vertexUV = layout.texcoords && flags == (layoutFlags(layout) | kGeomVertexUV);
   if (flags != layoutFlags(layout) && !vertexUV) fail(source, "geometry block has the wrong vertex layout");
   if (packed && h.triangleCount == 0) fail(source, "geometry block packs the triangles of an empty patch");
+  if (packedPositions && h.vertexCount == 0) fail(source, "geometry block packs the positions of no vertices");
   const size_t nv = h.vertexCount, nt = h.triangleCount;
   // Every array is found in the block before anything is allocated: a damaged count must not ask
   // for gigabytes the block does not hold (checked in one statement first, for a message with the counts).
-  const uint64_t perVertex = (layout.doublePrecision ? 24 : 12) + (layout.normals ? 12 : 0) + (layout.colors ? 4 : 0) +
+  const size_t positionSize = layout.doublePrecision ? 24 : 12;
+  const uint64_t perVertex = (packedPositions ? 0 : positionSize) + (layout.normals ? 12 : 0) + (layout.colors ? 4 : 0) +
                              (vertexUV ? 12 : 0);
   // A packed triangle takes at least one byte of its code.
   const uint64_t perTriangle = (packed ? 1 : 12) + (layout.texcoords && !vertexUV ? 28 : 0);
   if (uint64_t(nv) * perVertex + uint64_t(nt) * perTriangle > payload.size() - sizeof h)
     fail(source, "geometry block of " + std::to_string(payload.size()) + " bytes is too short for its " + std::to_string(nv) +
                      " vertices and " + std::to_string(nt) + " triangles");
-  const size_t positionBytes = nv * 3 * (layout.doublePrecision ? sizeof(double) : sizeof(float));
-  const char* positions = r.getRaw(positionBytes);
+  const size_t positionBytes = nv * positionSize;
+  const uint32_t positionCode = packedPositions ? r.get<uint32_t>() : uint32_t(0);
+  // The vertex codec spends at least 4 bytes on each byte of a vertex per block of 256 vertices
+  // (its 2-bit group headers), so a count beyond that is refused before anything is allocated.
+  if (packedPositions && uint64_t(nv) * positionSize > uint64_t(positionCode) * 64 + 256 * positionSize)
+    fail(source, "geometry block's " + std::to_string(positionCode) + " bytes of packed positions cannot hold its " +
+                     std::to_string(nv) + " vertices");
+  const char* positions = r.getRaw(packedPositions ? positionCode : positionBytes);
   const char* normals = layout.normals ? r.getRaw(nv * 3 * sizeof(float)) : nullptr;
   const char* colors = layout.colors ? r.getRaw(nv * 4) : nullptr;
   const char* vertexUVRaw = vertexUV ? r.getRaw(nv * 12) : nullptr;
@@ -120,6 +145,15 @@ void decodeGeometry(const std::string& payload, const VertexLayout& layout, Patc
     atlas = r.getRaw(atlasBytes);
   }
   if (!r.atEnd()) fail(source, "geometry block has trailing bytes");
+  std::vector<char> unpacked;
+  if (packedPositions) {
+    unpacked.resize(positionBytes);
+    if (meshopt_decodeVertexBuffer(unpacked.data(), nv, positionSize, reinterpret_cast<const unsigned char*>(positions),
+                                   positionCode) != 0)
+      fail(source, "geometry block's packed positions (" + std::to_string(positionCode) + " bytes) do not decode to " +
+                       std::to_string(nv) + " vertices");
+    positions = unpacked.data();
+  }
   out.positions.resize(nv * 3);
   if (layout.doublePrecision) {
     if (nv) std::memcpy(out.positions.data(), positions, positionBytes);  // memcpy(null, ..., 0) is UB

@@ -60,7 +60,9 @@ struct BlockHandle {
 
 // Geometry block payload (one per patch):
 //   GeometryHeader
-//   positions   vertexCount * 3 * (float32 | float64 if kGeomDouble)
+//   positions   vertexCount * 3 * (float32 | float64 if kGeomDouble), or with kGeomPackedPositions:
+//               uint32 n, then n bytes of meshopt_encodeVertexBuffer (version 0) over those
+//               vertices (12 or 24 bytes each; lossless)
 //   normals     vertexCount * 3 * float32            (if kGeomNormals)
 //   colors      vertexCount * 4 * uint8              (if kGeomColors)
 //   texcoords   vertexCount * {float32 u, v, uint32 material}   (if kGeomTexcoords and kGeomVertexUV)
@@ -75,13 +77,15 @@ struct BlockHandle {
 // (kGeomVertexUV: its vertex records carry them, one vertex per wedge, readers' wedge split), and
 // decoding turns that form into per-corner. Materials index the store's "materials" blob
 // (store_textures.h); kAtlasMaterial is the patch's own atlas, kNoMaterial untextured.
-// The layout flags stored in the manifest never include kGeomVertexUV or kGeomPackedTriangles.
+// The layout flags stored in the manifest never include kGeomVertexUV or the packed forms.
 // kGeomPackedTriangles: the triangles as an index sequence code, ~3 bytes a triangle where the
-// plain indices take 12 (ingest and the level loop write and read the whole mesh through the store:
-// at a billion triangles the plain indices alone were ~12 GB written and read back per pass).
-// Readers take both forms; writers pack.
+// plain indices take 12; kGeomPackedPositions: the positions through meshopt's vertex codec (byte
+// deltas between consecutive vertices, which ingest's ascending input order keeps close), 12 ->
+// 6.6-8.2 bytes a vertex on mtgen and scangen scans. Ingest and the level loop write and read the
+// whole mesh through the store: at a billion triangles the plain blocks were ~18 GB written and
+// read back by each of the ingest and the level loop. Readers take every form; writers pack.
 constexpr uint32_t kGeomDouble = 1, kGeomNormals = 2, kGeomColors = 4, kGeomTexcoords = 8, kGeomVertexUV = 16,
-                   kGeomPackedTriangles = 32;
+                   kGeomPackedTriangles = 32, kGeomPackedPositions = 64;
 struct GeometryHeader {
   uint32_t vertexCount;
   uint32_t triangleCount;

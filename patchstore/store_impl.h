@@ -138,6 +138,8 @@ struct PatchStore::Impl {
 std::string encodeGeometry(const Patch& p, const VertexLayout& layout);
 // A geometry block's packed triangles (kGeomPackedTriangles), appended: the byte count, the code.
 void appendPackedTriangles(std::string& block, const uint32_t* indices, size_t indexCount, uint32_t vertexCount);
+// ... and its packed positions (kGeomPackedPositions): vertexCount records of vertexSize bytes.
+void appendPackedPositions(std::string& block, const void* positions, size_t vertexCount, size_t vertexSize);
 void decodeGeometry(const std::string& payload, const VertexLayout& layout, Patch& out,
                     const std::string& source);
 std::string encodeBoundary(const std::vector<BoundaryEntry>& entries);

@@ -282,21 +282,23 @@ TEST(FuzzRegressions, StoreBlockWithHugeCountsIsRefusedBeforeAllocating) {
   EXPECT_THROW(mt::decodeBoundary(block, "SEG-000001.dat: patch 3"), mt::Error);
 }
 
-// Geometry blocks pack their triangles (kGeomPackedTriangles): every index comes back in its place
-// (corner order included, which the per-corner texture coordinates follow), the block is several
-// times smaller than the plain indices, a block of the plain form (stores written before) still
-// reads, and a damaged code is refused naming the block.
-TEST(FuzzRegressions, StoreBlockPacksTrianglesExactlyAndReadsThePlainForm) {
+// Geometry blocks pack their positions and triangles (kGeomPackedPositions, kGeomPackedTriangles):
+// every value comes back exactly and every index in its place (corner order included, which the
+// per-corner texture coordinates follow), the block is several times smaller than the plain form,
+// a block of the plain form (stores written before) still reads, and a damaged code is refused
+// naming the block.
+TEST(FuzzRegressions, StoreBlockPacksPositionsAndTrianglesExactlyAndReadsThePlainForm) {
+  namespace sf = mt::store_format;
   mt::VertexLayout layout;
   layout.texcoords = true;
   mt::Patch p;
   const uint32_t nv = 3000;
-  for (uint32_t v = 0; v < nv; ++v)
-    for (int a = 0; a < 3; ++a) p.positions.push_back(double(float(v * 0.25 + a)));
   uint32_t seed = 7;
   auto next = [&] { return seed = seed * 1664525u + 1013904223u; };
+  for (uint32_t v = 0; v < nv; ++v)  // a noisy sheet, as a scan's patch: floats that differ in their low bits
+    for (int a = 0; a < 3; ++a) p.positions.push_back(double(float((v % 60) * 0.01 + a * (v / 60) * 0.01 + (next() >> 8) * 1e-9)));
   for (uint32_t t = 0; t < 5000; ++t) {
-    // Mostly neighbouring indices, as a scan's patches have, some far jumps, corners in every rotation.
+    // Mostly neighbouring indices, some far jumps, corners in every rotation.
     const uint32_t base = (t / 2 + (next() >> 28)) % (nv - 2);
     uint32_t tri[3] = {base, base + 1, (next() % 8 == 0) ? next() % nv : base + 2};
     const uint32_t r = next() % 3;
@@ -305,46 +307,71 @@ TEST(FuzzRegressions, StoreBlockPacksTrianglesExactlyAndReadsThePlainForm) {
     for (int c = 0; c < 6; ++c) p.cornerUV.push_back(float(t * 6 + c) / 65536.0f);
   }
   const std::string block = mt::encodeGeometry(p, layout);
-  mt::store_format::GeometryHeader h;
+  sf::GeometryHeader h;
   std::memcpy(&h, block.data(), sizeof h);
-  EXPECT_TRUE(h.flags & mt::store_format::kGeomPackedTriangles);
-  const size_t plainBytes = p.triangles.size() * 4;
-  const size_t vertexBytes = size_t(nv) * 12, cornerBytes = p.triangleCount() * 28 + 4;
-  const size_t packedBytes = block.size() - sizeof h - vertexBytes - cornerBytes;
-  EXPECT_LT(packedBytes * 2, plainBytes) << packedBytes << " bytes packed against " << plainBytes << " plain";
+  EXPECT_EQ(h.flags & (sf::kGeomPackedTriangles | sf::kGeomPackedPositions), sf::kGeomPackedTriangles | sf::kGeomPackedPositions);
+  uint32_t positionCode, triangleCode;
+  std::memcpy(&positionCode, block.data() + sizeof h, 4);
+  const size_t trianglesAt = sizeof h + 4 + positionCode;
+  std::memcpy(&triangleCode, block.data() + trianglesAt, 4);
+  const size_t cornerBytes = p.triangleCount() * 28 + 4;
+  ASSERT_EQ(block.size(), trianglesAt + 4 + triangleCode + cornerBytes);
+  const size_t plainPositions = size_t(nv) * 12, plainTriangles = p.triangles.size() * 4;
+  EXPECT_LT(positionCode, plainPositions) << positionCode << " bytes of packed positions against " << plainPositions;
+  EXPECT_LT(triangleCode * 2, plainTriangles) << triangleCode << " bytes of packed triangles against " << plainTriangles;
   mt::Patch q;
   mt::decodeGeometry(block, layout, q, "SEG-000002.dat: patch 9");
+  EXPECT_EQ(q.positions, p.positions);
   EXPECT_EQ(q.triangles, p.triangles);
   EXPECT_EQ(q.cornerUV, p.cornerUV);
   EXPECT_EQ(q.triangleMaterial, p.triangleMaterial);
-  EXPECT_EQ(q.positions, p.positions);
 
-  // The plain form: the header without the flag and the indices as they are.
-  std::string plain = block.substr(0, sizeof h + vertexBytes);
-  h.flags &= ~mt::store_format::kGeomPackedTriangles;
-  std::memcpy(plain.data(), &h, sizeof h);
-  plain.append(reinterpret_cast<const char*>(p.triangles.data()), plainBytes);
+  // The plain form: the header without the flags, the floats and the indices as they are.
+  sf::GeometryHeader plainHeader = h;
+  plainHeader.flags &= ~(sf::kGeomPackedTriangles | sf::kGeomPackedPositions);
+  std::string plain(reinterpret_cast<const char*>(&plainHeader), sizeof plainHeader);
+  const std::vector<float> floats(p.positions.begin(), p.positions.end());
+  plain.append(reinterpret_cast<const char*>(floats.data()), plainPositions);
+  plain.append(reinterpret_cast<const char*>(p.triangles.data()), plainTriangles);
   plain.append(block.substr(block.size() - cornerBytes));
   mt::Patch r;
   mt::decodeGeometry(plain, layout, r, "SEG-000002.dat: patch 9");
+  EXPECT_EQ(r.positions, p.positions);
   EXPECT_EQ(r.triangles, p.triangles);
   EXPECT_EQ(r.cornerUV, p.cornerUV);
 
-  // Damaged: the code cut short (its byte count lowered, the rest taken for the corners), and a
-  // code claiming more bytes than the block holds.
-  for (const int64_t delta : {int64_t(-40), int64_t(1) << 20}) {
-    std::string bad = block;
-    uint32_t n;
-    std::memcpy(&n, bad.data() + sizeof h + vertexBytes, 4);
-    n = uint32_t(int64_t(n) + delta);
-    std::memcpy(bad.data() + sizeof h + vertexBytes, &n, 4);
+  // Damaged: a code's byte count lowered (the rest taken for what follows) or beyond the block, a
+  // byte of a code changed, and a vertex count far beyond what the packed positions can hold.
+  auto refused = [&](std::string bad, const char* what) {
     mt::Patch b;
     try {
       mt::decodeGeometry(bad, layout, b, "SEG-000002.dat: patch 9");
-      ADD_FAILURE() << "a damaged packed code was accepted (delta " << delta << ")";
+      ADD_FAILURE() << what << ": accepted";
     } catch (const mt::Error& e) {
-      EXPECT_NE(std::string(e.what()).find("SEG-000002.dat: patch 9"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("SEG-000002.dat: patch 9"), std::string::npos) << what << ": " << e.what();
     }
+    EXPECT_LT(b.positions.capacity(), 1u << 20) << what;
+  };
+  for (const size_t at : {sizeof h, trianglesAt})
+    for (const int64_t delta : {int64_t(-40), int64_t(1) << 20}) {
+      std::string bad = block;
+      uint32_t n;
+      std::memcpy(&n, bad.data() + at, 4);
+      n = uint32_t(int64_t(n) + delta);
+      std::memcpy(bad.data() + at, &n, 4);
+      refused(bad, at == sizeof h ? "positions' byte count" : "triangles' byte count");
+    }
+  {
+    std::string bad = block;
+    bad[trianglesAt + 4] = char(0x00);  // the index sequence's header byte
+    refused(bad, "triangle code header");
+  }
+  {
+    std::string bad = block;
+    sf::GeometryHeader huge = h;
+    huge.vertexCount = 0x20000000u;
+    std::memcpy(bad.data(), &huge, sizeof huge);
+    refused(bad, "vertex count");
   }
 }
 
