@@ -2,13 +2,12 @@
 // triangles) and its boundary-list block. Layouts: store_format.h; shared by ingest, the write
 // path and the readers, so every block the store holds was written by encodeGeometry and
 // encodeBoundary.
+#include <meshoptimizer.h>
+
 #include <algorithm>
 #include <cassert>
 #include <cstring>
 #include <limits>
-
-#include <meshoptimizer.h>
-
 #include <mutex>
 
 #include "base/byte_io.h"
@@ -72,11 +71,10 @@ std::string encodeGeometry(const Patch& p, const VertexLayout& layout) {
                    0};
   ByteWriter w;
   w.put(h);
-  if (!packedPositions) {
-  } else if (layout.doublePrecision) {
+  if (packedPositions && layout.doublePrecision) {
     appendPackedPositions(w.bytes(), p.positions.data(), p.vertexCount(), 3 * sizeof(double));
-  } else {
-    std::vector<float> f(p.positions.begin(), p.positions.end());
+  } else if (packedPositions) {
+    const std::vector<float> f(p.positions.begin(), p.positions.end());
     appendPackedPositions(w.bytes(), f.data(), p.vertexCount(), 3 * sizeof(float));
   }
   if (layout.normals) w.putRaw(p.normals.data(), p.normals.size() * sizeof(float));

@@ -40,7 +40,9 @@
 
 namespace mt::store_format {
 
-constexpr uint32_t kVersion = 1;
+// Version 2: geometry blocks may hold the packed forms (kGeomPackedTriangles, kGeomPackedPositions
+// below), which a version-1 reader does not know; a version-1 store reads as it is.
+constexpr uint32_t kVersion = 2, kOldestVersion = 1;
 
 // ---- segments ----
 constexpr uint32_t kBlockMagic = 0x4B42544D;  // "MTBK"

@@ -92,7 +92,9 @@ void readBlobs(ByteReader& r, std::map<std::string, std::string>& blobs) {
 void readSnapshot(PatchStore::Impl& s, ByteReader& r, const std::string& mpath, uint64_t offset) {
   if (r.get<uint32_t>() != kManifestMagic) fail(mpath, "bad magic at byte offset " + std::to_string(offset));
   uint32_t version = r.get<uint32_t>();
-  if (version != kVersion) fail(mpath, "unsupported store version " + std::to_string(version));
+  if (version < kOldestVersion || version > kVersion)
+    fail(mpath, "unsupported store version " + std::to_string(version) + " (this build reads versions " +
+                    std::to_string(kOldestVersion) + " to " + std::to_string(kVersion) + ")");
   uint32_t flags = r.get<uint32_t>();
   s.layout.doublePrecision = flags & kGeomDouble;
   s.layout.normals = flags & kGeomNormals;

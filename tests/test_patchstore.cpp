@@ -148,6 +148,29 @@ TEST(PatchStore, RoundTripIsExactWithHolesAndShuffledFaces) {
   EXPECT_EQ(info.triangles, m.triangles.size() / 3);
 }
 
+// A version-1 store (fuzz/store, made by an earlier mtstore ingest: plain positions and indices in
+// its geometry blocks) still opens, checks and exports; the same surface ingested now (packed
+// blocks, version 2) exports the same triangles.
+TEST(PatchStore, AVersionOneStoreStillReads) {
+  TempDir tmp;
+  std::filesystem::copy(std::string(MT_SOURCE_DIR) + "/fuzz/store", tmp.file("v1"));
+  {
+    std::ifstream manifest(tmp.file("v1/MANIFEST-000001"), std::ios::binary);
+    uint32_t head[6];  // the record header (16 bytes), then the snapshot's magic and version
+    ASSERT_TRUE(manifest.read(reinterpret_cast<char*>(head), sizeof head));
+    ASSERT_EQ(head[5], 1u) << "fuzz/store is no longer a version-1 store";
+  }
+  auto old = PatchStore::open(tmp.file("v1"));
+  EXPECT_TRUE(old->check().ok);
+  ASSERT_GT(old->info().triangles, 0u);
+  old->exportPly(tmp.file("v1.ply"));
+  old.reset();
+  auto now = ingestMesh(tmp.file("v1.ply"), tmp.file("v2"), 200);
+  EXPECT_TRUE(now->check().ok);
+  now->exportPly(tmp.file("v2.ply"));
+  EXPECT_TRUE(sameTriangles(readTriangles(tmp.file("v1.ply")), readTriangles(tmp.file("v2.ply"))));
+}
+
 TEST(PatchStore, TinyMemoryCapGivesTheSameStore) {
   // Same input under a cap that forces every external sort to spill and the centroid pass to
   // work in chunks: identical patches, so the store does not depend on the cap.

@@ -137,7 +137,7 @@ struct BuildCli {
                    "cluster would move): the input of the scaling model in docs/cluster.md");
     app.add_option("--work-dir", workDir,
                    std::string(cluster ? "Rank 0's scratch" : "Scratch") +
-                       " directory for the patch store (default OUT.work; up to ~3x the input). Created\n"
+                       " directory for the patch store (default OUT.work; about the input's size). Created\n"
                        "and marked (" + kWorkMarker +
                        ") by the build, removed when it completes. An existing directory the build did not\n"
                        "make (\".\", the input's folder) is never emptied: the build works in DIR/OUT.work inside it");
