@@ -31,6 +31,22 @@ Box3 boundsOf(const std::vector<double>& positions) {
   return b;
 }
 
+namespace {
+
+// A packed section: its byte count, then what `encode(destination, capacity)` writes (at most
+// `bound` bytes; returns how many).
+template <class Encode>
+void appendSection(std::string& block, size_t bound, Encode encode) {
+  const size_t at = block.size();
+  block.resize(at + 4 + bound);
+  const uint32_t n = uint32_t(encode(reinterpret_cast<unsigned char*>(&block[at + 4]), bound));
+  assert(n > 0);
+  std::memcpy(&block[at], &n, 4);
+  block.resize(at + 4 + n);
+}
+
+}  // namespace
+
 // The index sequence code keeps every index in its place (meshopt_encodeIndexBuffer would rotate
 // triangles, and the corners' texture coordinates and the floors' payloads follow the corner
 // order). Version 1, as the MT file's payload codec sets it process-wide (setMeshoptVersions):
@@ -39,13 +55,9 @@ void appendPackedTriangles(std::string& block, const uint32_t* indices, size_t i
   assert(indexCount > 0 && indexCount % 3 == 0);
   static std::once_flag once;
   std::call_once(once, [] { meshopt_encodeIndexVersion(1); });
-  const size_t at = block.size();
-  block.resize(at + 4 + meshopt_encodeIndexSequenceBound(indexCount, vertexCount));
-  const uint32_t n = uint32_t(meshopt_encodeIndexSequence(reinterpret_cast<unsigned char*>(&block[at + 4]),
-                                                          block.size() - at - 4, indices, indexCount));
-  assert(n > 0);
-  std::memcpy(&block[at], &n, 4);
-  block.resize(at + 4 + n);
+  appendSection(block, meshopt_encodeIndexSequenceBound(indexCount, vertexCount), [&](unsigned char* out, size_t capacity) {
+    return meshopt_encodeIndexSequence(out, capacity, indices, indexCount);
+  });
 }
 
 // Version 0 of the vertex codec, the one meshoptimizer 0.18 has and the MT file's payloads use.
@@ -53,13 +65,9 @@ void appendPackedPositions(std::string& block, const void* positions, size_t ver
   assert(vertexCount > 0 && vertexSize % 4 == 0);
   static std::once_flag once;
   std::call_once(once, [] { meshopt_encodeVertexVersion(0); });
-  const size_t at = block.size();
-  block.resize(at + 4 + meshopt_encodeVertexBufferBound(vertexCount, vertexSize));
-  const uint32_t n = uint32_t(meshopt_encodeVertexBuffer(reinterpret_cast<unsigned char*>(&block[at + 4]),
-                                                         block.size() - at - 4, positions, vertexCount, vertexSize));
-  assert(n > 0);
-  std::memcpy(&block[at], &n, 4);
-  block.resize(at + 4 + n);
+  appendSection(block, meshopt_encodeVertexBufferBound(vertexCount, vertexSize), [&](unsigned char* out, size_t capacity) {
+    return meshopt_encodeVertexBuffer(out, capacity, positions, vertexCount, vertexSize);
+  });
 }
 
 std::string encodeGeometry(const Patch& p, const VertexLayout& layout) {
