@@ -34,12 +34,11 @@ Engine::Engine(EngineOptions options) : options_(std::move(options)) {
       mapSizes_.push_back(size);
     }
     uint64_t largest = 0;
-    for (uint32_t p = 0; p < scene_->patchCount(); ++p) largest = std::max(largest, scene_->decodedBytesBound(p));
+    for (uint64_t b : scene_->decodedBytesBounds()) largest = std::max(largest, b);
     scratch_.resize(largest);
     extract_ = std::make_unique<ExtractRender>(*scene_, nullptr, nullptr, options_.extract);
   } else {
-    std::vector<uint64_t> bounds(scene_->patchCount());
-    for (uint32_t p = 0; p < bounds.size(); ++p) bounds[p] = scene_->decodedBytesBound(p);
+    const std::vector<uint64_t> bounds = scene_->decodedBytesBounds();
     cache_ = std::make_unique<PatchCache>(options_.cacheBytes, bounds, [this](const auto& group) { scene_->forEachMoveGroup(group); });
     PatchServer::Options so;
     so.readDelayMs = options_.readDelayMs;

@@ -32,12 +32,15 @@ PatchCache::PatchCache(uint64_t capBytes, const std::vector<uint64_t>& patchByte
   const size_t nc = classBytes_.size();
   std::vector<uint64_t> count(nc, 0);
   patchClass_.resize(patchBytes.size());
+  // A patch's class: the smallest place holder that holds it. The sizes fall with k, so that is
+  // the number of classes after the first whose size is at least the patch's: counted without a
+  // branch per class (1.2 M patches of a billion-triangle file are classed at open).
   for (size_t i = 0; i < patchBytes.size(); ++i) {
     size_t k = 0;
-    while (k + 1 < nc && classBytes_[k + 1] >= patchBytes[i]) ++k;
+    for (size_t j = 1; j < nc; ++j) k += classBytes_[j] >= patchBytes[i];
     patchClass_[i] = uint8_t(k);
-    ++count[k];
   }
+  for (uint8_t k : patchClass_) ++count[k];
   // The cap is shared in proportion to each class's demand (all its patches resident); a class
   // never gets more place holders than it has patches.
   uint64_t demand = 0;

@@ -83,6 +83,8 @@ class Scene {
   // Decoded size of a patch in the renderer's layout (RenderPatch in patch_cache.h), an upper
   // bound the cache sizes its place holders with; a textured patch's coordinates and texels included.
   uint64_t decodedBytesBound(uint32_t patch) const;
+  // decodedBytesBound of every patch, by global id.
+  std::vector<uint64_t> decodedBytesBounds() const;
   // Whether textured files' atlases are loaded (the default); off when nothing will be drawn
   // textured (mtrender --headless with --color other than texture): then no texture byte is read,
   // decoded, or counted in the caches. Set before the caches are sized.

@@ -216,6 +216,11 @@ TEST_F(MtRender, SeveralFilesShareOneCacheAndOneBudget) {
   const size_t n = reader->nodes().size();
   ASSERT_EQ(scene.nodes().size(), 2 * n);
   ASSERT_EQ(scene.sources().size(), 2u);
+  // The cache's sizes, all at once (by file) and one by one (each patch's file looked up).
+  const std::vector<uint64_t> bounds = scene.decodedBytesBounds();
+  ASSERT_EQ(bounds.size(), scene.patchCount());
+  ASSERT_EQ(scene.patchCount(), 2 * reader->patches().size());
+  for (uint32_t p = 0; p < bounds.size(); ++p) ASSERT_EQ(bounds[p], scene.decodedBytesBound(p)) << "patch " << p;
   ExtractOptions eo;
   eo.fixedTriangles = 30000;
   eo.extractMs = 50;

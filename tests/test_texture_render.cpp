@@ -262,11 +262,17 @@ TEST_F(TexturedBuild, RendersTheTextureCloseToTheFullResolution) {
 TEST_F(TexturedBuild, ShadedDrawingLoadsNoTexels) {
   Scene withTexels({mt()}), without({mt()});
   without.setLoadTextures(false);
+  // The engine sizes its cache with the bounds of every patch at once: the same as one by one.
+  const std::vector<uint64_t> allWith = withTexels.decodedBytesBounds(), allWithout = without.decodedBytesBounds();
+  ASSERT_EQ(allWith.size(), withTexels.patchCount());
+  ASSERT_EQ(allWithout.size(), without.patchCount());
   uint64_t texelBytes = 0;
   for (uint32_t p = 0; p < withTexels.patchCount(); ++p) {
     const auto& rec = withTexels.reader(0).textures()[withTexels.patch(p).local];
     const uint64_t expected = rec.size ? renderTextureBytes(withTexels.patch(p).triangles, rec.width, rec.height) : 0;
     EXPECT_EQ(withTexels.decodedBytesBound(p), without.decodedBytesBound(p) + expected) << "patch " << p;
+    EXPECT_EQ(allWith[p], withTexels.decodedBytesBound(p)) << "patch " << p;
+    EXPECT_EQ(allWithout[p], without.decodedBytesBound(p)) << "patch " << p;
     texelBytes += expected;
   }
   EXPECT_GT(texelBytes, 0u);
