@@ -139,9 +139,21 @@ struct NewPatch {
 // cells: sort the distinct keys, then bucket the triangles in their original order).
 std::vector<NewPatch> groupByCell(const ReplacementMesh& r) {
   const size_t nt = r.triangles.size() / 3;
-  std::vector<uint64_t> cells(r.triangleCell.begin(), r.triangleCell.end());
-  std::sort(cells.begin(), cells.end());
-  cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
+  // The distinct keys, kept sorted as they are met: a handful, and the triangles come in runs of
+  // one key (sorting a copy of every triangle's key was ~2% of the level loop).
+  // Past 64 keys the inserts would cost more than sorting a copy of every key.
+  std::vector<uint64_t> cells;
+  for (size_t t = 0; t < r.triangleCell.size() && cells.size() <= 64; ++t) {
+    const uint64_t c = r.triangleCell[t];
+    if (t > 0 && c == r.triangleCell[t - 1]) continue;
+    const auto at = std::lower_bound(cells.begin(), cells.end(), c);
+    if (at == cells.end() || *at != c) cells.insert(at, c);
+  }
+  if (cells.size() > 64) {
+    cells.assign(r.triangleCell.begin(), r.triangleCell.end());
+    std::sort(cells.begin(), cells.end());
+    cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
+  }
   std::vector<NewPatch> out(cells.size());
   std::vector<uint32_t> patchOfTriangle(nt);
   for (size_t k = 0; k < cells.size(); ++k) out[k].cell = cells[k];

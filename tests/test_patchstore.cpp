@@ -584,6 +584,30 @@ TEST(PatchStore, WriteBackWithANewPartitionKeepsTheSurfaceAndTheLists) {
   EXPECT_TRUE(sameTriangles(readTriangles(tmp.file("b.ply")), before));
 }
 
+// A replacement split into more cells than a level's region ever is (the keys' distinct values are
+// then found by sorting them all, not by inserting each as it is met): one new patch per key, in
+// key order, and the surface kept.
+TEST(PatchStore, WriteBackIntoManyCellsMakesOnePatchPerKeyInKeyOrder) {
+  TempDir tmp;
+  TestMesh m = makeTorus(120, 60, 5, true);
+  writePly(m, tmp.file("in.ply"));
+  auto store = ingestMesh(tmp.file("in.ply"), tmp.file("store"), 400);
+  const auto before = coordTriangles(m.positions, m.triangles);
+  for (int slabs : {5, 100}) {
+    LoadedMesh l = store->load(store->patchIds());
+    const ReplacementMesh r = repartition(l, slabs);
+    const std::set<uint64_t> keys(r.triangleCell.begin(), r.triangleCell.end());
+    if (slabs == 100) ASSERT_GT(keys.size(), 64u);
+    const std::vector<PatchId> created = store->writeBack(l, r, true);
+    ASSERT_EQ(created.size(), keys.size()) << slabs << " slabs";
+    auto key = keys.begin();
+    for (PatchId id : created) EXPECT_EQ(store->meta(id).cell, *key++) << "patch " << id;
+    EXPECT_TRUE(store->check().ok);
+    store->exportPly(tmp.file("out.ply"));
+    EXPECT_TRUE(sameTriangles(readTriangles(tmp.file("out.ply")), before)) << slabs << " slabs";
+  }
+}
+
 // Two neighbouring regions loaded at once and written back in the opposite order: the second
 // write-back's view of its outside neighbours is stale, and must be refreshed, not trusted.
 TEST(PatchStore, InterleavedWriteBacksOfNeighbouringRegions) {
