@@ -140,8 +140,8 @@ struct NewPatch {
 std::vector<NewPatch> groupByCell(const ReplacementMesh& r) {
   const size_t nt = r.triangles.size() / 3;
   // The distinct keys, kept sorted as they are met: a handful, and the triangles come in runs of
-  // one key (sorting a copy of every triangle's key was ~2% of the level loop).
-  // Past 64 keys the inserts would cost more than sorting a copy of every key.
+  // one key (sorting a copy of every triangle's key was ~0.3% of a build's samples). Past 64 keys
+  // the inserts would cost more than that sort, which then runs instead.
   std::vector<uint64_t> cells;
   for (size_t t = 0; t < r.triangleCell.size() && cells.size() <= 64; ++t) {
     const uint64_t c = r.triangleCell[t];
