@@ -584,9 +584,8 @@ TEST(PatchStore, WriteBackWithANewPartitionKeepsTheSurfaceAndTheLists) {
   EXPECT_TRUE(sameTriangles(readTriangles(tmp.file("b.ply")), before));
 }
 
-// A replacement split into more cells than a level's region ever is (the keys' distinct values are
-// then found by sorting them all, not by inserting each as it is met): one new patch per key, in
-// key order, and the surface kept.
+// A replacement split into a few cells (their keys found as they are met) and into more than 64
+// (found by sorting them all): either way one new patch per key, in key order, and the surface kept.
 TEST(PatchStore, WriteBackIntoManyCellsMakesOnePatchPerKeyInKeyOrder) {
   TempDir tmp;
   TestMesh m = makeTorus(120, 60, 5, true);
