@@ -596,7 +596,9 @@ TEST(PatchStore, WriteBackIntoManyCellsMakesOnePatchPerKeyInKeyOrder) {
     LoadedMesh l = store->load(store->patchIds());
     const ReplacementMesh r = repartition(l, slabs);
     const std::set<uint64_t> keys(r.triangleCell.begin(), r.triangleCell.end());
-    if (slabs == 100) ASSERT_GT(keys.size(), 64u);
+    if (slabs == 100) {
+      ASSERT_GT(keys.size(), 64u);
+    }
     const std::vector<PatchId> created = store->writeBack(l, r, true);
     ASSERT_EQ(created.size(), keys.size()) << slabs << " slabs";
     auto key = keys.begin();
