@@ -72,7 +72,7 @@ class PosixWritableFile : public WritableFile {
   std::string path_;
   int fd_;
   uint64_t size_;
-  bool appendMode_;
+  [[maybe_unused]] bool appendMode_;  // read only by an assert
 };
 
 class PosixRandomAccessFile : public RandomAccessFile {

@@ -38,6 +38,7 @@ std::string BuildReport::toJson() const {
     << ",\n  \"ingest_sys_seconds\": " << ingestSysSeconds << ",\n  \"cpu_user_seconds\": " << cpuUserSeconds
     << ",\n  \"cpu_sys_seconds\": " << cpuSysSeconds << ",\n  \"input_triangles_per_second\": "
     << (totalSeconds > 0 ? double(inputTriangles) / totalSeconds : 0) << ",\n  \"peak_rss_bytes\": " << peakRssBytes
+    << ",\n  \"ingest_peak_rss_bytes\": " << ingestPeakRssBytes
     << ",\n  \"resumed_at_level\": " << resumedAtLevel << ",\n  \"peak_temp_bytes\": " << peakTempBytes
     << ",\n  \"checkpoint_bytes\": " << checkpointBytes << ",\n  \"level_loop_bytes\": " << levelLoopBytes
     << ",\n  \"level_loop_peak_bytes\": " << levelLoopPeakBytes << ",\n  \"level_loop_peak_regions\": " << levelLoopPeakRegions

@@ -120,6 +120,7 @@ struct BuildReport {
   // earlier levels are the stopped run's figures).
   double ingestUserSeconds = 0, ingestSysSeconds = 0, cpuUserSeconds = 0, cpuSysSeconds = 0;
   uint64_t peakRssBytes = 0;
+  uint64_t ingestPeakRssBytes = 0;    // the peak RSS when the ingest ended (0 after --resume past it)
   uint32_t resumedAtLevel = 0;        // 0: built from the start; k: continued after level k
   uint64_t peakTempBytes = 0;         // largest OUT.work + OUT.mt.tmp seen (sampled in the level loop)
   uint64_t checkpointBytes = 0;       // largest checkpoint record kept in the store (RAM while built)

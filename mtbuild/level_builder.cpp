@@ -107,6 +107,7 @@ void LevelBuilder::State::startFresh(bool storeInput) {
   const CpuSeconds ingestCpu = processCpuSeconds();
   report.ingestUserSeconds = ingestCpu.user - cpu0.user;
   report.ingestSysSeconds = ingestCpu.sys - cpu0.sys;
+  report.ingestPeakRssBytes = peakRssBytes();
   StoreInfo info = store->info();
   report.inputTriangles = info.triangles;
   liveTriangles = info.triangles;

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Installs every Debian package the project uses (non-interactive, idempotent, waits for the apt
-# lock; clang-14 and the wasm32 libraries build the web viewer's decoder, web/wasm/),
+# lock; clang-14 and the wasm32 libraries build the web viewer's decoder, web/wasm/; clang-14 and
+# its sanitizer runtimes, libclang-rt-14-dev, build scripts/test.sh's sanitizer stage),
 # then configures and builds a Release build into build/ (executables in build/bin/).
 # Usage: scripts/setup.sh [--no-build]
 set -euo pipefail
@@ -16,6 +17,7 @@ PACKAGES=(
   libimgui-dev libpng-dev libjpeg62-turbo-dev libopengl-dev
   nlohmann-json3-dev nodejs chromium libproj-dev proj-bin
   clang-14 lld-14 wasi-libc libc++-14-dev-wasm32 libc++abi-14-dev-wasm32 libclang-rt-14-dev-wasm32
+  libclang-rt-14-dev
 )
 
 missing=()

@@ -16,6 +16,7 @@
 #include <cassert>
 #include <cerrno>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <sstream>
 #include <unordered_map>
@@ -274,11 +275,16 @@ void VPartitionAssigner::prepare(const CentroidSource& centroids, uint64_t memor
   // and the patch balancing below run on in memory. Its size depends on the input only.
   const uint32_t P = options_.patchTriangles ? options_.patchTriangles : kDefaultPatchTriangles;
   const uint64_t sampleCount = std::min<uint64_t>(centroids.count(), vp::sampleLimit(centroids.count(), P));
+  // Sizes to a hundredth of a MiB: whole MiB printed "8 MiB, more than the 8 MiB allowed".
+  auto mib = [](uint64_t bytes) {
+    char b[32];
+    std::snprintf(b, sizeof b, "%.2f MiB", double(bytes) / double(1 << 20));
+    return std::string(b);
+  };
   auto tooBig = [&](uint64_t bytes, const char* what) {
     if (memoryBytes && bytes > memoryBytes)
-      throw Error(std::string("V-partition: ") + what + " need " + std::to_string(bytes >> 20) +
-                  " MiB, more than the " + std::to_string(memoryBytes >> 20) +
-                  " MiB allowed; raise --memory or --patch-triangles",
+      throw Error(std::string("V-partition: ") + what + " need " + mib(bytes) + ", more than the " + mib(memoryBytes) +
+                      " allowed; raise --memory or --patch-triangles",
                   ErrorKind::Resource);
   };
   tooBig(sampleCount * 16, "the centroid sample would");
