@@ -171,10 +171,13 @@ MtFileWriter::Stars MtFileWriter::linkArcs(std::vector<NodeRecord>& nodes, std::
       fail(path_, "arc " + std::to_string(i) + " has bad nodes " + std::to_string(arcs[i].from) + " -> " +
                       std::to_string(arcs[i].to));
   // Forward stars: arcs sorted by (from, to). Stable, so equal pairs keep the caller's order.
-  std::stable_sort(arcs.begin(), arcs.end(),
-                   [](const DagArc& a, const DagArc& b) { return a.from != b.from ? a.from < b.from : a.to < b.to; });
+  // The builder passes them sorted already (from its map): then no sort, and no buffer the size
+  // of the arcs beside them.
+  auto byFromTo = [](const DagArc& a, const DagArc& b) { return a.from != b.from ? a.from < b.from : a.to < b.to; };
+  if (!std::is_sorted(arcs.begin(), arcs.end(), byFromTo)) std::stable_sort(arcs.begin(), arcs.end(), byFromTo);
   Stars s;
   s.arcs.resize(arcs.size());
+  s.patchRefs.reserve(patches_.size());  // each patch is on exactly one arc (checked below)
   for (auto& n : nodes) n.firstArc = n.arcCount = n.firstBackArc = n.backArcCount = n.triangles = 0;
   for (size_t i = 0; i < arcs.size(); ++i) {
     ArcRecord& a = s.arcs[i];
@@ -257,12 +260,20 @@ void MtFileWriter::writeTail(const std::vector<uint8_t>& meta) {
 void MtFileWriter::finish(std::vector<NodeRecord> nodes, std::vector<DagArc> arcs) {
   if (!file_) fail(path_, "finish after failure");
   const Stars stars = linkArcs(nodes, arcs);
+  std::vector<DagArc>().swap(arcs);  // the stars hold all the file needs of them
   // Metadata section, padded to 8 bytes so the records are naturally aligned.
   uint64_t pad = (8 - offset_ % 8) % 8;
   static const uint8_t zeros[8] = {};
   write(zeros, size_t(pad));
   fillHeader(nodes.size(), stars);
+  // The index in one buffer, reserved at its final size: grown by doubling instead, it held up to
+  // three times its size at the moment of a copy.
+  size_t metadataBlock = 0;
+  for (const auto& [key, value] : metadata_) metadataBlock += 8 + key.size() + value.size();
   std::vector<uint8_t> meta;
+  meta.reserve(nodes.size() * sizeof(NodeRecord) + stars.arcs.size() * sizeof(ArcRecord) +
+               (stars.backArcs.size() + stars.patchRefs.size()) * sizeof(uint32_t) + patches_.size() * sizeof(PatchRecord) +
+               (textured() ? textures_.size() * sizeof(TextureRecord) : 0) + metadataBlock);
   appendVec(meta, nodes);
   appendVec(meta, stars.arcs);
   appendVec(meta, stars.backArcs);
