@@ -90,7 +90,7 @@ struct BuildCli {
                        ", e.g. 512M, 4G (default 1G; accepted " + sizeText(kMinBuildMemory) + " to this machine's RAM, " +
                        sizeText(physicalRamBytes()) + ")" +
                        (cluster ? "" : ".\nIt bounds the stages' buffers; what stays resident beside them grows with the input "
-                                       "(a billion triangles peak at ~430 MiB at 256M or 512M),\nand a peak above the cap is "
+                                       "(a billion triangles peak at ~390 MiB at 256M, ~430 at 512M),\nand a peak above the cap is "
                                        "reported at the end"));
     threadsOption = app.add_option("--threads", threads,
                    std::string(cluster ? "Threads of a one-rank run" : "Worker threads") + " (default 0: all cores; 0 to " +
